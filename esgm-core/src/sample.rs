@@ -1,0 +1,45 @@
+//! Samples: entity structures as answers (M3, Definition 3.3.7).
+
+use std::ops::Deref;
+use std::sync::Arc;
+
+use crate::frame::EntityStructure;
+use crate::time::Time;
+
+/// An entity structure as stored in a trajectory or returned by a query.
+///
+/// The structure itself is shared (`Arc`), never copied, between the store, its
+/// subscribers and computational units: a cached image exists once in memory however
+/// many readers hold it. `Sample` derefs to [`EntityStructure`], so
+/// `sample.valid_time` and `sample.get("x")` work directly.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sample {
+    /// The structure (name, valid time, create time, attributes).
+    pub structure: Arc<EntityStructure>,
+    /// When the structure entered the trajectory (Definition 3.3.9's add time).
+    pub add_time: Time,
+    /// When the query this sample answers was asked (Definition 3.3.6). For a sample
+    /// delivered to a subscriber, the add time.
+    pub query_time: Time,
+}
+
+impl Sample {
+    /// Delay between the valid time and the add time: what a delay constraint bounds.
+    pub fn add_delay(&self) -> Time {
+        self.add_time - self.structure.valid_time
+    }
+
+    /// The same sample answering a query asked at `query_time`.
+    #[must_use]
+    pub fn at_query_time(mut self, query_time: Time) -> Self {
+        self.query_time = query_time;
+        self
+    }
+}
+
+impl Deref for Sample {
+    type Target = EntityStructure;
+    fn deref(&self) -> &EntityStructure {
+        &self.structure
+    }
+}
