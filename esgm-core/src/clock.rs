@@ -88,6 +88,11 @@ impl SimClock {
         Arc::new(Self::new(start))
     }
 
+    /// The current simulated time (also available through [`Clock::now`]).
+    pub fn now(&self) -> Time {
+        *self.now.lock()
+    }
+
     /// Moves the clock forward by `d` (negative values are ignored: time never runs
     /// backwards) and returns the new time.
     pub fn advance(&self, d: Time) -> Time {
@@ -110,7 +115,7 @@ impl SimClock {
 
 impl Clock for SimClock {
     fn now(&self) -> Time {
-        *self.now.lock()
+        SimClock::now(self)
     }
 
     fn sleep_until(&self, deadline: Time, max_wait: std::time::Duration) -> Time {

@@ -36,6 +36,29 @@ pub fn find_attribute<'a>(attributes: &'a [AttributeValuePair], name: &str) -> O
     attributes.iter().find(|p| p.name == name).map(|p| &p.value)
 }
 
+/// Attributes for the `create_at…` operations: from a `Vec` of pairs, a frame, or an
+/// array of `(name, value)` tuples.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct AttributeList(pub Vec<AttributeValuePair>);
+
+impl From<Vec<AttributeValuePair>> for AttributeList {
+    fn from(v: Vec<AttributeValuePair>) -> Self {
+        AttributeList(v)
+    }
+}
+
+impl From<EntityFrame> for AttributeList {
+    fn from(f: EntityFrame) -> Self {
+        AttributeList(f.attributes)
+    }
+}
+
+impl<const N: usize> From<[(&str, Value); N]> for AttributeList {
+    fn from(pairs: [(&str, Value); N]) -> Self {
+        AttributeList(pairs.into_iter().map(|(n, v)| AttributeValuePair::new(n, v)).collect())
+    }
+}
+
 /// A data structure representing an entity: a name and attribute/value pairs
 /// (Definition 2.4.3). Frames nest through [`Value::EntityFrame`] and
 /// [`Value::EntityFrameSeq`].

@@ -28,22 +28,39 @@
 // Lets `#[derive(Entity)]`'s generated `::esgm_core::…` paths resolve inside this crate.
 extern crate self as esgm_core;
 
+pub mod approximation;
 pub mod clock;
 pub mod codec;
 pub mod entity;
+pub mod filter;
 pub mod frame;
+pub mod generator;
 pub mod library;
+pub mod operators;
+pub mod policy;
 pub mod sample;
+pub mod store;
 pub mod time;
 pub mod type_check;
 pub mod type_registry;
 pub mod types;
 pub mod value;
 
+pub use approximation::{MergeRule, ValueApproximation};
 pub use clock::{Clock, SharedClock, SimClock, SystemClock};
 pub use entity::{AttributeField, Entity, FromEntityError};
-pub use frame::{AttributeValuePair, EntityFrame, EntityStructure};
+pub use filter::{Filter, FilterError};
+pub use frame::{AttributeList, AttributeValuePair, EntityFrame, EntityStructure};
+pub use generator::{FluentGenerator, GeneratorPolicy};
+pub use policy::{
+    CacheConstraint, ChangeConstraint, Constraint, DelayConstraint, DurationConstraint,
+    FluentStreamPolicy, OrderConstraint, PolicyError,
+};
 pub use sample::Sample;
+pub use store::{
+    AddError, AddOutcome, DropCause, PolicyViolation, QueryError, SubscribeOptions, Subscription,
+    SubscriptionId, TrajectoryStats, TrajectoryStore,
+};
 pub use time::{TIMEUNITS_PER_MILLI_SECOND, TIMEUNITS_PER_SECOND, Time, micros, millis, secs};
 pub use type_check::{InvalidType, TypeChecker};
 pub use type_registry::{TypeRegistry, TypeRegistryError};

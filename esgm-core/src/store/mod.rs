@@ -1,0 +1,550 @@
+//! The trajectory store: the representational structure behind every kind of
+//! trajectory (a fluent stream, seed 3.3.3), with its constraints, queries and
+//! subscriptions.
+//!
+//! A store is a plain single-owner value (`&mut self` to add): the runtimes wrap it in
+//! whatever locking or process boundary they need. Everything timed reads the
+//! [`Clock`](crate::Clock) it was built with.
+//!
+//! ## What happens to an offered structure
+//! 1. Samples held for reordering whose delay window has passed are released first.
+//! 2. Type check: a structure that does not fit the type is refused with
+//!    [`AddError::InvalidType`] (bad input, not a policy matter) and counted.
+//! 3. Arrival constraints: duration (C4), delay (C6, add time − valid time), filter (C3).
+//! 4. With a monotone order, a maximum delay and `reorder` on, the structure is held
+//!    until valid time + delay and released in valid-time order (C6).
+//! 5. Sequence constraints against the previous sample in the stream: order (C5),
+//!    change (C1), and a time cache's window (C2).
+//! 6. It enters the stream: stored, the cache evicts its oldest, subscribers get it.
+//!
+//! A structure that breaks a constraint is dropped, counted under that constraint and
+//! sent to violation subscribers; the blocking add forms also return it as
+//! [`AddError::PolicyViolation`] (C7, T4). Nothing is lost silently:
+//! `added + dropped + held` always equals the number of structures offered.
+
+pub(crate) mod history;
+mod query;
+mod stats;
+mod subscription;
+mod violation;
+
+use std::cmp::Reverse;
+use std::collections::BinaryHeap;
+use std::sync::Arc;
+
+use crate::clock::SharedClock;
+use crate::filter::Filter;
+use crate::frame::AttributeList;
+use crate::frame::EntityStructure;
+use crate::policy::{
+    CacheConstraint, ChangeConstraint, Constraint, DelayConstraint, DurationConstraint,
+    FluentStreamPolicy, OrderConstraint, PolicyError,
+};
+use crate::sample::Sample;
+use crate::time::Time;
+use crate::type_check::TypeChecker;
+use crate::types::EntityStructureType;
+use history::{Entry, History};
+use stats::StatsRecorder;
+use subscription::Subscribers;
+
+pub use query::QueryError;
+pub use stats::TrajectoryStats;
+pub use subscription::{RecvError, SubscribeOptions, Subscription, SubscriptionId};
+pub use violation::{AddError, AddOutcome, DropCause, PolicyViolation};
+
+/// A sample waiting in the reorder buffer, ordered by (valid time, add sequence).
+#[derive(Debug)]
+struct Held {
+    es: Arc<EntityStructure>,
+    seq: u64,
+    release_at: Time,
+}
+
+impl PartialEq for Held {
+    fn eq(&self, other: &Self) -> bool {
+        self.key() == other.key()
+    }
+}
+impl Eq for Held {}
+impl PartialOrd for Held {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Held {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.key().cmp(&other.key())
+    }
+}
+impl Held {
+    fn key(&self) -> (Time, u64) {
+        (self.es.valid_time, self.seq)
+    }
+}
+
+/// Builds a [`TrajectoryStore`].
+#[derive(Debug)]
+pub struct TrajectoryStoreBuilder {
+    name: String,
+    checker: TypeChecker,
+    policy: FluentStreamPolicy,
+    clock: Option<SharedClock>,
+}
+
+impl TrajectoryStoreBuilder {
+    /// The policy (default: unconstrained).
+    #[must_use]
+    pub fn policy(mut self, policy: FluentStreamPolicy) -> Self {
+        self.policy = policy;
+        self
+    }
+
+    /// The clock timing rules read (default: the system clock).
+    #[must_use]
+    pub fn clock(mut self, clock: SharedClock) -> Self {
+        self.clock = Some(clock);
+        self
+    }
+
+    /// Validates the policy, compiles its filter against the type, resolves the
+    /// duration's zero rules against the clock, and creates the store.
+    pub fn create(self) -> Result<TrajectoryStore, PolicyError> {
+        self.policy.validate()?;
+        let filter = match &self.policy.filter {
+            Some(src) => Some(Filter::compile(src, &self.checker)?),
+            None => None,
+        };
+        let clock = self.clock.unwrap_or_else(crate::clock::SystemClock::shared);
+        let window = match self.policy.duration {
+            DurationConstraint::Unbounded => None,
+            DurationConstraint::Between { from, to } => {
+                let from = if from == 0 { clock.now() } else { from };
+                Some((from, (to != 0).then_some(to)))
+            }
+        };
+        if let Some((from, Some(to))) = window {
+            if to < from {
+                return Err(PolicyError::IllegalPolicy {
+                    field: "duration.to",
+                    value: to.to_string(),
+                    rule: "is before the start (from = 0 means now)",
+                });
+            }
+        }
+        Ok(TrajectoryStore {
+            name: self.name,
+            checker: self.checker,
+            policy: self.policy,
+            filter,
+            clock,
+            window,
+            history: History::default(),
+            held: BinaryHeap::new(),
+            last: None,
+            next_seq: 0,
+            subscribers: Subscribers::default(),
+            violation_subscribers: Subscribers::default(),
+            stats: StatsRecorder::default(),
+        })
+    }
+}
+
+/// A fluent stream of entity structures with history: one trajectory's content.
+#[derive(Debug)]
+pub struct TrajectoryStore {
+    name: String,
+    checker: TypeChecker,
+    policy: FluentStreamPolicy,
+    filter: Option<Filter>,
+    clock: SharedClock,
+    /// The duration constraint with its zero rules resolved: `[from, to]`, `None` = ∞.
+    window: Option<(Time, Option<Time>)>,
+    pub(crate) history: History,
+    held: BinaryHeap<Reverse<Held>>,
+    /// The last sample that entered the stream, kept after eviction: order and change
+    /// are relations between consecutive samples, whatever the cache keeps.
+    last: Option<Arc<EntityStructure>>,
+    next_seq: u64,
+    subscribers: Subscribers<Sample>,
+    violation_subscribers: Subscribers<PolicyViolation>,
+    stats: StatsRecorder,
+}
+
+impl TrajectoryStore {
+    /// Starts building a store named `name` whose structures `checker` checks.
+    pub fn builder(name: impl Into<String>, checker: TypeChecker) -> TrajectoryStoreBuilder {
+        TrajectoryStoreBuilder {
+            name: name.into(),
+            checker,
+            policy: FluentStreamPolicy::default(),
+            clock: None,
+        }
+    }
+
+    /// The trajectory's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// The registered name of the trajectory's type.
+    pub fn type_name(&self) -> &str {
+        self.checker.type_name()
+    }
+
+    /// The trajectory's type (the seed's `type` attribute).
+    pub fn entity_type(&self) -> &Arc<EntityStructureType> {
+        self.checker.entity_type()
+    }
+
+    /// The type checker (shared with units and filters that need the same types).
+    pub fn checker(&self) -> &TypeChecker {
+        &self.checker
+    }
+
+    /// The policy (the seed's `pol` attribute).
+    pub fn policy(&self) -> &FluentStreamPolicy {
+        &self.policy
+    }
+
+    /// The clock this store reads.
+    pub fn clock(&self) -> &SharedClock {
+        &self.clock
+    }
+
+    /// Adds a structure; a constraint violation drops it, counts it and notifies
+    /// violation subscribers (`Ok(AddOutcome::Dropped)`).
+    pub fn add(&mut self, es: EntityStructure) -> Result<AddOutcome, AddError> {
+        self.offer(Arc::new(es), false)
+    }
+
+    /// Adds a structure; a constraint violation is also returned as
+    /// [`AddError::PolicyViolation`].
+    pub fn add_blocking(&mut self, es: EntityStructure) -> Result<AddOutcome, AddError> {
+        self.offer(Arc::new(es), true)
+    }
+
+    /// Adds an already shared structure without copying it (what runtimes use to pass
+    /// one structure to several stores).
+    pub fn add_shared(
+        &mut self,
+        es: Arc<EntityStructure>,
+        blocking: bool,
+    ) -> Result<AddOutcome, AddError> {
+        self.offer(es, blocking)
+    }
+
+    /// Creates a structure valid at `valid_time`, created now, and adds it.
+    pub fn create_at(
+        &mut self,
+        name: impl Into<String>,
+        valid_time: Time,
+        attributes: impl Into<AttributeList>,
+    ) -> Result<AddOutcome, AddError> {
+        let es = self.make(name, Some(valid_time), attributes);
+        self.offer(Arc::new(es), false)
+    }
+
+    /// [`TrajectoryStore::create_at`], returning violations.
+    pub fn create_at_blocking(
+        &mut self,
+        name: impl Into<String>,
+        valid_time: Time,
+        attributes: impl Into<AttributeList>,
+    ) -> Result<AddOutcome, AddError> {
+        let es = self.make(name, Some(valid_time), attributes);
+        self.offer(Arc::new(es), true)
+    }
+
+    /// Creates a structure valid and created now, and adds it.
+    pub fn create_at_now(
+        &mut self,
+        name: impl Into<String>,
+        attributes: impl Into<AttributeList>,
+    ) -> Result<AddOutcome, AddError> {
+        let es = self.make(name, None, attributes);
+        self.offer(Arc::new(es), false)
+    }
+
+    /// [`TrajectoryStore::create_at_now`], returning violations.
+    pub fn create_at_now_blocking(
+        &mut self,
+        name: impl Into<String>,
+        attributes: impl Into<AttributeList>,
+    ) -> Result<AddOutcome, AddError> {
+        let es = self.make(name, None, attributes);
+        self.offer(Arc::new(es), true)
+    }
+
+    fn make(
+        &self,
+        name: impl Into<String>,
+        valid_time: Option<Time>,
+        attributes: impl Into<AttributeList>,
+    ) -> EntityStructure {
+        let now = self.clock.now();
+        EntityStructure {
+            name: name.into(),
+            valid_time: valid_time.unwrap_or(now),
+            create_time: now,
+            attributes: attributes.into().0,
+        }
+    }
+
+    /// Empties the stream (T5): stored and held samples go (held ones are counted as
+    /// dropped for [`DropCause::Reset`]); policy, subscribers and stats stay.
+    pub fn reset(&mut self) {
+        for _ in self.held.drain() {
+            self.stats.record_dropped(DropCause::Reset);
+        }
+        self.history.clear();
+        self.last = None;
+    }
+
+    /// The same as [`TrajectoryStore::reset`]: in process, every reset completes
+    /// before it returns.
+    pub fn reset_blocking(&mut self) {
+        self.reset();
+    }
+
+    /// Releases held samples whose delay window has passed; returns how many entered
+    /// the stream. Runtimes call it at [`TrajectoryStore::next_release_time`].
+    pub fn release_due(&mut self) -> usize {
+        let now = self.clock.now();
+        self.release_due_at(now)
+    }
+
+    /// When the next held sample is due, if any is held.
+    pub fn next_release_time(&self) -> Option<Time> {
+        self.held.peek().map(|Reverse(h)| h.release_at)
+    }
+
+    /// Subscribes to every structure that enters the stream from now on (after the
+    /// last `options.last` stored ones), in add order.
+    pub fn subscribe(&mut self, options: SubscribeOptions) -> Subscription<Sample> {
+        let backlog: Vec<Sample> = self
+            .history
+            .last_n(options.last)
+            .map(|e| Sample {
+                structure: Arc::clone(&e.es),
+                add_time: e.add_time,
+                query_time: e.add_time,
+            })
+            .collect();
+        self.subscribers.subscribe(options.capacity, backlog.into_iter())
+    }
+
+    /// Ends a subscription; false if it was not a subscription of this store.
+    pub fn unsubscribe(&mut self, id: SubscriptionId) -> bool {
+        self.subscribers.unsubscribe(id)
+    }
+
+    /// Subscribes to this trajectory's policy violations.
+    pub fn subscribe_violations(&mut self, capacity: usize) -> Subscription<PolicyViolation> {
+        self.violation_subscribers.subscribe(capacity, std::iter::empty())
+    }
+
+    /// Ends a violation subscription.
+    pub fn unsubscribe_violations(&mut self, id: SubscriptionId) -> bool {
+        self.violation_subscribers.unsubscribe(id)
+    }
+
+    /// Moves every subscriber (stream and violations) of `old` to this store, so a
+    /// name re-pointed to a new trajectory keeps its subscribers (E5).
+    pub fn adopt_subscribers(&mut self, old: &mut TrajectoryStore) {
+        self.subscribers.adopt(&mut old.subscribers);
+        self.violation_subscribers.adopt(&mut old.violation_subscribers);
+    }
+
+    /// A snapshot of the statistics.
+    pub fn stats(&self) -> TrajectoryStats {
+        self.stats.snapshot(self.history.len(), self.held.len(), self.subscribers.len())
+    }
+
+    fn offer(&mut self, es: Arc<EntityStructure>, blocking: bool) -> Result<AddOutcome, AddError> {
+        let now = self.clock.now();
+        self.release_due_at(now);
+        if let Err(source) = self.checker.check(&es.attributes) {
+            self.stats.record_dropped(DropCause::InvalidType);
+            tracing::debug!(trajectory = %self.name, error = %source, "structure refused");
+            return Err(AddError::InvalidType { trajectory: self.name.clone(), source });
+        }
+        if let Some((constraint, detail)) = self.arrival_violation(&es, now) {
+            return self.violated(&es, now, constraint, detail, blocking);
+        }
+        if let (true, DelayConstraint::Max(d)) = (self.policy.holds_samples(), self.policy.delay) {
+            let release_at = es.valid_time.saturating_add(d);
+            if release_at > now {
+                let seq = self.next_seq;
+                self.next_seq += 1;
+                self.held.push(Reverse(Held { es, seq, release_at }));
+                return Ok(AddOutcome::Held { release_at });
+            }
+        }
+        self.enter(es, now, blocking)
+    }
+
+    fn release_due_at(&mut self, now: Time) -> usize {
+        let mut released = 0;
+        while self.held.peek().is_some_and(|Reverse(h)| h.release_at <= now) {
+            let Some(Reverse(h)) = self.held.pop() else { break };
+            if let Ok(AddOutcome::Added) = self.enter(h.es, now, false) {
+                released += 1;
+            }
+        }
+        released
+    }
+
+    fn arrival_violation(&self, es: &EntityStructure, now: Time) -> Option<(Constraint, String)> {
+        let vt = es.valid_time;
+        if let Some((from, to)) = self.window {
+            if vt < from {
+                return Some((
+                    Constraint::Duration,
+                    format!("valid time {vt} is before the start {from}"),
+                ));
+            }
+            if let Some(to) = to.filter(|to| vt > *to) {
+                return Some((
+                    Constraint::Duration,
+                    format!("valid time {vt} is after the end {to}"),
+                ));
+            }
+        }
+        if let DelayConstraint::Max(d) = self.policy.delay {
+            if now - vt > d {
+                return Some((
+                    Constraint::Delay,
+                    format!("delay {} exceeds the maximum {d}", now - vt),
+                ));
+            }
+        }
+        if let Some(f) = &self.filter {
+            if !f.matches(&es.attributes) {
+                return Some((Constraint::Filter, format!("`{}` is false", f.source())));
+            }
+        }
+        None
+    }
+
+    fn sequence_violation(&self, es: &EntityStructure) -> Option<(Constraint, String)> {
+        let vt = es.valid_time;
+        if let Some(last) = &self.last {
+            let lvt = last.valid_time;
+            match self.policy.order {
+                OrderConstraint::Monotone if vt < lvt => {
+                    return Some((
+                        Constraint::Order,
+                        format!("valid time {vt} is before the previous {lvt}"),
+                    ));
+                }
+                OrderConstraint::StrictMonotone if vt <= lvt => {
+                    return Some((
+                        Constraint::Order,
+                        format!("valid time {vt} is not after the previous {lvt}"),
+                    ));
+                }
+                _ => {}
+            }
+            let same_value = || es.name == last.name && es.attributes == last.attributes;
+            match self.policy.change {
+                ChangeConstraint::AnyChange if same_value() => {
+                    return Some((Constraint::Change, "value equals the previous sample's".into()));
+                }
+                ChangeConstraint::AnyUpdate
+                    if same_value() && vt == lvt && es.create_time == last.create_time =>
+                {
+                    return Some((Constraint::Change, "identical to the previous sample".into()));
+                }
+                ChangeConstraint::SampleEvery(p) if vt - lvt < p => {
+                    return Some((
+                        Constraint::Change,
+                        format!("valid time {vt} is {} after the previous, period {p}", vt - lvt),
+                    ));
+                }
+                _ => {}
+            }
+        }
+        if let (CacheConstraint::Duration(t), Some(newest)) =
+            (self.policy.cache, self.history.max_valid_time())
+        {
+            if newest - vt >= t {
+                return Some((
+                    Constraint::Cache,
+                    format!("valid time {vt} is outside the cache window ({t} before {newest})"),
+                ));
+            }
+        }
+        None
+    }
+
+    fn enter(
+        &mut self,
+        es: Arc<EntityStructure>,
+        now: Time,
+        blocking: bool,
+    ) -> Result<AddOutcome, AddError> {
+        if let Some((constraint, detail)) = self.sequence_violation(&es) {
+            return self.violated(&es, now, constraint, detail, blocking);
+        }
+        if let (ChangeConstraint::SampleEvery(p), Some(last)) = (self.policy.change, &self.last) {
+            let skipped = (es.valid_time - last.valid_time) / p - 1;
+            if skipped > 0 {
+                self.stats.record_missed_sample_points(skipped as u64);
+            }
+        }
+        let seq = self.next_seq;
+        self.next_seq += 1;
+        self.stats.record_added(now, es.valid_time);
+        self.last = Some(Arc::clone(&es));
+        self.history.push(Entry { es: Arc::clone(&es), add_time: now, seq });
+        let evicted = match self.policy.cache {
+            CacheConstraint::All | CacheConstraint::Elements(0) => 0,
+            CacheConstraint::Elements(n) => {
+                let mut k = 0;
+                while self.history.len() > n && self.history.pop_oldest().is_some() {
+                    k += 1;
+                }
+                k
+            }
+            CacheConstraint::Duration(t) => match self.history.max_valid_time() {
+                Some(newest) => self.history.remove_older_than(newest - t + 1),
+                None => 0,
+            },
+        };
+        self.stats.record_evicted(evicted);
+        let overflow =
+            self.subscribers.publish(&Sample { structure: es, add_time: now, query_time: now });
+        self.stats.record_overflow(overflow);
+        Ok(AddOutcome::Added)
+    }
+
+    fn violated(
+        &mut self,
+        es: &EntityStructure,
+        now: Time,
+        constraint: Constraint,
+        detail: String,
+        blocking: bool,
+    ) -> Result<AddOutcome, AddError> {
+        self.stats.record_dropped(DropCause::Violation(constraint));
+        let v = PolicyViolation {
+            trajectory: self.name.clone(),
+            constraint,
+            valid_time: es.valid_time,
+            create_time: es.create_time,
+            add_time: now,
+            detail,
+        };
+        tracing::debug!(trajectory = %self.name, %constraint, detail = %v.detail, "sample dropped");
+        self.violation_subscribers.publish(&v);
+        if blocking {
+            Err(AddError::PolicyViolation(Box::new(v)))
+        } else {
+            Ok(AddOutcome::Dropped(v))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,179 @@
+//! Queries on a trajectory (T1, T2): by position in the stream and by valid time.
+//!
+//! Every answer is a [`Sample`] sharing the stored structure (no copy) and stamped
+//! with the query time. Time lookups are O(log n); `get_between` is O(log n + k).
+
+use std::sync::Arc;
+
+use super::TrajectoryStore;
+use super::history::Entry;
+use crate::approximation::{ValueApproximation, interpolate};
+use crate::frame::EntityStructure;
+use crate::sample::Sample;
+use crate::time::Time;
+use crate::type_check::InvalidType;
+
+/// Errors of the query operations.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum QueryError {
+    /// No sample answers the query (the seed's `ValueNotAvailable`): the trajectory is
+    /// empty, the time is outside what the cache holds, or no approximation applies.
+    #[error("value not available in `{trajectory}`: {query}")]
+    ValueNotAvailable {
+        /// The trajectory.
+        trajectory: String,
+        /// The query and why it has no answer.
+        query: String,
+    },
+    /// A default value for approximation does not fit the trajectory's type.
+    #[error("default value for `{trajectory}` does not fit its type: {source}")]
+    InvalidDefault {
+        /// The trajectory.
+        trajectory: String,
+        /// What did not fit.
+        source: InvalidType,
+    },
+}
+
+impl TrajectoryStore {
+    pub(crate) fn not_available(&self, query: impl Into<String>) -> QueryError {
+        QueryError::ValueNotAvailable { trajectory: self.name.clone(), query: query.into() }
+    }
+
+    pub(crate) fn sample_of(&self, e: &Entry, now: Time) -> Sample {
+        Sample { structure: Arc::clone(&e.es), add_time: e.add_time, query_time: now }
+    }
+
+    /// Number of stored samples.
+    pub fn len(&self) -> usize {
+        self.history.len()
+    }
+
+    /// True if no sample is stored.
+    pub fn is_empty(&self) -> bool {
+        self.history.is_empty()
+    }
+
+    /// The latest sample added.
+    pub fn get_latest(&self) -> Result<Sample, QueryError> {
+        self.get_nth_latest(0)
+            .map_err(|_| self.not_available("get_latest: the trajectory is empty"))
+    }
+
+    /// The `n`-th latest sample in add order (0 = latest).
+    pub fn get_nth_latest(&self, n: usize) -> Result<Sample, QueryError> {
+        let now = self.clock.now();
+        self.history.nth_latest(n).map(|e| self.sample_of(e, now)).ok_or_else(|| {
+            self.not_available(format!(
+                "get_nth_latest({n}): {} samples stored",
+                self.history.len()
+            ))
+        })
+    }
+
+    /// Every sample with valid time in `[from, to]`, ordered by valid time (ties in add
+    /// order). Empty if none (or if `from > to`).
+    pub fn get_between(&self, from: Time, to: Time) -> Vec<Sample> {
+        let now = self.clock.now();
+        self.history.between(from, to).into_iter().map(|e| self.sample_of(e, now)).collect()
+    }
+
+    /// The sample valid exactly at `t` (the latest added if several are).
+    pub fn get_at(&self, t: Time) -> Result<Sample, QueryError> {
+        let now = self.clock.now();
+        self.history
+            .at_or_before(t)
+            .filter(|e| e.es.valid_time == t)
+            .map(|e| self.sample_of(e, now))
+            .ok_or_else(|| self.not_available(format!("get_at({t}): no sample valid at {t}")))
+    }
+
+    /// The sample with the largest valid time not after `t`.
+    pub fn get_closest_at_or_before(&self, t: Time) -> Result<Sample, QueryError> {
+        let now = self.clock.now();
+        self.history.at_or_before(t).map(|e| self.sample_of(e, now)).ok_or_else(|| {
+            self.not_available(format!("get_closest_at_or_before({t}): no sample at or before {t}"))
+        })
+    }
+
+    /// The value at `t`, approximated by `aprx` when no sample is valid exactly at `t`.
+    /// Interpolated and default values are new structures valid at `t` and created at
+    /// the query time.
+    pub fn get_at_approximating(
+        &self,
+        t: Time,
+        aprx: &ValueApproximation,
+    ) -> Result<Sample, QueryError> {
+        if let Ok(s) = self.get_at(t) {
+            return Ok(s);
+        }
+        let now = self.clock.now();
+        let q = |what: &str| format!("get_at_approximating({t}, {what})");
+        match aprx {
+            ValueApproximation::None => {
+                Err(self.not_available(q("none: no sample valid at that time")))
+            }
+            ValueApproximation::MostRecent => self
+                .history
+                .before(t)
+                .map(|e| self.sample_of(e, now))
+                .ok_or_else(|| self.not_available(q("most recent: nothing before it"))),
+            ValueApproximation::Closest => {
+                let before = self.history.before(t);
+                let after = self.history.after(t);
+                let pick = match (before, after) {
+                    (Some(b), Some(a)) => {
+                        if t - b.es.valid_time <= a.es.valid_time - t {
+                            b
+                        } else {
+                            a
+                        }
+                    }
+                    (Some(x), None) | (None, Some(x)) => x,
+                    (None, None) => {
+                        return Err(self.not_available(q("closest: the trajectory is empty")));
+                    }
+                };
+                Ok(self.sample_of(pick, now))
+            }
+            ValueApproximation::Default(attributes) => {
+                self.checker.check(attributes).map_err(|source| QueryError::InvalidDefault {
+                    trajectory: self.name.clone(),
+                    source,
+                })?;
+                let es = EntityStructure {
+                    name: self.name.clone(),
+                    valid_time: t,
+                    create_time: now,
+                    attributes: attributes.clone(),
+                };
+                Ok(Sample { structure: Arc::new(es), add_time: now, query_time: now })
+            }
+            ValueApproximation::Linear => match (self.history.before(t), self.history.after(t)) {
+                (Some(b), Some(a)) => {
+                    let es = interpolate(&b.es, &a.es, t, now);
+                    Ok(Sample { structure: Arc::new(es), add_time: now, query_time: now })
+                }
+                (None, _) => Err(self.not_available(q("linear: nothing before it"))),
+                (_, None) => Err(self.not_available(q("linear: nothing after it"))),
+            },
+        }
+    }
+
+    /// The earliest valid time stored (the start of the trajectory's interval).
+    pub fn start_time(&self) -> Result<Time, QueryError> {
+        self.history.min_valid_time().ok_or_else(|| self.not_available("start_time: empty"))
+    }
+
+    /// The latest valid time stored (the end of the trajectory's interval).
+    pub fn end_time(&self) -> Result<Time, QueryError> {
+        self.history.max_valid_time().ok_or_else(|| self.not_available("end_time: empty"))
+    }
+
+    /// Every stored sample in add order (for recording and inspection).
+    pub fn samples(&self) -> Vec<Sample> {
+        let now = self.clock.now();
+        self.history.iter().map(|e| self.sample_of(e, now)).collect()
+    }
+}

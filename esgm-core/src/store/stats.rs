@@ -1,0 +1,160 @@
+//! Per-trajectory statistics (E7): what was added, what was dropped and why, how fast
+//! and how late samples arrive.
+
+use std::collections::{BTreeMap, VecDeque};
+
+use hdrhistogram::Histogram;
+
+use crate::store::violation::DropCause;
+use crate::time::{TIMEUNITS_PER_SECOND, Time};
+
+/// How many recent add times the rate is computed over (like `ros2 topic hz`'s window).
+const RATE_WINDOW: usize = 128;
+
+#[derive(Debug)]
+pub(crate) struct StatsRecorder {
+    added: u64,
+    dropped: BTreeMap<DropCause, u64>,
+    evicted: u64,
+    subscriber_overflow: u64,
+    missed_sample_points: u64,
+    recent_adds: VecDeque<Time>,
+    /// add time − valid time in ns, clamped to ≥ 0 (a predicted value has no delay).
+    add_delay: Option<Histogram<u64>>,
+}
+
+impl Default for StatsRecorder {
+    fn default() -> Self {
+        Self {
+            added: 0,
+            dropped: BTreeMap::new(),
+            evicted: 0,
+            subscriber_overflow: 0,
+            missed_sample_points: 0,
+            recent_adds: VecDeque::with_capacity(RATE_WINDOW),
+            // Three significant digits up to an hour of delay; if creation fails the
+            // percentiles are simply absent.
+            add_delay: Histogram::new_with_bounds(1, 3_600 * TIMEUNITS_PER_SECOND as u64, 3).ok(),
+        }
+    }
+}
+
+impl StatsRecorder {
+    pub fn record_added(&mut self, add_time: Time, valid_time: Time) {
+        self.added += 1;
+        if self.recent_adds.len() == RATE_WINDOW {
+            self.recent_adds.pop_front();
+        }
+        self.recent_adds.push_back(add_time);
+        if let Some(h) = &mut self.add_delay {
+            h.saturating_record(u64::try_from(add_time - valid_time).unwrap_or(0).max(1));
+        }
+    }
+
+    pub fn record_dropped(&mut self, cause: DropCause) {
+        *self.dropped.entry(cause).or_default() += 1;
+    }
+
+    pub fn record_evicted(&mut self, n: usize) {
+        self.evicted += n as u64;
+    }
+
+    pub fn record_overflow(&mut self, n: u64) {
+        self.subscriber_overflow += n;
+    }
+
+    pub fn record_missed_sample_points(&mut self, n: u64) {
+        self.missed_sample_points += n;
+    }
+
+    pub fn dropped_total(&self) -> u64 {
+        self.dropped.values().sum()
+    }
+
+    pub fn snapshot(&self, stored: usize, held: usize, subscribers: usize) -> TrajectoryStats {
+        let rate_hz = match (self.recent_adds.front(), self.recent_adds.back()) {
+            (Some(first), Some(last)) if last > first => {
+                (self.recent_adds.len() - 1) as f64 * TIMEUNITS_PER_SECOND as f64
+                    / (last - first) as f64
+            }
+            _ => 0.0,
+        };
+        let pct = |q: f64| {
+            self.add_delay
+                .as_ref()
+                .filter(|h| !h.is_empty())
+                .map(|h| h.value_at_quantile(q) as Time)
+        };
+        TrajectoryStats {
+            added: self.added,
+            dropped: self.dropped.iter().map(|(c, n)| (*c, *n)).collect(),
+            dropped_total: self.dropped_total(),
+            violations: self
+                .dropped
+                .iter()
+                .filter(|(c, _)| matches!(c, DropCause::Violation(_)))
+                .map(|(_, n)| n)
+                .sum(),
+            evicted: self.evicted,
+            stored,
+            held,
+            subscribers,
+            subscriber_overflow: self.subscriber_overflow,
+            missed_sample_points: self.missed_sample_points,
+            rate_hz,
+            add_delay_p50: pct(0.5),
+            add_delay_p90: pct(0.9),
+            add_delay_p99: pct(0.99),
+            add_delay_max: self
+                .add_delay
+                .as_ref()
+                .filter(|h| !h.is_empty())
+                .map(|h| h.max() as Time),
+        }
+    }
+}
+
+/// A snapshot of one trajectory's statistics.
+///
+/// Every structure ever offered is accounted for: `added + dropped_total + held`
+/// equals the number offered; `evicted` counts samples that left the cache normally.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrajectoryStats {
+    /// Structures that entered the stream.
+    pub added: u64,
+    /// Structures dropped, per cause.
+    pub dropped: Vec<(DropCause, u64)>,
+    /// Sum of `dropped`.
+    pub dropped_total: u64,
+    /// Drops caused by a policy constraint (a subset of `dropped_total`).
+    pub violations: u64,
+    /// Samples that left the cache because of the cache constraint.
+    pub evicted: u64,
+    /// Samples stored now.
+    pub stored: usize,
+    /// Samples held for reordering now.
+    pub held: usize,
+    /// Live subscribers.
+    pub subscribers: usize,
+    /// Samples discarded from slow subscribers' buffers.
+    pub subscriber_overflow: u64,
+    /// Sample points skipped by a sampled stream (gaps of two periods or more).
+    pub missed_sample_points: u64,
+    /// Adds per second over the last 128 adds.
+    pub rate_hz: f64,
+    /// Median add delay (add time − valid time), ns.
+    pub add_delay_p50: Option<Time>,
+    /// 90th percentile add delay, ns.
+    pub add_delay_p90: Option<Time>,
+    /// 99th percentile add delay, ns.
+    pub add_delay_p99: Option<Time>,
+    /// Largest add delay, ns.
+    pub add_delay_max: Option<Time>,
+}
+
+impl TrajectoryStats {
+    /// Drops counted under `cause`.
+    pub fn dropped_for(&self, cause: DropCause) -> u64 {
+        self.dropped.iter().find(|(c, _)| *c == cause).map_or(0, |(_, n)| *n)
+    }
+}

@@ -1,0 +1,241 @@
+//! Subscriptions (T3): every structure added after subscribing, in add order.
+//!
+//! Each subscriber has its own bounded channel. The writer never blocks on a slow
+//! subscriber: when a subscriber's buffer is full, its oldest undelivered sample is
+//! discarded to make room (a controller wants the freshest data) and the overflow is
+//! counted, for the subscriber and in the trajectory's stats.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Duration;
+
+use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, TrySendError};
+
+/// Identifies one subscription of one trajectory.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct SubscriptionId(pub u64);
+
+/// How to subscribe.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SubscribeOptions {
+    /// Deliver the last `n` stored samples first (a late joiner catching up).
+    pub last: usize,
+    /// Buffer capacity before the oldest undelivered sample is discarded.
+    pub capacity: usize,
+}
+
+impl Default for SubscribeOptions {
+    fn default() -> Self {
+        Self { last: 0, capacity: 1024 }
+    }
+}
+
+impl SubscribeOptions {
+    /// Builder form: replay the last `n` samples first.
+    #[must_use]
+    pub fn last(mut self, n: usize) -> Self {
+        self.last = n;
+        self
+    }
+    /// Builder form: buffer capacity (at least 1).
+    #[must_use]
+    pub fn capacity(mut self, n: usize) -> Self {
+        self.capacity = n.max(1);
+        self
+    }
+}
+
+/// The receiving end of a subscription; dropping it unsubscribes.
+#[derive(Debug)]
+pub struct Subscription<T> {
+    id: SubscriptionId,
+    receiver: Receiver<T>,
+    overflow: Arc<AtomicU64>,
+}
+
+/// The error of a timed receive.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum RecvError {
+    /// Nothing arrived in time; try again or give up.
+    #[error("nothing arrived before the timeout")]
+    Timeout,
+    /// The trajectory was destroyed or unsubscribed this subscription.
+    #[error("the subscription has ended")]
+    Closed,
+}
+
+impl<T> Subscription<T> {
+    /// This subscription's id, for `unsubscribe`.
+    pub fn id(&self) -> SubscriptionId {
+        self.id
+    }
+
+    /// Waits up to `timeout` for the next item.
+    pub fn recv_timeout(&self, timeout: Duration) -> Result<T, RecvError> {
+        self.receiver.recv_timeout(timeout).map_err(|e| match e {
+            RecvTimeoutError::Timeout => RecvError::Timeout,
+            RecvTimeoutError::Disconnected => RecvError::Closed,
+        })
+    }
+
+    /// The next item if one is waiting.
+    pub fn try_recv(&self) -> Option<T> {
+        self.receiver.try_recv().ok()
+    }
+
+    /// Everything waiting now, without blocking.
+    pub fn drain(&self) -> Vec<T> {
+        self.receiver.try_iter().collect()
+    }
+
+    /// How many items were discarded because this subscriber fell behind.
+    pub fn overflowed(&self) -> u64 {
+        self.overflow.load(Ordering::Relaxed)
+    }
+
+    /// The underlying channel, to `select!` over several subscriptions.
+    pub fn receiver(&self) -> &Receiver<T> {
+        &self.receiver
+    }
+}
+
+/// The writer's side of one subscription.
+#[derive(Debug)]
+struct Subscriber<T> {
+    id: SubscriptionId,
+    sender: Sender<T>,
+    /// A second receiver so the writer can discard the oldest item when full.
+    oldest: Receiver<T>,
+    overflow: Arc<AtomicU64>,
+}
+
+/// The subscribers of one trajectory (or of its violations).
+#[derive(Debug)]
+pub(crate) struct Subscribers<T> {
+    subscribers: Vec<Subscriber<T>>,
+    next_id: u64,
+}
+
+impl<T> Default for Subscribers<T> {
+    fn default() -> Self {
+        Self { subscribers: Vec::new(), next_id: 1 }
+    }
+}
+
+impl<T: Clone> Subscribers<T> {
+    /// Adds a subscriber, first filled with `backlog`.
+    pub fn subscribe(
+        &mut self,
+        capacity: usize,
+        backlog: impl Iterator<Item = T>,
+    ) -> Subscription<T> {
+        let (sender, receiver) = crossbeam_channel::bounded(capacity.max(1));
+        let id = SubscriptionId(self.next_id);
+        self.next_id += 1;
+        let overflow = Arc::new(AtomicU64::new(0));
+        let sub =
+            Subscriber { id, sender, oldest: receiver.clone(), overflow: Arc::clone(&overflow) };
+        for item in backlog {
+            Self::deliver(&sub, item);
+        }
+        self.subscribers.push(sub);
+        Subscription { id, receiver, overflow }
+    }
+
+    /// Removes a subscriber; false if there was none with that id.
+    pub fn unsubscribe(&mut self, id: SubscriptionId) -> bool {
+        let before = self.subscribers.len();
+        self.subscribers.retain(|s| s.id != id);
+        before != self.subscribers.len()
+    }
+
+    /// Sends `item` to every subscriber; returns how many older items had to be
+    /// discarded for lack of room. Subscribers whose receiver is gone are removed.
+    pub fn publish(&mut self, item: &T) -> u64 {
+        let mut overflowed = 0;
+        self.subscribers.retain(|s| match Self::deliver(s, item.clone()) {
+            Delivery::Sent => true,
+            Delivery::Overflowed => {
+                overflowed += 1;
+                true
+            }
+            Delivery::Gone => false,
+        });
+        overflowed
+    }
+
+    fn deliver(s: &Subscriber<T>, mut item: T) -> Delivery {
+        // The writer keeps a receiver of its own, so the channel never reports the
+        // subscriber gone; the shared overflow counter does: when only the writer's
+        // handle is left, the `Subscription` was dropped.
+        if Arc::strong_count(&s.overflow) == 1 {
+            return Delivery::Gone;
+        }
+        let mut discarded = false;
+        loop {
+            match s.sender.try_send(item) {
+                Ok(()) => {
+                    return if discarded { Delivery::Overflowed } else { Delivery::Sent };
+                }
+                Err(TrySendError::Disconnected(_)) => return Delivery::Gone,
+                Err(TrySendError::Full(back)) => {
+                    item = back;
+                    // Only the writer and the subscriber hold receivers: the subscriber
+                    // may have drained the slot meanwhile, which is also fine.
+                    if s.oldest.try_recv().is_ok() {
+                        s.overflow.fetch_add(1, Ordering::Relaxed);
+                        discarded = true;
+                    }
+                }
+            }
+        }
+    }
+
+    /// Number of live subscribers. (A receiver dropped since the last publish is
+    /// still counted until then.)
+    pub fn len(&self) -> usize {
+        self.subscribers.len()
+    }
+
+    /// Moves every subscriber of `other` here (re-pointing a name keeps subscribers).
+    pub fn adopt(&mut self, other: &mut Subscribers<T>) {
+        self.next_id = self.next_id.max(other.next_id);
+        self.subscribers.append(&mut other.subscribers);
+    }
+}
+
+enum Delivery {
+    Sent,
+    Overflowed,
+    Gone,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn delivers_in_order_and_discards_oldest_when_full() {
+        let mut subs = Subscribers::<u32>::default();
+        let s = subs.subscribe(2, [7].into_iter());
+        assert_eq!(subs.publish(&1), 0);
+        assert_eq!(subs.publish(&2), 1); // 7 discarded
+        assert_eq!(s.drain(), vec![1, 2]);
+        assert_eq!(s.overflowed(), 1);
+    }
+
+    #[test]
+    fn dropped_receivers_are_pruned_and_unsubscribe_works() {
+        let mut subs = Subscribers::<u32>::default();
+        let a = subs.subscribe(4, std::iter::empty());
+        let b = subs.subscribe(4, std::iter::empty());
+        drop(a);
+        subs.publish(&1);
+        assert_eq!(subs.len(), 1);
+        assert!(subs.unsubscribe(b.id()));
+        assert!(!subs.unsubscribe(b.id()));
+        assert_eq!(b.recv_timeout(Duration::from_millis(1)), Ok(1));
+        assert_eq!(b.recv_timeout(Duration::from_millis(1)), Err(RecvError::Closed));
+    }
+}

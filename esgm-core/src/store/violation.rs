@@ -1,0 +1,105 @@
+//! What happens to a structure offered to a trajectory: added, held, or dropped with a
+//! cause (T4, C7).
+
+use std::fmt;
+
+use crate::policy::Constraint;
+use crate::time::Time;
+use crate::type_check::InvalidType;
+
+/// A structure broke a constraint of a trajectory's policy (the seed's
+/// `PolicyViolation`). Returned by the blocking add forms, delivered to violation
+/// subscribers, and counted in stats.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PolicyViolation {
+    /// The trajectory.
+    pub trajectory: String,
+    /// The constraint that was broken.
+    pub constraint: Constraint,
+    /// The structure's valid time.
+    pub valid_time: Time,
+    /// The structure's create time.
+    pub create_time: Time,
+    /// When it was offered to the trajectory.
+    pub add_time: Time,
+    /// What exactly was wrong, for people (e.g. "valid time 5 is before 7").
+    pub detail: String,
+}
+
+impl fmt::Display for PolicyViolation {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(
+            f,
+            "policy violation in `{}`: {} constraint: {} (valid time {}, added at {})",
+            self.trajectory, self.constraint, self.detail, self.valid_time, self.add_time
+        )
+    }
+}
+
+impl std::error::Error for PolicyViolation {}
+
+/// Why a structure offered to a trajectory was not stored. Every drop is counted under
+/// its cause.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum DropCause {
+    /// It broke a policy constraint.
+    Violation(Constraint),
+    /// It did not fit the trajectory's type.
+    InvalidType,
+    /// It was held for reordering when the trajectory was reset.
+    Reset,
+}
+
+impl fmt::Display for DropCause {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            DropCause::Violation(c) => c.fmt(f),
+            DropCause::InvalidType => f.write_str("invalid_type"),
+            DropCause::Reset => f.write_str("reset"),
+        }
+    }
+}
+
+/// What an add did.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum AddOutcome {
+    /// The structure entered the stream and was sent to subscribers.
+    Added,
+    /// The structure is held until `release_at` to restore valid-time order (C6); it
+    /// enters the stream then unless an earlier-valid sample makes it a violation.
+    Held {
+        /// When it will be released.
+        release_at: Time,
+    },
+    /// The structure broke a constraint, was dropped and counted (non-blocking forms
+    /// only; the blocking forms return [`AddError::PolicyViolation`]).
+    Dropped(PolicyViolation),
+}
+
+/// Errors of the add operations (T4).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum AddError {
+    /// The structure does not fit the trajectory's type; fix the named attribute. It
+    /// was dropped and counted.
+    #[error("trajectory `{trajectory}`: {source}")]
+    InvalidType {
+        /// The trajectory.
+        trajectory: String,
+        /// What did not fit.
+        source: InvalidType,
+    },
+    /// The structure broke a constraint (blocking forms only). It was dropped, counted
+    /// and reported to violation subscribers.
+    #[error(transparent)]
+    PolicyViolation(Box<PolicyViolation>),
+    /// The trajectory does not accept structures from outside (e.g. a computed or
+    /// sampled one fed by esgm itself).
+    #[error("trajectory `{trajectory}` does not accept {operation}: it is fed by esgm")]
+    OperationNotSupported {
+        /// The trajectory.
+        trajectory: String,
+        /// The refused operation.
+        operation: &'static str,
+    },
+}
