@@ -95,6 +95,37 @@ impl EntityFrame {
     }
 }
 
+fn attributes_heap_bytes(
+    attributes: &[AttributeValuePair],
+    seen: &mut std::collections::HashSet<usize>,
+) -> usize {
+    attributes
+        .iter()
+        .map(|p| {
+            std::mem::size_of::<AttributeValuePair>()
+                + p.name.capacity()
+                + p.value.approx_heap_bytes(seen)
+        })
+        .sum()
+}
+
+impl EntityFrame {
+    /// Approximate heap bytes held (see [`Value::approx_heap_bytes`]).
+    pub fn approx_heap_bytes(&self, seen: &mut std::collections::HashSet<usize>) -> usize {
+        self.name.capacity() + attributes_heap_bytes(&self.attributes, seen)
+    }
+}
+
+impl EntityStructure {
+    /// Approximate bytes held, the structure itself included (see
+    /// [`Value::approx_heap_bytes`]).
+    pub fn approx_bytes(&self, seen: &mut std::collections::HashSet<usize>) -> usize {
+        std::mem::size_of::<Self>()
+            + self.name.capacity()
+            + attributes_heap_bytes(&self.attributes, seen)
+    }
+}
+
 fn set_attribute(attributes: &mut Vec<AttributeValuePair>, name: String, value: Value) {
     match attributes.iter_mut().find(|p| p.name == name) {
         Some(p) => p.value = value,

@@ -32,12 +32,14 @@ pub mod approximation;
 pub mod clock;
 pub mod codec;
 pub mod entity;
+pub mod esgm;
 pub mod filter;
 pub mod frame;
 pub mod generator;
 pub mod library;
 pub mod operators;
 pub mod policy;
+pub mod runtime;
 pub mod sample;
 pub mod store;
 pub mod time;
@@ -49,6 +51,10 @@ pub mod value;
 pub use approximation::{MergeRule, ValueApproximation};
 pub use clock::{Clock, SharedClock, SimClock, SystemClock};
 pub use entity::{AttributeField, Entity, FromEntityError};
+pub use esgm::{
+    CompUnit, ComputeError, CreateError, EntityTrajectoryStructure, Esgm, InputType, LookupError,
+    RegistrationError, SensorError, SensorInterface, TrajectorySpec,
+};
 pub use filter::{Filter, FilterError};
 pub use frame::{AttributeList, AttributeValuePair, EntityFrame, EntityStructure};
 pub use generator::{FluentGenerator, GeneratorPolicy};
@@ -56,6 +62,7 @@ pub use policy::{
     CacheConstraint, ChangeConstraint, Constraint, DelayConstraint, DurationConstraint,
     FluentStreamPolicy, OrderConstraint, PolicyError,
 };
+pub use runtime::{InProcessEsgm, InProcessTrajectory};
 pub use sample::Sample;
 pub use store::{
     AddError, AddOutcome, DropCause, PolicyViolation, QueryError, SubscribeOptions, Subscription,

@@ -469,6 +469,31 @@ impl Value {
     }
 }
 
+impl Value {
+    /// Approximate heap bytes this value holds; octet buffers already in `seen` (by
+    /// address) are not counted again, so a shared image counts once.
+    pub fn approx_heap_bytes(&self, seen: &mut std::collections::HashSet<usize>) -> usize {
+        use std::mem::size_of;
+        match self {
+            Value::String(s) | Value::Symbol(s) => s.capacity(),
+            Value::OctetSeq(o) if seen.insert(o.as_ptr() as usize) => o.len(),
+            Value::LongSeq(v) => v.capacity() * size_of::<i64>(),
+            Value::DoubleSeq(v) => v.capacity() * size_of::<f64>(),
+            Value::SymbolSeq(v) => v.iter().map(|s| s.capacity() + size_of::<String>()).sum(),
+            Value::VecSeq(v) => v.capacity() * size_of::<Vec3>(),
+            Value::Pos2Seq(v) => v.capacity() * size_of::<Pos2>(),
+            Value::Agg(v) | Value::Collection(v) => {
+                v.iter().map(|x| size_of::<Value>() + x.approx_heap_bytes(seen)).sum()
+            }
+            Value::EntityFrame(f) => size_of::<EntityFrame>() + f.approx_heap_bytes(seen),
+            Value::EntityFrameSeq(v) => {
+                v.iter().map(|f| size_of::<EntityFrame>() + f.approx_heap_bytes(seen)).sum()
+            }
+            _ => 0,
+        }
+    }
+}
+
 impl From<i64> for Value {
     fn from(v: i64) -> Self {
         Value::Long(v)

@@ -1,1 +1,14 @@
-//! Placeholder
+//! Test support for esgm: the runtime-generic conformance suite, and harnesses.
+//!
+//! Every semantic rule of the ESGM interface is written once, in [`conformance`], as a
+//! function generic over a [`Harness`]; [`conformance_tests!`] turns the whole suite
+//! into `#[test]`s for one runtime. The in-process runtime runs it in
+//! `tests/in_process.rs`; the shared-memory runtime runs the same functions.
+#![deny(missing_docs)]
+// This crate is test code: a failed unwrap or a panic is a failed test with its message.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+pub mod conformance;
+mod harness;
+
+pub use harness::{Harness, InProcessHarness, wait_for};

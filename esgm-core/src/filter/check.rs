@@ -293,8 +293,6 @@ fn scalar(path: Path, sort: ValueSort) -> Option<Typed> {
 }
 
 #[cfg(test)]
-// A failing test panics; that is how it fails.
-#[allow(clippy::unwrap_used, clippy::panic)]
 mod tests {
     use super::super::fixtures::compile;
     use super::*;

@@ -101,8 +101,6 @@ impl StrExpr {
 }
 
 #[cfg(test)]
-// A failing test panics; that is how it fails.
-#[allow(clippy::unwrap_used, clippy::panic)]
 mod tests {
     use super::super::fixtures::{blob, compile, eval, sample};
     use crate::frame::EntityFrame;

@@ -1,6 +1,5 @@
 //! Test support: a type with an attribute of every sort the language treats
 //! differently, and a structure of that type.
-#![allow(clippy::unwrap_used, clippy::panic)] // failing fixtures fail the test
 
 use super::{Filter, FilterError};
 use crate::frame::EntityFrame;

@@ -230,8 +230,6 @@ impl Lexer<'_> {
 }
 
 #[cfg(test)]
-// A failing test panics; that is how it fails.
-#[allow(clippy::unwrap_used, clippy::panic)]
 mod tests {
     use super::TokenKind::*;
     use super::*;

@@ -121,8 +121,6 @@ impl fmt::Display for Filter {
 mod fixtures;
 
 #[cfg(test)]
-// A failing test panics; that is how it fails.
-#[allow(clippy::unwrap_used, clippy::panic)]
 mod tests {
     use super::*;
     use crate::Entity;

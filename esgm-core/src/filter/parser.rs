@@ -264,8 +264,6 @@ impl Parser<'_> {
 }
 
 #[cfg(test)]
-// A failing test panics; that is how it fails.
-#[allow(clippy::unwrap_used, clippy::panic)]
 mod tests {
     use super::*;
 

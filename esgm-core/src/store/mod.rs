@@ -50,7 +50,7 @@ use subscription::Subscribers;
 
 pub use query::QueryError;
 pub use stats::TrajectoryStats;
-pub use subscription::{RecvError, SubscribeOptions, Subscription, SubscriptionId};
+pub use subscription::{CallbackHandle, RecvError, SubscribeOptions, Subscription, SubscriptionId};
 pub use violation::{AddError, AddOutcome, DropCause, PolicyViolation};
 
 /// A sample waiting in the reorder buffer, ordered by (valid time, add sequence).

@@ -26,6 +26,12 @@ pub enum QueryError {
         /// The query and why it has no answer.
         query: String,
     },
+    /// The trajectory behind this handle was destroyed; get a new handle by name.
+    #[error("no entity trajectory structure `{trajectory}` (destroyed)")]
+    NoSuchEntityStructure {
+        /// The trajectory's name.
+        trajectory: String,
+    },
     /// A default value for approximation does not fit the trajectory's type.
     #[error("default value for `{trajectory}` does not fit its type: {source}")]
     InvalidDefault {
@@ -169,6 +175,12 @@ impl TrajectoryStore {
     /// The latest valid time stored (the end of the trajectory's interval).
     pub fn end_time(&self) -> Result<Time, QueryError> {
         self.history.max_valid_time().ok_or_else(|| self.not_available("end_time: empty"))
+    }
+
+    /// Approximate bytes held by stored samples; octet buffers in `seen` are not
+    /// counted again.
+    pub fn approx_bytes(&self, seen: &mut std::collections::HashSet<usize>) -> usize {
+        self.history.iter().map(|e| e.es.approx_bytes(seen)).sum()
     }
 
     /// Every stored sample in add order (for recording and inspection).

@@ -100,6 +100,58 @@ impl<T> Subscription<T> {
     }
 }
 
+impl<T: Send + 'static> Subscription<T> {
+    /// Calls `callback` on a thread of its own for every item, until the subscription
+    /// ends or the returned handle is dropped (the seed's `SubscriptionProxy`).
+    pub fn spawn_callback<F>(self, mut callback: F) -> CallbackHandle
+    where
+        F: FnMut(T) + Send + 'static,
+    {
+        let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let stop_thread = Arc::clone(&stop);
+        let thread = std::thread::Builder::new()
+            .name(format!("esgm-callback-{}", self.id.0))
+            .spawn(move || {
+                while !stop_thread.load(Ordering::Relaxed) {
+                    match self.recv_timeout(Duration::from_millis(50)) {
+                        Ok(item) => callback(item),
+                        Err(RecvError::Timeout) => {}
+                        Err(RecvError::Closed) => break,
+                    }
+                }
+            })
+            .ok();
+        CallbackHandle { stop, thread }
+    }
+}
+
+/// Keeps a callback subscription alive; dropping it stops the callback thread.
+#[derive(Debug)]
+pub struct CallbackHandle {
+    stop: Arc<std::sync::atomic::AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl CallbackHandle {
+    /// True if the callback thread could not be started (the OS refused a thread).
+    pub fn failed_to_start(&self) -> bool {
+        self.thread.is_none()
+    }
+}
+
+impl Drop for CallbackHandle {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            // Do not join from the callback thread itself (a callback dropping its
+            // own handle would deadlock).
+            if t.thread().id() != std::thread::current().id() {
+                let _ = t.join();
+            }
+        }
+    }
+}
+
 /// The writer's side of one subscription.
 #[derive(Debug)]
 struct Subscriber<T> {

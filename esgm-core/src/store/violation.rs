@@ -93,6 +93,12 @@ pub enum AddError {
     /// and reported to violation subscribers.
     #[error(transparent)]
     PolicyViolation(Box<PolicyViolation>),
+    /// The trajectory behind this handle was destroyed; get a new handle by name.
+    #[error("no entity trajectory structure `{trajectory}` (destroyed)")]
+    NoSuchEntityStructure {
+        /// The trajectory's name.
+        trajectory: String,
+    },
     /// The trajectory does not accept structures from outside (e.g. a computed or
     /// sampled one fed by esgm itself).
     #[error("trajectory `{trajectory}` does not accept {operation}: it is fed by esgm")]

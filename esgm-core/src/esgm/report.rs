@@ -1,0 +1,93 @@
+//! What the ESGM reports about itself (E7): statistics, memory, log level.
+
+use crate::esgm::spec::TrajectoryKind;
+use crate::policy::FluentStreamPolicy;
+use crate::store::TrajectoryStats;
+
+/// One trajectory as listed: name, kind, type, where it reads from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrajectoryInfo {
+    /// The name.
+    pub name: String,
+    /// Primitive, sampled, computed, …
+    pub kind: TrajectoryKind,
+    /// The registered type name of its structures.
+    pub type_name: String,
+    /// The sensor or unit feeding it, if any.
+    pub source: Option<String>,
+    /// The trajectories it reads, in order.
+    pub inputs: Vec<String>,
+    /// Its policy.
+    pub policy: FluentStreamPolicy,
+}
+
+/// Counters of the worker that feeds a sampled, computed or operator trajectory.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct WorkerStats {
+    /// Sensor or unit calls made.
+    pub calls: u64,
+    /// Calls that produced a structure.
+    pub outputs: u64,
+    /// Calls that answered "no value" (not an error).
+    pub no_value: u64,
+    /// Calls that failed with an error.
+    pub failures: u64,
+    /// Calls that panicked (isolated; the worker carried on).
+    pub panics: u64,
+    /// Outputs refused by the trajectory's type check.
+    pub invalid_outputs: u64,
+    /// Sample times skipped because the worker was late by a period or more.
+    pub missed_periods: u64,
+    /// Times the worker was restarted (out-of-process runtimes).
+    pub restarts: u64,
+}
+
+/// Statistics of the whole ESGM.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EsgmStats {
+    /// Per trajectory: its listing, its store's stats, its worker's.
+    pub trajectories: Vec<(TrajectoryInfo, TrajectoryStats, WorkerStats)>,
+}
+
+/// Memory held by the ESGM's trajectories.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct MemoryStats {
+    /// Trajectories.
+    pub trajectories: usize,
+    /// Samples stored in all caches.
+    pub stored_samples: usize,
+    /// Samples held for reordering.
+    pub held_samples: usize,
+    /// Approximate bytes of stored structures (images counted once per buffer).
+    pub approx_bytes: usize,
+}
+
+/// Log verbosity (E7's `Logable`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Default)]
+pub enum LogLevel {
+    /// Errors only.
+    Error,
+    /// Warnings and errors.
+    Warn,
+    /// Informational messages (the default).
+    #[default]
+    Info,
+    /// Debugging detail (every drop).
+    Debug,
+    /// Everything.
+    Trace,
+}
+
+impl LogLevel {
+    /// Parses `error|warn|info|debug|trace`.
+    pub fn parse(s: &str) -> Option<Self> {
+        match s.to_ascii_lowercase().as_str() {
+            "error" => Some(LogLevel::Error),
+            "warn" | "warning" => Some(LogLevel::Warn),
+            "info" => Some(LogLevel::Info),
+            "debug" => Some(LogLevel::Debug),
+            "trace" => Some(LogLevel::Trace),
+            _ => None,
+        }
+    }
+}

@@ -1,0 +1,241 @@
+//! The richer constructor: a trajectory described in full (source + policy), so the
+//! seed's "reasonable set of constraints" and every operator are one call away.
+
+use crate::generator::GeneratorPolicy;
+use crate::operators::sync::SyncPolicy;
+use crate::policy::{FluentStreamPolicy, PolicyError};
+use crate::time::Time;
+
+/// Where a trajectory's structures come from (the content part of a DyKnow policy).
+#[derive(Debug, Clone)]
+#[non_exhaustive]
+pub enum TrajectorySource {
+    /// Pushed by an outside source (E2).
+    Primitive {
+        /// The registered type of its structures.
+        type_name: String,
+    },
+    /// Pulled from a registered sensor every `sample_period` between `from` and `to`
+    /// (E3; `from = 0`: now, `to = 0`: forever).
+    Sampled {
+        /// The sensor.
+        sensor: String,
+        /// First sample time.
+        from: Time,
+        /// Last sample time.
+        to: Time,
+        /// Time between samples.
+        sample_period: Time,
+    },
+    /// Computed by a unit on every update of any input (E4).
+    Computed {
+        /// The computational unit.
+        unit: String,
+        /// The inputs, in the order the unit receives them.
+        inputs: Vec<String>,
+    },
+    /// States holding one sample of every input valid at the same time (G2).
+    Sync {
+        /// The inputs.
+        inputs: Vec<String>,
+        /// Exact or approximate (ROS ApproximateTime) matching.
+        policy: SyncPolicy,
+    },
+    /// Every sample of every input, in the order they arrive (G3).
+    Merge {
+        /// The inputs; they must share one type.
+        inputs: Vec<String>,
+    },
+    /// A stream sampled from fluent generators over other trajectories (G4,
+    /// `fstream(l, s, c)`): with one input, the generator's values; with several, a
+    /// state of all of them (`state(s1..sn)`).
+    SampledGenerators {
+        /// The inputs and the generator policy (approximation + merge) for each.
+        inputs: Vec<(String, GeneratorPolicy)>,
+        /// First sample time (0 = now).
+        from: Time,
+        /// Last sample time (0 = forever).
+        to: Time,
+        /// Time between samples.
+        sample_period: Time,
+    },
+}
+
+/// A full description of a trajectory to create.
+#[derive(Debug, Clone)]
+pub struct TrajectorySpec {
+    /// The trajectory's name.
+    pub name: String,
+    /// Where its structures come from.
+    pub source: TrajectorySource,
+    /// The constraints it keeps.
+    pub policy: FluentStreamPolicy,
+    /// If a trajectory with this name exists, re-point the name to the new one; its
+    /// subscribers move over and see the new stream from then on (E5).
+    pub replace: bool,
+}
+
+impl TrajectorySpec {
+    fn new(name: impl Into<String>, source: TrajectorySource) -> Self {
+        Self { name: name.into(), source, policy: FluentStreamPolicy::default(), replace: false }
+    }
+
+    /// A primitive trajectory of `type_name`, unconstrained until a policy is set.
+    pub fn primitive(name: impl Into<String>, type_name: impl Into<String>) -> Self {
+        Self::new(name, TrajectorySource::Primitive { type_name: type_name.into() })
+    }
+
+    /// A sampled trajectory with the seed's policy for it (period → change, from/to →
+    /// duration, monotone order; delay any and keep all until set).
+    pub fn sampled(
+        name: impl Into<String>,
+        sensor: impl Into<String>,
+        sample_period: Time,
+    ) -> Result<Self, PolicyError> {
+        let mut s = Self::new(
+            name,
+            TrajectorySource::Sampled { sensor: sensor.into(), from: 0, to: 0, sample_period },
+        );
+        s.policy = FluentStreamPolicy::sampled(0, 0, sample_period, 0, 0)?;
+        Ok(s)
+    }
+
+    /// A computed trajectory.
+    pub fn computed<S: Into<String>>(
+        name: impl Into<String>,
+        unit: impl Into<String>,
+        inputs: impl IntoIterator<Item = S>,
+    ) -> Self {
+        Self::new(
+            name,
+            TrajectorySource::Computed {
+                unit: unit.into(),
+                inputs: inputs.into_iter().map(Into::into).collect(),
+            },
+        )
+    }
+
+    /// A synchronized trajectory of states.
+    pub fn sync<S: Into<String>>(
+        name: impl Into<String>,
+        inputs: impl IntoIterator<Item = S>,
+        policy: SyncPolicy,
+    ) -> Self {
+        Self::new(
+            name,
+            TrajectorySource::Sync { inputs: inputs.into_iter().map(Into::into).collect(), policy },
+        )
+    }
+
+    /// A merged trajectory.
+    pub fn merge<S: Into<String>>(
+        name: impl Into<String>,
+        inputs: impl IntoIterator<Item = S>,
+    ) -> Self {
+        Self::new(
+            name,
+            TrajectorySource::Merge { inputs: inputs.into_iter().map(Into::into).collect() },
+        )
+    }
+
+    /// A trajectory sampled every `sample_period` from generators over `inputs`.
+    pub fn sampled_generators<S: Into<String>>(
+        name: impl Into<String>,
+        inputs: impl IntoIterator<Item = (S, GeneratorPolicy)>,
+        sample_period: Time,
+    ) -> Self {
+        Self::new(
+            name,
+            TrajectorySource::SampledGenerators {
+                inputs: inputs.into_iter().map(|(n, g)| (n.into(), g)).collect(),
+                from: 0,
+                to: 0,
+                sample_period,
+            },
+        )
+    }
+
+    /// Sets the policy.
+    #[must_use]
+    pub fn policy(mut self, policy: FluentStreamPolicy) -> Self {
+        self.policy = policy;
+        self
+    }
+
+    /// Sets the start and end of a sampled source (0 rules as in E3).
+    #[must_use]
+    pub fn between(mut self, from_time: Time, to_time: Time) -> Self {
+        match &mut self.source {
+            TrajectorySource::Sampled { from, to, .. }
+            | TrajectorySource::SampledGenerators { from, to, .. } => {
+                *from = from_time;
+                *to = to_time;
+            }
+            _ => {}
+        }
+        self
+    }
+
+    /// Re-points the name if it exists (subscribers move to the new trajectory).
+    #[must_use]
+    pub fn replace(mut self) -> Self {
+        self.replace = true;
+        self
+    }
+
+    /// The trajectory's kind, for listings.
+    pub fn kind(&self) -> TrajectoryKind {
+        match self.source {
+            TrajectorySource::Primitive { .. } => TrajectoryKind::Primitive,
+            TrajectorySource::Sampled { .. } => TrajectoryKind::Sampled,
+            TrajectorySource::Computed { .. } => TrajectoryKind::Computed,
+            TrajectorySource::Sync { .. } => TrajectoryKind::Sync,
+            TrajectorySource::Merge { .. } => TrajectoryKind::Merge,
+            TrajectorySource::SampledGenerators { .. } => TrajectoryKind::SampledGenerators,
+        }
+    }
+
+    /// The names of the trajectories this one reads, in order.
+    pub fn inputs(&self) -> Vec<String> {
+        match &self.source {
+            TrajectorySource::Computed { inputs, .. }
+            | TrajectorySource::Sync { inputs, .. }
+            | TrajectorySource::Merge { inputs } => inputs.clone(),
+            TrajectorySource::SampledGenerators { inputs, .. } => {
+                inputs.iter().map(|(n, _)| n.clone()).collect()
+            }
+            _ => Vec::new(),
+        }
+    }
+}
+
+/// The kinds of trajectory, for listings and graphs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum TrajectoryKind {
+    /// Pushed from outside.
+    Primitive,
+    /// Pulled from a sensor.
+    Sampled,
+    /// Computed by a unit.
+    Computed,
+    /// Synchronized states.
+    Sync,
+    /// Merged inputs.
+    Merge,
+    /// Sampled from generators.
+    SampledGenerators,
+}
+
+impl TrajectoryKind {
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            TrajectoryKind::Primitive => "primitive",
+            TrajectoryKind::Sampled => "sampled",
+            TrajectoryKind::Computed => "computed",
+            TrajectoryKind::Sync => "sync",
+            TrajectoryKind::Merge => "merge",
+            TrajectoryKind::SampledGenerators => "sampled-generators",
+        }
+    }
+}

@@ -1,0 +1,83 @@
+//! A trajectory in the in-process runtime (its store, description and worker), and the
+//! descriptor that maps a name to whichever trajectory it currently denotes.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+
+use parking_lot::{Mutex, RwLock};
+
+use crate::esgm::{TrajectoryInfo, WorkerStats};
+use crate::store::TrajectoryStore;
+
+/// Counters a worker bumps; read as a [`WorkerStats`] snapshot.
+#[derive(Debug, Default)]
+pub(crate) struct WorkerCounters {
+    pub calls: AtomicU64,
+    pub outputs: AtomicU64,
+    pub no_value: AtomicU64,
+    pub failures: AtomicU64,
+    pub panics: AtomicU64,
+    pub invalid_outputs: AtomicU64,
+    pub missed_periods: AtomicU64,
+}
+
+impl WorkerCounters {
+    pub fn bump(counter: &AtomicU64) {
+        counter.fetch_add(1, Ordering::Relaxed);
+    }
+
+    pub fn snapshot(&self) -> WorkerStats {
+        let l = |c: &AtomicU64| c.load(Ordering::Relaxed);
+        WorkerStats {
+            calls: l(&self.calls),
+            outputs: l(&self.outputs),
+            no_value: l(&self.no_value),
+            failures: l(&self.failures),
+            panics: l(&self.panics),
+            invalid_outputs: l(&self.invalid_outputs),
+            missed_periods: l(&self.missed_periods),
+            restarts: 0,
+        }
+    }
+}
+
+/// The thread feeding a trajectory; dropping it asks the thread to stop. The thread is
+/// not joined: a unit in the middle of a long computation finishes on its own and its
+/// output goes to a trajectory nobody can reach any more.
+#[derive(Debug)]
+pub(crate) struct Worker {
+    pub stop: Arc<AtomicBool>,
+    /// Dropped with the worker: a worker blocked on its inputs wakes on disconnection.
+    pub _wake: Option<crossbeam_channel::Sender<()>>,
+}
+
+impl Drop for Worker {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+    }
+}
+
+/// One trajectory: the representational structure behind a name.
+#[derive(Debug)]
+pub(crate) struct TrajectoryCell {
+    pub store: Mutex<TrajectoryStore>,
+    pub info: TrajectoryInfo,
+    /// Only primitive trajectories take structures from outside.
+    pub external_adds: bool,
+    pub worker: Mutex<Option<Worker>>,
+    pub counters: Arc<WorkerCounters>,
+}
+
+/// A name and the trajectory it denotes now (the seed's descriptor). Handles hold the
+/// descriptor, so they follow re-pointing, and see `None` after destruction.
+#[derive(Debug)]
+pub(crate) struct Descriptor {
+    pub name: String,
+    pub current: RwLock<Option<Arc<TrajectoryCell>>>,
+}
+
+impl Descriptor {
+    pub fn get(&self) -> Option<Arc<TrajectoryCell>> {
+        self.current.read().clone()
+    }
+}

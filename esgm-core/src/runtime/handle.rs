@@ -1,0 +1,169 @@
+//! The in-process trajectory handle.
+
+use std::sync::Arc;
+
+use super::cell::{Descriptor, TrajectoryCell};
+use crate::approximation::ValueApproximation;
+use crate::esgm::EntityTrajectoryStructure;
+use crate::frame::{AttributeList, EntityStructure};
+use crate::policy::FluentStreamPolicy;
+use crate::sample::Sample;
+use crate::store::{
+    AddError, AddOutcome, PolicyViolation, QueryError, SubscribeOptions, Subscription,
+    SubscriptionId, TrajectoryStats, TrajectoryStore,
+};
+use crate::time::Time;
+use crate::types::EntityStructureType;
+
+/// A handle on a trajectory of the in-process runtime: a proxy for its name.
+#[derive(Debug, Clone)]
+pub struct InProcessTrajectory {
+    pub(crate) descriptor: Arc<Descriptor>,
+}
+
+impl InProcessTrajectory {
+    fn cell(&self) -> Option<Arc<TrajectoryCell>> {
+        self.descriptor.get()
+    }
+
+    fn gone_q(&self) -> QueryError {
+        QueryError::NoSuchEntityStructure { trajectory: self.descriptor.name.clone() }
+    }
+
+    fn gone_a(&self) -> AddError {
+        AddError::NoSuchEntityStructure { trajectory: self.descriptor.name.clone() }
+    }
+
+    /// Runs `f` on the current store, under its lock.
+    pub fn with_store<R>(
+        &self,
+        f: impl FnOnce(&mut TrajectoryStore) -> R,
+    ) -> Result<R, QueryError> {
+        let cell = self.cell().ok_or_else(|| self.gone_q())?;
+        let mut store = cell.store.lock();
+        Ok(f(&mut store))
+    }
+
+    fn query<R>(
+        &self,
+        f: impl FnOnce(&TrajectoryStore) -> Result<R, QueryError>,
+    ) -> Result<R, QueryError> {
+        self.with_store(|s| f(s))?
+    }
+
+    fn add_with(
+        &self,
+        operation: &'static str,
+        f: impl FnOnce(&mut TrajectoryStore) -> Result<AddOutcome, AddError>,
+    ) -> Result<AddOutcome, AddError> {
+        let cell = self.cell().ok_or_else(|| self.gone_a())?;
+        if !cell.external_adds {
+            return Err(AddError::OperationNotSupported {
+                trajectory: self.descriptor.name.clone(),
+                operation,
+            });
+        }
+        let mut store = cell.store.lock();
+        f(&mut store)
+    }
+
+    /// Adds an already shared structure without copying it (zero-copy push).
+    pub fn add_shared(&self, es: Arc<EntityStructure>) -> Result<AddOutcome, AddError> {
+        self.add_with("add", |s| s.add_shared(es, false))
+    }
+}
+
+impl EntityTrajectoryStructure for InProcessTrajectory {
+    fn name(&self) -> &str {
+        &self.descriptor.name
+    }
+    fn entity_type(&self) -> Result<EntityStructureType, QueryError> {
+        self.with_store(|s| s.entity_type().as_ref().clone())
+    }
+    fn policy(&self) -> Result<FluentStreamPolicy, QueryError> {
+        self.with_store(|s| s.policy().clone())
+    }
+    fn start_time(&self) -> Result<Time, QueryError> {
+        self.query(|s| s.start_time())
+    }
+    fn end_time(&self) -> Result<Time, QueryError> {
+        self.query(|s| s.end_time())
+    }
+    fn get_latest(&self) -> Result<Sample, QueryError> {
+        self.query(|s| s.get_latest())
+    }
+    fn get_nth_latest(&self, n: usize) -> Result<Sample, QueryError> {
+        self.query(|s| s.get_nth_latest(n))
+    }
+    fn get_between(&self, from: Time, to: Time) -> Result<Vec<Sample>, QueryError> {
+        self.with_store(|s| s.get_between(from, to))
+    }
+    fn get_closest_at_or_before(&self, t: Time) -> Result<Sample, QueryError> {
+        self.query(|s| s.get_closest_at_or_before(t))
+    }
+    fn get_at(&self, t: Time) -> Result<Sample, QueryError> {
+        self.query(|s| s.get_at(t))
+    }
+    fn get_at_approximating(
+        &self,
+        t: Time,
+        aprx: &ValueApproximation,
+    ) -> Result<Sample, QueryError> {
+        self.query(|s| s.get_at_approximating(t, aprx))
+    }
+    fn subscribe(&self, options: SubscribeOptions) -> Result<Subscription<Sample>, QueryError> {
+        self.with_store(|s| s.subscribe(options))
+    }
+    fn unsubscribe(&self, id: SubscriptionId) -> Result<(), QueryError> {
+        self.with_store(|s| {
+            s.unsubscribe(id);
+        })
+    }
+    fn subscribe_violations(
+        &self,
+        capacity: usize,
+    ) -> Result<Subscription<PolicyViolation>, QueryError> {
+        self.with_store(|s| s.subscribe_violations(capacity))
+    }
+    fn add(&self, es: EntityStructure) -> Result<AddOutcome, AddError> {
+        self.add_with("add", |s| s.add(es))
+    }
+    fn add_blocking(&self, es: EntityStructure) -> Result<AddOutcome, AddError> {
+        self.add_with("add_blocking", |s| s.add_blocking(es))
+    }
+    fn create_at(
+        &self,
+        name: &str,
+        valid_time: Time,
+        attributes: AttributeList,
+    ) -> Result<AddOutcome, AddError> {
+        self.add_with("create_at", |s| s.create_at(name, valid_time, attributes))
+    }
+    fn create_at_blocking(
+        &self,
+        name: &str,
+        valid_time: Time,
+        attributes: AttributeList,
+    ) -> Result<AddOutcome, AddError> {
+        self.add_with("create_at_blocking", |s| s.create_at_blocking(name, valid_time, attributes))
+    }
+    fn create_at_now(&self, name: &str, attributes: AttributeList) -> Result<AddOutcome, AddError> {
+        self.add_with("create_at_now", |s| s.create_at_now(name, attributes))
+    }
+    fn create_at_now_blocking(
+        &self,
+        name: &str,
+        attributes: AttributeList,
+    ) -> Result<AddOutcome, AddError> {
+        self.add_with("create_at_now_blocking", |s| s.create_at_now_blocking(name, attributes))
+    }
+    fn reset(&self) -> Result<(), QueryError> {
+        self.with_store(|s| s.reset())
+    }
+    fn reset_blocking(&self) -> Result<(), QueryError> {
+        self.with_store(|s| s.reset_blocking())
+    }
+    fn stats(&self) -> Result<TrajectoryStats, QueryError> {
+        self.with_store(|s| s.stats())
+    }
+}

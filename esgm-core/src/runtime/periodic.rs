@@ -1,0 +1,61 @@
+//! The periodic loop behind sampled trajectories: a tick at every sample time from
+//! `from` to `to`, on the runtime's clock.
+//!
+//! Sample times are exact multiples of the period after `from` (the query time handed
+//! to the sensor is the scheduled time, not the wake-up time), so a sampled stream's
+//! valid times are evenly spaced however the thread is scheduled. A worker that wakes
+//! a period or more late skips the missed sample times and counts them.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use crate::clock::SharedClock;
+use crate::time::Time;
+
+/// How long a sleeping worker waits before re-checking its stop flag.
+pub(crate) const STOP_POLL: Duration = Duration::from_millis(20);
+
+/// When to tick.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Schedule {
+    /// First sample time (already resolved: never 0 for "now").
+    pub from: Time,
+    /// Last sample time, if any.
+    pub to: Option<Time>,
+    pub period: Time,
+}
+
+/// Runs `tick(sample_time)` at every sample time until `stop` is set or the schedule
+/// ends. `missed(n)` is told about skipped sample times.
+pub(crate) fn run(
+    clock: &SharedClock,
+    stop: &Arc<AtomicBool>,
+    schedule: Schedule,
+    mut missed: impl FnMut(u64),
+    mut tick: impl FnMut(Time),
+) {
+    let mut next = schedule.from;
+    while !stop.load(Ordering::Relaxed) {
+        if schedule.to.is_some_and(|to| next > to) {
+            break;
+        }
+        let now = clock.sleep_until(next, STOP_POLL);
+        if now < next {
+            continue;
+        }
+        let late = (now - next) / schedule.period;
+        if late > 0 {
+            missed(late as u64);
+            next += late * schedule.period;
+            if schedule.to.is_some_and(|to| next > to) {
+                break;
+            }
+        }
+        if stop.load(Ordering::Relaxed) {
+            break;
+        }
+        tick(next);
+        next += schedule.period;
+    }
+}

@@ -1,0 +1,260 @@
+//! The threads that feed sampled, computed and operator trajectories.
+//!
+//! Every call into user code (sensors, units) is isolated with `catch_unwind`: a
+//! panicking unit is counted and logged, and its trajectory keeps running.
+
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use crossbeam_channel::Receiver;
+
+use super::cell::{Descriptor, TrajectoryCell, Worker, WorkerCounters};
+use super::{inputs, periodic};
+use crate::clock::SharedClock;
+use crate::esgm::{CompUnit, ComputeError, SensorError, SensorInterface};
+use crate::frame::{AttributeValuePair, EntityFrame, EntityStructure};
+use crate::generator::GeneratorPolicy;
+use crate::operators::sync::Synchronizer;
+use crate::sample::Sample;
+use crate::store::{AddError, Subscription};
+use crate::time::Time;
+use crate::value::Value;
+
+/// Starts `body` on a named thread and returns the handle that stops it.
+pub(crate) fn spawn(
+    kind: &str,
+    cell: &Arc<TrajectoryCell>,
+    body: impl FnOnce(Arc<AtomicBool>, Receiver<()>) + Send + 'static,
+) -> Worker {
+    let stop = Arc::new(AtomicBool::new(false));
+    let (wake_tx, wake_rx) = crossbeam_channel::bounded::<()>(0);
+    let thread_stop = Arc::clone(&stop);
+    let name = format!("esgm-{kind}-{}", cell.info.name);
+    if let Err(e) = std::thread::Builder::new().name(name).spawn(move || body(thread_stop, wake_rx))
+    {
+        tracing::error!(trajectory = %cell.info.name, error = %e, "could not start worker thread");
+    }
+    Worker { stop, _wake: Some(wake_tx) }
+}
+
+/// Runs user code, counting a panic instead of propagating it.
+fn guarded<R>(cell: &TrajectoryCell, what: &str, f: impl FnOnce() -> R) -> Option<R> {
+    match catch_unwind(AssertUnwindSafe(f)) {
+        Ok(r) => Some(r),
+        Err(payload) => {
+            WorkerCounters::bump(&cell.counters.panics);
+            let msg = payload
+                .downcast_ref::<&str>()
+                .map(|s| (*s).to_owned())
+                .or_else(|| payload.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "non-string panic".into());
+            tracing::error!(trajectory = %cell.info.name, %what, panic = %msg, "user code panicked; isolated");
+            None
+        }
+    }
+}
+
+/// Adds a produced structure to the worker's own trajectory.
+fn emit(cell: &TrajectoryCell, es: Arc<EntityStructure>) {
+    WorkerCounters::bump(&cell.counters.outputs);
+    let result = cell.store.lock().add_shared(es, false);
+    match result {
+        Ok(_) => {}
+        Err(AddError::InvalidType { source, .. }) => {
+            WorkerCounters::bump(&cell.counters.invalid_outputs);
+            tracing::warn!(trajectory = %cell.info.name, error = %source, "worker output has the wrong type");
+        }
+        Err(e) => {
+            WorkerCounters::bump(&cell.counters.failures);
+            tracing::warn!(trajectory = %cell.info.name, error = %e, "worker output refused");
+        }
+    }
+}
+
+fn missed(cell: &TrajectoryCell) -> impl FnMut(u64) + '_ {
+    move |n| {
+        cell.counters.missed_periods.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
+    }
+}
+
+/// A sampled trajectory: calls the sensor at every sample time.
+pub(crate) fn sampler(
+    cell: &Arc<TrajectoryCell>,
+    clock: SharedClock,
+    sensor: Arc<dyn SensorInterface>,
+    schedule: periodic::Schedule,
+) -> Worker {
+    let c = Arc::clone(cell);
+    spawn("sampler", cell, move |stop, _wake| {
+        periodic::run(&clock, &stop, schedule, missed(&c), |qtime| {
+            WorkerCounters::bump(&c.counters.calls);
+            match guarded(&c, "get_current_value", || sensor.get_current_value(qtime)) {
+                Some(Ok(es)) => emit(&c, Arc::new(es)),
+                Some(Err(SensorError::ValueNotAvailable)) => {
+                    WorkerCounters::bump(&c.counters.no_value)
+                }
+                Some(Err(e)) => {
+                    WorkerCounters::bump(&c.counters.failures);
+                    tracing::warn!(trajectory = %c.info.name, error = %e, "sensor failed");
+                }
+                None => {}
+            }
+        });
+    })
+}
+
+/// A computed trajectory: on every input update, calls the unit with the latest sample
+/// of each input, once every input has one.
+pub(crate) fn unit(
+    cell: &Arc<TrajectoryCell>,
+    clock: SharedClock,
+    cu: Arc<dyn CompUnit>,
+    subscriptions: Vec<Subscription<Sample>>,
+    initial: Vec<Option<Sample>>,
+) -> Worker {
+    let c = Arc::clone(cell);
+    spawn("unit", cell, move |stop, wake| {
+        let mut latest = initial;
+        inputs::run(subscriptions, wake, &stop, |i, sample| {
+            latest[i] = Some(sample);
+            let Some(args) = latest.iter().cloned().collect::<Option<Vec<Sample>>>() else {
+                return;
+            };
+            WorkerCounters::bump(&c.counters.calls);
+            let qtime = clock.now();
+            match guarded(&c, "compute", || cu.compute(&args, qtime)) {
+                Some(Ok(es)) => emit(&c, Arc::new(es)),
+                Some(Err(ComputeError::ValueNotAvailable)) => {
+                    WorkerCounters::bump(&c.counters.no_value)
+                }
+                Some(Err(e)) => {
+                    WorkerCounters::bump(&c.counters.failures);
+                    tracing::warn!(trajectory = %c.info.name, error = %e, "unit failed");
+                }
+                None => {}
+            }
+        });
+    })
+}
+
+/// A state: one frame per input, named after the input trajectory.
+pub(crate) fn state(
+    name: &str,
+    valid_time: Time,
+    create_time: Time,
+    parts: &[(&str, &EntityStructure)],
+) -> EntityStructure {
+    EntityStructure {
+        name: name.to_owned(),
+        valid_time,
+        create_time,
+        attributes: parts
+            .iter()
+            .map(|(input, es)| AttributeValuePair {
+                name: (*input).to_owned(),
+                value: Value::EntityFrame(Box::new(EntityFrame {
+                    name: es.name.clone(),
+                    attributes: es.attributes.clone(),
+                })),
+            })
+            .collect(),
+    }
+}
+
+/// A synchronized trajectory (G2): states of samples matched by the synchronizer. A
+/// state is valid at the latest valid time among its samples.
+pub(crate) fn sync(
+    cell: &Arc<TrajectoryCell>,
+    clock: SharedClock,
+    mut synchronizer: Box<dyn Synchronizer<Sample> + Send>,
+    names: Vec<String>,
+    subscriptions: Vec<Subscription<Sample>>,
+) -> Worker {
+    let c = Arc::clone(cell);
+    spawn("sync", cell, move |stop, wake| {
+        inputs::run(subscriptions, wake, &stop, |i, sample| {
+            WorkerCounters::bump(&c.counters.calls);
+            match synchronizer.push(i, sample) {
+                Ok(sets) => {
+                    for set in sets {
+                        let vt = set.iter().map(|s| s.valid_time).max().unwrap_or_default();
+                        let parts: Vec<(&str, &EntityStructure)> = names
+                            .iter()
+                            .map(String::as_str)
+                            .zip(set.iter().map(|s| &*s.structure))
+                            .collect();
+                        emit(&c, Arc::new(state(&c.info.name, vt, clock.now(), &parts)));
+                    }
+                }
+                Err(e) => {
+                    WorkerCounters::bump(&c.counters.failures);
+                    tracing::warn!(trajectory = %c.info.name, error = %e, "sync failed");
+                }
+            }
+        });
+    })
+}
+
+/// A merged trajectory (G3): every sample of every input, shared, not copied.
+pub(crate) fn merge(
+    cell: &Arc<TrajectoryCell>,
+    subscriptions: Vec<Subscription<Sample>>,
+) -> Worker {
+    let c = Arc::clone(cell);
+    spawn("merge", cell, move |stop, wake| {
+        inputs::run(subscriptions, wake, &stop, |_, sample| {
+            WorkerCounters::bump(&c.counters.calls);
+            emit(&c, sample.structure);
+        });
+    })
+}
+
+/// A trajectory sampled from generators (G4): at each sample time `t`, each input's
+/// generator value at `t`; one input gives its value re-stamped at `t`, several give a
+/// state.
+pub(crate) fn sampled_generators(
+    cell: &Arc<TrajectoryCell>,
+    clock: SharedClock,
+    inputs: Vec<(Arc<Descriptor>, GeneratorPolicy)>,
+    schedule: periodic::Schedule,
+) -> Worker {
+    let c = Arc::clone(cell);
+    spawn("generator", cell, move |stop, _wake| {
+        periodic::run(&clock, &stop, schedule, missed(&c), |t| {
+            WorkerCounters::bump(&c.counters.calls);
+            let mut values = Vec::with_capacity(inputs.len());
+            for (d, policy) in &inputs {
+                let Some(input) = d.get() else {
+                    WorkerCounters::bump(&c.counters.failures);
+                    return;
+                };
+                let value = input.store.lock().generator(policy).value_at(t);
+                match value {
+                    Ok(s) => values.push(s),
+                    Err(_) => {
+                        WorkerCounters::bump(&c.counters.no_value);
+                        return;
+                    }
+                }
+            }
+            let es = match values.as_slice() {
+                [one] => EntityStructure {
+                    name: one.name.clone(),
+                    valid_time: t,
+                    create_time: one.create_time,
+                    attributes: one.attributes.clone(),
+                },
+                many => {
+                    let parts: Vec<(&str, &EntityStructure)> = inputs
+                        .iter()
+                        .map(|(d, _)| d.name.as_str())
+                        .zip(many.iter().map(|s| &*s.structure))
+                        .collect();
+                    state(&c.info.name, t, clock.now(), &parts)
+                }
+            };
+            emit(&c, Arc::new(es));
+        });
+    })
+}
