@@ -54,8 +54,8 @@ impl FluentGenerator<'_> {
             return Ok(wrap(es));
         }
         let h = &self.store.history;
-        let before = h.before(t).and_then(|e| self.group_at(e.es.valid_time));
-        let after = h.after(t).and_then(|e| self.group_at(e.es.valid_time));
+        let before = h.before(t).and_then(|e| self.group_at(e.vt));
+        let after = h.after(t).and_then(|e| self.group_at(e.vt));
         let fail = |why: &str| self.store.not_available(format!("value_at({t}): {why}"));
         match &self.policy.approximation {
             ValueApproximation::Linear => match (before, after) {

@@ -127,18 +127,31 @@ pub fn closest_name<'a>(name: &str, candidates: impl Iterator<Item = &'a str>) -
         .map(|(_, c)| c.to_owned())
 }
 
+/// Optimal-string-alignment distance: insertions, deletions, substitutions and swaps
+/// of two adjacent characters each cost one (so `szie` is one edit from `size`, the
+/// commonest typo).
 fn edit_distance(a: &str, b: &str) -> usize {
+    let a: Vec<char> = a.chars().collect();
     let b: Vec<char> = b.chars().collect();
-    let mut prev: Vec<usize> = (0..=b.len()).collect();
-    for (i, ca) in a.chars().enumerate() {
-        let mut cur = vec![i + 1; b.len() + 1];
-        for (j, cb) in b.iter().enumerate() {
-            let subst = prev[j] + usize::from(ca != *cb);
-            cur[j + 1] = subst.min(prev[j + 1] + 1).min(cur[j] + 1);
-        }
-        prev = cur;
+    // d[i][j]: distance between a[..i] and b[..j].
+    let mut d = vec![vec![0usize; b.len() + 1]; a.len() + 1];
+    for (i, row) in d.iter_mut().enumerate() {
+        row[0] = i;
     }
-    prev[b.len()]
+    for j in 0..=b.len() {
+        d[0][j] = j;
+    }
+    for i in 1..=a.len() {
+        for j in 1..=b.len() {
+            let cost = usize::from(a[i - 1] != b[j - 1]);
+            let mut v = (d[i - 1][j] + 1).min(d[i][j - 1] + 1).min(d[i - 1][j - 1] + cost);
+            if i > 1 && j > 1 && a[i - 1] == b[j - 2] && a[i - 2] == b[j - 1] {
+                v = v.min(d[i - 2][j - 2] + 1);
+            }
+            d[i][j] = v;
+        }
+    }
+    d[a.len()][b.len()]
 }
 
 #[cfg(test)]
@@ -184,5 +197,6 @@ mod tests {
         let names = ["blobs", "images", "robot_state"];
         assert_eq!(closest_name("blobz", names.into_iter()), Some("blobs".into()));
         assert_eq!(closest_name("zzz", names.into_iter()), None);
+        assert_eq!(closest_name("szie", ["size", "x"].into_iter()), Some("size".into()));
     }
 }

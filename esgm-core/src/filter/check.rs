@@ -264,21 +264,9 @@ impl<'a> Checker<'a> {
     }
 }
 
-/// The candidate closest to `name`: [`closest_name`], or else one that differs by
-/// swapping two adjacent characters (`szie` for `size`), the commonest typo, which
-/// plain edit distance counts as two edits and so misses in short names.
-fn suggest<'c>(name: &str, candidates: impl Iterator<Item = &'c str> + Clone) -> Option<String> {
-    closest_name(name, candidates.clone())
-        .or_else(|| candidates.into_iter().find(|c| is_adjacent_swap(name, c)).map(str::to_owned))
-}
-
-fn is_adjacent_swap(a: &str, b: &str) -> bool {
-    let (a, b): (Vec<char>, Vec<char>) = (a.chars().collect(), b.chars().collect());
-    if a.len() != b.len() {
-        return false;
-    }
-    let differ: Vec<usize> = (0..a.len()).filter(|&i| a.get(i) != b.get(i)).collect();
-    matches!(differ[..], [i, j] if j == i + 1 && a.get(i) == b.get(j) && a.get(j) == b.get(i))
+/// The candidate closest to `name` (adjacent swaps such as `szie` count as one edit).
+fn suggest<'c>(name: &str, candidates: impl Iterator<Item = &'c str>) -> Option<String> {
+    closest_name(name, candidates)
 }
 
 /// A path of a scalar sort as an expression of its type; `None` for other sorts.

@@ -32,7 +32,6 @@ use crate::esgm::{
     RegistrationError, SensorInterface, TrajectoryInfo, TrajectoryKind, TrajectorySource,
     TrajectorySpec,
 };
-use crate::policy::{DurationConstraint, FluentStreamPolicy};
 use crate::sample::Sample;
 use crate::store::{SubscribeOptions, Subscription, TrajectoryStore};
 use crate::type_check::TypeChecker;
@@ -232,9 +231,10 @@ impl InProcessEsgm {
         TypeChecker::new(&registry, &key).map_err(type_error)
     }
 
-    fn resolve_window(&self, from: i64, to: i64) -> periodic::Schedule {
+    /// A sampling schedule with the seed's zero rules: from = 0 is now, to = 0 forever.
+    fn schedule(&self, from: i64, to: i64, period: i64) -> periodic::Schedule {
         let from = if from == 0 { self.inner.clock.now() } else { from };
-        periodic::Schedule { from, to: (to != 0).then_some(to), period: 1 }
+        periodic::Schedule { from, to: (to != 0).then_some(to), period }
     }
 }
 
@@ -388,8 +388,7 @@ impl Esgm for InProcessEsgm {
             TrajectorySource::Primitive { .. } => None,
             TrajectorySource::Sampled { sensor, from, to, sample_period } => {
                 let iface = self.inner.sensors.read().get(sensor).map(|e| Arc::clone(&e.iface));
-                let mut schedule = self.resolve_window(*from, *to);
-                schedule.period = *sample_period;
+                let schedule = self.schedule(*from, *to, *sample_period);
                 iface.map(|iface| workers::sampler(&cell, clock.clone(), iface, schedule))
             }
             TrajectorySource::Computed { unit, .. } => {
@@ -418,8 +417,7 @@ impl Esgm for InProcessEsgm {
                         },
                     ));
                 }
-                let mut schedule = self.resolve_window(*from, *to);
-                schedule.period = *sample_period;
+                let schedule = self.schedule(*from, *to, *sample_period);
                 let with_policies = inputs
                     .iter()
                     .zip(gens)
@@ -643,15 +641,4 @@ fn users_of(esgm: &InProcessEsgm, kind: TrajectoryKind, source: &str) -> Vec<Str
         .filter(|c| c.info.kind == kind && c.info.source.as_deref() == Some(source))
         .map(|c| c.info.name.clone())
         .collect()
-}
-
-/// The duration constraint a sampled trajectory's `from`/`to` imply, for callers that
-/// build policies by hand.
-pub fn duration_of(from: i64, to: i64) -> DurationConstraint {
-    DurationConstraint::Between { from, to }
-}
-
-/// A policy helper re-exported for runtime users.
-pub fn unconstrained() -> FluentStreamPolicy {
-    FluentStreamPolicy::unconstrained()
 }

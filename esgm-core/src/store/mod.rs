@@ -497,7 +497,7 @@ impl TrajectoryStore {
         self.next_seq += 1;
         self.stats.record_added(now, es.valid_time);
         self.last = Some(Arc::clone(&es));
-        self.history.push(Entry { es: Arc::clone(&es), add_time: now, seq });
+        self.history.push(Entry { vt: es.valid_time, es: Arc::clone(&es), add_time: now, seq });
         let evicted = match self.policy.cache {
             CacheConstraint::All | CacheConstraint::Elements(0) => 0,
             CacheConstraint::Elements(n) => {

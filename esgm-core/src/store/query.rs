@@ -90,7 +90,7 @@ impl TrajectoryStore {
         let now = self.clock.now();
         self.history
             .at_or_before(t)
-            .filter(|e| e.es.valid_time == t)
+            .filter(|e| e.vt == t)
             .map(|e| self.sample_of(e, now))
             .ok_or_else(|| self.not_available(format!("get_at({t}): no sample valid at {t}")))
     }
@@ -111,10 +111,11 @@ impl TrajectoryStore {
         t: Time,
         aprx: &ValueApproximation,
     ) -> Result<Sample, QueryError> {
-        if let Ok(s) = self.get_at(t) {
-            return Ok(s);
-        }
         let now = self.clock.now();
+        // The exact sample, if any, without building get_at's error on a miss.
+        if let Some(e) = self.history.at_or_before(t).filter(|e| e.vt == t) {
+            return Ok(self.sample_of(e, now));
+        }
         let q = |what: &str| format!("get_at_approximating({t}, {what})");
         match aprx {
             ValueApproximation::None => {
@@ -130,7 +131,7 @@ impl TrajectoryStore {
                 let after = self.history.after(t);
                 let pick = match (before, after) {
                     (Some(b), Some(a)) => {
-                        if t - b.es.valid_time <= a.es.valid_time - t {
+                        if t - b.vt <= a.vt - t {
                             b
                         } else {
                             a
