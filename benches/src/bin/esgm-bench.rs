@@ -1,0 +1,37 @@
+//! `esgm-bench`: latency scenarios of esgm, each against a baseline measured in the
+//! same run. See the `esgm_benches` crate docs for how it is built and `--help` for
+//! the options.
+
+use std::process::ExitCode;
+
+use clap::Parser;
+use esgm_benches::args::Args;
+use esgm_benches::{json, runner, scenarios, table};
+
+fn main() -> ExitCode {
+    match run(Args::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("esgm-bench: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(args: Args) -> anyhow::Result<()> {
+    let config = args.into_config()?;
+    let all = scenarios::all();
+    if config.list {
+        for s in runner::select(&all, config.only.as_deref()) {
+            println!("{:<26} {}", s.name(), s.summary());
+        }
+        return Ok(());
+    }
+    let report = runner::run(&config, &all, &mut std::io::stderr())?;
+    print!("{}", table::render(&report, &config));
+    if let Some(path) = &config.json {
+        json::write(path, &report)?;
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
+}

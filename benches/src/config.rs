@@ -1,0 +1,22 @@
+//! The validated settings of one `esgm-bench` run.
+
+use std::path::PathBuf;
+
+use crate::pin::Pinning;
+
+/// What to run and how, checked (see [`crate::args::Args::into_config`]).
+#[derive(Debug, Clone, Default)]
+pub struct RunConfig {
+    /// Fewer samples: the whole run takes under a minute.
+    pub quick: bool,
+    /// Where to write the JSON report, if anywhere.
+    pub json: Option<PathBuf>,
+    /// The cores to pin to, if pinning.
+    pub pin: Option<Pinning>,
+    /// Only scenarios whose name contains this.
+    pub only: Option<String>,
+    /// Samples per scenario and wait strategy, overriding the defaults.
+    pub samples: Option<u64>,
+    /// List the scenarios instead of running them.
+    pub list: bool,
+}

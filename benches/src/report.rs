@@ -1,0 +1,209 @@
+//! The result of a run: what `--json` writes and what the table prints.
+//!
+//! The JSON form is a contract with the issue that defines it and with whoever
+//! compares runs: `{"scenarios":[{"name","payload_bytes","wait":"spin"|"event","n",
+//! "p50_ns","p99_ns","p999_ns","max_ns"}]}`. Fields may be added (the optional ones
+//! below are left out when empty); none may be renamed or removed.
+
+use serde::{Deserialize, Serialize};
+
+/// How the receiving side waits for the next message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Wait {
+    /// Busy-polling (`try_recv` in a loop): the lowest latency, at the cost of a core.
+    Spin,
+    /// Blocking until woken (a blocking `recv`, a sleeping sampler): what a robot
+    /// program does when it must not burn a core.
+    Event,
+}
+
+impl Wait {
+    /// Both strategies, spin first.
+    pub const BOTH: [Wait; 2] = [Wait::Spin, Wait::Event];
+
+    /// The name used in the JSON and the table.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Wait::Spin => "spin",
+            Wait::Event => "event",
+        }
+    }
+}
+
+/// What a row's figures are.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Method {
+    /// One-way latency estimated as half a round trip (A → peer → back to A), timed on
+    /// the sending thread's monotonic clock: no two clocks are compared.
+    HalfRoundTrip,
+    /// One-way latency timed directly: the same thread sends and receives.
+    OneWay,
+    /// Lateness of a periodic action: when it happened minus when it was scheduled.
+    Lateness,
+}
+
+impl Method {
+    /// A short label for the table.
+    pub fn label(self) -> &'static str {
+        match self {
+            Method::HalfRoundTrip => "rtt/2",
+            Method::OneWay => "one-way",
+            Method::Lateness => "late",
+        }
+    }
+
+    /// What the label means, for the table's legend.
+    pub fn legend(self) -> &'static str {
+        match self {
+            Method::HalfRoundTrip => {
+                "one-way latency = round trip / 2, timed on the sending thread (one clock)"
+            }
+            Method::OneWay => "one-way latency timed directly (one thread sends and receives)",
+            Method::Lateness => "actual add time - scheduled sample time",
+        }
+    }
+}
+
+/// One row: one scenario measured with one wait strategy. Times in nanoseconds.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Measurement {
+    /// The scenario's name (`inproc-hop-small`, `esgm-image`, …).
+    pub name: String,
+    /// Size of what travels: the archived (shared-memory) form of an esgm structure,
+    /// the struct itself for a raw channel.
+    pub payload_bytes: u64,
+    /// How the receiver waits.
+    pub wait: Wait,
+    /// Samples recorded (warm-up excluded).
+    pub n: u64,
+    /// Median.
+    pub p50_ns: u64,
+    /// 99th percentile.
+    pub p99_ns: u64,
+    /// 99.9th percentile.
+    pub p999_ns: u64,
+    /// Largest sample.
+    pub max_ns: u64,
+    /// What the figures are.
+    pub method: Method,
+    /// The scenario this row is compared with; the reference is that scenario's row
+    /// with the same wait, measured in the same run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub baseline: Option<String>,
+    /// Median time the producer spent completing each structure before its timed hop
+    /// (e.g. writing a frame's pixels): reported beside the hop, never inside it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub producer_write_p50_ns: Option<u64>,
+    /// Facts worth printing under the table (missed periods, whether data was shared).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
+}
+
+impl Measurement {
+    /// Sets the payload size.
+    #[must_use]
+    pub fn payload_bytes(mut self, bytes: u64) -> Self {
+        self.payload_bytes = bytes;
+        self
+    }
+
+    /// Sets what the figures are.
+    #[must_use]
+    pub fn method(mut self, method: Method) -> Self {
+        self.method = method;
+        self
+    }
+
+    /// Names the baseline scenario (its row with the same wait is the reference).
+    #[must_use]
+    pub fn baseline(mut self, scenario: &str) -> Self {
+        self.baseline = Some(scenario.to_owned());
+        self
+    }
+
+    /// Sets the producer's per-structure write time (median).
+    #[must_use]
+    pub fn producer_write_p50_ns(mut self, ns: u64) -> Self {
+        self.producer_write_p50_ns = Some(ns);
+        self
+    }
+
+    /// Adds a note printed under the table.
+    #[must_use]
+    pub fn note(mut self, note: impl Into<String>) -> Self {
+        self.notes.push(note.into());
+        self
+    }
+}
+
+/// Everything a run measured, in run order.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Report {
+    /// One row per scenario and wait strategy.
+    pub scenarios: Vec<Measurement>,
+}
+
+impl Report {
+    /// The reference row of `m`: its baseline scenario with the same wait, if that
+    /// scenario ran.
+    pub fn baseline_of(&self, m: &Measurement) -> Option<&Measurement> {
+        let name = m.baseline.as_deref()?;
+        self.scenarios.iter().find(|b| b.name == name && b.wait == m.wait)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(name: &str, wait: Wait) -> Measurement {
+        Measurement {
+            name: name.into(),
+            payload_bytes: 100,
+            wait,
+            n: 10,
+            p50_ns: 1,
+            p99_ns: 2,
+            p999_ns: 3,
+            max_ns: 4,
+            method: Method::HalfRoundTrip,
+            baseline: None,
+            producer_write_p50_ns: None,
+            notes: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn json_has_the_issue_fields_and_leaves_empty_extras_out() {
+        let report = Report { scenarios: vec![row("a", Wait::Spin)] };
+        let json = serde_json::to_value(&report).unwrap();
+        let s = &json["scenarios"][0];
+        for field in ["name", "payload_bytes", "wait", "n", "p50_ns", "p99_ns", "p999_ns", "max_ns"]
+        {
+            assert!(s.get(field).is_some(), "missing {field}");
+        }
+        assert_eq!(s["wait"], "spin");
+        assert!(s.get("baseline").is_none());
+        assert!(s.get("notes").is_none());
+        let back: Report = serde_json::from_value(json).unwrap();
+        assert_eq!(back, report);
+    }
+
+    #[test]
+    fn baseline_is_the_same_wait_row_of_the_named_scenario() {
+        let report = Report {
+            scenarios: vec![
+                row("floor", Wait::Spin),
+                row("floor", Wait::Event),
+                row("hop", Wait::Event).baseline("floor"),
+                row("chain", Wait::Event).baseline("missing"),
+            ],
+        };
+        let hop = &report.scenarios[2];
+        assert_eq!(report.baseline_of(hop).map(|b| b.wait), Some(Wait::Event));
+        assert!(report.baseline_of(&report.scenarios[3]).is_none());
+        assert!(report.baseline_of(&report.scenarios[0]).is_none());
+    }
+}

@@ -1,0 +1,49 @@
+//! Runs the selected scenarios, in order, into a [`Report`].
+
+use std::io::Write;
+use std::time::Instant;
+
+use anyhow::{Context as _, bail};
+
+use crate::config::RunConfig;
+use crate::report::Report;
+use crate::scenario::{Context, Scenario};
+
+/// The scenarios of `all` whose name contains `only` (all of them without a filter).
+pub fn select<'a>(all: &'a [Box<dyn Scenario>], only: Option<&str>) -> Vec<&'a dyn Scenario> {
+    all.iter().map(AsRef::as_ref).filter(|s| only.is_none_or(|o| s.name().contains(o))).collect()
+}
+
+/// Runs the scenarios of `all` that `config` selects, telling `progress` what it is
+/// doing. Stops at the first scenario that fails.
+pub fn run(
+    config: &RunConfig,
+    all: &[Box<dyn Scenario>],
+    progress: &mut dyn Write,
+) -> anyhow::Result<Report> {
+    let selected = select(all, config.only.as_deref());
+    if selected.is_empty() {
+        let names: Vec<_> = all.iter().map(|s| s.name()).collect();
+        bail!(
+            "--only {:?} matches no scenario; the scenarios are: {}",
+            config.only.as_deref().unwrap_or(""),
+            names.join(", ")
+        );
+    }
+    if let Some(p) = config.pin {
+        p.pin_measuring_thread().context("--pin")?;
+    }
+    let ctx = Context::new(config);
+    let mut report = Report::default();
+    for scenario in selected {
+        // Progress lines are a courtesy; a closed stderr must not stop the run.
+        let _ = write!(progress, "{:<26} ", scenario.name());
+        let _ = progress.flush();
+        let started = Instant::now();
+        let rows =
+            scenario.run(&ctx).with_context(|| format!("scenario {} failed", scenario.name()))?;
+        let _ = writeln!(progress, "{:>6.1} s", started.elapsed().as_secs_f64());
+        report.scenarios.extend(rows);
+    }
+    Ok(report)
+}

@@ -1,0 +1,217 @@
+//! The printed table: one row per measurement, its baseline's ratio beside it, the
+//! meaning of each method and every note below.
+
+use std::fmt::Write as _;
+
+use crate::config::RunConfig;
+use crate::report::{Measurement, Method, Report, Wait};
+use crate::scenario::EVENT_GAP;
+
+const HEADER: [&str; 12] = [
+    "name",
+    "payload B",
+    "wait",
+    "method",
+    "n",
+    "p50",
+    "p99",
+    "p99.9",
+    "max",
+    "baseline (same wait)",
+    "p50 vs baseline",
+    "p99 vs baseline",
+];
+/// Columns whose cells are right-aligned (numbers).
+const RIGHT: [bool; 12] =
+    [false, true, false, false, true, true, true, true, true, false, true, true];
+
+/// The report as a table, with a legend and the notes.
+pub fn render(report: &Report, config: &RunConfig) -> String {
+    let mut rows: Vec<[String; 12]> = vec![HEADER.map(str::to_owned)];
+    for m in &report.scenarios {
+        let base = report.baseline_of(m);
+        let (baseline, p50_vs, p99_vs) = match (&m.baseline, base) {
+            (Some(_), Some(b)) => {
+                (b.name.clone(), compare(m.p50_ns, b.p50_ns), compare(m.p99_ns, b.p99_ns))
+            }
+            (Some(name), None) => (format!("{name} (not run)"), "-".into(), "-".into()),
+            (None, _) => ("-".into(), "-".into(), "-".into()),
+        };
+        rows.push([
+            m.name.clone(),
+            thousands(m.payload_bytes),
+            m.wait.as_str().to_owned(),
+            m.method.label().to_owned(),
+            thousands(m.n),
+            duration(m.p50_ns),
+            duration(m.p99_ns),
+            duration(m.p999_ns),
+            duration(m.max_ns),
+            baseline,
+            p50_vs,
+            p99_vs,
+        ]);
+    }
+
+    let mut widths = [0usize; 12];
+    for row in &rows {
+        for (w, cell) in widths.iter_mut().zip(row) {
+            *w = (*w).max(cell.chars().count());
+        }
+    }
+
+    let mut out = String::new();
+    let pinning = match config.pin {
+        Some(p) => format!(
+            "pinned: measuring thread on core {}, peers on core {}",
+            p.measuring_core(),
+            p.peer_core()
+        ),
+        None => "not pinned".to_owned(),
+    };
+    let _ = writeln!(out, "esgm-bench: latency, baselines measured in the same run ({pinning})");
+    for row in &rows {
+        let mut line = String::new();
+        for (i, cell) in row.iter().enumerate() {
+            let pad = widths[i] - cell.chars().count();
+            if i > 0 {
+                line.push_str("  ");
+            }
+            if RIGHT[i] {
+                line.extend(std::iter::repeat_n(' ', pad));
+                line.push_str(cell);
+            } else {
+                line.push_str(cell);
+                line.extend(std::iter::repeat_n(' ', pad));
+            }
+        }
+        let _ = writeln!(out, "{}", line.trim_end());
+    }
+
+    let mut methods: Vec<Method> = Vec::new();
+    for m in &report.scenarios {
+        if !methods.contains(&m.method) {
+            methods.push(m.method);
+        }
+    }
+    for method in methods {
+        let _ = writeln!(out, "{:>8}: {}", method.label(), method.legend());
+    }
+    for wait in Wait::BOTH {
+        if report.scenarios.iter().any(|m| m.wait == wait) {
+            let _ = writeln!(out, "{:>8}: {}", wait.as_str(), wait_legend(wait));
+        }
+    }
+    let _ = writeln!(out, "{:>8}: ratio to the baseline row (and the difference)", "vs");
+
+    let notes: Vec<String> = report.scenarios.iter().flat_map(notes_of).collect();
+    if !notes.is_empty() {
+        let _ = writeln!(out, "notes:");
+        for n in notes {
+            let _ = writeln!(out, "  {n}");
+        }
+    }
+    out
+}
+
+fn wait_legend(wait: Wait) -> String {
+    match wait {
+        Wait::Spin => "receivers busy-poll (try_recv in a loop)".to_owned(),
+        Wait::Event => format!(
+            "receivers block in recv; each hop starts {} µs after the last, so they are asleep \
+             when it comes (one wake-up per hop)",
+            EVENT_GAP.as_micros()
+        ),
+    }
+}
+
+fn notes_of(m: &Measurement) -> Vec<String> {
+    let who = format!("{} ({})", m.name, m.wait.as_str());
+    let write = m.producer_write_p50_ns.map(|ns| {
+        format!(
+            "{who}: producer's write of each structure, before and outside its hop: p50 {}",
+            duration(ns)
+        )
+    });
+    write.into_iter().chain(m.notes.iter().map(|n| format!("{who}: {n}"))).collect()
+}
+
+/// `×1.84 (+120 ns)`: the ratio and the difference.
+fn compare(value: u64, base: u64) -> String {
+    let diff = value as i128 - base as i128;
+    let sign = if diff < 0 { "-" } else { "+" };
+    let diff = duration(u64::try_from(diff.unsigned_abs()).unwrap_or(u64::MAX));
+    if base == 0 {
+        format!("- ({sign}{diff})")
+    } else {
+        format!("×{:.2} ({sign}{diff})", value as f64 / base as f64)
+    }
+}
+
+/// Nanoseconds with a unit and three significant digits: `812 ns`, `12.3 µs`, `1.05 ms`.
+pub fn duration(ns: u64) -> String {
+    const UNITS: [(f64, &str); 3] = [(1e9, "s"), (1e6, "ms"), (1e3, "µs")];
+    let v = ns as f64;
+    for (scale, unit) in UNITS {
+        if v >= scale {
+            let x = v / scale;
+            return if x >= 100.0 {
+                format!("{x:.0} {unit}")
+            } else if x >= 10.0 {
+                format!("{x:.1} {unit}")
+            } else {
+                format!("{x:.2} {unit}")
+            };
+        }
+    }
+    format!("{ns} ns")
+}
+
+/// `921,600`.
+fn thousands(n: u64) -> String {
+    let digits = n.to_string();
+    let mut out = String::with_capacity(digits.len() + digits.len() / 3);
+    for (i, c) in digits.chars().enumerate() {
+        if i > 0 && (digits.len() - i) % 3 == 0 {
+            out.push(',');
+        }
+        out.push(c);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::latency::Latency;
+
+    #[test]
+    fn durations_and_counts_read_well() {
+        assert_eq!(duration(812), "812 ns");
+        assert_eq!(duration(1_234), "1.23 µs");
+        assert_eq!(duration(12_345), "12.3 µs");
+        assert_eq!(duration(123_456), "123 µs");
+        assert_eq!(duration(1_050_000), "1.05 ms");
+        assert_eq!(thousands(921_600), "921,600");
+        assert_eq!(thousands(100), "100");
+        assert_eq!(compare(300, 100), "×3.00 (+200 ns)");
+        assert_eq!(compare(50, 100), "×0.50 (-50 ns)");
+    }
+
+    #[test]
+    fn rows_show_their_baseline_ratio_and_notes() {
+        let mut l = Latency::new().unwrap();
+        l.record_ns(100);
+        let floor = l.measurement("floor", Wait::Spin);
+        let mut l = Latency::new().unwrap();
+        l.record_ns(250);
+        let hop = l.measurement("hop", Wait::Spin).baseline("floor").note("shared");
+        let orphan = l.measurement("hop", Wait::Event).baseline("floor");
+        let report = Report { scenarios: vec![floor, hop, orphan] };
+        let text = render(&report, &RunConfig::default());
+        assert!(text.contains("×2.50 (+150 ns)"), "{text}");
+        assert!(text.contains("floor (not run)"), "{text}");
+        assert!(text.contains("hop (spin): shared"), "{text}");
+        assert!(text.contains("rtt/2:"), "{text}");
+    }
+}
