@@ -9,7 +9,8 @@
 //!   detector against;
 //! - [`ImageDirectory`]: PNG or JPEG files from a directory, cycled through by time.
 //!
-//! Both are [`FrameSource`]s.
+//! Both are [`FrameSource`]s, and [`CameraSensor`] makes any of them an esgm pull
+//! sensor.
 //!
 //! ## Design decisions
 //! - **Frames are written into a caller's buffer** ([`FrameSource::render_into`]): a
@@ -38,12 +39,14 @@
 //! ```
 #![deny(missing_docs)]
 
+pub mod camera_sensor;
 pub mod frame_source;
 pub mod image_directory;
 mod noise;
 pub mod ppm;
 pub mod scene;
 
+pub use camera_sensor::CameraSensor;
 pub use frame_source::{FrameSource, MAX_DIMENSION, RenderError};
 pub use image_directory::{ImageDirectory, ImageDirectoryError};
 pub use ppm::write_ppm;

@@ -3,23 +3,31 @@
 //! The computational units of the seed's tutorial (chapter 9), with the computations
 //! the seed leaves as `// Do stuff with image`, plus generic units:
 //!
-//! | unit | seed name | input → output |
+//! | computation | esgm unit (registered name) | input → output |
 //! | --- | --- | --- |
-//! | [`BlobDetector`] | `BlobDetection` (BlobDetector) | `Image` → `BlobSeq` |
-//! | [`select_blob`] | `BlobSelection` (ObjectSelector) | `BlobSeq` → `Blob` or no value |
-//! | [`ComputeDirection`] | `DrivingDirection` (ComputeDirection) | `RobotState`, `Blob` → `DrivingDirection` |
+//! | [`BlobDetector`] | [`BlobDetectionUnit`] (`BlobDetection`, the seed's BlobDetector) | `Image` → `BlobSeq` |
+//! | [`select_blob`] | [`BlobSelectionUnit`] (`BlobSelection`, the seed's ObjectSelector) | `BlobSeq` → `Blob` or no value |
+//! | [`ComputeDirection`] | [`DrivingDirectionUnit`] (`DrivingDirection`, the seed's ComputeDirection) | `RobotState`, `Blob` → `DrivingDirection` |
 //! | [`MovingAverage`] | — | any structure → the same structure, averaged |
 //!
+//! [`register_tutorial_units`] registers the three tutorial units on any runtime;
+//! `examples/tutorial.rs` runs the seed's whole tutorial (chapters 8–10) in process.
+//!
 //! ## Design decisions
-//! - **Pure computations, no runtime.** Each unit is a plain function or a struct with a
-//!   `&mut self` method over the typed library structs; the runtime adapters (which read
-//!   inputs from trajectories and write samples) wrap them. So every unit is tested here
-//!   without a runtime, and the same code runs in process and in a worker process.
+//! - **Pure computations, thin adapters.** Each computation is a plain function or a
+//!   struct with a `&mut self` method over the typed library structs, tested here
+//!   without a runtime. Each `…Unit` (in a sibling `*_unit.rs`) adapts one to
+//!   [`esgm_core::CompUnit`]: it reads the input samples as typed structs, calls the
+//!   computation and stamps the output's times. The adapters name only esgm-core's
+//!   traits, so the same units run in process and in a worker process.
 //! - **"No value" is `None`.** Where the seed throws `ValueNotAvailable` (no blob to
 //!   select, inputs not yet synchronized) a unit returns `Option`; the adapter turns it
-//!   into the runtime's no-value outcome.
+//!   into [`esgm_core::ComputeError::ValueNotAvailable`].
 //! - **Malformed input is an error, never a panic.** Images come from other processes;
-//!   the detector checks sizes and formats and reports a typed [`DetectionError`].
+//!   the detector checks sizes and formats and reports a typed [`DetectionError`], and
+//!   an adapter given structures of the wrong type reports a [`UnitInputError`]; the
+//!   adapters hand either to the runtime as [`esgm_core::ComputeError::Failed`] with
+//!   the error's message.
 //! - **Scratch space is reused.** The detector keeps its label and union-find buffers
 //!   between frames, so a steady stream of frames allocates only the output.
 //!
@@ -54,13 +62,40 @@
 #![deny(missing_docs)]
 
 pub mod blob_detection;
+pub mod blob_detection_unit;
 pub mod blob_selection;
+pub mod blob_selection_unit;
 pub mod driving_direction;
+pub mod driving_direction_unit;
 pub mod moving_average;
+pub mod tutorial;
+pub mod unit_input;
 
 pub use blob_detection::{BlobDetectionConfig, BlobDetector, Connectivity, DetectionError};
+pub use blob_detection_unit::BlobDetectionUnit;
 pub use blob_selection::select_blob;
+pub use blob_selection_unit::BlobSelectionUnit;
 pub use driving_direction::{
     ComputeDirection, DrivingDirectionConfig, DrivingDirectionConfigError, inputs_synchronized,
 };
+pub use driving_direction_unit::DrivingDirectionUnit;
 pub use moving_average::MovingAverage;
+pub use tutorial::register_tutorial_units;
+pub use unit_input::UnitInputError;
+
+/// Builds input samples for the adapters' tests.
+#[cfg(test)]
+mod unit_test_support {
+    use std::sync::Arc;
+
+    use esgm_core::{Entity, Sample, Time};
+
+    /// `value` as a sample valid (and created and added) at `valid_time`.
+    pub(crate) fn sample<T: Entity>(value: &T, valid_time: Time) -> Sample {
+        Sample {
+            structure: Arc::new(value.to_structure("input", valid_time, valid_time)),
+            add_time: valid_time,
+            query_time: valid_time,
+        }
+    }
+}

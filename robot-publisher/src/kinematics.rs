@@ -66,6 +66,14 @@ pub struct Kinematics {
     config: KinematicsConfig,
 }
 
+impl Default for Kinematics {
+    /// The seed's robot, which reports `(1, 2, 3)`: at (1, 2) heading 3°, with the
+    /// default limits.
+    fn default() -> Self {
+        Self { state: RobotState { x: 1.0, y: 2.0, dir: 3.0 }, config: KinematicsConfig::default() }
+    }
+}
+
 impl Kinematics {
     /// A robot at `initial` (its heading normalised to `[0, 360)`) with the given limits.
     pub fn new(initial: RobotState, config: KinematicsConfig) -> Result<Self, KinematicsError> {

@@ -9,6 +9,9 @@
 //! - **Pure and time-stepped.** [`Kinematics::step`] advances the state by a duration
 //!   in [`esgm_core::Time`] nanoseconds; the publisher decides when to step and what
 //!   clock to read, so the model runs the same under a simulated clock in tests.
+//! - **Publishing is a thin adapter.** [`RobotPublisher`] steps the model on a thread,
+//!   paced by the runtime's [`esgm_core::Clock`], and pushes each state with
+//!   `create_at_now`; it names only esgm-core's traits, so it pushes into any runtime.
 //! - **Exact integration.** Each step turns at the bounded rate until the heading is
 //!   reached, then drives straight, integrating the arc in closed form: two steps of
 //!   50 ms land exactly where one of 100 ms does, so the publishing period does not
@@ -27,5 +30,9 @@
 #![deny(missing_docs)]
 
 pub mod kinematics;
+pub mod publisher;
 
 pub use kinematics::{Kinematics, KinematicsConfig, KinematicsError};
+pub use publisher::{
+    DEFAULT_PERIOD, PublisherStats, RobotPublisher, RobotPublisherBuilder, RobotPublisherError,
+};
