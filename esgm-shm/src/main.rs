@@ -19,7 +19,9 @@ fn main() -> ExitCode {
             ExitCode::from(2)
         }
         None => {
-            eprintln!("usage: esgm <command>   (commands arrive with the coordinator; try --version)");
+            eprintln!(
+                "usage: esgm <command>   (commands arrive with the coordinator; try --version)"
+            );
             ExitCode::from(2)
         }
     }

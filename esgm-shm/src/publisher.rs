@@ -1,0 +1,411 @@
+//! The writing end of a trajectory: encodes entity structures straight into loaned
+//! shared memory and wakes sleeping readers.
+//!
+//! # One write, no heap buffer
+//! [`TrajectoryPublisher::publish`] loans a slice sized by
+//! [`crate::size_hint::archived_size_hint`] (a walk over the structure, no encode), zeroes it,
+//! and has the codec encode into it directly; the header carries the archive length,
+//! times and type id. Zeroing first serves two ends: a loaned slice must be fully
+//! initialised before iceoryx2 may treat it as bytes, and the bytes after the archive
+//! (the hint's slack, the block rounding) must not leak a previous sample's contents to
+//! other processes. If the hint is ever short the codec names the size it needs and
+//! the publisher loans again once.
+//!
+//! Images written by a camera go through [`TrajectoryPublisher::loan_image`] instead,
+//! which lets the camera fill the pixels in place (see [`crate::image_loan`]).
+//!
+//! # Late joiners
+//! iceoryx2 keeps the last `history_size` samples in the publisher and hands them to a
+//! subscriber when the publisher next updates its connections — on its next send, or
+//! when [`TrajectoryPublisher::update_connections`] is called. A producer that publishes
+//! rarely should call it periodically so that new subscribers get the history at once.
+
+use std::cell::{Cell, RefCell};
+use std::sync::Arc;
+use std::time::Duration;
+
+use esgm_core::codec::{self, CodecError};
+use esgm_core::{EntityStructure, SharedClock, SystemClock, Time};
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::update_connections::{ConnectionFailure, UpdateConnections};
+use iceoryx2::port::{BackpressureAction, LoanError, SendError};
+use iceoryx2::prelude::{AllocationStrategy, BackpressureStrategy, ipc};
+use iceoryx2::sample_mut::SampleMut;
+use iceoryx2::service::port_factory::PortFactory;
+
+use crate::image_layout::{ImageError, ImageTemplate};
+use crate::image_loan::ImageLoan;
+use crate::payload::{Block16, SampleHeader, as_uninit_bytes, blocks_for, zero_fill};
+use crate::qos::{Delivery, TrajectoryQos};
+use crate::service::{DataService, OpenError, ShmNode, open_data_service, open_wake_service};
+use crate::service_name::{DEFAULT_DOMAIN, TrajectoryServiceNames};
+use crate::size_hint::archived_size_hint;
+use crate::type_id::type_id;
+
+/// Default initial size of a publisher's samples: small structures fit without growth.
+pub const DEFAULT_INITIAL_MAX_LEN: usize = 4096;
+
+/// Default time a [`Delivery::Lossless`] publish waits for a full subscriber.
+pub const DEFAULT_LOSSLESS_TIMEOUT: Duration = Duration::from_secs(1);
+
+/// Whether a publisher's samples may outgrow its initial maximum size.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[non_exhaustive]
+pub enum SampleSizing {
+    /// Grow the shared-memory segment (to the next power of two) when a larger sample
+    /// is needed; subscribers follow transparently. Costs one reallocation per doubling.
+    #[default]
+    Grow,
+    /// Never grow: a larger sample fails with [`PublishError::Loan`]. For real-time
+    /// producers that must not allocate after start-up; size `max_len` for the largest.
+    Fixed,
+}
+
+/// A structure could not be published.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum PublishError {
+    /// The structure could not be encoded; it is not representable (report it).
+    #[error("cannot encode the structure: {0}")]
+    Encode(#[source] CodecError),
+    /// No shared memory could be loaned: subscribers hold too many samples, or (with
+    /// [`SampleSizing::Fixed`]) the sample is larger than `max_len`. Drop held samples,
+    /// or raise the limits.
+    #[error("cannot loan shared memory: {0}")]
+    Loan(#[source] LoanError),
+    /// A [`Delivery::Lossless`] subscriber made no room within the lossless timeout;
+    /// the sample reached the other subscribers only.
+    #[error("a subscriber's buffer stayed full for {timeout:?}; sample not delivered to it")]
+    NotDelivered {
+        /// The lossless timeout that passed.
+        timeout: Duration,
+    },
+    /// iceoryx2 could not deliver the sample (a broken connection); retry.
+    #[error("cannot send the sample: {0}")]
+    Send(#[source] SendError),
+    /// The connections to subscribers could not be updated; retry later.
+    #[error("cannot update connections: {0:?}")]
+    Connections(ConnectionFailure),
+    /// The image could not be loaned or laid out.
+    #[error(transparent)]
+    Image(#[from] ImageError),
+}
+
+/// What a successful publish did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Published {
+    /// The sample's sequence number.
+    pub sequence: u64,
+    /// Subscribers the sample was delivered to.
+    pub subscribers: usize,
+}
+
+/// Builds a [`TrajectoryPublisher`]; every setting has a default.
+#[derive(Debug, Clone)]
+pub struct TrajectoryPublisherBuilder {
+    trajectory: String,
+    type_name: String,
+    domain: String,
+    qos: TrajectoryQos,
+    initial_max_len: usize,
+    sizing: SampleSizing,
+    lossless_timeout: Duration,
+    clock: Option<SharedClock>,
+    image_name: Option<String>,
+}
+
+impl TrajectoryPublisherBuilder {
+    /// The domain (namespace) of the trajectory; default [`DEFAULT_DOMAIN`].
+    pub fn domain(mut self, domain: impl Into<String>) -> Self {
+        self.domain = domain.into();
+        self
+    }
+
+    /// All service settings at once (see [`crate::qos`]).
+    pub fn qos(mut self, qos: TrajectoryQos) -> Self {
+        self.qos = qos;
+        self
+    }
+
+    /// Samples kept for late subscribers; default 1.
+    pub fn history_size(mut self, n: usize) -> Self {
+        self.qos.history_size = n;
+        self
+    }
+
+    /// Unread samples a subscriber can queue; default 8.
+    pub fn subscriber_buffer_size(mut self, n: usize) -> Self {
+        self.qos.subscriber_buffer_size = n;
+        self
+    }
+
+    /// Overwrite the oldest unread sample, or wait for room; default
+    /// [`Delivery::LatestWins`].
+    pub fn delivery(mut self, delivery: Delivery) -> Self {
+        self.qos.delivery = delivery;
+        self
+    }
+
+    /// How long a [`Delivery::Lossless`] publish waits for a full subscriber before
+    /// giving up on it; default [`DEFAULT_LOSSLESS_TIMEOUT`].
+    pub fn lossless_timeout(mut self, timeout: Duration) -> Self {
+        self.lossless_timeout = timeout;
+        self
+    }
+
+    /// Initial maximum sample size in bytes (codec envelope included); default
+    /// [`DEFAULT_INITIAL_MAX_LEN`]. Size it for the largest sample (e.g. an image) to
+    /// avoid growth after start-up.
+    pub fn max_len(mut self, bytes: usize) -> Self {
+        self.initial_max_len = bytes;
+        self
+    }
+
+    /// Whether samples may outgrow [`Self::max_len`]; default [`SampleSizing::Grow`].
+    pub fn sizing(mut self, sizing: SampleSizing) -> Self {
+        self.sizing = sizing;
+        self
+    }
+
+    /// The clock that stamps add times; default the system clock.
+    pub fn clock(mut self, clock: SharedClock) -> Self {
+        self.clock = Some(clock);
+        self
+    }
+
+    /// The entity name image loans are laid out for before the first image is sent;
+    /// default the trajectory's name. Afterwards the last name sent is used.
+    pub fn image_name(mut self, name: impl Into<String>) -> Self {
+        self.image_name = Some(name.into());
+        self
+    }
+
+    /// Opens (or creates) the trajectory's services and the publisher port on `node`.
+    pub fn create(self, node: &ShmNode) -> Result<TrajectoryPublisher, OpenError> {
+        let names = TrajectoryServiceNames::new(&self.domain, &self.trajectory)?;
+        let service = open_data_service(node, &names, &self.qos)?;
+        let allocation = match self.sizing {
+            SampleSizing::Grow => AllocationStrategy::PowerOfTwo,
+            SampleSizing::Fixed => AllocationStrategy::Static,
+        };
+        let mut port = service
+            .publisher_builder()
+            .initial_max_slice_len(blocks_for(self.initial_max_len).max(1))
+            .allocation_strategy(allocation);
+        if self.qos.delivery == Delivery::Lossless {
+            let timeout = self.lossless_timeout;
+            port = port.backpressure_strategy(BackpressureStrategy::RetryUntilDelivered);
+            // Bounded: a subscriber that never reads must not stall the producer forever.
+            port = port.set_backpressure_handler(move |info| {
+                if info.elapsed_time >= timeout {
+                    BackpressureAction::DiscardDataAndFail
+                } else {
+                    if info.retries > 64 {
+                        std::thread::yield_now();
+                    }
+                    BackpressureAction::Retry
+                }
+            });
+        }
+        let port = port.create().map_err(OpenError::Publisher)?;
+        let wake = open_wake_service(node, &names)?;
+        let notifier = wake.notifier_builder().create().map_err(OpenError::Notifier)?;
+        Ok(TrajectoryPublisher {
+            type_id: type_id(&self.type_name),
+            image_name: RefCell::new(self.image_name.unwrap_or_else(|| self.trajectory.clone())),
+            trajectory: self.trajectory,
+            type_name: self.type_name,
+            service,
+            port,
+            notifier,
+            clock: self.clock.unwrap_or_else(SystemClock::shared),
+            lossless_timeout: self.lossless_timeout,
+            sequence: Cell::new(0),
+            image_template: RefCell::new(None),
+            notify_failures: Cell::new(0),
+        })
+    }
+}
+
+/// The writing end of one trajectory in shared memory.
+#[derive(Debug)]
+pub struct TrajectoryPublisher {
+    trajectory: String,
+    type_name: String,
+    type_id: u64,
+    service: DataService,
+    port: Publisher<ipc::Service, [Block16], SampleHeader>,
+    notifier: Notifier<ipc::Service>,
+    clock: SharedClock,
+    lossless_timeout: Duration,
+    sequence: Cell<u64>,
+    image_name: RefCell<String>,
+    image_template: RefCell<Option<Arc<ImageTemplate>>>,
+    notify_failures: Cell<u64>,
+}
+
+/// A sample whose payload is written, waiting for its header.
+pub(crate) type LoanedSample = SampleMut<ipc::Service, [Block16], SampleHeader>;
+
+impl TrajectoryPublisher {
+    /// A builder for a publisher of `trajectory`, whose structures are of the entity
+    /// structure type `type_name` (its hash goes into every header).
+    pub fn builder(
+        trajectory: impl Into<String>,
+        type_name: impl Into<String>,
+    ) -> TrajectoryPublisherBuilder {
+        TrajectoryPublisherBuilder {
+            trajectory: trajectory.into(),
+            type_name: type_name.into(),
+            domain: DEFAULT_DOMAIN.to_owned(),
+            qos: TrajectoryQos::default(),
+            initial_max_len: DEFAULT_INITIAL_MAX_LEN,
+            sizing: SampleSizing::default(),
+            lossless_timeout: DEFAULT_LOSSLESS_TIMEOUT,
+            clock: None,
+            image_name: None,
+        }
+    }
+
+    /// The trajectory's name.
+    pub fn trajectory(&self) -> &str {
+        &self.trajectory
+    }
+
+    /// The entity structure type this publisher writes.
+    pub fn type_name(&self) -> &str {
+        &self.type_name
+    }
+
+    /// Subscribers currently connected to the trajectory (for start-up handshakes).
+    pub fn subscriber_count(&self) -> usize {
+        self.service.dynamic_config().number_of_subscribers()
+    }
+
+    /// Wake-ups that could not be sent so far (each failure is logged once).
+    pub fn notify_failures(&self) -> u64 {
+        self.notify_failures.get()
+    }
+
+    /// Connects subscribers that appeared since the last send and hands them the
+    /// history; see the module docs.
+    pub fn update_connections(&self) -> Result<(), PublishError> {
+        self.port.update_connections().map_err(PublishError::Connections)
+    }
+
+    /// Encodes `es` into shared memory and sends it to every subscriber.
+    ///
+    /// The structure is not type-checked here: the caller (the runtime) checks it
+    /// against the trajectory's type before publishing.
+    pub fn publish(&self, es: &EntityStructure) -> Result<Published, PublishError> {
+        let mut want = archived_size_hint(es);
+        let mut retried = false;
+        loop {
+            let mut sample =
+                self.port.loan_slice_uninit(blocks_for(want)).map_err(PublishError::Loan)?;
+            let bytes = zero_fill(as_uninit_bytes(sample.payload_mut()));
+            match codec::encode_into(es, bytes) {
+                Ok(len) => {
+                    // SAFETY: `zero_fill` initialised every byte of the payload; the
+                    // encoder then overwrote some of them.
+                    let sample = unsafe { sample.assume_init() };
+                    return self.send(sample, len, es.valid_time, es.create_time, 0);
+                }
+                Err(CodecError::BufferTooSmall { needed, .. }) if !retried => {
+                    tracing::debug!(trajectory = %self.trajectory, hint = want, needed,
+                        "size hint too small, loaning again");
+                    want = needed;
+                    retried = true;
+                }
+                Err(e) => return Err(PublishError::Encode(e)),
+            }
+        }
+    }
+
+    /// Loans shared memory for an image of `width × height` pixels in `format`
+    /// ([`esgm_core::library::Image`]'s formats) for the caller to fill in place; see
+    /// [`ImageLoan`].
+    pub fn loan_image(
+        &self,
+        width: i64,
+        height: i64,
+        format: i64,
+    ) -> Result<ImageLoan<'_>, PublishError> {
+        let template = self.image_template(width, height, format)?;
+        let sample = self
+            .port
+            .loan_slice_uninit(blocks_for(template.archive_len()))
+            .map_err(PublishError::Loan)?;
+        Ok(ImageLoan::new(self, sample, template)?)
+    }
+
+    fn image_template(
+        &self,
+        width: i64,
+        height: i64,
+        format: i64,
+    ) -> Result<Arc<ImageTemplate>, ImageError> {
+        let name = self.image_name.borrow();
+        if let Some(t) = self.image_template.borrow().as_ref() {
+            if t.fits(&name, width, height, format) {
+                return Ok(Arc::clone(t));
+            }
+        }
+        let t = ImageTemplate::build(&name, width, height, format)?;
+        *self.image_template.borrow_mut() = Some(Arc::clone(&t));
+        Ok(t)
+    }
+
+    /// Lays out later image loans for entity name `name`.
+    pub(crate) fn set_image_name(&self, name: &str) {
+        let mut current = self.image_name.borrow_mut();
+        current.clear();
+        current.push_str(name);
+    }
+
+    /// Fills the header, sends, and wakes sleeping readers.
+    pub(crate) fn send(
+        &self,
+        mut sample: LoanedSample,
+        archive_len: usize,
+        valid_time: Time,
+        create_time: Time,
+        flags: u32,
+    ) -> Result<Published, PublishError> {
+        let sequence = self.sequence.get();
+        *sample.user_header_mut() = SampleHeader {
+            valid_time,
+            create_time,
+            add_time: self.clock.now(),
+            archive_len: archive_len as u64,
+            type_id: self.type_id,
+            sequence,
+            kind: SampleHeader::KIND_STRUCTURE,
+            flags,
+            reserved: 0,
+        };
+        let subscribers = sample.send().map_err(|e| match e {
+            SendError::UnableToDeliver => {
+                PublishError::NotDelivered { timeout: self.lossless_timeout }
+            }
+            e => PublishError::Send(e),
+        })?;
+        self.sequence.set(sequence + 1);
+        self.wake();
+        Ok(Published { sequence, subscribers })
+    }
+
+    fn wake(&self) {
+        // A failed wake-up is not a failed publish: the sample is delivered, and a
+        // reader's timed wait bounds the delay. Log the first, count all.
+        if let Err(e) = self.notifier.notify() {
+            let n = self.notify_failures.get();
+            self.notify_failures.set(n + 1);
+            if n == 0 {
+                tracing::warn!(trajectory = %self.trajectory, error = ?e,
+                    "cannot wake readers (later failures are only counted)");
+            }
+        }
+    }
+}

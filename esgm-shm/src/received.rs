@@ -1,0 +1,155 @@
+//! A sample a subscriber took from shared memory, read in place.
+
+use std::cell::Cell;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use esgm_core::EntityStructure;
+use esgm_core::codec::{self, ArchivedEntityStructure, CodecError};
+use iceoryx2::prelude::ipc;
+use iceoryx2::sample::Sample;
+
+use crate::payload::{Block16, SampleHeader, as_bytes};
+
+/// The iceoryx2 sample type of a trajectory.
+pub(crate) type RawSample = Sample<ipc::Service, [Block16], SampleHeader>;
+
+/// Counters shared by a subscriber and, when validation is deferred, its samples.
+#[derive(Debug, Default)]
+pub(crate) struct Counters {
+    pub(crate) received: AtomicU64,
+    pub(crate) malformed: AtomicU64,
+    pub(crate) type_mismatch: AtomicU64,
+}
+
+impl Counters {
+    /// Counts a malformed sample; true for the first one (which is worth a warning).
+    pub(crate) fn count_malformed(&self) -> bool {
+        self.malformed.fetch_add(1, Ordering::Relaxed) == 0
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Checked {
+    /// Not validated yet (deferred validation).
+    No,
+    /// Passed [`codec::access`] and the header cross-check.
+    Valid,
+    /// Failed validation (already counted).
+    Invalid,
+}
+
+/// A sample taken from a trajectory: the iceoryx2 sample itself (its payload stays in
+/// shared memory, where the producer wrote it) and what the subscriber checked.
+///
+/// Holding it keeps the shared-memory chunk borrowed: the publisher cannot reuse it,
+/// and a subscriber may hold only `max_borrowed_samples` at once
+/// ([`crate::TrajectoryQos`]). Drop samples you are done with.
+#[derive(Debug)]
+pub struct ReceivedSample {
+    sample: RawSample,
+    archive_len: usize,
+    checked: Cell<Checked>,
+    /// Present only when validation is deferred, to count failures found later.
+    counters: Option<Arc<Counters>>,
+}
+
+impl ReceivedSample {
+    pub(crate) fn new(
+        sample: RawSample,
+        archive_len: usize,
+        checked: Checked,
+        counters: Option<Arc<Counters>>,
+    ) -> Self {
+        Self { sample, archive_len, checked: Cell::new(checked), counters }
+    }
+
+    /// The header: times, type id, sequence, archive length. Reading it never touches
+    /// the payload.
+    pub fn header(&self) -> &SampleHeader {
+        self.sample.user_header()
+    }
+
+    /// The codec bytes (envelope + archive) in shared memory.
+    pub fn archive_bytes(&self) -> &[u8] {
+        // The subscriber checked `archive_len <= payload length` before building us.
+        let bytes = as_bytes(self.sample.payload());
+        bytes.get(..self.archive_len).unwrap_or(bytes)
+    }
+
+    /// True if the producer wrote an image's pixels straight into shared memory.
+    pub fn is_image_in_place(&self) -> bool {
+        self.header().has_flag(SampleHeader::FLAG_IMAGE_IN_PLACE)
+    }
+
+    /// The archived entity structure, read in place and validated.
+    ///
+    /// With the default [`crate::Validation::InPlace`] the subscriber validated the bytes
+    /// when it received them and this is free. With [`crate::Validation::OnAccess`] the
+    /// first call validates (and counts a failure in the subscriber's stats); later
+    /// calls reuse the verdict.
+    pub fn structure(&self) -> Result<&ArchivedEntityStructure, CodecError> {
+        let bytes = self.archive_bytes();
+        match self.checked.get() {
+            Checked::Valid => {
+                // SAFETY: these exact bytes passed `codec::access` (full validation) in
+                // this sample's lifetime, and the chunk is read-only to us while we hold
+                // it, so they are still what an encoder produced.
+                unsafe { codec::access_unchecked(bytes) }
+            }
+            Checked::No | Checked::Invalid => match validate(bytes, self.header()) {
+                Ok(archived) => {
+                    self.checked.set(Checked::Valid);
+                    Ok(archived)
+                }
+                Err(e) => {
+                    if self.checked.replace(Checked::Invalid) == Checked::No {
+                        if let Some(c) = &self.counters {
+                            c.count_malformed();
+                        }
+                    }
+                    Err(e)
+                }
+            },
+        }
+    }
+
+    /// The archived entity structure without validating the archive (only the
+    /// envelope: magic, version, length).
+    ///
+    /// # Safety
+    /// The bytes come from another process. Call this only when every process that
+    /// can publish on this trajectory is trusted to run esgm's own, unmodified
+    /// publisher of the same format version: a malformed archive read unchecked is
+    /// undefined behaviour (out-of-bounds reads through corrupt relative pointers).
+    /// It saves the validation (≈100 ns for a small structure); measure before using it.
+    pub unsafe fn structure_unchecked(&self) -> Result<&ArchivedEntityStructure, CodecError> {
+        // SAFETY: forwarded to the caller, see above.
+        unsafe { codec::access_unchecked(self.archive_bytes()) }
+    }
+
+    /// An owned copy of the structure (decodes every field, image bytes included: use
+    /// it where an owned copy is really needed, e.g. to hand it to an in-process store).
+    pub fn to_owned(&self) -> Result<EntityStructure, CodecError> {
+        codec::decode(self.structure()?)
+    }
+}
+
+/// Full validation of `bytes`, and the header's times must be the archive's: filters
+/// and time lookups read the header, so a header that lies is as bad as a bad archive.
+pub(crate) fn validate<'a>(
+    bytes: &'a [u8],
+    header: &SampleHeader,
+) -> Result<&'a ArchivedEntityStructure, CodecError> {
+    let archived = codec::access(bytes)?;
+    if archived.valid_time != header.valid_time || archived.create_time != header.create_time {
+        return Err(CodecError::Malformed {
+            len: bytes.len(),
+            reason: format!(
+                "header times ({}, {}) differ from the archive's ({}, {})",
+                header.valid_time, header.create_time, archived.valid_time, archived.create_time
+            ),
+        });
+    }
+    Ok(archived)
+}

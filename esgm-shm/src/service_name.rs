@@ -1,0 +1,164 @@
+//! How a trajectory maps to iceoryx2 service names.
+//!
+//! Every trajectory owns two services in a *domain* (a namespace):
+//!
+//! | service                         | pattern           | carries                      |
+//! |---------------------------------|-------------------|------------------------------|
+//! | `esgm/<domain>/traj/<name>`     | publish-subscribe | the samples ([`crate::payload`]) |
+//! | `esgm/<domain>/wake/<name>`     | event             | "a sample was sent" wake-ups |
+//!
+//! The domain exists so that independent systems on one host, and tests running in
+//! parallel, never meet: give each test its own ([`unique_domain`]). Data and wake-ups
+//! live under separate kinds (`traj`, `wake`) rather than as `<name>/wake`, so no
+//! trajectory name can collide with another trajectory's event service.
+//!
+//! Domains and trajectory names are restricted to ASCII letters, digits, `_`, `-`, `.`
+//! and `:` — no `/`, so that the mapping stays one-to-one and reversible (a discovery
+//! tool can read a trajectory name back from a service name).
+
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use iceoryx2::prelude::ServiceName;
+
+/// The domain used when none is given.
+pub const DEFAULT_DOMAIN: &str = "default";
+
+/// Prefix of every esgm service.
+pub const SERVICE_PREFIX: &str = "esgm";
+
+/// A domain or trajectory name that cannot become part of a service name.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum NameError {
+    /// The name is empty; give the domain or trajectory a name.
+    #[error("the {what} name is empty")]
+    Empty {
+        /// `"domain"` or `"trajectory"`.
+        what: &'static str,
+    },
+    /// The name holds a character outside `[A-Za-z0-9_.:-]`; rename it.
+    #[error(
+        "the {what} name `{name}` contains `{character}`; use ASCII letters, digits, `_`, `-`, `.` or `:`"
+    )]
+    InvalidCharacter {
+        /// `"domain"` or `"trajectory"`.
+        what: &'static str,
+        /// The rejected name.
+        name: String,
+        /// The first character not allowed.
+        character: char,
+    },
+    /// The service name would exceed iceoryx2's limit; shorten the domain or name.
+    #[error("the service name `{service}` is longer than iceoryx2's {max} bytes")]
+    TooLong {
+        /// The service name that was too long.
+        service: String,
+        /// iceoryx2's limit.
+        max: usize,
+    },
+}
+
+/// The iceoryx2 service names of one trajectory in one domain.
+#[derive(Debug, Clone)]
+pub struct TrajectoryServiceNames {
+    data: ServiceName,
+    wake: ServiceName,
+}
+
+impl TrajectoryServiceNames {
+    /// The names for `trajectory` in `domain`.
+    pub fn new(domain: &str, trajectory: &str) -> Result<Self, NameError> {
+        check("domain", domain)?;
+        check("trajectory", trajectory)?;
+        Ok(Self {
+            data: service_name(&data_service_name(domain, trajectory))?,
+            wake: service_name(&wake_service_name(domain, trajectory))?,
+        })
+    }
+
+    /// The publish-subscribe service carrying the samples.
+    pub fn data(&self) -> &ServiceName {
+        &self.data
+    }
+
+    /// The event service carrying wake-ups for blocking readers.
+    pub fn wake(&self) -> &ServiceName {
+        &self.wake
+    }
+}
+
+/// `esgm/<domain>/traj/<trajectory>`, unchecked.
+pub fn data_service_name(domain: &str, trajectory: &str) -> String {
+    format!("{SERVICE_PREFIX}/{domain}/traj/{trajectory}")
+}
+
+/// `esgm/<domain>/wake/<trajectory>`, unchecked.
+pub fn wake_service_name(domain: &str, trajectory: &str) -> String {
+    format!("{SERVICE_PREFIX}/{domain}/wake/{trajectory}")
+}
+
+/// A domain no other process or test on this host uses: `<prefix>-<pid>-<n>`, with `n`
+/// counting calls in this process. Characters of `prefix` that names may not contain
+/// become `_`, so a test can pass its own name (`module::test`).
+pub fn unique_domain(prefix: &str) -> String {
+    static NEXT: AtomicU64 = AtomicU64::new(0);
+    let clean: String = prefix.chars().map(|c| if allowed(c) { c } else { '_' }).collect();
+    let n = NEXT.fetch_add(1, Ordering::Relaxed);
+    format!("{clean}-{}-{n}", std::process::id())
+}
+
+fn allowed(c: char) -> bool {
+    c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.' | ':')
+}
+
+fn check(what: &'static str, name: &str) -> Result<(), NameError> {
+    if name.is_empty() {
+        return Err(NameError::Empty { what });
+    }
+    match name.chars().find(|c| !allowed(*c)) {
+        Some(character) => {
+            Err(NameError::InvalidCharacter { what, name: name.to_owned(), character })
+        }
+        None => Ok(()),
+    }
+}
+
+fn service_name(name: &str) -> Result<ServiceName, NameError> {
+    // Only length can fail here: the characters were checked above.
+    ServiceName::new(name)
+        .map_err(|_| NameError::TooLong { service: name.to_owned(), max: ServiceName::max_len() })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_map_one_to_one() {
+        let n = TrajectoryServiceNames::new("lab", "cam_images").unwrap();
+        assert_eq!(n.data().as_str(), "esgm/lab/traj/cam_images");
+        assert_eq!(n.wake().as_str(), "esgm/lab/wake/cam_images");
+    }
+
+    #[test]
+    fn bad_names_are_rejected() {
+        assert_eq!(
+            TrajectoryServiceNames::new("", "x").unwrap_err(),
+            NameError::Empty { what: "domain" }
+        );
+        assert!(matches!(
+            TrajectoryServiceNames::new("d", "a/b"),
+            Err(NameError::InvalidCharacter { character: '/', .. })
+        ));
+        let long = "x".repeat(300);
+        assert!(matches!(TrajectoryServiceNames::new("d", &long), Err(NameError::TooLong { .. })));
+    }
+
+    #[test]
+    fn unique_domains_are_valid_and_distinct() {
+        let a = unique_domain("tests::round_trip");
+        let b = unique_domain("tests::round_trip");
+        assert_ne!(a, b);
+        assert!(TrajectoryServiceNames::new(&a, "t").is_ok());
+    }
+}

@@ -1,0 +1,305 @@
+//! The reading end of a trajectory: takes samples from shared memory, rejects and
+//! counts bad ones, and waits with a [`WaitStrategy`].
+//!
+//! Checks, in the order they cost:
+//! 1. the header's type id against the subscriber's type (no payload access);
+//! 2. the header's kind and archive length against the payload actually delivered;
+//! 3. with [`Validation::InPlace`] (the default), the archive itself: envelope, rkyv
+//!    bytecheck, and the header's times against the archive's.
+//!
+//! A sample failing any check is returned to iceoryx2 at once and reported as a typed
+//! [`ReceiveError`]; the counters in [`SubscriberStats`] say how often. Nothing a peer
+//! writes can make the reader panic.
+
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use esgm_core::codec::{CodecError, ENVELOPE_LEN};
+use iceoryx2::port::listener::ListenerWaitError;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::ipc;
+use iceoryx2::service::port_factory::PortFactory;
+
+use crate::payload::{Block16, SampleHeader, as_bytes};
+use crate::qos::TrajectoryQos;
+use crate::received::{Checked, Counters, ReceivedSample, validate};
+use crate::service::{DataService, OpenError, ShmNode, open_data_service, open_wake_service};
+use crate::service_name::{DEFAULT_DOMAIN, TrajectoryServiceNames};
+use crate::type_id::type_id;
+use crate::wait::{WaitStrategy, Waiter, deadline_after};
+
+/// When a subscriber validates archives.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[non_exhaustive]
+pub enum Validation {
+    /// Validate every sample in [`TrajectorySubscriber::receive`]: a malformed sample is
+    /// never handed out. The right choice whenever bytes come from another process.
+    #[default]
+    InPlace,
+    /// Check only the header on receive; validate on the first
+    /// [`ReceivedSample::structure`] call, or skip validation with the unsafe
+    /// [`ReceivedSample::structure_unchecked`] in a setup that trusts every publisher.
+    /// For readers that drop most samples on header fields alone.
+    OnAccess,
+}
+
+/// A sample could not be taken or was rejected.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ReceiveError {
+    /// The subscriber already holds `max_borrowed_samples` samples; drop some (or raise
+    /// [`TrajectoryQos::max_borrowed_samples`]) and receive again.
+    #[error("too many samples held; drop some before receiving more")]
+    TooManyHeld,
+    /// iceoryx2 could not connect to a publisher (its resources are gone or corrupt);
+    /// retry later — dead publishers are cleaned up by the next node creation.
+    #[error("connection to a publisher failed: {0}")]
+    Connection(#[source] iceoryx2::port::ReceiveError),
+    /// The sample's type id is not the subscriber's: something publishes another type
+    /// on this trajectory. The sample was dropped; fix the producer's configuration.
+    #[error("sample of type id {found:#018x}, expected {expected:#018x}")]
+    TypeMismatch {
+        /// The subscriber's type id.
+        expected: u64,
+        /// The sample's.
+        found: u64,
+    },
+    /// The header names a payload kind this build does not know (a newer or foreign
+    /// writer). The sample was dropped.
+    #[error("unknown sample kind {kind}")]
+    UnknownKind {
+        /// The header's kind.
+        kind: u32,
+    },
+    /// The header claims more (or fewer) bytes than an archive can have in the payload
+    /// delivered. The sample was dropped.
+    #[error("header says {archive_len} archive bytes, payload holds {payload_len}")]
+    Truncated {
+        /// The header's archive length.
+        archive_len: u64,
+        /// The bytes delivered.
+        payload_len: usize,
+    },
+    /// The archive failed validation (bad envelope, corrupt archive, or header times
+    /// that differ from the archive's). The sample was dropped.
+    #[error("malformed sample: {0}")]
+    Malformed(#[source] CodecError),
+    /// Waiting was interrupted (e.g. by a signal) or the wake-up listener failed;
+    /// check for shutdown, then wait again.
+    #[error("wait interrupted: {0}")]
+    Wait(#[from] ListenerWaitError),
+}
+
+/// What a subscriber has seen so far.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SubscriberStats {
+    /// Samples taken from shared memory, good or bad.
+    pub received: u64,
+    /// Samples rejected as malformed (unknown kind, bad length, failed validation).
+    pub malformed: u64,
+    /// Samples rejected because their type id was not the subscriber's.
+    pub type_mismatch: u64,
+}
+
+/// Builds a [`TrajectorySubscriber`]; every setting has a default.
+#[derive(Debug, Clone)]
+pub struct TrajectorySubscriberBuilder {
+    trajectory: String,
+    type_name: String,
+    domain: String,
+    qos: TrajectoryQos,
+    history: Option<usize>,
+    wait: WaitStrategy,
+    validation: Validation,
+}
+
+impl TrajectorySubscriberBuilder {
+    /// The domain (namespace) of the trajectory; default [`DEFAULT_DOMAIN`].
+    pub fn domain(mut self, domain: impl Into<String>) -> Self {
+        self.domain = domain.into();
+        self
+    }
+
+    /// The service settings, used if this subscriber creates the service (see
+    /// [`crate::qos`]); default [`TrajectoryQos::default`].
+    pub fn qos(mut self, qos: TrajectoryQos) -> Self {
+        self.qos = qos;
+        self
+    }
+
+    /// How many of the publisher's last samples to receive on connecting (at most the
+    /// service's history size); default: all the service keeps.
+    pub fn history(mut self, last_n: usize) -> Self {
+        self.history = Some(last_n);
+        self
+    }
+
+    /// How [`TrajectorySubscriber::wait_for_sample`] waits; default
+    /// [`WaitStrategy::default`].
+    pub fn wait_strategy(mut self, wait: WaitStrategy) -> Self {
+        self.wait = wait;
+        self
+    }
+
+    /// When archives are validated; default [`Validation::InPlace`].
+    pub fn validation(mut self, validation: Validation) -> Self {
+        self.validation = validation;
+        self
+    }
+
+    /// Opens (or creates) the trajectory's services and the subscriber port on `node`.
+    pub fn create(self, node: &ShmNode) -> Result<TrajectorySubscriber, OpenError> {
+        let names = TrajectoryServiceNames::new(&self.domain, &self.trajectory)?;
+        let service = open_data_service(node, &names, &self.qos)?;
+        let mut port = service.subscriber_builder();
+        if let Some(n) = self.history {
+            port = port.history_request(n);
+        }
+        let port = port.create().map_err(OpenError::Subscriber)?;
+        let listener = if self.wait.blocks() {
+            let wake = open_wake_service(node, &names)?;
+            Some(wake.listener_builder().create().map_err(OpenError::Listener)?)
+        } else {
+            None
+        };
+        Ok(TrajectorySubscriber {
+            expected_type_id: type_id(&self.type_name),
+            trajectory: self.trajectory,
+            type_name: self.type_name,
+            service,
+            port,
+            waiter: Waiter::new(self.wait, listener),
+            validation: self.validation,
+            counters: Arc::default(),
+        })
+    }
+}
+
+/// The reading end of one trajectory in shared memory.
+#[derive(Debug)]
+pub struct TrajectorySubscriber {
+    trajectory: String,
+    type_name: String,
+    expected_type_id: u64,
+    service: DataService,
+    port: Subscriber<ipc::Service, [Block16], SampleHeader>,
+    waiter: Waiter,
+    validation: Validation,
+    counters: Arc<Counters>,
+}
+
+impl TrajectorySubscriber {
+    /// A builder for a subscriber to `trajectory`, whose structures are of the entity
+    /// structure type `type_name`.
+    pub fn builder(
+        trajectory: impl Into<String>,
+        type_name: impl Into<String>,
+    ) -> TrajectorySubscriberBuilder {
+        TrajectorySubscriberBuilder {
+            trajectory: trajectory.into(),
+            type_name: type_name.into(),
+            domain: DEFAULT_DOMAIN.to_owned(),
+            qos: TrajectoryQos::default(),
+            history: None,
+            wait: WaitStrategy::default(),
+            validation: Validation::default(),
+        }
+    }
+
+    /// The trajectory's name.
+    pub fn trajectory(&self) -> &str {
+        &self.trajectory
+    }
+
+    /// The entity structure type this subscriber accepts.
+    pub fn type_name(&self) -> &str {
+        &self.type_name
+    }
+
+    /// Publishers currently connected to the trajectory (for start-up handshakes).
+    pub fn publisher_count(&self) -> usize {
+        self.service.dynamic_config().number_of_publishers()
+    }
+
+    /// Counters of samples seen and rejected.
+    pub fn stats(&self) -> SubscriberStats {
+        SubscriberStats {
+            received: self.counters.received.load(Ordering::Relaxed),
+            malformed: self.counters.malformed.load(Ordering::Relaxed),
+            type_mismatch: self.counters.type_mismatch.load(Ordering::Relaxed),
+        }
+    }
+
+    /// Takes the next sample if one is queued; never blocks.
+    pub fn receive(&self) -> Result<Option<ReceivedSample>, ReceiveError> {
+        let sample = match self.port.receive() {
+            Ok(Some(sample)) => sample,
+            Ok(None) => return Ok(None),
+            Err(iceoryx2::port::ReceiveError::ExceedsMaxBorrows) => {
+                return Err(ReceiveError::TooManyHeld);
+            }
+            Err(e) => return Err(ReceiveError::Connection(e)),
+        };
+        let c = &self.counters;
+        c.received.fetch_add(1, Ordering::Relaxed);
+        let header = *sample.user_header();
+
+        if header.type_id != self.expected_type_id {
+            if c.type_mismatch.fetch_add(1, Ordering::Relaxed) == 0 {
+                tracing::warn!(trajectory = %self.trajectory, expected = %self.type_name,
+                    found = header.type_id, "dropping a sample of another type");
+            }
+            return Err(ReceiveError::TypeMismatch {
+                expected: self.expected_type_id,
+                found: header.type_id,
+            });
+        }
+        let rejected = |e: ReceiveError| {
+            if c.count_malformed() {
+                tracing::warn!(trajectory = %self.trajectory, error = %e,
+                    "dropping a malformed sample (later ones are only counted)");
+            }
+            Err(e)
+        };
+        if header.kind != SampleHeader::KIND_STRUCTURE {
+            return rejected(ReceiveError::UnknownKind { kind: header.kind });
+        }
+        let payload_len = as_bytes(sample.payload()).len();
+        let archive_len = match usize::try_from(header.archive_len) {
+            Ok(n) if (ENVELOPE_LEN..=payload_len).contains(&n) => n,
+            _ => {
+                return rejected(ReceiveError::Truncated {
+                    archive_len: header.archive_len,
+                    payload_len,
+                });
+            }
+        };
+
+        match self.validation {
+            Validation::InPlace => {
+                let bytes = &as_bytes(sample.payload())[..archive_len];
+                if let Err(e) = validate(bytes, &header) {
+                    return rejected(ReceiveError::Malformed(e));
+                }
+                Ok(Some(ReceivedSample::new(sample, archive_len, Checked::Valid, None)))
+            }
+            Validation::OnAccess => Ok(Some(ReceivedSample::new(
+                sample,
+                archive_len,
+                Checked::No,
+                Some(Arc::clone(&self.counters)),
+            ))),
+        }
+    }
+
+    /// Waits up to `timeout` for the next sample, with the subscriber's
+    /// [`WaitStrategy`]. `Ok(None)` means the timeout passed; a rejected sample ends the
+    /// wait with its error (call again to keep waiting).
+    pub fn wait_for_sample(
+        &self,
+        timeout: Duration,
+    ) -> Result<Option<ReceivedSample>, ReceiveError> {
+        self.waiter.wait(deadline_after(timeout), || self.receive())
+    }
+}

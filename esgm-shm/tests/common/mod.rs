@@ -1,0 +1,73 @@
+//! Helpers shared by the esgm-shm integration tests.
+#![allow(dead_code)] // each test binary uses a different subset
+
+use std::time::Duration;
+
+use esgm_core::codec::{ArchivedEntityStructure, ArchivedValue};
+use esgm_core::library::{Image, RobotState};
+use esgm_core::{Entity, EntityStructure};
+use esgm_shm::ShmNode;
+use iceoryx2::prelude::{LogLevel, NodeBuilder, ipc, set_log_level};
+
+/// Every wait in the tests: long enough for a loaded CI machine, short enough that a
+/// lost sample fails the test instead of hanging it.
+pub const TIMEOUT: Duration = Duration::from_secs(10);
+
+pub fn node() -> ShmNode {
+    // iceoryx2 warns that no config file exists; the defaults are what the tests want.
+    set_log_level(LogLevel::Error);
+    NodeBuilder::new().create::<ipc::Service>().expect("iceoryx2 node")
+}
+
+pub fn robot(i: i64) -> EntityStructure {
+    RobotState { x: i as f64, y: 2.0 * i as f64, dir: 90.0 }.to_structure(
+        "robot1",
+        1_000 + i,
+        2_000 + i,
+    )
+}
+
+/// A pixel pattern that differs per frame and per position.
+pub fn pixel(frame: u64, i: usize) -> u8 {
+    (i as u64).wrapping_mul(31).wrapping_add(frame.wrapping_mul(7)) as u8
+}
+
+pub fn fill(pixels: &mut [u8], frame: u64) {
+    for (i, p) in pixels.iter_mut().enumerate() {
+        *p = pixel(frame, i);
+    }
+}
+
+pub fn check_pattern(pixels: &[u8], frame: u64) {
+    let bad = pixels.iter().enumerate().find(|(i, p)| **p != pixel(frame, *i));
+    assert!(bad.is_none(), "pixel {bad:?} differs from frame {frame}'s pattern");
+}
+
+pub fn value<'a>(a: &'a ArchivedEntityStructure, name: &str) -> &'a ArchivedValue {
+    &a.attributes
+        .iter()
+        .find(|p| p.name.as_str() == name)
+        .unwrap_or_else(|| panic!("no attribute {name}"))
+        .value
+}
+
+pub fn long(a: &ArchivedEntityStructure, name: &str) -> i64 {
+    match value(a, name) {
+        ArchivedValue::Long(v) => v.to_native(),
+        other => panic!("{name} is {other:?}"),
+    }
+}
+
+pub fn octets<'a>(a: &'a ArchivedEntityStructure, name: &str) -> &'a [u8] {
+    match value(a, name) {
+        ArchivedValue::OctetSeq(o) => o.as_slice(),
+        other => panic!("{name} is {other:?}"),
+    }
+}
+
+/// Width, height, format and pixels of an archived `Image`, read in place.
+pub fn image(a: &ArchivedEntityStructure) -> (i64, i64, i64, &[u8]) {
+    (long(a, "width"), long(a, "height"), long(a, "format"), octets(a, "image_data"))
+}
+
+pub const RGB8: i64 = Image::FORMAT_RGB8;

@@ -1,0 +1,480 @@
+//! Publisher → subscriber through iceoryx2 in one process (separate nodes, as separate
+//! processes would have). Every test has its own domain and every wait a timeout, so
+//! the tests run in parallel.
+
+// Test helpers outside #[test] fns: a failed unwrap is a failed test with a message.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+mod common;
+
+use std::thread;
+use std::time::{Duration, Instant};
+
+use common::*;
+use esgm_core::codec::{self, CodecError, ENVELOPE_LEN};
+use esgm_core::library::Image;
+use esgm_core::{Entity, EntityFrame, EntityStructure, Octets, Pos2, Value, Vec3};
+use esgm_shm::payload::{Block16, blocks_for};
+use esgm_shm::service_name::data_service_name;
+use esgm_shm::{
+    Delivery, OpenError, PublishError, ReceiveError, SampleHeader, SampleSizing, SubscriberStats,
+    TrajectoryPublisher, TrajectoryQos, TrajectorySubscriber, Validation, WaitStrategy, type_id,
+    unique_domain,
+};
+use iceoryx2::port::LoanError;
+use iceoryx2::prelude::ServiceName;
+
+fn publisher(
+    domain: &str,
+    trajectory: &str,
+    type_name: &str,
+) -> esgm_shm::publisher::TrajectoryPublisherBuilder {
+    TrajectoryPublisher::builder(trajectory, type_name).domain(domain)
+}
+
+fn subscriber(
+    domain: &str,
+    trajectory: &str,
+    type_name: &str,
+) -> esgm_shm::subscriber::TrajectorySubscriberBuilder {
+    TrajectorySubscriber::builder(trajectory, type_name).domain(domain)
+}
+
+#[test]
+fn small_structures_round_trip_between_two_nodes() {
+    let domain = unique_domain("small_round_trip");
+    let (pub_node, sub_node) = (node(), node());
+    let p = publisher(&domain, "robot", "RobotState").create(&pub_node).unwrap();
+    let s = subscriber(&domain, "robot", "RobotState").create(&sub_node).unwrap();
+    assert_eq!(p.subscriber_count(), 1);
+    assert_eq!(s.publisher_count(), 1);
+
+    for i in 0..3 {
+        let sent = p.publish(&robot(i)).unwrap();
+        assert_eq!(sent.sequence, i as u64);
+        assert_eq!(sent.subscribers, 1);
+    }
+    for i in 0..3 {
+        let sample = s.wait_for_sample(TIMEOUT).unwrap().expect("sample within timeout");
+        let h = *sample.header();
+        assert_eq!((h.valid_time, h.create_time), (1_000 + i, 2_000 + i));
+        assert_eq!(h.type_id, type_id("RobotState"));
+        assert_eq!(h.sequence, i as u64);
+        assert_eq!(h.kind, SampleHeader::KIND_STRUCTURE);
+        assert!(!sample.is_image_in_place());
+        assert!(h.add_time > 0, "stamped by the system clock");
+        assert_eq!(h.archive_len as usize, sample.archive_bytes().len());
+
+        let archived = sample.structure().unwrap();
+        assert_eq!(archived.name.as_str(), "robot1");
+        assert_eq!(archived.valid_time, 1_000 + i);
+        assert_eq!(sample.to_owned().unwrap(), robot(i));
+    }
+    assert!(s.receive().unwrap().is_none());
+    assert_eq!(s.stats(), SubscriberStats { received: 3, malformed: 0, type_mismatch: 0 });
+}
+
+#[test]
+fn every_value_sort_round_trips() {
+    let domain = unique_domain("every_sort");
+    let (pub_node, sub_node) = (node(), node());
+    let p = publisher(&domain, "mixed", "Mixed").create(&pub_node).unwrap();
+    let s = subscriber(&domain, "mixed", "Mixed").create(&sub_node).unwrap();
+    let blob = EntityFrame::new("blob").with("x", 1i64).with("y", 2i64);
+    let es = EntityStructure::new("a_name_longer_than_eight_bytes", -5, 7)
+        .with("long", 42i64)
+        .with("double", 1.5)
+        .with("bool", true)
+        .with("string", "a string that is not inline")
+        .with("bytes", Octets::from(vec![9u8; 333]))
+        .with("longs", Value::LongSeq(vec![1, -2, 3]))
+        .with("vecs", Value::VecSeq(vec![Vec3 { x: 1.0, y: 2.0, z: 3.0 }]))
+        .with("pos", Value::Pos2(Pos2 { x: 0.5, y: 0.25 }))
+        .with("agg", Value::Agg(vec![Value::Bool(false), Value::String("in".into())]))
+        .with("frame", Value::EntityFrame(Box::new(blob.clone())))
+        .with("frames", vec![blob.clone(), blob])
+        .with("none", Value::NoValue);
+    p.publish(&es).unwrap();
+    let sample = s.wait_for_sample(TIMEOUT).unwrap().expect("sample");
+    assert_eq!(sample.to_owned().unwrap(), es);
+}
+
+#[test]
+fn a_large_structure_grows_the_segment() {
+    let domain = unique_domain("grow");
+    let (pub_node, sub_node) = (node(), node());
+    let p = publisher(&domain, "big", "Big").max_len(256).create(&pub_node).unwrap();
+    let s = subscriber(&domain, "big", "Big").create(&sub_node).unwrap();
+    let small = EntityStructure::new("b", 1, 1).with("v", 1i64);
+    let big = EntityStructure::new("b", 2, 2).with("data", Octets::from(vec![3u8; 200_000]));
+    p.publish(&small).unwrap();
+    p.publish(&big).unwrap();
+    assert_eq!(s.wait_for_sample(TIMEOUT).unwrap().unwrap().to_owned().unwrap(), small);
+    assert_eq!(s.wait_for_sample(TIMEOUT).unwrap().unwrap().to_owned().unwrap(), big);
+}
+
+#[test]
+fn a_fixed_size_publisher_refuses_larger_samples() {
+    let domain = unique_domain("fixed");
+    let n = node();
+    let p = publisher(&domain, "fixed", "Big")
+        .max_len(512)
+        .sizing(SampleSizing::Fixed)
+        .create(&n)
+        .unwrap();
+    let big = EntityStructure::new("b", 2, 2).with("data", Octets::from(vec![3u8; 4096]));
+    assert!(matches!(p.publish(&big), Err(PublishError::Loan(LoanError::ExceedsMaxLoanSize))));
+    // Small ones still fit.
+    p.publish(&EntityStructure::new("b", 1, 1)).unwrap();
+}
+
+#[test]
+fn an_image_published_as_a_structure_round_trips() {
+    let domain = unique_domain("image_structure");
+    let (pub_node, sub_node) = (node(), node());
+    let p = publisher(&domain, "cam", "Image").max_len(1 << 20).create(&pub_node).unwrap();
+    let s = subscriber(&domain, "cam", "Image").create(&sub_node).unwrap();
+    let mut pixels = vec![0u8; 640 * 480 * 3];
+    fill(&mut pixels, 1);
+    let img = Image { width: 640, height: 480, format: RGB8, image_data: pixels.into() };
+    p.publish(&img.to_structure("cam", 10, 11)).unwrap();
+    let sample = s.wait_for_sample(TIMEOUT).unwrap().expect("image");
+    let (w, h, f, px) = image(sample.structure().unwrap());
+    assert_eq!((w, h, f), (640, 480, RGB8));
+    check_pattern(px, 1);
+    assert_eq!(Image::from_structure(&sample.to_owned().unwrap()).unwrap(), img);
+}
+
+#[test]
+fn pixels_written_into_an_image_loan_are_read_in_place() {
+    let domain = unique_domain("image_loan");
+    let (pub_node, sub_node) = (node(), node());
+    let p = publisher(&domain, "cam", "Image").image_name("cam0").create(&pub_node).unwrap();
+    let s = subscriber(&domain, "cam", "Image").create(&sub_node).unwrap();
+
+    // Full VGA frames, the second reusing the first's layout.
+    for frame in 0..2u64 {
+        let mut loan = p.loan_image(640, 480, RGB8).unwrap();
+        assert_eq!((loan.width(), loan.height(), loan.format()), (640, 480, RGB8));
+        assert_eq!(loan.pixel_len(), 921_600);
+        fill(loan.pixels_mut(), frame);
+        let t = 100 + frame as i64;
+        let sent = loan.send("cam0", t, t + 1).unwrap();
+        assert_eq!(sent.sequence, frame);
+
+        let sample = s.wait_for_sample(TIMEOUT).unwrap().expect("image");
+        assert!(sample.is_image_in_place());
+        assert_eq!((sample.header().valid_time, sample.header().create_time), (t, t + 1));
+        let archived = sample.structure().unwrap();
+        assert_eq!(archived.name.as_str(), "cam0");
+        assert_eq!((archived.valid_time.to_native(), archived.create_time.to_native()), (t, t + 1));
+        let (w, h, f, px) = image(archived);
+        assert_eq!((w, h, f), (640, 480, RGB8));
+        // The pixels are read inside the sample's shared memory, not from a copy.
+        let shm = sample.archive_bytes().as_ptr_range();
+        assert!(shm.contains(&px.as_ptr()) && px.len() == 921_600);
+        check_pattern(px, frame);
+        let owned = Image::from_structure(&sample.to_owned().unwrap()).unwrap();
+        assert_eq!((owned.width, owned.height, owned.format), (640, 480, RGB8));
+        check_pattern(&owned.image_data, frame);
+    }
+}
+
+#[test]
+fn an_image_loan_handles_renames_sizes_and_unwritten_pixels() {
+    let domain = unique_domain("image_loan_variants");
+    let (pub_node, sub_node) = (node(), node());
+    let p = publisher(&domain, "cam", "Image").create(&pub_node).unwrap();
+    let s = subscriber(&domain, "cam", "Image").create(&sub_node).unwrap();
+
+    // Laid out for the trajectory name, sent under another: correct, one copy.
+    let mut loan = p.loan_image(8, 4, Image::FORMAT_MONO8).unwrap();
+    fill(loan.pixels_mut(), 3);
+    loan.send("a_longer_entity_name", 1, 2).unwrap();
+    let sample = s.wait_for_sample(TIMEOUT).unwrap().unwrap();
+    assert!(!sample.is_image_in_place(), "renamed frames are copied");
+    let a = sample.structure().unwrap();
+    assert_eq!(a.name.as_str(), "a_longer_entity_name");
+    check_pattern(image(a).3, 3);
+    drop(sample);
+
+    // The next loan is laid out for the new name: in place again.
+    let mut loan = p.loan_image(8, 4, Image::FORMAT_MONO8).unwrap();
+    fill(loan.pixels_mut(), 4);
+    loan.send("a_longer_entity_name", 3, 4).unwrap();
+    let sample = s.wait_for_sample(TIMEOUT).unwrap().unwrap();
+    assert!(sample.is_image_in_place());
+    check_pattern(image(sample.structure().unwrap()).3, 4);
+
+    // Written through the uninitialised view.
+    let mut loan = p.loan_image(2, 2, RGB8).unwrap();
+    for (i, b) in loan.pixels_uninit_mut().iter_mut().enumerate() {
+        b.write(pixel(5, i));
+    }
+    // SAFETY: every byte was written just above.
+    unsafe { loan.assume_pixels_init() };
+    loan.send("a_longer_entity_name", 5, 6).unwrap();
+    let sample = s.wait_for_sample(TIMEOUT).unwrap().unwrap();
+    check_pattern(image(sample.structure().unwrap()).3, 5);
+
+    // Never written: sent as zeros, not as stale memory.
+    let loan = p.loan_image(2, 2, RGB8).unwrap();
+    loan.send("a_longer_entity_name", 7, 8).unwrap();
+    let sample = s.wait_for_sample(TIMEOUT).unwrap().unwrap();
+    assert!(image(sample.structure().unwrap()).3.iter().all(|b| *b == 0));
+
+    // A dropped loan sends nothing; bad sizes are refused.
+    drop(p.loan_image(2, 2, RGB8).unwrap());
+    assert!(s.receive().unwrap().is_none());
+    assert!(matches!(p.loan_image(-1, 2, RGB8), Err(PublishError::Image(_))));
+    assert!(matches!(p.loan_image(2, 2, 77), Err(PublishError::Image(_))));
+}
+
+#[test]
+fn a_late_subscriber_gets_the_history() {
+    let domain = unique_domain("late_subscriber");
+    let (pub_node, sub_node) = (node(), node());
+    let p = publisher(&domain, "robot", "RobotState").history_size(4).create(&pub_node).unwrap();
+    for i in 0..6 {
+        p.publish(&robot(i)).unwrap();
+    }
+    let s = subscriber(&domain, "robot", "RobotState").history(3).create(&sub_node).unwrap();
+    // History is handed over when the publisher next looks at its connections.
+    p.update_connections().unwrap();
+    let mut got = Vec::new();
+    while let Some(sample) = s.wait_for_sample(Duration::from_millis(200)).unwrap() {
+        got.push(sample.header().sequence);
+        assert_eq!(sample.to_owned().unwrap(), robot(sample.header().sequence as i64));
+    }
+    assert_eq!(got, vec![3, 4, 5]);
+}
+
+#[test]
+fn a_structure_of_another_type_is_rejected_and_counted() {
+    let domain = unique_domain("type_mismatch");
+    let (pub_node, sub_node) = (node(), node());
+    let wrong = publisher(&domain, "robot", "Blob").create(&pub_node).unwrap();
+    let s = subscriber(&domain, "robot", "RobotState").create(&sub_node).unwrap();
+    wrong.publish(&robot(0)).unwrap();
+    match s.wait_for_sample(TIMEOUT) {
+        Err(ReceiveError::TypeMismatch { expected, found }) => {
+            assert_eq!((expected, found), (type_id("RobotState"), type_id("Blob")));
+        }
+        other => panic!("expected a type mismatch, got {other:?}"),
+    }
+    assert_eq!(s.stats(), SubscriberStats { received: 1, malformed: 0, type_mismatch: 1 });
+}
+
+/// Raw iceoryx2 access to a trajectory's data service, to write what esgm never would.
+struct RawPublisher {
+    port: iceoryx2::port::publisher::Publisher<
+        iceoryx2::prelude::ipc::Service,
+        [Block16],
+        SampleHeader,
+    >,
+}
+
+impl RawPublisher {
+    fn new(node: &esgm_shm::ShmNode, domain: &str, trajectory: &str) -> Self {
+        let name = ServiceName::new(&data_service_name(domain, trajectory)).unwrap();
+        let service = node
+            .service_builder(&name)
+            .publish_subscribe::<[Block16]>()
+            .user_header::<SampleHeader>()
+            .open()
+            .unwrap();
+        let port = service.publisher_builder().initial_max_slice_len(4096).create().unwrap();
+        Self { port }
+    }
+
+    fn send(&self, payload: &[u8], header: SampleHeader) {
+        let mut blocks = vec![Block16::default(); blocks_for(payload.len()).max(1)];
+        bytemuck::cast_slice_mut::<Block16, u8>(&mut blocks)[..payload.len()]
+            .copy_from_slice(payload);
+        let mut sample =
+            self.port.loan_slice_uninit(blocks.len()).unwrap().write_from_slice(&blocks);
+        *sample.user_header_mut() = header;
+        sample.send().unwrap();
+    }
+}
+
+fn header_for(payload_len: usize, valid_time: i64, create_time: i64) -> SampleHeader {
+    SampleHeader {
+        valid_time,
+        create_time,
+        archive_len: payload_len as u64,
+        type_id: type_id("RobotState"),
+        kind: SampleHeader::KIND_STRUCTURE,
+        ..SampleHeader::default()
+    }
+}
+
+#[test]
+fn malformed_payloads_are_rejected_and_counted() {
+    let domain = unique_domain("malformed");
+    let (raw_node, sub_node, pub_node) = (node(), node(), node());
+    let s = subscriber(&domain, "robot", "RobotState")
+        .wait_strategy(WaitStrategy::Block)
+        .create(&sub_node)
+        .unwrap();
+    let raw = RawPublisher::new(&raw_node, &domain, "robot");
+    let good = codec::encode(&robot(1)).unwrap();
+
+    // Garbage behind a plausible header.
+    raw.send(&[0xAB; 96], header_for(96, 1_001, 2_001));
+    assert!(matches!(
+        s.wait_for_sample(TIMEOUT),
+        Err(ReceiveError::Malformed(CodecError::Malformed { .. }))
+    ));
+    // A header claiming more bytes than were delivered.
+    raw.send(&good, header_for(good.len() + 4096, 1_001, 2_001));
+    assert!(matches!(s.wait_for_sample(TIMEOUT), Err(ReceiveError::Truncated { .. })));
+    // Too short to hold even the envelope.
+    raw.send(&good, header_for(ENVELOPE_LEN - 1, 1_001, 2_001));
+    assert!(matches!(s.wait_for_sample(TIMEOUT), Err(ReceiveError::Truncated { .. })));
+    // A truncated archive (the envelope's length disagrees).
+    raw.send(&good, header_for(good.len() - 16, 1_001, 2_001));
+    assert!(matches!(s.wait_for_sample(TIMEOUT), Err(ReceiveError::Malformed(_))));
+    // A valid archive whose header lies about its times.
+    raw.send(&good, header_for(good.len(), 5, 2_001));
+    assert!(matches!(s.wait_for_sample(TIMEOUT), Err(ReceiveError::Malformed(_))));
+    // A header never filled in (kind 0).
+    raw.send(&good, SampleHeader { kind: 0, ..header_for(good.len(), 1_001, 2_001) });
+    assert!(matches!(s.wait_for_sample(TIMEOUT), Err(ReceiveError::UnknownKind { kind: 0 })));
+    // Another type.
+    raw.send(&good, SampleHeader { type_id: 7, ..header_for(good.len(), 1_001, 2_001) });
+    assert!(matches!(s.wait_for_sample(TIMEOUT), Err(ReceiveError::TypeMismatch { .. })));
+    // A correct raw sample is accepted.
+    raw.send(&good, header_for(good.len(), 1_001, 2_001));
+    let sample = s.wait_for_sample(TIMEOUT).unwrap().expect("good raw sample");
+    assert_eq!(sample.to_owned().unwrap(), robot(1));
+    drop(sample);
+
+    assert_eq!(s.stats(), SubscriberStats { received: 8, malformed: 6, type_mismatch: 1 });
+
+    // The subscriber still works with a real publisher afterwards.
+    let p = publisher(&domain, "robot", "RobotState").create(&pub_node).unwrap();
+    p.publish(&robot(2)).unwrap();
+    let sample = s.wait_for_sample(TIMEOUT).unwrap().expect("good sample");
+    assert_eq!(sample.to_owned().unwrap(), robot(2));
+}
+
+#[test]
+fn deferred_validation_rejects_on_access_and_counts_once() {
+    let domain = unique_domain("deferred");
+    let (raw_node, sub_node) = (node(), node());
+    let s = subscriber(&domain, "robot", "RobotState")
+        .validation(Validation::OnAccess)
+        .create(&sub_node)
+        .unwrap();
+    let raw = RawPublisher::new(&raw_node, &domain, "robot");
+    raw.send(&[0xAB; 96], header_for(96, 1_001, 2_001));
+    let sample = s.wait_for_sample(TIMEOUT).unwrap().expect("header passes");
+    assert!(sample.structure().is_err());
+    assert!(sample.to_owned().is_err());
+    assert_eq!(s.stats().malformed, 1, "one bad sample counts once");
+
+    let good = codec::encode(&robot(1)).unwrap();
+    raw.send(&good, header_for(good.len(), 1_001, 2_001));
+    let sample = s.wait_for_sample(TIMEOUT).unwrap().expect("good sample");
+    assert_eq!(sample.structure().unwrap().name.as_str(), "robot1");
+    // SAFETY: this test wrote the bytes with the codec itself.
+    let unchecked = unsafe { sample.structure_unchecked() }.unwrap();
+    assert_eq!(unchecked.valid_time, 1_001);
+    assert_eq!(s.stats(), SubscriberStats { received: 2, malformed: 1, type_mismatch: 0 });
+}
+
+#[test]
+fn every_wait_strategy_delivers_and_times_out() {
+    let strategies = [
+        WaitStrategy::BusySpin,
+        WaitStrategy::SpinThenBlock { spin: Duration::from_micros(200) },
+        WaitStrategy::Block,
+    ];
+    for (k, strategy) in strategies.into_iter().enumerate() {
+        let domain = unique_domain(&format!("wait_{k}"));
+        let sub_node = node();
+        let s = subscriber(&domain, "robot", "RobotState")
+            .wait_strategy(strategy)
+            .create(&sub_node)
+            .unwrap();
+
+        let start = Instant::now();
+        assert!(s.wait_for_sample(Duration::from_millis(20)).unwrap().is_none());
+        assert!(start.elapsed() >= Duration::from_millis(20), "{strategy:?} returned early");
+
+        // A producer in another thread (with its own node, as ports are per thread)
+        // publishes while the subscriber is already waiting.
+        let producer_domain = domain.clone();
+        let producer = thread::spawn(move || {
+            let n = node();
+            let p = publisher(&producer_domain, "robot", "RobotState").create(&n).unwrap();
+            let deadline = Instant::now() + TIMEOUT;
+            while p.subscriber_count() == 0 && Instant::now() < deadline {
+                thread::sleep(Duration::from_millis(1));
+            }
+            thread::sleep(Duration::from_millis(30));
+            p.publish(&robot(7)).unwrap();
+            // Keep the publisher alive until the subscriber has had time to read.
+            thread::sleep(Duration::from_millis(100));
+        });
+        let sample = s.wait_for_sample(TIMEOUT).unwrap().expect("woken by the sample");
+        assert_eq!(sample.to_owned().unwrap(), robot(7), "{strategy:?}");
+        drop(sample);
+        producer.join().unwrap();
+    }
+}
+
+#[test]
+fn lossless_delivery_waits_for_room_but_not_forever() {
+    let domain = unique_domain("lossless");
+    let (pub_node, sub_node) = (node(), node());
+    let qos = TrajectoryQos {
+        delivery: Delivery::Lossless,
+        subscriber_buffer_size: 2,
+        history_size: 0,
+        ..TrajectoryQos::default()
+    };
+    let p = publisher(&domain, "events", "Event")
+        .qos(qos)
+        .lossless_timeout(Duration::from_millis(50))
+        .create(&pub_node)
+        .unwrap();
+    let s = subscriber(&domain, "events", "Event").qos(qos).create(&sub_node).unwrap();
+    let ev = |i: i64| EntityStructure::new("e", i, i);
+    p.publish(&ev(0)).unwrap();
+    p.publish(&ev(1)).unwrap();
+    // The buffer is full: the third waits the lossless timeout, then gives up.
+    assert!(matches!(p.publish(&ev(2)), Err(PublishError::NotDelivered { .. })));
+    for i in 0..2 {
+        let sample = s.wait_for_sample(TIMEOUT).unwrap().expect("kept sample");
+        assert_eq!(sample.header().valid_time, i);
+    }
+    p.publish(&ev(3)).unwrap();
+    assert_eq!(s.wait_for_sample(TIMEOUT).unwrap().unwrap().header().valid_time, 3);
+}
+
+#[test]
+fn bad_names_are_refused() {
+    let n = node();
+    let e = TrajectoryPublisher::builder("a/b", "T").domain("d").create(&n).unwrap_err();
+    assert!(matches!(e, OpenError::InvalidName(_)));
+    let e = TrajectorySubscriber::builder("t", "T").domain("").create(&n).unwrap_err();
+    assert!(matches!(e, OpenError::InvalidName(_)));
+}
+
+#[test]
+fn held_samples_are_bounded() {
+    let domain = unique_domain("held");
+    let (pub_node, sub_node) = (node(), node());
+    let p = publisher(&domain, "robot", "RobotState").create(&pub_node).unwrap();
+    let s = subscriber(&domain, "robot", "RobotState").create(&sub_node).unwrap();
+    let max = TrajectoryQos::default().max_borrowed_samples;
+    for i in 0..=max as i64 {
+        p.publish(&robot(i)).unwrap();
+    }
+    let held: Vec<_> = (0..max).map(|_| s.wait_for_sample(TIMEOUT).unwrap().unwrap()).collect();
+    assert!(matches!(s.receive(), Err(ReceiveError::TooManyHeld)));
+    drop(held);
+    assert!(s.wait_for_sample(TIMEOUT).unwrap().is_some());
+}
