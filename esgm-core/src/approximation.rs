@@ -15,7 +15,7 @@ use crate::value::{
 
 /// How to answer "the value at `t`" when no sample has valid time `t` (the seed's
 /// `ValueApproximationConstraint`).
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub enum ValueApproximation {
     /// No approximation: `ValueNotAvailable` unless a sample is valid exactly at `t`.
     #[default]
@@ -32,7 +32,7 @@ pub enum ValueApproximation {
 
 /// How several samples with one valid time become one value (the seed's merge
 /// constraint).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub enum MergeRule {
     /// The sample created first.
     KeepFirst,

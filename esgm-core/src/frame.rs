@@ -15,7 +15,9 @@ use crate::time::Time;
 use crate::value::Value;
 
 /// One attribute and its value (`AttributeValuePair`).
-#[derive(Debug, Clone, PartialEq, Archive, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, PartialEq, Archive, Serialize, Deserialize, serde::Serialize, serde::Deserialize,
+)]
 #[rkyv(derive(Debug))]
 pub struct AttributeValuePair {
     /// The attribute's name, as declared in the entity structure type.
@@ -62,7 +64,17 @@ impl<const N: usize> From<[(&str, Value); N]> for AttributeList {
 /// A data structure representing an entity: a name and attribute/value pairs
 /// (Definition 2.4.3). Frames nest through [`Value::EntityFrame`] and
 /// [`Value::EntityFrameSeq`].
-#[derive(Debug, Clone, PartialEq, Default, Archive, Serialize, Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    PartialEq,
+    Default,
+    Archive,
+    Serialize,
+    Deserialize,
+    serde::Serialize,
+    serde::Deserialize,
+)]
 #[rkyv(derive(Debug))]
 pub struct EntityFrame {
     /// The name of the represented entity (e.g. `blob3`), not of its type.
@@ -138,7 +150,17 @@ fn set_attribute(attributes: &mut Vec<AttributeValuePair>, name: String, value: 
 ///
 /// Two structures for one entity may share a valid time and differ in create time:
 /// that is how the seed represents a later, better estimate of the same moment.
-#[derive(Debug, Clone, PartialEq, Default, Archive, Serialize, Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    PartialEq,
+    Default,
+    Archive,
+    Serialize,
+    Deserialize,
+    serde::Serialize,
+    serde::Deserialize,
+)]
 #[rkyv(derive(Debug))]
 pub struct EntityStructure {
     /// The name of the represented entity.

@@ -11,7 +11,7 @@ use crate::time::Time;
 
 /// The constraints of a fluent generator: how to approximate between samples and how
 /// to merge samples sharing a valid time.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct GeneratorPolicy {
     /// Value approximation constraint.
     pub approximation: ValueApproximation,

@@ -14,7 +14,7 @@ use crate::filter::FilterError;
 use crate::time::Time;
 
 /// C1: what must differ between consecutive samples.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub enum ChangeConstraint {
     /// No restriction.
     #[default]
@@ -30,7 +30,7 @@ pub enum ChangeConstraint {
 }
 
 /// C2: which samples may be in the stream at the same time; the oldest go first.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub enum CacheConstraint {
     /// Keep every sample.
     #[default]
@@ -55,7 +55,7 @@ impl CacheConstraint {
 }
 
 /// C4: the interval valid times must fall in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub enum DurationConstraint {
     /// Any valid time.
     #[default]
@@ -71,7 +71,7 @@ pub enum DurationConstraint {
 }
 
 /// C5: how valid times of consecutive samples relate.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub enum OrderConstraint {
     /// No restriction.
     #[default]
@@ -83,7 +83,7 @@ pub enum OrderConstraint {
 }
 
 /// C6: the largest allowed add time − valid time.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub enum DelayConstraint {
     /// Any delay (the seed's `delay = 0`).
     #[default]
@@ -106,7 +106,9 @@ impl DelayConstraint {
 }
 
 /// Which constraint a sample broke; the cause of a drop.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
 pub enum Constraint {
     /// C1.
     Change,
@@ -153,7 +155,7 @@ impl std::fmt::Display for Constraint {
 }
 
 /// The constraints of one trajectory (the seed's fluent stream constraints).
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct FluentStreamPolicy {
     /// C1.
     pub change: ChangeConstraint,
@@ -188,7 +190,7 @@ impl Default for FluentStreamPolicy {
 }
 
 /// A policy is unusable.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error, serde::Serialize, serde::Deserialize)]
 #[non_exhaustive]
 pub enum PolicyError {
     /// A field has a value that makes no sense (the seed's `IllegalPolicy`); fix the
@@ -196,11 +198,11 @@ pub enum PolicyError {
     #[error("illegal policy: {field} = {value}: {rule}")]
     IllegalPolicy {
         /// The policy field.
-        field: &'static str,
+        field: String,
         /// The offending value, as written.
         value: String,
         /// The rule it breaks.
-        rule: &'static str,
+        rule: String,
     },
     /// The filter expression does not parse or does not type-check against the
     /// trajectory's type.
@@ -209,8 +211,13 @@ pub enum PolicyError {
 }
 
 impl PolicyError {
-    pub(crate) fn illegal(field: &'static str, value: impl ToString, rule: &'static str) -> Self {
-        PolicyError::IllegalPolicy { field, value: value.to_string(), rule }
+    /// An [`PolicyError::IllegalPolicy`] naming `field`, its `value` and the `rule`.
+    pub fn illegal(field: &str, value: impl ToString, rule: &str) -> Self {
+        PolicyError::IllegalPolicy {
+            field: field.into(),
+            value: value.to_string(),
+            rule: rule.into(),
+        }
     }
 }
 
@@ -376,7 +383,7 @@ mod tests {
         assert_eq!(CacheConstraint::from_seed(5), Ok(CacheConstraint::Elements(5)));
         assert!(matches!(
             CacheConstraint::from_seed(-1),
-            Err(PolicyError::IllegalPolicy { field: "cache_size", .. })
+            Err(PolicyError::IllegalPolicy { ref field, .. }) if field == "cache_size"
         ));
         assert_eq!(DelayConstraint::from_seed(0), Ok(DelayConstraint::Any));
         assert!(DelayConstraint::from_seed(-5).is_err());

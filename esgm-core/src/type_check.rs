@@ -16,7 +16,7 @@ use crate::value::{Value, ValueSort};
 
 /// A structure does not fit its type (the seed's `InvalidType`, with the attribute
 /// named). Attribute paths name nested positions, e.g. `items[2].size`.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error, serde::Serialize, serde::Deserialize)]
 #[non_exhaustive]
 pub enum InvalidType {
     /// The type declares an attribute the structure does not assign.

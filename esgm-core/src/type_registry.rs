@@ -11,7 +11,7 @@ use std::sync::Arc;
 use crate::types::{EntityStructureType, TypeDefinitionError};
 
 /// Errors of the type-registry operations, named as the seed's exceptions.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error, serde::Serialize, serde::Deserialize)]
 #[non_exhaustive]
 pub enum TypeRegistryError {
     /// A type is already registered under that name; destroy it first or pick another.

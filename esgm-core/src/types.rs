@@ -9,7 +9,18 @@ use crate::value::ValueSort;
 /// A frame-sorted attribute ([`ValueSort::EntityFrame`] or
 /// [`ValueSort::EntityFrameSeq`]) may name the registered type of its element(s); then
 /// nested frames are type-checked too. Without it, any frame is accepted there.
-#[derive(Debug, Clone, PartialEq, Eq, Hash, Archive, Serialize, Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    PartialEq,
+    Eq,
+    Hash,
+    Archive,
+    Serialize,
+    Deserialize,
+    serde::Serialize,
+    serde::Deserialize,
+)]
 #[rkyv(derive(Debug))]
 pub struct Attr {
     /// The attribute's name, unique within its type.
@@ -29,7 +40,18 @@ impl Attr {
 
 /// The type of the structures in a trajectory: a name and the attributes every
 /// instance must assign (the seed's `EntityStructureType`).
-#[derive(Debug, Clone, PartialEq, Eq, Hash, Archive, Serialize, Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    PartialEq,
+    Eq,
+    Hash,
+    Archive,
+    Serialize,
+    Deserialize,
+    serde::Serialize,
+    serde::Deserialize,
+)]
 #[rkyv(derive(Debug))]
 pub struct EntityStructureType {
     /// The type's own name (the seed's tutorial registers `BlobType` under `blob`; the
@@ -40,7 +62,7 @@ pub struct EntityStructureType {
 }
 
 /// Why a type definition is unusable.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error, serde::Serialize, serde::Deserialize)]
 #[non_exhaustive]
 pub enum TypeDefinitionError {
     /// Two attributes share a name; rename one.
@@ -69,7 +91,7 @@ pub enum TypeDefinitionError {
         /// The type (may itself be empty).
         type_name: String,
         /// `type` or `attribute`.
-        what: &'static str,
+        what: String,
     },
     /// [`ValueSort::NoValue`] is the sort of a missing value and cannot be declared.
     #[error("attribute `{attribute}` of type `{type_name}` cannot have sort NoValue")]
@@ -128,14 +150,17 @@ impl EntityStructureType {
     /// only on frame attributes). Element types are resolved later, against a registry.
     pub fn validate(&self) -> Result<(), TypeDefinitionError> {
         if self.name.is_empty() {
-            return Err(TypeDefinitionError::EmptyName { type_name: String::new(), what: "type" });
+            return Err(TypeDefinitionError::EmptyName {
+                type_name: String::new(),
+                what: "type".into(),
+            });
         }
         for (i, a) in self.attributes.iter().enumerate() {
             let err_ctx = || (self.name.clone(), a.name.clone());
             if a.name.is_empty() {
                 return Err(TypeDefinitionError::EmptyName {
                     type_name: self.name.clone(),
-                    what: "attribute",
+                    what: "attribute".into(),
                 });
             }
             if self.attributes[..i].iter().any(|b| b.name == a.name) {

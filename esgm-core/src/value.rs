@@ -21,7 +21,19 @@ use crate::time::Time;
 
 /// The sort (type) of a [`Value`], as in the seed's `ValueSort` enum.
 #[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Archive, Serialize, Deserialize,
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    Hash,
+    PartialOrd,
+    Ord,
+    Archive,
+    Serialize,
+    Deserialize,
+    serde::Serialize,
+    serde::Deserialize,
 )]
 #[rkyv(derive(Debug, PartialEq, Eq, Clone, Copy), compare(PartialEq))]
 pub enum ValueSort {
@@ -195,7 +207,18 @@ impl fmt::Display for ValueSort {
 }
 
 /// A 3-D vector (`Vec` in the seed's common types).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Archive, Serialize, Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    Archive,
+    Serialize,
+    Deserialize,
+    serde::Serialize,
+    serde::Deserialize,
+)]
 #[rkyv(derive(Debug, PartialEq), compare(PartialEq))]
 pub struct Vec3 {
     /// x component.
@@ -207,7 +230,18 @@ pub struct Vec3 {
 }
 
 /// A 2-D point, e.g. in image pixels (`Pos2`).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Archive, Serialize, Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    Archive,
+    Serialize,
+    Deserialize,
+    serde::Serialize,
+    serde::Deserialize,
+)]
 #[rkyv(derive(Debug, PartialEq), compare(PartialEq))]
 pub struct Pos2 {
     /// x coordinate.
@@ -217,7 +251,18 @@ pub struct Pos2 {
 }
 
 /// A horizontal world position in metres, north and east of the map origin (`Position`).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Archive, Serialize, Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    Archive,
+    Serialize,
+    Deserialize,
+    serde::Serialize,
+    serde::Deserialize,
+)]
 #[rkyv(derive(Debug, PartialEq), compare(PartialEq))]
 pub struct Position {
     /// Metres north of the origin.
@@ -227,7 +272,18 @@ pub struct Position {
 }
 
 /// An orientation as roll, pitch and yaw in radians (`Rotation`).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Archive, Serialize, Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    Archive,
+    Serialize,
+    Deserialize,
+    serde::Serialize,
+    serde::Deserialize,
+)]
 #[rkyv(derive(Debug, PartialEq), compare(PartialEq))]
 pub struct Rotation {
     /// Rotation about the forward axis.
@@ -239,7 +295,18 @@ pub struct Rotation {
 }
 
 /// A world position with an altitude (`PositionAltitude`).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Archive, Serialize, Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    Archive,
+    Serialize,
+    Deserialize,
+    serde::Serialize,
+    serde::Deserialize,
+)]
 #[rkyv(derive(Debug, PartialEq), compare(PartialEq))]
 pub struct PositionAltitude {
     /// Horizontal position.
@@ -249,7 +316,18 @@ pub struct PositionAltitude {
 }
 
 /// A full pose: position, altitude and orientation (`PositionAltitudeRotation`).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Archive, Serialize, Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Default,
+    Archive,
+    Serialize,
+    Deserialize,
+    serde::Serialize,
+    serde::Deserialize,
+)]
 #[rkyv(derive(Debug, PartialEq), compare(PartialEq))]
 pub struct PositionAltitudeRotation {
     /// Horizontal position.
@@ -277,6 +355,20 @@ impl Octets {
     /// True if both handles share one buffer (no copy was made between them).
     pub fn ptr_eq(&self, other: &Octets) -> bool {
         Arc::ptr_eq(&self.0, &other.0)
+    }
+}
+
+/// Octets cross the control plane and JSON output as a byte sequence; images travel on
+/// the data plane, not here.
+impl serde::Serialize for Octets {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_bytes(&self.0)
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for Octets {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        Ok(Octets::from(Vec::<u8>::deserialize(d)?))
     }
 }
 
@@ -314,7 +406,17 @@ impl fmt::Debug for Octets {
 }
 
 /// A value of an attribute: the seed's `Value` union plus `NoValue`.
-#[derive(Debug, Clone, PartialEq, Default, Archive, Serialize, Deserialize)]
+#[derive(
+    Debug,
+    Clone,
+    PartialEq,
+    Default,
+    Archive,
+    Serialize,
+    Deserialize,
+    serde::Serialize,
+    serde::Deserialize,
+)]
 #[rkyv(serialize_bounds(
     __S: rkyv::ser::Writer + rkyv::ser::Allocator,
     __S::Error: rkyv::rancor::Source,

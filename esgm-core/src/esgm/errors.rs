@@ -8,7 +8,7 @@ use crate::type_registry::did_you_mean;
 use crate::value::ValueSort;
 
 /// Errors of the `create_…_entity_trajectory_structure` operations.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error, serde::Serialize, serde::Deserialize)]
 #[non_exhaustive]
 pub enum CreateError {
     /// The name is taken; destroy the trajectory first, choose another name, or
@@ -89,7 +89,7 @@ pub enum CreateError {
 }
 
 /// Errors of looking a trajectory up or destroying it.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error, serde::Serialize, serde::Deserialize)]
 #[non_exhaustive]
 pub enum LookupError {
     /// No trajectory has that name (the seed's `NoSuchEntityStructure`).
@@ -103,7 +103,7 @@ pub enum LookupError {
 }
 
 /// Errors of registering or removing sensors and computational units.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error, serde::Serialize, serde::Deserialize)]
 #[non_exhaustive]
 pub enum RegistrationError {
     /// A sensor with that name is registered; remove it first.
@@ -154,7 +154,7 @@ pub enum RegistrationError {
 
 /// What a computational unit declares about one input: any structure (the seed's
 /// `ENTITY_FRAME_TYPE`) or structures of one registered type.
-#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 pub enum InputType {
     /// A value sort: `EntityFrame` or `AnyValue` accept any trajectory.
     Sort(ValueSort),

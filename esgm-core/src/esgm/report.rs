@@ -5,7 +5,7 @@ use crate::policy::FluentStreamPolicy;
 use crate::store::TrajectoryStats;
 
 /// One trajectory as listed: name, kind, type, where it reads from.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TrajectoryInfo {
     /// The name.
     pub name: String,
@@ -22,7 +22,7 @@ pub struct TrajectoryInfo {
 }
 
 /// Counters of the worker that feeds a sampled, computed or operator trajectory.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub struct WorkerStats {
     /// Sensor or unit calls made.
     pub calls: u64,
@@ -43,14 +43,14 @@ pub struct WorkerStats {
 }
 
 /// Statistics of the whole ESGM.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EsgmStats {
     /// Per trajectory: its listing, its store's stats, its worker's.
     pub trajectories: Vec<(TrajectoryInfo, TrajectoryStats, WorkerStats)>,
 }
 
 /// Memory held by the ESGM's trajectories.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub struct MemoryStats {
     /// Trajectories.
     pub trajectories: usize,
@@ -63,7 +63,18 @@ pub struct MemoryStats {
 }
 
 /// Log verbosity (E7's `Logable`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Default)]
+#[derive(
+    Debug,
+    Clone,
+    Copy,
+    PartialEq,
+    Eq,
+    PartialOrd,
+    Ord,
+    Default,
+    serde::Serialize,
+    serde::Deserialize,
+)]
 pub enum LogLevel {
     /// Errors only.
     Error,

@@ -7,7 +7,7 @@ use crate::policy::{FluentStreamPolicy, PolicyError};
 use crate::time::Time;
 
 /// Where a trajectory's structures come from (the content part of a DyKnow policy).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 #[non_exhaustive]
 pub enum TrajectorySource {
     /// Pushed by an outside source (E2).
@@ -62,7 +62,7 @@ pub enum TrajectorySource {
 }
 
 /// A full description of a trajectory to create.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct TrajectorySpec {
     /// The trajectory's name.
     pub name: String,
@@ -210,7 +210,7 @@ impl TrajectorySpec {
 }
 
 /// The kinds of trajectory, for listings and graphs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 pub enum TrajectoryKind {
     /// Pushed from outside.
     Primitive,

@@ -7,7 +7,7 @@ use crate::type_registry::did_you_mean;
 use crate::value::ValueSort;
 
 /// A filter does not parse or does not type-check against the trajectory's type.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error, serde::Serialize, serde::Deserialize)]
 #[non_exhaustive]
 pub enum FilterError {
     /// The text is not a well-formed expression; fix it at `position`.

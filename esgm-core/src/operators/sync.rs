@@ -68,7 +68,7 @@ impl Stamped for Sample {
 }
 
 /// Why a synchronizer could not be created or could not take an item.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, thiserror::Error, serde::Serialize, serde::Deserialize)]
 #[non_exhaustive]
 pub enum SyncError {
     /// The item was pushed on an input the synchronizer does not have (or a setting
@@ -92,7 +92,7 @@ pub enum SyncError {
     #[error("{setting} must not be negative, got {value} ns")]
     NegativeDuration {
         /// Which setting was negative.
-        setting: &'static str,
+        setting: String,
         /// The value that was given.
         value: Time,
     },
@@ -127,7 +127,7 @@ pub trait Synchronizer<T> {
 }
 
 /// Which sync policy to use, with its settings: what a sync trajectory declares.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub enum SyncPolicy {
     /// Sets of items with identical valid times ([`ExactSync`]).
     Exact(ExactConfig),
@@ -213,11 +213,17 @@ mod tests {
         );
         assert_eq!(
             approx(ApproximateConfig::default().max_interval_duration(-1)),
-            Some(SyncError::NegativeDuration { setting: "max_interval_duration", value: -1 })
+            Some(SyncError::NegativeDuration {
+                setting: "max_interval_duration".into(),
+                value: -1
+            })
         );
         assert_eq!(
             approx(ApproximateConfig::default().inter_message_lower_bound(1, -5)),
-            Some(SyncError::NegativeDuration { setting: "inter_message_lower_bound", value: -5 })
+            Some(SyncError::NegativeDuration {
+                setting: "inter_message_lower_bound".into(),
+                value: -5
+            })
         );
         assert_eq!(
             approx(ApproximateConfig::default().inter_message_lower_bound(2, 5)),

@@ -60,7 +60,7 @@ impl InProcessTrajectory {
         if !cell.external_adds {
             return Err(AddError::OperationNotSupported {
                 trajectory: self.descriptor.name.clone(),
-                operation,
+                operation: operation.into(),
             });
         }
         let mut store = cell.store.lock();

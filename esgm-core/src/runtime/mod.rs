@@ -409,13 +409,11 @@ impl Esgm for InProcessEsgm {
             }
             TrajectorySource::SampledGenerators { inputs: gens, from, to, sample_period } => {
                 if *sample_period <= 0 {
-                    return Err(CreateError::IllegalPolicy(
-                        crate::policy::PolicyError::IllegalPolicy {
-                            field: "sample_period",
-                            value: sample_period.to_string(),
-                            rule: "must be positive",
-                        },
-                    ));
+                    return Err(CreateError::IllegalPolicy(crate::policy::PolicyError::illegal(
+                        "sample_period",
+                        sample_period,
+                        "must be positive",
+                    )));
                 }
                 let schedule = self.schedule(*from, *to, *sample_period);
                 let with_policies = inputs

@@ -125,11 +125,11 @@ impl TrajectoryStoreBuilder {
         };
         if let Some((from, Some(to))) = window {
             if to < from {
-                return Err(PolicyError::IllegalPolicy {
-                    field: "duration.to",
-                    value: to.to_string(),
-                    rule: "is before the start (from = 0 means now)",
-                });
+                return Err(PolicyError::illegal(
+                    "duration.to",
+                    to,
+                    "is before the start (from = 0 means now)",
+                ));
             }
         }
         Ok(TrajectoryStore {

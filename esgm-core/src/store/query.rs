@@ -14,7 +14,7 @@ use crate::time::Time;
 use crate::type_check::InvalidType;
 
 /// Errors of the query operations.
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error, serde::Serialize, serde::Deserialize)]
 #[non_exhaustive]
 pub enum QueryError {
     /// No sample answers the query (the seed's `ValueNotAvailable`): the trajectory is

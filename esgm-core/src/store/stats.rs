@@ -118,7 +118,7 @@ impl StatsRecorder {
 ///
 /// Every structure ever offered is accounted for: `added + dropped_total + held`
 /// equals the number offered; `evicted` counts samples that left the cache normally.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TrajectoryStats {
     /// Structures that entered the stream.
     pub added: u64,

@@ -10,7 +10,7 @@ use crate::type_check::InvalidType;
 /// A structure broke a constraint of a trajectory's policy (the seed's
 /// `PolicyViolation`). Returned by the blocking add forms, delivered to violation
 /// subscribers, and counted in stats.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct PolicyViolation {
     /// The trajectory.
     pub trajectory: String,
@@ -40,7 +40,9 @@ impl std::error::Error for PolicyViolation {}
 
 /// Why a structure offered to a trajectory was not stored. Every drop is counted under
 /// its cause.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
 pub enum DropCause {
     /// It broke a policy constraint.
     Violation(Constraint),
@@ -61,7 +63,7 @@ impl fmt::Display for DropCause {
 }
 
 /// What an add did.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum AddOutcome {
     /// The structure entered the stream and was sent to subscribers.
     Added,
@@ -77,7 +79,7 @@ pub enum AddOutcome {
 }
 
 /// Errors of the add operations (T4).
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error, serde::Serialize, serde::Deserialize)]
 #[non_exhaustive]
 pub enum AddError {
     /// The structure does not fit the trajectory's type; fix the named attribute. It
@@ -106,6 +108,6 @@ pub enum AddError {
         /// The trajectory.
         trajectory: String,
         /// The refused operation.
-        operation: &'static str,
+        operation: String,
     },
 }

@@ -38,7 +38,7 @@ use super::{Stamped, SyncError, Synchronizer};
 use crate::Time;
 
 /// Settings of [`ApproximateSync`], named as in message_filters.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[non_exhaustive]
 pub struct ApproximateConfig {
     /// At most this many items are held per input, counting those the current search
@@ -234,7 +234,7 @@ impl<T: Stamped> ApproximateSync<T> {
         }
         if let Some(max) = config.max_interval_duration.filter(|&max| max < 0) {
             return Err(SyncError::NegativeDuration {
-                setting: "max_interval_duration",
+                setting: "max_interval_duration".into(),
                 value: max,
             });
         }
@@ -244,7 +244,7 @@ impl<T: Stamped> ApproximateSync<T> {
         for (input, &bound) in config.inter_message_lower_bounds.iter().enumerate() {
             if bound < 0 {
                 return Err(SyncError::NegativeDuration {
-                    setting: "inter_message_lower_bound",
+                    setting: "inter_message_lower_bound".into(),
                     value: bound,
                 });
             }

@@ -16,7 +16,7 @@ use super::{Stamped, SyncError, Synchronizer};
 use crate::Time;
 
 /// Settings of [`ExactSync`].
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[non_exhaustive]
 pub struct ExactConfig {
     /// At most this many unmatched items are held per input; when an input has more, its
