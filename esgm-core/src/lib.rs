@@ -29,6 +29,7 @@
 extern crate self as esgm_core;
 
 pub mod approximation;
+pub mod catalog;
 pub mod clock;
 pub mod codec;
 pub mod entity;

@@ -26,6 +26,7 @@ use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
 
 use parking_lot::RwLock;
 
+use crate::catalog::Catalog;
 use crate::clock::{SharedClock, SystemClock};
 use crate::esgm::{
     CompUnit, CreateError, Esgm, EsgmStats, InputType, LogLevel, LookupError, MemoryStats,
@@ -34,16 +35,9 @@ use crate::esgm::{
 };
 use crate::sample::Sample;
 use crate::store::{SubscribeOptions, Subscription, TrajectoryStore};
-use crate::type_check::TypeChecker;
-use crate::type_registry::{TypeRegistry, TypeRegistryError, closest_name};
+use crate::type_registry::{TypeRegistry, TypeRegistryError};
 use crate::types::EntityStructureType;
 use cell::{Descriptor, TrajectoryCell};
-
-#[derive(Debug)]
-struct SensorEntry {
-    type_name: String,
-    iface: Arc<dyn SensorInterface>,
-}
 
 impl std::fmt::Debug for dyn SensorInterface {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -57,23 +51,20 @@ impl std::fmt::Debug for dyn CompUnit {
     }
 }
 
-#[derive(Debug)]
-struct UnitEntry {
-    type_name: String,
-    input_types: Vec<InputType>,
-    cu: Arc<dyn CompUnit>,
-}
-
 /// A resolved input: its name's descriptor and the trajectory it denotes now.
 type Input = (Arc<Descriptor>, Arc<TrajectoryCell>);
+
+/// The host name the in-process runtime gives its sensors and units in the catalog.
+const LOCAL_HOST: &str = "in-process";
 
 #[derive(Debug)]
 pub(crate) struct Inner {
     clock: SharedClock,
-    types: RwLock<TypeRegistry>,
+    /// Names and the rules on them. Lock order: catalog, then trajectories.
+    catalog: RwLock<Catalog>,
     trajectories: RwLock<BTreeMap<String, Arc<Descriptor>>>,
-    sensors: RwLock<BTreeMap<String, SensorEntry>>,
-    units: RwLock<BTreeMap<String, UnitEntry>>,
+    sensors: RwLock<BTreeMap<String, Arc<dyn SensorInterface>>>,
+    units: RwLock<BTreeMap<String, Arc<dyn CompUnit>>>,
     subscriber_capacity: usize,
     log_level: AtomicU8,
     shutdown: AtomicBool,
@@ -125,7 +116,9 @@ impl InProcessEsgmBuilder {
     pub fn create(self) -> InProcessEsgm {
         let inner = Arc::new(Inner {
             clock: self.clock.unwrap_or_else(SystemClock::shared),
-            types: RwLock::new(self.types.unwrap_or_else(TypeRegistry::with_library)),
+            catalog: RwLock::new(Catalog::new(
+                self.types.unwrap_or_else(TypeRegistry::with_library),
+            )),
             trajectories: RwLock::new(BTreeMap::new()),
             sensors: RwLock::new(BTreeMap::new()),
             units: RwLock::new(BTreeMap::new()),
@@ -176,28 +169,18 @@ impl InProcessEsgm {
         }
     }
 
-    fn no_such_trajectory(&self, name: &str) -> LookupError {
-        let map = self.inner.trajectories.read();
-        LookupError::NoSuchEntityStructure {
-            name: name.to_owned(),
-            suggestion: closest_name(name, map.keys().map(String::as_str)),
-        }
-    }
-
     fn descriptor(&self, name: &str) -> Option<Arc<Descriptor>> {
         self.inner.trajectories.read().get(name).cloned()
     }
 
+    /// The inputs' descriptors and current trajectories (the catalog checked they exist;
+    /// one destroyed since is reported like an unknown name).
     fn input_cells(&self, names: &[String]) -> Result<Vec<Input>, CreateError> {
         names
             .iter()
             .map(|n| {
                 self.descriptor(n).and_then(|d| d.get().map(|c| (d, c))).ok_or_else(|| {
-                    match self.no_such_trajectory(n) {
-                        LookupError::NoSuchEntityStructure { name, suggestion } => {
-                            CreateError::NoSuchEntityStructure { name, suggestion }
-                        }
-                    }
+                    CreateError::NoSuchEntityStructure { name: n.clone(), suggestion: None }
                 })
             })
             .collect()
@@ -213,41 +196,53 @@ impl InProcessEsgm {
         (sub, latest)
     }
 
-    fn checker(&self, type_name: &str) -> Result<TypeChecker, CreateError> {
-        TypeChecker::new(&self.inner.types.read(), type_name).map_err(type_error)
-    }
-
-    /// A checker for an operator's own state type (one frame per input), built on a
-    /// copy of the registry so the synthesized type does not appear in it.
-    fn state_checker(&self, name: &str, inputs: &[Input]) -> Result<TypeChecker, CreateError> {
-        let mut ty = EntityStructureType::new(format!("{name}:state"));
-        for (d, c) in inputs {
-            ty = ty.frame(d.name.clone(), c.info.type_name.clone());
-        }
-        let mut registry = self.inner.types.read().clone();
-        let key = ty.name.clone();
-        let _ = registry.destroy_entity_structure_type(&key);
-        registry.create_entity_structure_type(key.clone(), ty).map_err(type_error)?;
-        TypeChecker::new(&registry, &key).map_err(type_error)
-    }
-
     /// A sampling schedule with the seed's zero rules: from = 0 is now, to = 0 forever.
     fn schedule(&self, from: i64, to: i64, period: i64) -> periodic::Schedule {
         let from = if from == 0 { self.inner.clock.now() } else { from };
         periodic::Schedule { from, to: (to != 0).then_some(to), period }
     }
-}
 
-fn type_error(e: TypeRegistryError) -> CreateError {
-    match e {
-        TypeRegistryError::NoSuchEntityStructureType { name, suggestion } => {
-            CreateError::NoSuchEntityStructureType { name, suggestion }
-        }
-        // Only lookups happen here; a definition error means a synthesized type broke
-        // a rule, reported as the type that could not be resolved.
-        other => {
-            CreateError::NoSuchEntityStructureType { name: other.to_string(), suggestion: None }
-        }
+    /// Starts the worker that feeds `cell` from `spec`'s source.
+    fn start_worker(
+        &self,
+        spec: &TrajectorySpec,
+        cell: &Arc<TrajectoryCell>,
+        inputs: &[Input],
+    ) -> Result<Option<cell::Worker>, CreateError> {
+        let clock = self.inner.clock.clone();
+        Ok(match &spec.source {
+            TrajectorySource::Primitive { .. } => None,
+            TrajectorySource::Sampled { sensor, from, to, sample_period } => {
+                let iface = self.inner.sensors.read().get(sensor).cloned();
+                let schedule = self.schedule(*from, *to, *sample_period);
+                iface.map(|iface| workers::sampler(cell, clock, iface, schedule))
+            }
+            TrajectorySource::Computed { unit, .. } => {
+                let cu = self.inner.units.read().get(unit).cloned();
+                let (subs, latest): (Vec<_>, Vec<_>) =
+                    inputs.iter().map(|(_, c)| self.subscribe_input(c)).unzip();
+                cu.map(|cu| workers::unit(cell, clock, cu, subs, latest))
+            }
+            TrajectorySource::Sync { policy, .. } => {
+                let synchronizer = policy.create::<Sample>(inputs.len())?;
+                let subs = inputs.iter().map(|(_, c)| self.subscribe_input(c).0).collect();
+                let names = inputs.iter().map(|(d, _)| d.name.clone()).collect();
+                Some(workers::sync(cell, clock, synchronizer, names, subs))
+            }
+            TrajectorySource::Merge { .. } => {
+                let subs = inputs.iter().map(|(_, c)| self.subscribe_input(c).0).collect();
+                Some(workers::merge(cell, subs))
+            }
+            TrajectorySource::SampledGenerators { inputs: gens, from, to, sample_period } => {
+                let schedule = self.schedule(*from, *to, *sample_period);
+                let with_policies = inputs
+                    .iter()
+                    .zip(gens)
+                    .map(|((d, _), (_, g))| (Arc::clone(d), g.clone()))
+                    .collect();
+                Some(workers::sampled_generators(cell, clock, with_policies, schedule))
+            }
+        })
     }
 }
 
@@ -259,174 +254,48 @@ impl Esgm for InProcessEsgm {
         type_name: &str,
         entity_type: EntityStructureType,
     ) -> Result<(), TypeRegistryError> {
-        self.inner.types.write().create_entity_structure_type(type_name, entity_type)
+        self.inner.catalog.write().types_mut().create_entity_structure_type(type_name, entity_type)
     }
 
     fn destroy_entity_structure_type(&self, type_name: &str) -> Result<(), TypeRegistryError> {
-        self.inner.types.write().destroy_entity_structure_type(type_name).map(|_| ())
+        self.inner.catalog.write().types_mut().destroy_entity_structure_type(type_name).map(|_| ())
     }
 
     fn get_entity_structure_type(
         &self,
         type_name: &str,
     ) -> Result<EntityStructureType, TypeRegistryError> {
-        self.inner.types.read().get_entity_structure_type(type_name).map(|t| t.as_ref().clone())
+        self.inner
+            .catalog
+            .read()
+            .types()
+            .get_entity_structure_type(type_name)
+            .map(|t| t.as_ref().clone())
     }
 
     fn entity_structure_type_names(&self) -> Vec<String> {
-        self.inner.types.read().names()
+        self.inner.catalog.read().types().names()
     }
 
     fn create_trajectory(&self, spec: TrajectorySpec) -> Result<InProcessTrajectory, CreateError> {
+        let resolved = self.inner.catalog.read().resolve(&spec)?;
+        let inputs = self.input_cells(&spec.inputs())?;
         let name = spec.name.clone();
-        let existing = self.descriptor(&name);
-        if existing.is_some() && !spec.replace {
-            return Err(CreateError::EntityStructureAlreadyExists { name });
-        }
-        let clock = self.inner.clock.clone();
-        let input_names = spec.inputs();
-        let inputs = self.input_cells(&input_names)?;
-        if matches!(
-            spec.source,
-            TrajectorySource::Sync { .. }
-                | TrajectorySource::Merge { .. }
-                | TrajectorySource::SampledGenerators { .. }
-        ) && inputs.is_empty()
-        {
-            return Err(CreateError::NoInputs { name });
-        }
-
-        // The type of the new trajectory, and what feeds it.
-        let (checker, source_name) = match &spec.source {
-            TrajectorySource::Primitive { type_name } => (self.checker(type_name)?, None),
-            TrajectorySource::Sampled { sensor, .. } => {
-                let sensors = self.inner.sensors.read();
-                let entry = sensors.get(sensor).ok_or_else(|| CreateError::NoSuchSensor {
-                    name: sensor.clone(),
-                    suggestion: closest_name(sensor, sensors.keys().map(String::as_str)),
-                })?;
-                (self.checker(&entry.type_name)?, Some(sensor.clone()))
-            }
-            TrajectorySource::Computed { unit, .. } => {
-                let units = self.inner.units.read();
-                let entry = units.get(unit).ok_or_else(|| CreateError::NoSuchCompUnit {
-                    name: unit.clone(),
-                    suggestion: closest_name(unit, units.keys().map(String::as_str)),
-                })?;
-                if entry.input_types.len() != inputs.len() {
-                    return Err(CreateError::WrongInputCount {
-                        unit: unit.clone(),
-                        expected: entry.input_types.len(),
-                        found: inputs.len(),
-                    });
-                }
-                for (position, (declared, (d, c))) in
-                    entry.input_types.iter().zip(&inputs).enumerate()
-                {
-                    if !declared.accepts(&c.info.type_name) {
-                        return Err(CreateError::InvalidInput {
-                            unit: unit.clone(),
-                            input: d.name.clone(),
-                            position,
-                            expected: declared.to_string(),
-                            actual: c.info.type_name.clone(),
-                        });
-                    }
-                }
-                (self.checker(&entry.type_name)?, Some(unit.clone()))
-            }
-            TrajectorySource::Merge { .. } => {
-                let first = inputs[0].1.info.type_name.clone();
-                for (position, (d, c)) in inputs.iter().enumerate() {
-                    if c.info.type_name != first {
-                        return Err(CreateError::InvalidInput {
-                            unit: "merge".into(),
-                            input: d.name.clone(),
-                            position,
-                            expected: format!(
-                                "type `{first}` (all inputs of a merge share one type)"
-                            ),
-                            actual: c.info.type_name.clone(),
-                        });
-                    }
-                }
-                (self.checker(&first)?, Some("merge".into()))
-            }
-            TrajectorySource::Sync { .. } => {
-                (self.state_checker(&name, &inputs)?, Some("sync".into()))
-            }
-            TrajectorySource::SampledGenerators { .. } if inputs.len() == 1 => {
-                (self.checker(&inputs[0].1.info.type_name)?, Some("generator".into()))
-            }
-            TrajectorySource::SampledGenerators { .. } => {
-                (self.state_checker(&name, &inputs)?, Some("state".into()))
-            }
-        };
-
-        let store = TrajectoryStore::builder(name.clone(), checker)
+        let store = TrajectoryStore::builder(name.clone(), resolved.checker)
             .policy(spec.policy.clone())
-            .clock(clock.clone())
+            .clock(self.inner.clock.clone())
             .create()?;
-        let info = TrajectoryInfo {
-            name: name.clone(),
-            kind: spec.kind(),
-            type_name: store.type_name().to_owned(),
-            source: source_name,
-            inputs: input_names,
-            policy: spec.policy.clone(),
-        };
         let cell = Arc::new(TrajectoryCell {
             store: parking_lot::Mutex::new(store),
             external_adds: spec.kind() == TrajectoryKind::Primitive,
-            info,
+            info: resolved.info.clone(),
             worker: parking_lot::Mutex::new(None),
             counters: Arc::default(),
         });
-
-        // Start what feeds it.
-        let worker = match &spec.source {
-            TrajectorySource::Primitive { .. } => None,
-            TrajectorySource::Sampled { sensor, from, to, sample_period } => {
-                let iface = self.inner.sensors.read().get(sensor).map(|e| Arc::clone(&e.iface));
-                let schedule = self.schedule(*from, *to, *sample_period);
-                iface.map(|iface| workers::sampler(&cell, clock.clone(), iface, schedule))
-            }
-            TrajectorySource::Computed { unit, .. } => {
-                let cu = self.inner.units.read().get(unit).map(|e| Arc::clone(&e.cu));
-                let (subs, latest): (Vec<_>, Vec<_>) =
-                    inputs.iter().map(|(_, c)| self.subscribe_input(c)).unzip();
-                cu.map(|cu| workers::unit(&cell, clock.clone(), cu, subs, latest))
-            }
-            TrajectorySource::Sync { policy, .. } => {
-                let synchronizer = policy.create::<Sample>(inputs.len())?;
-                let subs = inputs.iter().map(|(_, c)| self.subscribe_input(c).0).collect();
-                let names = inputs.iter().map(|(d, _)| d.name.clone()).collect();
-                Some(workers::sync(&cell, clock.clone(), synchronizer, names, subs))
-            }
-            TrajectorySource::Merge { .. } => {
-                let subs = inputs.iter().map(|(_, c)| self.subscribe_input(c).0).collect();
-                Some(workers::merge(&cell, subs))
-            }
-            TrajectorySource::SampledGenerators { inputs: gens, from, to, sample_period } => {
-                if *sample_period <= 0 {
-                    return Err(CreateError::IllegalPolicy(crate::policy::PolicyError::illegal(
-                        "sample_period",
-                        sample_period,
-                        "must be positive",
-                    )));
-                }
-                let schedule = self.schedule(*from, *to, *sample_period);
-                let with_policies = inputs
-                    .iter()
-                    .zip(gens)
-                    .map(|((d, _), (_, g))| (Arc::clone(d), g.clone()))
-                    .collect();
-                Some(workers::sampled_generators(&cell, clock.clone(), with_policies, schedule))
-            }
-        };
-        *cell.worker.lock() = worker;
+        *cell.worker.lock() = self.start_worker(&spec, &cell, &inputs)?;
 
         // Publish it under its name (re-pointing keeps subscribers and handles).
+        let mut catalog = self.inner.catalog.write();
         let mut map = self.inner.trajectories.write();
         let descriptor = match map.get(&name) {
             Some(d) if spec.replace => {
@@ -438,6 +307,7 @@ impl Esgm for InProcessEsgm {
                 }
                 Arc::clone(d)
             }
+            // Created concurrently under the same name since the catalog check.
             Some(_) => return Err(CreateError::EntityStructureAlreadyExists { name }),
             None => {
                 let d = Arc::new(Descriptor {
@@ -448,6 +318,7 @@ impl Esgm for InProcessEsgm {
                 d
             }
         };
+        catalog.insert_trajectory(resolved.info);
         Ok(InProcessTrajectory { descriptor })
     }
 
@@ -455,32 +326,35 @@ impl Esgm for InProcessEsgm {
         &self,
         name: &str,
     ) -> Result<InProcessTrajectory, LookupError> {
-        self.descriptor(name)
-            .map(|descriptor| InProcessTrajectory { descriptor })
-            .ok_or_else(|| self.no_such_trajectory(name))
+        match self.descriptor(name) {
+            Some(descriptor) => Ok(InProcessTrajectory { descriptor }),
+            None => Err(self.inner.catalog.read().no_such_trajectory(name)),
+        }
     }
 
     fn get_entity_trajectory_structure_type(
         &self,
         name: &str,
     ) -> Result<EntityStructureType, LookupError> {
-        self.descriptor(name)
-            .and_then(|d| d.get())
-            .map(|c| c.store.lock().entity_type().as_ref().clone())
-            .ok_or_else(|| self.no_such_trajectory(name))
+        match self.descriptor(name).and_then(|d| d.get()) {
+            Some(c) => Ok(c.store.lock().entity_type().as_ref().clone()),
+            None => Err(self.inner.catalog.read().no_such_trajectory(name)),
+        }
     }
 
     fn destroy_entity_trajectory_structure(&self, name: &str) -> Result<(), LookupError> {
+        let mut catalog = self.inner.catalog.write();
+        catalog.remove_trajectory(name)?;
         let removed = self.inner.trajectories.write().remove(name);
-        let d = removed.ok_or_else(|| self.no_such_trajectory(name))?;
-        if let Some(cell) = d.current.write().take() {
+        drop(catalog);
+        if let Some(cell) = removed.and_then(|d| d.current.write().take()) {
             cell.worker.lock().take();
         }
         Ok(())
     }
 
     fn trajectories(&self) -> Vec<TrajectoryInfo> {
-        self.inner.cells().iter().map(|c| c.info.clone()).collect()
+        self.inner.catalog.read().trajectories().cloned().collect()
     }
 
     fn add_sensor_interface(
@@ -489,32 +363,16 @@ impl Esgm for InProcessEsgm {
         type_name: &str,
         iface: Arc<dyn SensorInterface>,
     ) -> Result<(), RegistrationError> {
-        if let Err(TypeRegistryError::NoSuchEntityStructureType { name, suggestion }) =
-            self.inner.types.read().get_entity_structure_type(type_name)
-        {
-            return Err(RegistrationError::NoSuchEntityStructureType { name, suggestion });
-        }
-        let mut sensors = self.inner.sensors.write();
-        if sensors.contains_key(sensor) {
-            return Err(RegistrationError::SensorAlreadyExists { name: sensor.to_owned() });
-        }
-        sensors.insert(sensor.to_owned(), SensorEntry { type_name: type_name.to_owned(), iface });
+        let mut catalog = self.inner.catalog.write();
+        catalog.add_sensor(sensor, type_name, LOCAL_HOST)?;
+        self.inner.sensors.write().insert(sensor.to_owned(), iface);
         Ok(())
     }
 
     fn remove_sensor_interface(&self, sensor: &str) -> Result<(), RegistrationError> {
-        let users = users_of(self, TrajectoryKind::Sampled, sensor);
-        let mut sensors = self.inner.sensors.write();
-        if !sensors.contains_key(sensor) {
-            return Err(RegistrationError::NoSuchSensor {
-                name: sensor.to_owned(),
-                suggestion: closest_name(sensor, sensors.keys().map(String::as_str)),
-            });
-        }
-        if !users.is_empty() {
-            return Err(RegistrationError::InUse { name: sensor.to_owned(), users });
-        }
-        sensors.remove(sensor);
+        let mut catalog = self.inner.catalog.write();
+        catalog.remove_sensor(sensor)?;
+        self.inner.sensors.write().remove(sensor);
         Ok(())
     }
 
@@ -525,60 +383,29 @@ impl Esgm for InProcessEsgm {
         input_types: Vec<InputType>,
         cu: Arc<dyn CompUnit>,
     ) -> Result<(), RegistrationError> {
-        {
-            let types = self.inner.types.read();
-            let all =
-                std::iter::once(type_name.to_owned()).chain(input_types.iter().filter_map(|t| {
-                    match t {
-                        InputType::Type(t) => Some(t.clone()),
-                        InputType::Sort(_) => None,
-                    }
-                }));
-            for t in all {
-                if let Err(TypeRegistryError::NoSuchEntityStructureType { name, suggestion }) =
-                    types.get_entity_structure_type(&t)
-                {
-                    return Err(RegistrationError::NoSuchEntityStructureType { name, suggestion });
-                }
-            }
-        }
-        let mut units = self.inner.units.write();
-        if units.contains_key(name) {
-            return Err(RegistrationError::CompUnitAlreadyExists { name: name.to_owned() });
-        }
-        units.insert(
-            name.to_owned(),
-            UnitEntry { type_name: type_name.to_owned(), input_types, cu },
-        );
+        let mut catalog = self.inner.catalog.write();
+        catalog.add_unit(name, type_name, input_types, LOCAL_HOST)?;
+        self.inner.units.write().insert(name.to_owned(), cu);
         Ok(())
     }
 
     fn remove_comp_unit(&self, name: &str) -> Result<(), RegistrationError> {
-        let users = users_of(self, TrajectoryKind::Computed, name);
-        let mut units = self.inner.units.write();
-        if !units.contains_key(name) {
-            return Err(RegistrationError::NoSuchCompUnit {
-                name: name.to_owned(),
-                suggestion: closest_name(name, units.keys().map(String::as_str)),
-            });
-        }
-        if !users.is_empty() {
-            return Err(RegistrationError::InUse { name: name.to_owned(), users });
-        }
-        units.remove(name);
+        let mut catalog = self.inner.catalog.write();
+        catalog.remove_unit(name)?;
+        self.inner.units.write().remove(name);
         Ok(())
     }
 
     fn sensors(&self) -> Vec<(String, String)> {
-        self.inner.sensors.read().iter().map(|(n, e)| (n.clone(), e.type_name.clone())).collect()
+        self.inner.catalog.read().sensors().map(|s| (s.name.clone(), s.type_name.clone())).collect()
     }
 
     fn comp_units(&self) -> Vec<(String, String, Vec<InputType>)> {
         self.inner
-            .units
+            .catalog
             .read()
-            .iter()
-            .map(|(n, e)| (n.clone(), e.type_name.clone(), e.input_types.clone()))
+            .units()
+            .map(|u| (u.name.clone(), u.type_name.clone(), u.input_types.clone()))
             .collect()
     }
 
@@ -630,13 +457,4 @@ impl Esgm for InProcessEsgm {
     fn set_log_level(&self, level: LogLevel) {
         self.inner.log_level.store(level as u8, Ordering::Relaxed);
     }
-}
-
-fn users_of(esgm: &InProcessEsgm, kind: TrajectoryKind, source: &str) -> Vec<String> {
-    esgm.inner
-        .cells()
-        .iter()
-        .filter(|c| c.info.kind == kind && c.info.source.as_deref() == Some(source))
-        .map(|c| c.info.name.clone())
-        .collect()
 }

@@ -1,0 +1,436 @@
+//! The catalog: what an ESGM knows by name (types, sensors, units, trajectories) and
+//! the checks every runtime applies before creating a trajectory.
+//!
+//! Both runtimes use it: the in-process runtime next to its stores and workers, the
+//! shared-memory coordinator as its registry, where sensors and units live in other
+//! processes (their `host`). Keeping the rules here means a bad spec gets the same
+//! error, with the same "did you mean", whichever runtime the program runs on.
+
+use std::collections::BTreeMap;
+
+use crate::esgm::{
+    CreateError, InputType, LookupError, RegistrationError, TrajectoryInfo, TrajectorySource,
+    TrajectorySpec,
+};
+use crate::filter::Filter;
+use crate::policy::PolicyError;
+use crate::sample::Sample;
+use crate::type_check::TypeChecker;
+use crate::type_registry::{TypeRegistry, TypeRegistryError, closest_name};
+use crate::types::EntityStructureType;
+
+/// A registered pull sensor.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct SensorRecord {
+    /// The sensor's name.
+    pub name: String,
+    /// The registered type of the structures it produces.
+    pub type_name: String,
+    /// The process (location) that serves it; the in-process runtime uses its own name.
+    pub host: String,
+}
+
+/// A registered computational unit.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct UnitRecord {
+    /// The unit's name.
+    pub name: String,
+    /// The registered type of its output.
+    pub type_name: String,
+    /// What it declares about each input, in order.
+    pub input_types: Vec<InputType>,
+    /// The process (location) that runs it.
+    pub host: String,
+}
+
+/// A spec that passed every check: the new trajectory's type checker and listing.
+#[derive(Debug, Clone)]
+pub struct Resolved {
+    /// Checks the structures of the new trajectory.
+    pub checker: TypeChecker,
+    /// How the trajectory is listed (kind, type, source, inputs, policy).
+    pub info: TrajectoryInfo,
+}
+
+/// Types, sensors, units and trajectories, by name.
+#[derive(Debug, Clone, Default)]
+pub struct Catalog {
+    types: TypeRegistry,
+    sensors: BTreeMap<String, SensorRecord>,
+    units: BTreeMap<String, UnitRecord>,
+    trajectories: BTreeMap<String, TrajectoryInfo>,
+}
+
+fn no_such_type(e: TypeRegistryError) -> CreateError {
+    match e {
+        TypeRegistryError::NoSuchEntityStructureType { name, suggestion } => {
+            CreateError::NoSuchEntityStructureType { name, suggestion }
+        }
+        // Only lookups reach here; a definition error means a synthesized state type
+        // broke a rule, reported as the type that could not be made.
+        other => {
+            CreateError::NoSuchEntityStructureType { name: other.to_string(), suggestion: None }
+        }
+    }
+}
+
+impl Catalog {
+    /// A catalog holding `types` and nothing else.
+    pub fn new(types: TypeRegistry) -> Self {
+        Self { types, ..Self::default() }
+    }
+
+    /// The registered types.
+    pub fn types(&self) -> &TypeRegistry {
+        &self.types
+    }
+
+    /// The registered types, to create or destroy one.
+    pub fn types_mut(&mut self) -> &mut TypeRegistry {
+        &mut self.types
+    }
+
+    fn require_type(&self, type_name: &str) -> Result<(), RegistrationError> {
+        match self.types.get_entity_structure_type(type_name) {
+            Ok(_) => Ok(()),
+            Err(TypeRegistryError::NoSuchEntityStructureType { name, suggestion }) => {
+                Err(RegistrationError::NoSuchEntityStructureType { name, suggestion })
+            }
+            Err(other) => Err(RegistrationError::NoSuchEntityStructureType {
+                name: other.to_string(),
+                suggestion: None,
+            }),
+        }
+    }
+
+    /// Registers a sensor producing `type_name`, served by `host`.
+    pub fn add_sensor(
+        &mut self,
+        name: &str,
+        type_name: &str,
+        host: &str,
+    ) -> Result<(), RegistrationError> {
+        self.require_type(type_name)?;
+        if self.sensors.contains_key(name) {
+            return Err(RegistrationError::SensorAlreadyExists { name: name.to_owned() });
+        }
+        let record = SensorRecord {
+            name: name.to_owned(),
+            type_name: type_name.to_owned(),
+            host: host.to_owned(),
+        };
+        self.sensors.insert(name.to_owned(), record);
+        Ok(())
+    }
+
+    /// Removes a sensor that no trajectory samples.
+    pub fn remove_sensor(&mut self, name: &str) -> Result<SensorRecord, RegistrationError> {
+        if !self.sensors.contains_key(name) {
+            return Err(RegistrationError::NoSuchSensor {
+                name: name.to_owned(),
+                suggestion: closest_name(name, self.sensors.keys().map(String::as_str)),
+            });
+        }
+        let users = self.users_of(crate::esgm::TrajectoryKind::Sampled, name);
+        if !users.is_empty() {
+            return Err(RegistrationError::InUse { name: name.to_owned(), users });
+        }
+        self.sensors.remove(name).ok_or_else(|| RegistrationError::NoSuchSensor {
+            name: name.to_owned(),
+            suggestion: None,
+        })
+    }
+
+    /// A registered sensor.
+    pub fn sensor(&self, name: &str) -> Option<&SensorRecord> {
+        self.sensors.get(name)
+    }
+
+    /// Every registered sensor, by name.
+    pub fn sensors(&self) -> impl Iterator<Item = &SensorRecord> {
+        self.sensors.values()
+    }
+
+    /// Registers a unit producing `type_name` from inputs of `input_types`, run by `host`.
+    pub fn add_unit(
+        &mut self,
+        name: &str,
+        type_name: &str,
+        input_types: Vec<InputType>,
+        host: &str,
+    ) -> Result<(), RegistrationError> {
+        self.require_type(type_name)?;
+        for t in &input_types {
+            if let InputType::Type(t) = t {
+                self.require_type(t)?;
+            }
+        }
+        if self.units.contains_key(name) {
+            return Err(RegistrationError::CompUnitAlreadyExists { name: name.to_owned() });
+        }
+        let record = UnitRecord {
+            name: name.to_owned(),
+            type_name: type_name.to_owned(),
+            input_types,
+            host: host.to_owned(),
+        };
+        self.units.insert(name.to_owned(), record);
+        Ok(())
+    }
+
+    /// Removes a unit that no trajectory uses.
+    pub fn remove_unit(&mut self, name: &str) -> Result<UnitRecord, RegistrationError> {
+        if !self.units.contains_key(name) {
+            return Err(RegistrationError::NoSuchCompUnit {
+                name: name.to_owned(),
+                suggestion: closest_name(name, self.units.keys().map(String::as_str)),
+            });
+        }
+        let users = self.users_of(crate::esgm::TrajectoryKind::Computed, name);
+        if !users.is_empty() {
+            return Err(RegistrationError::InUse { name: name.to_owned(), users });
+        }
+        self.units.remove(name).ok_or_else(|| RegistrationError::NoSuchCompUnit {
+            name: name.to_owned(),
+            suggestion: None,
+        })
+    }
+
+    /// A registered unit.
+    pub fn unit(&self, name: &str) -> Option<&UnitRecord> {
+        self.units.get(name)
+    }
+
+    /// Every registered unit, by name.
+    pub fn units(&self) -> impl Iterator<Item = &UnitRecord> {
+        self.units.values()
+    }
+
+    fn users_of(&self, kind: crate::esgm::TrajectoryKind, source: &str) -> Vec<String> {
+        self.trajectories
+            .values()
+            .filter(|t| t.kind == kind && t.source.as_deref() == Some(source))
+            .map(|t| t.name.clone())
+            .collect()
+    }
+
+    /// The error for an unknown trajectory name, with the closest existing name.
+    pub fn no_such_trajectory(&self, name: &str) -> LookupError {
+        LookupError::NoSuchEntityStructure {
+            name: name.to_owned(),
+            suggestion: closest_name(name, self.trajectories.keys().map(String::as_str)),
+        }
+    }
+
+    /// The listing of the trajectory called `name`.
+    pub fn trajectory(&self, name: &str) -> Result<&TrajectoryInfo, LookupError> {
+        self.trajectories.get(name).ok_or_else(|| self.no_such_trajectory(name))
+    }
+
+    /// Every trajectory, by name.
+    pub fn trajectories(&self) -> impl Iterator<Item = &TrajectoryInfo> {
+        self.trajectories.values()
+    }
+
+    /// Records a created trajectory (replacing a re-pointed one).
+    pub fn insert_trajectory(&mut self, info: TrajectoryInfo) {
+        self.trajectories.insert(info.name.clone(), info);
+    }
+
+    /// Forgets a trajectory; its name can be reused.
+    pub fn remove_trajectory(&mut self, name: &str) -> Result<TrajectoryInfo, LookupError> {
+        match self.trajectories.remove(name) {
+            Some(info) => Ok(info),
+            None => Err(self.no_such_trajectory(name)),
+        }
+    }
+
+    fn input_type(&self, name: &str) -> Result<&str, CreateError> {
+        match self.trajectories.get(name) {
+            Some(t) => Ok(&t.type_name),
+            None => Err(CreateError::NoSuchEntityStructure {
+                name: name.to_owned(),
+                suggestion: closest_name(name, self.trajectories.keys().map(String::as_str)),
+            }),
+        }
+    }
+
+    fn checker(&self, type_name: &str) -> Result<TypeChecker, CreateError> {
+        TypeChecker::new(&self.types, type_name).map_err(no_such_type)
+    }
+
+    /// A checker for an operator's state type (one frame per input, named after the
+    /// input), built on a copy of the registry so the synthesized type is not listed.
+    fn state_checker(
+        &self,
+        name: &str,
+        inputs: &[(String, String)],
+    ) -> Result<TypeChecker, CreateError> {
+        let mut ty = EntityStructureType::new(format!("{name}:state"));
+        for (input, type_name) in inputs {
+            ty = ty.frame(input.clone(), type_name.clone());
+        }
+        let mut registry = self.types.clone();
+        let key = ty.name.clone();
+        let _ = registry.destroy_entity_structure_type(&key);
+        registry.create_entity_structure_type(key.clone(), ty).map_err(no_such_type)?;
+        TypeChecker::new(&registry, &key).map_err(no_such_type)
+    }
+
+    /// Applies every check a trajectory must pass before it exists: the name is free
+    /// (or `replace` is set), everything it names exists, inputs fit the unit or
+    /// operator, the policy is legal and its filter type-checks.
+    pub fn resolve(&self, spec: &TrajectorySpec) -> Result<Resolved, CreateError> {
+        let name = spec.name.clone();
+        if self.trajectories.contains_key(&name) && !spec.replace {
+            return Err(CreateError::EntityStructureAlreadyExists { name });
+        }
+        let input_names = spec.inputs();
+        let inputs: Vec<(String, String)> = input_names
+            .iter()
+            .map(|n| self.input_type(n).map(|t| (n.clone(), t.to_owned())))
+            .collect::<Result<_, _>>()?;
+        let operator = matches!(
+            spec.source,
+            TrajectorySource::Sync { .. }
+                | TrajectorySource::Merge { .. }
+                | TrajectorySource::SampledGenerators { .. }
+        );
+        if operator && inputs.is_empty() {
+            return Err(CreateError::NoInputs { name });
+        }
+        let (checker, source) = match &spec.source {
+            TrajectorySource::Primitive { type_name } => (self.checker(type_name)?, None),
+            TrajectorySource::Sampled { sensor, sample_period, .. } => {
+                let record = self.sensors.get(sensor).ok_or_else(|| CreateError::NoSuchSensor {
+                    name: sensor.clone(),
+                    suggestion: closest_name(sensor, self.sensors.keys().map(String::as_str)),
+                })?;
+                if *sample_period <= 0 {
+                    return Err(PolicyError::illegal(
+                        "sample_period",
+                        sample_period,
+                        "must be positive",
+                    )
+                    .into());
+                }
+                (self.checker(&record.type_name)?, Some(sensor.clone()))
+            }
+            TrajectorySource::Computed { unit, .. } => {
+                let record = self.units.get(unit).ok_or_else(|| CreateError::NoSuchCompUnit {
+                    name: unit.clone(),
+                    suggestion: closest_name(unit, self.units.keys().map(String::as_str)),
+                })?;
+                if record.input_types.len() != inputs.len() {
+                    return Err(CreateError::WrongInputCount {
+                        unit: unit.clone(),
+                        expected: record.input_types.len(),
+                        found: inputs.len(),
+                    });
+                }
+                for (position, (declared, (input, actual))) in
+                    record.input_types.iter().zip(&inputs).enumerate()
+                {
+                    if !declared.accepts(actual) {
+                        return Err(CreateError::InvalidInput {
+                            unit: unit.clone(),
+                            input: input.clone(),
+                            position,
+                            expected: declared.to_string(),
+                            actual: actual.clone(),
+                        });
+                    }
+                }
+                (self.checker(&record.type_name)?, Some(unit.clone()))
+            }
+            TrajectorySource::Merge { .. } => {
+                let first = inputs[0].1.clone();
+                for (position, (input, actual)) in inputs.iter().enumerate() {
+                    if *actual != first {
+                        return Err(CreateError::InvalidInput {
+                            unit: "merge".into(),
+                            input: input.clone(),
+                            position,
+                            expected: format!(
+                                "type `{first}` (all inputs of a merge share one type)"
+                            ),
+                            actual: actual.clone(),
+                        });
+                    }
+                }
+                (self.checker(&first)?, Some("merge".into()))
+            }
+            TrajectorySource::Sync { policy, .. } => {
+                // Validate the operator's settings now, not when the worker starts.
+                policy.create::<Sample>(inputs.len())?;
+                (self.state_checker(&name, &inputs)?, Some("sync".into()))
+            }
+            TrajectorySource::SampledGenerators { sample_period, .. } => {
+                if *sample_period <= 0 {
+                    return Err(PolicyError::illegal(
+                        "sample_period",
+                        sample_period,
+                        "must be positive",
+                    )
+                    .into());
+                }
+                if inputs.len() == 1 {
+                    (self.checker(&inputs[0].1)?, Some("generator".into()))
+                } else {
+                    (self.state_checker(&name, &inputs)?, Some("state".into()))
+                }
+            }
+        };
+        spec.policy.validate()?;
+        if let Some(src) = &spec.policy.filter {
+            Filter::compile(src, &checker).map_err(PolicyError::from)?;
+        }
+        let info = TrajectoryInfo {
+            name,
+            kind: spec.kind(),
+            type_name: checker.type_name().to_owned(),
+            source,
+            inputs: input_names,
+            policy: spec.policy.clone(),
+        };
+        Ok(Resolved { checker, info })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::policy::FluentStreamPolicy;
+
+    #[test]
+    fn hosts_are_recorded_and_specs_resolved_without_a_runtime() {
+        let mut c = Catalog::new(TypeRegistry::with_library());
+        c.add_sensor("camera", "Image", "camera-process").unwrap();
+        assert_eq!(c.sensor("camera").map(|s| s.host.as_str()), Some("camera-process"));
+        c.add_unit("BlobDetection", "BlobSeq", vec!["Image".into()], "cu-worker-1").unwrap();
+        let images =
+            c.resolve(&TrajectorySpec::sampled("images", "camera", 1_000).unwrap()).unwrap();
+        assert_eq!(images.info.type_name, "Image");
+        c.insert_trajectory(images.info);
+        let blobs =
+            c.resolve(&TrajectorySpec::computed("blobs", "BlobDetection", ["images"])).unwrap();
+        assert_eq!(
+            (blobs.info.type_name.as_str(), blobs.info.inputs.clone()),
+            ("BlobSeq", vec!["images".to_owned()])
+        );
+        // The same rules as the in-process runtime: in use, unknown, illegal filter.
+        assert!(matches!(c.remove_sensor("camera"), Err(RegistrationError::InUse { .. })));
+        assert!(matches!(
+            c.resolve(&TrajectorySpec::computed("x", "BlobDetection", ["imagez"])),
+            Err(CreateError::NoSuchEntityStructure { suggestion: Some(_), .. })
+        ));
+        let bad_filter = TrajectorySpec::primitive("b", "Blob")
+            .policy(FluentStreamPolicy::default().filter("szie > 3"));
+        assert!(matches!(
+            c.resolve(&bad_filter),
+            Err(CreateError::IllegalPolicy(PolicyError::IllegalFilter(_)))
+        ));
+        assert!(c.resolve(&TrajectorySpec::primitive("images", "Image")).is_err(), "name taken");
+        assert!(c.resolve(&TrajectorySpec::primitive("images", "Image").replace()).is_ok());
+    }
+}
