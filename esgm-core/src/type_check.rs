@@ -83,6 +83,28 @@ impl TypeChecker {
         Ok(Self { root: type_name.to_owned(), types: Arc::new(types) })
     }
 
+    /// The checked type and every type reachable from it, by registered name: what
+    /// another process needs to check the same structures
+    /// ([`TypeChecker::from_definitions`]).
+    pub fn definitions(&self) -> Vec<(String, EntityStructureType)> {
+        let mut v: Vec<_> =
+            self.types.iter().map(|(n, t)| (n.clone(), t.as_ref().clone())).collect();
+        v.sort_by(|a, b| a.0.cmp(&b.0));
+        v
+    }
+
+    /// A checker for `root` from definitions received from another process.
+    pub fn from_definitions(
+        root: &str,
+        definitions: impl IntoIterator<Item = (String, EntityStructureType)>,
+    ) -> Result<Self, TypeRegistryError> {
+        let mut registry = TypeRegistry::new();
+        for (name, ty) in definitions {
+            registry.create_entity_structure_type(name, ty)?;
+        }
+        Self::new(&registry, root)
+    }
+
     /// The registered name of the checked type.
     pub fn type_name(&self) -> &str {
         &self.root

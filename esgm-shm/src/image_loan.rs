@@ -2,18 +2,24 @@
 //!
 //! A camera asks its publisher for an [`ImageLoan`], fills [`ImageLoan::pixels_mut`]
 //! (or the uninitialised view, see below) with the frame, and calls
-//! [`ImageLoan::send`]. The loan already holds a complete `Image` entity structure
-//! around the pixel range ([`crate::image_layout`]); sending only writes the two times
-//! and the header. The pixels are written once, by the camera, where every reader —
-//! subscribers, workers, a cache — reads them.
+//! [`ImageLoan::send`] with the entity's name and times. The pixels sit at a fixed
+//! offset of the loan ([`crate::image_layout`]); sending has the codec complete an
+//! ordinary `Image` entity structure around them
+//! ([`esgm_core::codec::encode_image_into`]: a few hundred bytes of envelope, names,
+//! attributes and root) and sends. The pixels are written once, by the camera, where
+//! every reader — subscribers, workers, a cache — reads them, whatever name each frame
+//! is sent under.
 //!
 //! # Initialisation
 //! Rust may only hand out `&mut [u8]` over initialised memory, and a loan is not.
 //! [`ImageLoan::pixels_mut`] therefore zeroes the pixel range on first use (one memset
-//! of the frame). A camera that writes every pixel anyway can skip it: write through
-//! [`ImageLoan::pixels_uninit_mut`], then promise with the unsafe
+//! of the frame). A camera that writes every pixel anyway can skip it: copy a finished
+//! frame in with [`ImageLoan::write_pixels`], or write through
+//! [`ImageLoan::pixels_uninit_mut`] and then promise with the unsafe
 //! [`ImageLoan::assume_pixels_init`]. If neither happened, [`ImageLoan::send`] zeroes
-//! the pixels, so a loan can never publish uninitialised memory.
+//! the pixels, so a loan can never publish uninitialised memory. The bytes around the
+//! pixels are zeroed at send, before the codec writes the archive over them, so the
+//! slack after the archive never carries an earlier sample's bytes.
 //!
 //! Dropping a loan without sending returns the memory to the publisher.
 //!
@@ -23,17 +29,19 @@
 //! small reply / 2) against 2.5 µs for a small structure in the same run: the hop does
 //! not depend on the image size. The producer's own loan + zeroing + writing of the
 //! frame took 48 µs p50 — two passes over 921,600 bytes, one of which
-//! `pixels_uninit_mut` avoids.
+//! `pixels_uninit_mut` avoids. (Measured with the earlier template layout; sending
+//! now encodes the few hundred bytes around the pixels instead of copying a template.)
 
 use std::mem::MaybeUninit;
-use std::sync::Arc;
+use std::ops::Range;
 
+use esgm_core::codec;
 use esgm_core::library::Image;
 use esgm_core::{Entity, Octets, Time};
 use iceoryx2::prelude::ipc;
 use iceoryx2::sample_mut_uninit::SampleMutUninit;
 
-use crate::image_layout::{ImageError, ImageTemplate};
+use crate::image_layout::{IMAGE_NAME_MAX, IMAGE_PIXELS_OFFSET, ImageError};
 use crate::payload::{Block16, SampleHeader, as_uninit_bytes, copy_into, zero_fill};
 use crate::publisher::{PublishError, Published, TrajectoryPublisher};
 
@@ -43,7 +51,10 @@ type UninitSample = SampleMutUninit<ipc::Service, [MaybeUninit<Block16>], Sample
 pub struct ImageLoan<'p> {
     publisher: &'p TrajectoryPublisher,
     sample: UninitSample,
-    template: Arc<ImageTemplate>,
+    width: i64,
+    height: i64,
+    format: i64,
+    pixel_len: usize,
     pixels_init: bool,
 }
 
@@ -52,57 +63,53 @@ impl std::fmt::Debug for ImageLoan<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("ImageLoan")
             .field("trajectory", &self.publisher.trajectory())
-            .field("image", &self.template)
+            .field("size", &(self.width, self.height, self.format))
+            .field("pixel_len", &self.pixel_len)
             .field("pixels_init", &self.pixels_init)
             .finish_non_exhaustive()
     }
 }
 
 impl<'p> ImageLoan<'p> {
-    /// Writes everything but the pixels (and times) into a fresh loan.
+    /// A loan of at least `image_layout::image_loan_len(pixel_len)` bytes for an image
+    /// of these sizes (already checked by the publisher).
     pub(crate) fn new(
         publisher: &'p TrajectoryPublisher,
-        mut sample: UninitSample,
-        template: Arc<ImageTemplate>,
-    ) -> Result<Self, ImageError> {
-        let bytes = as_uninit_bytes(sample.payload_mut());
-        let pixels = template.pixel_range();
-        let end = template.archive_len();
-        let fits = bytes.len() >= end
-            && copy_into(&mut bytes[..pixels.start], template.prefix())
-            && copy_into(&mut bytes[pixels.end..end], template.suffix());
-        if !fits {
-            return Err(ImageError::LayoutUnsupported { reason: "loan smaller than template" });
-        }
-        // The block rounding after the archive: never leak an old sample's bytes.
-        zero_fill(&mut bytes[end..]);
-        Ok(Self { publisher, sample, template, pixels_init: false })
+        sample: UninitSample,
+        (width, height, format): (i64, i64, i64),
+        pixel_len: usize,
+    ) -> Self {
+        Self { publisher, sample, width, height, format, pixel_len, pixels_init: false }
     }
 
     /// Width in pixels.
     pub fn width(&self) -> i64 {
-        self.template.size().0
+        self.width
     }
 
     /// Height in pixels.
     pub fn height(&self) -> i64 {
-        self.template.size().1
+        self.height
     }
 
     /// Pixel format (`Image::FORMAT_*`).
     pub fn format(&self) -> i64 {
-        self.template.size().2
+        self.format
     }
 
     /// Bytes of pixels (width × height × bytes per pixel).
     pub fn pixel_len(&self) -> usize {
-        self.template.pixel_range().len()
+        self.pixel_len
+    }
+
+    fn pixel_range(&self) -> Range<usize> {
+        IMAGE_PIXELS_OFFSET..IMAGE_PIXELS_OFFSET + self.pixel_len
     }
 
     fn pixels_uninit(&mut self) -> &mut [MaybeUninit<u8>] {
-        let range = self.template.pixel_range();
+        let range = self.pixel_range();
         let bytes = as_uninit_bytes(self.sample.payload_mut());
-        // `new` checked that the loan covers the whole template.
+        // The publisher loaned room for the whole image; clamp rather than panic anyway.
         let len = bytes.len();
         &mut bytes[range.start.min(len)..range.end.min(len)]
     }
@@ -129,6 +136,17 @@ impl<'p> ImageLoan<'p> {
         self.pixels_uninit()
     }
 
+    /// Copies a whole frame (exactly [`Self::pixel_len`] bytes, e.g. a driver's or a
+    /// decoder's buffer) into the pixels, without zeroing them first.
+    pub fn write_pixels(&mut self, frame: &[u8]) -> Result<(), ImageError> {
+        let expected = self.pixel_len;
+        if frame.len() != expected || !copy_into(self.pixels_uninit(), frame) {
+            return Err(ImageError::FrameLength { expected, found: frame.len() });
+        }
+        self.pixels_init = true;
+        Ok(())
+    }
+
     /// Declares the pixels initialised.
     ///
     /// # Safety
@@ -138,12 +156,12 @@ impl<'p> ImageLoan<'p> {
         self.pixels_init = true;
     }
 
-    /// Completes the image as entity `name` with the given times and sends it.
+    /// Completes the image as entity `name` with the given times and sends it, the
+    /// pixels staying where they were written.
     ///
-    /// If `name` is not the one the loan was laid out for (the last name this
-    /// publisher sent, initially its image name), the pixels cannot stay where they
-    /// are: this frame is copied once into a fresh sample, and later loans are laid
-    /// out for `name`.
+    /// Any name of up to [`IMAGE_NAME_MAX`] bytes is sent in place, a different one
+    /// every frame if need be. A longer name does not fit the layout: that frame is
+    /// copied once into an ordinary structure instead (correct, but not zero-copy).
     pub fn send(
         mut self,
         name: &str,
@@ -153,15 +171,32 @@ impl<'p> ImageLoan<'p> {
         if !self.pixels_init {
             self.pixels_mut();
         }
-        if name != self.template.name() {
-            return self.send_renamed(name, valid_time, create_time);
+        if name.len() > IMAGE_NAME_MAX {
+            return self.send_copied(name, valid_time, create_time);
         }
-        let archive_len = self.template.archive_len();
-        // SAFETY: `new` wrote the bytes before and after the pixels and zeroed the tail;
-        // the pixels were initialised above (zeroed, written, or promised).
+        let pixels = self.pixel_range();
+        let bytes = as_uninit_bytes(self.sample.payload_mut());
+        let len = bytes.len();
+        // Everything but the pixels is still uninitialised: zero it, so the whole loan
+        // is bytes. The codec then writes the archive around the pixels, and what it
+        // does not use (the loan's slack) stays zero.
+        zero_fill(&mut bytes[..pixels.start.min(len)]);
+        zero_fill(&mut bytes[pixels.end.min(len)..]);
+        // SAFETY: the pixels were initialised above (zeroed, written, or promised) and
+        // every other byte of the payload was just zeroed.
         let mut sample = unsafe { self.sample.assume_init() };
         let bytes: &mut [u8] = bytemuck::cast_slice_mut(sample.payload_mut());
-        self.template.stamp(bytes, valid_time, create_time);
+        let archive_len = codec::encode_image_into(
+            name,
+            valid_time,
+            create_time,
+            self.width,
+            self.height,
+            self.format,
+            self.pixel_len,
+            bytes,
+        )
+        .map_err(PublishError::Encode)?;
         self.publisher.send(
             sample,
             archive_len,
@@ -171,21 +206,24 @@ impl<'p> ImageLoan<'p> {
         )
     }
 
-    fn send_renamed(
+    fn send_copied(
         mut self,
         name: &str,
         valid_time: Time,
         create_time: Time,
     ) -> Result<Published, PublishError> {
-        tracing::debug!(trajectory = %self.publisher.trajectory(), from = %self.template.name(),
-            to = %name, "image name changed: copying this frame, re-laying out later ones");
+        tracing::debug!(trajectory = %self.publisher.trajectory(), name_len = name.len(),
+            max = IMAGE_NAME_MAX, "image name too long to send in place: copying this frame");
         let pixels = Octets::from(&*self.pixels_mut());
-        let (width, height, format) = self.template.size();
+        let image = Image {
+            width: self.width,
+            height: self.height,
+            format: self.format,
+            image_data: pixels,
+        };
         let publisher = self.publisher;
         // Return the loan before loaning again for the copy.
         drop(self);
-        publisher.set_image_name(name);
-        let image = Image { width, height, format, image_data: pixels };
         publisher.publish(&image.to_structure(name, valid_time, create_time))
     }
 }

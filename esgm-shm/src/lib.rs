@@ -6,8 +6,9 @@
 //!
 //! This is the data plane: [`TrajectoryPublisher`], [`TrajectorySubscriber`], the
 //! sample layout ([`payload`]), service naming ([`service_name`]), waiting
-//! ([`wait`]) and in-place images ([`image_loan`]). The control plane (coordinator,
-//! registry, `connect`) builds on it.
+//! ([`wait`]) and in-place images ([`image_loan`]); and on top of it trajectories with
+//! policy and history: [`ShmTrajectoryWriter`], [`ShmTrajectoryReader`],
+//! [`violations`]. The control plane (coordinator, registry, `connect`) builds on it.
 //!
 //! ```no_run
 //! use std::time::Duration;
@@ -54,29 +55,83 @@
 //!   every wait has a deadline because a dead publisher is not signalled. See [`wait`].
 //! - **One namespace per system, and per test.** Service names carry a domain
 //!   ([`service_name`]), so parallel tests and independent systems never meet.
+//!
+//! ## One writer per trajectory, and it gates
+//! Exactly one process writes a trajectory: its [`ShmTrajectoryWriter`]. The writer runs
+//! the trajectory's policy — type check, duration, delay, filter, order, change, and the
+//! hold-and-reorder of late samples — *before* publishing, with esgm-core's own
+//! [`esgm_core::TrajectoryStore`] as the gate, so every reader receives exactly the
+//! stream, already checked, with the gate's add time in the header, and the add forms
+//! return the in-process outcomes and errors. Dropped structures are published on the
+//! trajectory's violations service ([`violations`]) for any process to watch (C7). A
+//! second writer would gate a second, different stream, so the writer refuses to start
+//! on a trajectory that already has a publisher.
+//!
+//! ## Where the history lives
+//! **In each reader.** A [`ShmTrajectoryReader`] keeps the iceoryx2 samples it received
+//! — the structures stay in shared memory, where the writer encoded them — up to the
+//! cache bound, evicts them as the policy's cache constraint says, and answers the
+//! queries (T1, T2) itself, looking samples up by the times in their headers. The
+//! publisher's iceoryx2 history is sized to the same bound, so a reader that connects
+//! late receives the last N samples and starts with the writer's view. Why there:
+//! - **Zero copy end to end.** A cached image is the writer's shared-memory chunk; a
+//!   query answers with it in place. A cache in the producer or a coordinator would
+//!   answer across a process boundary, i.e. copy the answer into a response.
+//! - **No process holds every image.** The writer keeps only what its gate needs; no
+//!   coordinator accumulates every trajectory's history.
+//! - **Queries without a round trip.** `get_latest` in a control loop is a lookup in
+//!   the reader's own memory (≈ nanoseconds), not a request to another process
+//!   (≥ 10 µs, and a failure mode when that process is slow or gone).
+//! - **Consistent because the writer gates.** Every reader receives the same, already
+//!   constrained stream, so their histories agree with each other and with what an
+//!   in-process store of the same policy would hold.
+//!
+//! The costs: each reader holds its own view (one that started late or fell behind —
+//! counted as lost — may hold less); shared memory is sized for the cache in every
+//! reader at once — each reader may borrow `bound + 1` chunks and the writer keeps
+//! `bound` for late joiners, so a segment has about
+//! `max_subscribers × (queue + bound) + bound` chunks of the largest sample (tmpfs
+//! commits only the chunks in use); and an
+//! `All` or `Duration` cache, which iceoryx2 needs as a number, holds at most a
+//! configured maximum ([`DEFAULT_MAX_HISTORY`], 1024) — see [`history`]. Readers are
+//! single-threaded like the ports they hold; [`HostedTrajectoryReader`] puts one on a
+//! thread of its own for queries from anywhere (answers then are owned copies).
 #![deny(missing_docs)]
 
+pub mod history;
+pub mod hosted_reader;
 pub mod image_layout;
 pub mod image_loan;
 pub mod payload;
 pub mod publisher;
 pub mod qos;
+pub mod reader;
 pub mod received;
 pub mod service;
 pub mod service_name;
 pub mod size_hint;
 pub mod subscriber;
 pub mod type_id;
+pub mod violations;
 pub mod wait;
+pub mod writer;
 
+pub use history::{DEFAULT_MAX_HISTORY, history_bound, history_qos};
+pub use hosted_reader::{HostError, HostedTrajectoryReader};
 pub use image_layout::ImageError;
 pub use image_loan::ImageLoan;
 pub use payload::{Block16, SampleHeader};
 pub use publisher::{PublishError, Published, SampleSizing, TrajectoryPublisher};
 pub use qos::{Delivery, TrajectoryQos};
+pub use reader::{
+    Approximated, CachedSample, HistoryError, ReaderCreateError, ReaderStats, ShmTrajectoryReader,
+};
 pub use received::ReceivedSample;
 pub use service::{OpenError, ShmNode};
 pub use service_name::{NameError, TrajectoryServiceNames, unique_domain};
 pub use subscriber::{ReceiveError, SubscriberStats, TrajectorySubscriber, Validation};
 pub use type_id::type_id;
+pub use violations::{ViolationPublisher, ViolationRecord, ViolationSubscriber};
 pub use wait::WaitStrategy;
+pub use writer::{ShmTrajectoryWriter, WriteError, WriterCreateError, WriterStats};
+pub mod control;

@@ -3,13 +3,21 @@
 //!
 //! # One write, no heap buffer
 //! [`TrajectoryPublisher::publish`] loans a slice sized by
-//! [`crate::size_hint::archived_size_hint`] (a walk over the structure, no encode), zeroes it,
-//! and has the codec encode into it directly; the header carries the archive length,
-//! times and type id. Zeroing first serves two ends: a loaned slice must be fully
-//! initialised before iceoryx2 may treat it as bytes, and the bytes after the archive
-//! (the hint's slack, the block rounding) must not leak a previous sample's contents to
-//! other processes. If the hint is ever short the codec names the size it needs and
-//! the publisher loans again once.
+//! [`crate::size_hint::archived_size_hint`] (a walk over the structure, no encode) and
+//! has the codec encode straight into the uninitialised loan
+//! ([`codec::encode_into_uninit`]); the header carries the archive length, times and
+//! type id. The codec initialises exactly the bytes it reports (rkyv writes padding
+//! as zeros, see the codec's docs), and the publisher zeroes the rest — the hint's
+//! slack and the block rounding — because a loaned slice must be fully initialised
+//! before iceoryx2 treats it as bytes, and those bytes must not leak a previous
+//! sample's contents to other processes. If the hint is ever short the codec names the
+//! size it needs and the publisher loans again once.
+//!
+//! A hint that would exceed the configured maximum sample size
+//! ([`TrajectoryPublisherBuilder::max_len`]) is replaced by the exact length
+//! ([`codec::encoded_len`], a counting pass that allocates nothing): an over-estimate
+//! must not grow the segment, or fail a [`SampleSizing::Fixed`] loan, for a structure
+//! that actually fits.
 //!
 //! Images written by a camera go through [`TrajectoryPublisher::loan_image`] instead,
 //! which lets the camera fill the pixels in place (see [`crate::image_loan`]).
@@ -20,8 +28,7 @@
 //! when [`TrajectoryPublisher::update_connections`] is called. A producer that publishes
 //! rarely should call it periodically so that new subscribers get the history at once.
 
-use std::cell::{Cell, RefCell};
-use std::sync::Arc;
+use std::cell::Cell;
 use std::time::Duration;
 
 use esgm_core::codec::{self, CodecError};
@@ -34,9 +41,9 @@ use iceoryx2::prelude::{AllocationStrategy, BackpressureStrategy, ipc};
 use iceoryx2::sample_mut::SampleMut;
 use iceoryx2::service::port_factory::PortFactory;
 
-use crate::image_layout::{ImageError, ImageTemplate};
+use crate::image_layout::{ImageError, image_loan_len, pixel_len};
 use crate::image_loan::ImageLoan;
-use crate::payload::{Block16, SampleHeader, as_uninit_bytes, blocks_for, zero_fill};
+use crate::payload::{BLOCK_LEN, Block16, SampleHeader, as_uninit_bytes, blocks_for, zero_fill};
 use crate::qos::{Delivery, TrajectoryQos};
 use crate::service::{DataService, OpenError, ShmNode, open_data_service, open_wake_service};
 use crate::service_name::{DEFAULT_DOMAIN, TrajectoryServiceNames};
@@ -112,7 +119,6 @@ pub struct TrajectoryPublisherBuilder {
     sizing: SampleSizing,
     lossless_timeout: Duration,
     clock: Option<SharedClock>,
-    image_name: Option<String>,
 }
 
 impl TrajectoryPublisherBuilder {
@@ -174,10 +180,10 @@ impl TrajectoryPublisherBuilder {
         self
     }
 
-    /// The entity name image loans are laid out for before the first image is sent;
-    /// default the trajectory's name. Afterwards the last name sent is used.
-    pub fn image_name(mut self, name: impl Into<String>) -> Self {
-        self.image_name = Some(name.into());
+    /// Has no effect: image loans no longer depend on the entity name (any name of up
+    /// to [`crate::image_layout::IMAGE_NAME_MAX`] bytes is sent in place, see
+    /// [`crate::image_layout`]). Kept so that existing callers compile.
+    pub fn image_name(self, _name: impl Into<String>) -> Self {
         self
     }
 
@@ -189,9 +195,10 @@ impl TrajectoryPublisherBuilder {
             SampleSizing::Grow => AllocationStrategy::PowerOfTwo,
             SampleSizing::Fixed => AllocationStrategy::Static,
         };
+        let max_blocks = blocks_for(self.initial_max_len).max(1);
         let mut port = service
             .publisher_builder()
-            .initial_max_slice_len(blocks_for(self.initial_max_len).max(1))
+            .initial_max_slice_len(max_blocks)
             .allocation_strategy(allocation);
         if self.qos.delivery == Delivery::Lossless {
             let timeout = self.lossless_timeout;
@@ -213,7 +220,6 @@ impl TrajectoryPublisherBuilder {
         let notifier = wake.notifier_builder().create().map_err(OpenError::Notifier)?;
         Ok(TrajectoryPublisher {
             type_id: type_id(&self.type_name),
-            image_name: RefCell::new(self.image_name.unwrap_or_else(|| self.trajectory.clone())),
             trajectory: self.trajectory,
             type_name: self.type_name,
             service,
@@ -222,7 +228,7 @@ impl TrajectoryPublisherBuilder {
             clock: self.clock.unwrap_or_else(SystemClock::shared),
             lossless_timeout: self.lossless_timeout,
             sequence: Cell::new(0),
-            image_template: RefCell::new(None),
+            max_len: max_blocks * BLOCK_LEN,
             notify_failures: Cell::new(0),
         })
     }
@@ -240,8 +246,8 @@ pub struct TrajectoryPublisher {
     clock: SharedClock,
     lossless_timeout: Duration,
     sequence: Cell<u64>,
-    image_name: RefCell<String>,
-    image_template: RefCell<Option<Arc<ImageTemplate>>>,
+    /// The configured maximum sample size in bytes (see the module docs).
+    max_len: usize,
     notify_failures: Cell<u64>,
 }
 
@@ -264,7 +270,6 @@ impl TrajectoryPublisher {
             sizing: SampleSizing::default(),
             lossless_timeout: DEFAULT_LOSSLESS_TIMEOUT,
             clock: None,
-            image_name: None,
         }
     }
 
@@ -300,15 +305,19 @@ impl TrajectoryPublisher {
     /// against the trajectory's type before publishing.
     pub fn publish(&self, es: &EntityStructure) -> Result<Published, PublishError> {
         let mut want = archived_size_hint(es);
+        if want > self.max_len {
+            want = codec::encoded_len(es).map_err(PublishError::Encode)?;
+        }
         let mut retried = false;
         loop {
             let mut sample =
                 self.port.loan_slice_uninit(blocks_for(want)).map_err(PublishError::Loan)?;
-            let bytes = zero_fill(as_uninit_bytes(sample.payload_mut()));
-            match codec::encode_into(es, bytes) {
+            let bytes = as_uninit_bytes(sample.payload_mut());
+            match codec::encode_into_uninit(es, bytes) {
                 Ok(len) => {
-                    // SAFETY: `zero_fill` initialised every byte of the payload; the
-                    // encoder then overwrote some of them.
+                    zero_fill(&mut bytes[len..]);
+                    // SAFETY: the encoder initialised `..len` (it promises every byte it
+                    // reports) and `zero_fill` the rest of the payload.
                     let sample = unsafe { sample.assume_init() };
                     return self.send(sample, len, es.valid_time, es.create_time, 0);
                 }
@@ -332,36 +341,12 @@ impl TrajectoryPublisher {
         height: i64,
         format: i64,
     ) -> Result<ImageLoan<'_>, PublishError> {
-        let template = self.image_template(width, height, format)?;
+        let pixel_len = pixel_len(width, height, format)?;
         let sample = self
             .port
-            .loan_slice_uninit(blocks_for(template.archive_len()))
+            .loan_slice_uninit(blocks_for(image_loan_len(pixel_len)))
             .map_err(PublishError::Loan)?;
-        Ok(ImageLoan::new(self, sample, template)?)
-    }
-
-    fn image_template(
-        &self,
-        width: i64,
-        height: i64,
-        format: i64,
-    ) -> Result<Arc<ImageTemplate>, ImageError> {
-        let name = self.image_name.borrow();
-        if let Some(t) = self.image_template.borrow().as_ref() {
-            if t.fits(&name, width, height, format) {
-                return Ok(Arc::clone(t));
-            }
-        }
-        let t = ImageTemplate::build(&name, width, height, format)?;
-        *self.image_template.borrow_mut() = Some(Arc::clone(&t));
-        Ok(t)
-    }
-
-    /// Lays out later image loans for entity name `name`.
-    pub(crate) fn set_image_name(&self, name: &str) {
-        let mut current = self.image_name.borrow_mut();
-        current.clear();
-        current.push_str(name);
+        Ok(ImageLoan::new(self, sample, (width, height, format), pixel_len))
     }
 
     /// Fills the header, sends, and wakes sleeping readers.

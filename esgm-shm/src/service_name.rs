@@ -97,6 +97,12 @@ pub fn wake_service_name(domain: &str, trajectory: &str) -> String {
     format!("{SERVICE_PREFIX}/{domain}/wake/{trajectory}")
 }
 
+/// The coordinator's control service of `domain`: `esgm/<domain>/control`.
+pub fn control_service(domain: &str) -> Result<ServiceName, NameError> {
+    check("domain", domain)?;
+    service_name(&format!("{SERVICE_PREFIX}/{domain}/control"))
+}
+
 /// A domain no other process or test on this host uses: `<prefix>-<pid>-<n>`, with `n`
 /// counting calls in this process. Characters of `prefix` that names may not contain
 /// become `_`, so a test can pass its own name (`module::test`).

@@ -1,15 +1,21 @@
 //! How many payload bytes to loan for a structure, without encoding it first.
 //!
-//! `esgm_core::codec::encoded_len` encodes the structure into a fresh heap buffer to
-//! measure it: an allocation and a full serialization (plus a copy of every image
-//! byte) before the real encode into shared memory. The publisher instead loans
-//! [`archived_size_hint`] bytes — a walk over the structure adding a generous bound for
-//! each node of the archived form — and encodes once, straight into the loan. The
-//! bound is meant to be an over-estimate (the unit tests check it against the codec
-//! for every value sort); if it is ever short, `encode_into` reports the size it needs
-//! and the publisher retries once with exactly that, so a wrong hint costs time, never
-//! correctness. Over-estimating costs only zeroing the unused tail of the loan, a few
-//! hundred bytes for a small structure.
+//! Two ways to size a loan: this module's [`archived_size_hint`], a walk over the
+//! structure adding a generous bound for each node of the archived form, or
+//! `esgm_core::codec::encoded_len`, which is exact (a full serialization into a
+//! counting writer: no allocation and no copy of octet bytes, but every node is
+//! serialized). The publisher uses the hint: measuring exactly and then encoding runs
+//! the serializer twice, while an over-estimate costs only zeroing the unused tail of
+//! the loan, a few dozen bytes per node — cheaper than a serialization pass at every
+//! size. Where the hint is not tight enough to be trusted is the sample-size limit: a
+//! hint above the publisher's configured maximum could grow the segment (or fail a
+//! fixed-size loan) for a structure that fits, so there the publisher asks
+//! `encoded_len` instead (see `publisher.rs`).
+//!
+//! The bound is meant to be an over-estimate (the unit tests check it against the
+//! codec for every value sort); if it is ever short, `encode_into_uninit` reports the
+//! size it needs and the publisher retries once with exactly that, so a wrong hint
+//! costs time, never correctness.
 //!
 //! The per-node constants are upper bounds of rkyv 0.8's archived sizes: a string or
 //! vector header is 8 bytes, an archived `Value` at most 64 (its largest variant, a
@@ -30,7 +36,7 @@ const NESTED_FRAME: usize = 32;
 /// Alignment padding and header slack for one out-of-line object.
 const SLACK: usize = 16;
 
-/// An upper bound (in practice) of the bytes `codec::encode_into` writes for `es`,
+/// An upper bound (in practice) of the bytes `codec::encode_into_uninit` writes for `es`,
 /// envelope included.
 pub fn archived_size_hint(es: &EntityStructure) -> usize {
     ENVELOPE_LEN + STRUCTURE_ROOT + string(&es.name) + pairs(&es.attributes)

@@ -14,12 +14,13 @@ use common::*;
 use esgm_core::codec::{self, CodecError, ENVELOPE_LEN};
 use esgm_core::library::Image;
 use esgm_core::{Entity, EntityFrame, EntityStructure, Octets, Pos2, Value, Vec3};
+use esgm_shm::image_layout::{IMAGE_NAME_MAX, IMAGE_PIXELS_OFFSET};
 use esgm_shm::payload::{Block16, blocks_for};
 use esgm_shm::service_name::data_service_name;
 use esgm_shm::{
-    Delivery, OpenError, PublishError, ReceiveError, SampleHeader, SampleSizing, SubscriberStats,
-    TrajectoryPublisher, TrajectoryQos, TrajectorySubscriber, Validation, WaitStrategy, type_id,
-    unique_domain,
+    Delivery, ImageError, OpenError, PublishError, ReceiveError, SampleHeader, SampleSizing,
+    SubscriberStats, TrajectoryPublisher, TrajectoryQos, TrajectorySubscriber, Validation,
+    WaitStrategy, type_id, unique_domain,
 };
 use iceoryx2::port::LoanError;
 use iceoryx2::prelude::ServiceName;
@@ -181,30 +182,90 @@ fn pixels_written_into_an_image_loan_are_read_in_place() {
 }
 
 #[test]
+fn an_image_under_a_new_name_each_frame_is_never_copied() {
+    let domain = unique_domain("image_new_names");
+    let (pub_node, sub_node) = (node(), node());
+    let p = publisher(&domain, "cam", "Image").create(&pub_node).unwrap();
+    let s = subscriber(&domain, "cam", "Image").create(&sub_node).unwrap();
+    let names = [
+        String::new(),
+        "c".into(),
+        "exactly8".into(),
+        "frame_with_a_longer_name".into(),
+        "kamera_ü_ñ_日本".into(),
+        "n".repeat(IMAGE_NAME_MAX),
+    ];
+    // Odd sizes too: the structure after the pixels must be aligned whatever they end on.
+    let sizes = [(7, 3, Image::FORMAT_MONO8), (5, 5, RGB8), (1, 1, RGB8), (0, 4, RGB8)];
+    for (frame, name) in names.iter().enumerate() {
+        let frame = frame as u64;
+        let (w, h, f) = sizes[frame as usize % sizes.len()];
+        let mut loan = p.loan_image(w, h, f).unwrap();
+        fill(loan.pixels_mut(), frame);
+        loan.send(name, frame as i64, 1).unwrap();
+
+        let sample = s.wait_for_sample(TIMEOUT).unwrap().expect("image");
+        assert!(sample.is_image_in_place(), "{name:?} was copied");
+        let archived = sample.structure().unwrap();
+        assert_eq!(archived.name.as_str(), name);
+        let (aw, ah, af, px) = image(archived);
+        assert_eq!((aw, ah, af), (w, h, f));
+        check_pattern(px, frame);
+        // The subscriber reads the pixels at the offset the camera wrote them to, in the
+        // same chunk of shared memory: they were never moved or copied.
+        let chunk = sample.archive_bytes().as_ptr() as usize;
+        assert_eq!(px.as_ptr() as usize - chunk, IMAGE_PIXELS_OFFSET, "{name:?}");
+        let owned = sample.to_owned().unwrap();
+        let mut pixels = vec![0u8; px.len()];
+        fill(&mut pixels, frame);
+        let expected = Image { width: w, height: h, format: f, image_data: pixels.into() };
+        assert_eq!(owned, expected.to_structure(name.as_str(), frame as i64, 1));
+    }
+}
+
+#[test]
 fn an_image_loan_handles_renames_sizes_and_unwritten_pixels() {
     let domain = unique_domain("image_loan_variants");
     let (pub_node, sub_node) = (node(), node());
     let p = publisher(&domain, "cam", "Image").create(&pub_node).unwrap();
     let s = subscriber(&domain, "cam", "Image").create(&sub_node).unwrap();
 
-    // Laid out for the trajectory name, sent under another: correct, one copy.
+    // Sent under a name other than the trajectory's: still in place.
     let mut loan = p.loan_image(8, 4, Image::FORMAT_MONO8).unwrap();
     fill(loan.pixels_mut(), 3);
     loan.send("a_longer_entity_name", 1, 2).unwrap();
     let sample = s.wait_for_sample(TIMEOUT).unwrap().unwrap();
-    assert!(!sample.is_image_in_place(), "renamed frames are copied");
+    assert!(sample.is_image_in_place());
     let a = sample.structure().unwrap();
     assert_eq!(a.name.as_str(), "a_longer_entity_name");
     check_pattern(image(a).3, 3);
     drop(sample);
 
-    // The next loan is laid out for the new name: in place again.
+    // A name longer than the layout's names region: correct, one copy.
+    let long = "n".repeat(IMAGE_NAME_MAX + 1);
     let mut loan = p.loan_image(8, 4, Image::FORMAT_MONO8).unwrap();
     fill(loan.pixels_mut(), 4);
-    loan.send("a_longer_entity_name", 3, 4).unwrap();
+    loan.send(&long, 3, 4).unwrap();
+    let sample = s.wait_for_sample(TIMEOUT).unwrap().unwrap();
+    assert!(!sample.is_image_in_place(), "over-long names are copied");
+    let a = sample.structure().unwrap();
+    assert_eq!(a.name.as_str(), long);
+    check_pattern(image(a).3, 4);
+    drop(sample);
+
+    // A finished frame copied in, without zeroing first; a wrong length is refused.
+    let mut loan = p.loan_image(8, 4, Image::FORMAT_MONO8).unwrap();
+    let mut frame = vec![0u8; 32];
+    fill(&mut frame, 9);
+    assert!(matches!(
+        loan.write_pixels(&frame[..31]),
+        Err(ImageError::FrameLength { expected: 32, found: 31 })
+    ));
+    loan.write_pixels(&frame).unwrap();
+    loan.send("cam", 9, 10).unwrap();
     let sample = s.wait_for_sample(TIMEOUT).unwrap().unwrap();
     assert!(sample.is_image_in_place());
-    check_pattern(image(sample.structure().unwrap()).3, 4);
+    check_pattern(image(sample.structure().unwrap()).3, 9);
 
     // Written through the uninitialised view.
     let mut loan = p.loan_image(2, 2, RGB8).unwrap();

@@ -3,25 +3,45 @@
 //! The archived form is rkyv's: a reader in another process uses
 //! [`ArchivedEntityStructure`] in place, without deserializing, so an image in shared
 //! memory is read where its producer wrote it. Nobody outside this module names rkyv's
-//! functions; everything goes through [`encode`], [`encode_into`], [`access`],
+//! functions; everything goes through [`encode`], [`encode_into`],
+//! [`encode_into_uninit`], [`encoded_len`], [`encode_image_into`], [`access`],
 //! [`access_unchecked`] and [`decode`].
 //!
 //! Bytes that come from another process must go through [`access`], which validates
 //! them (bounds, alignment, enum tags, UTF-8) before any field is read. The unchecked
 //! path is only for bytes this process wrote itself or a setup that trusts every peer.
+//!
+//! # Written bytes are initialised bytes
+//! rkyv writes an archive front to back through its writer, one `write` after the
+//! other with no gaps: alignment padding is written as zeros, and every archived object
+//! is zeroed before its fields are filled in, so padding inside structures is zero too.
+//! That is what lets [`encode_into_uninit`] promise that the `n` bytes it reports are
+//! initialised (a test encodes over two different backgrounds and compares).
+//!
+//! # Files
+//! `octets.rs` archives octet sequences (and lets the image writer point one at pixels
+//! already in place), `writer.rs` holds the counting writer, `image.rs` the in-place
+//! image layout.
 
-use std::sync::Arc;
+mod image;
+mod octets;
+mod writer;
 
-use rkyv::rancor::{BoxedError, Fallible};
-use rkyv::ser::{Allocator, Writer};
+use std::mem::MaybeUninit;
+
+use rkyv::Portable;
+use rkyv::rancor::BoxedError;
+use rkyv::ser::writer::Buffer;
 use rkyv::util::AlignedVec;
-use rkyv::vec::{ArchivedVec, VecResolver};
-use rkyv::with::{ArchiveWith, DeserializeWith, SerializeWith};
-use rkyv::{Place, Portable};
 
 use crate::frame::EntityStructure;
 pub use crate::frame::{ArchivedAttributeValuePair, ArchivedEntityFrame, ArchivedEntityStructure};
 pub use crate::value::{ArchivedOctets, ArchivedValue, ArchivedValueSort};
+pub use image::{
+    IMAGE_NAME_MAX, IMAGE_OVERHEAD_MAX, IMAGE_PIXELS_MAX, IMAGE_PIXELS_OFFSET, encode_image_into,
+};
+pub use octets::{PlaceOctets, SharedBytes, SharedBytesResolver};
+use writer::CountingWriter;
 
 /// Alignment the archived form needs from its buffer. Shared-memory payloads are laid
 /// out on this boundary.
@@ -48,6 +68,24 @@ pub enum CodecError {
         /// Bytes the archive needs.
         needed: usize,
     },
+    /// The entity name is too long for [`encode_image_into`]'s names region; shorten
+    /// it, or publish the image as an ordinary structure.
+    #[error("entity name of {len} bytes is too long for an in-place image (at most {max})")]
+    NameTooLong {
+        /// Bytes in the rejected name.
+        len: usize,
+        /// [`IMAGE_NAME_MAX`].
+        max: usize,
+    },
+    /// The data is more than the archived format can address (32-bit relative
+    /// pointers); split it.
+    #[error("{len} bytes exceed the archived format's limit of {max}")]
+    TooLarge {
+        /// Bytes asked for.
+        len: usize,
+        /// The limit.
+        max: usize,
+    },
     /// Serialization failed.
     #[error("could not encode entity structure: {0}")]
     Encode(String),
@@ -64,10 +102,16 @@ const MAGIC: [u8; 4] = *b"ESGM";
 /// The archived format's version; bump it with any change to the archived types.
 pub const FORMAT_VERSION: u32 = 1;
 
+fn envelope(archive_len: usize) -> [u8; ENVELOPE_LEN] {
+    let mut e = [0u8; ENVELOPE_LEN];
+    e[..4].copy_from_slice(&MAGIC);
+    e[4..8].copy_from_slice(&FORMAT_VERSION.to_le_bytes());
+    e[8..16].copy_from_slice(&(archive_len as u64).to_le_bytes());
+    e
+}
+
 fn write_envelope(out: &mut [u8], archive_len: usize) {
-    out[..4].copy_from_slice(&MAGIC);
-    out[4..8].copy_from_slice(&FORMAT_VERSION.to_le_bytes());
-    out[8..16].copy_from_slice(&(archive_len as u64).to_le_bytes());
+    out[..ENVELOPE_LEN].copy_from_slice(&envelope(archive_len));
 }
 
 fn malformed(bytes: &[u8], reason: impl Into<String>) -> CodecError {
@@ -92,27 +136,58 @@ pub fn encode(es: &EntityStructure) -> Result<AlignedVec<ARCHIVE_ALIGNMENT>, Cod
 /// [`ARCHIVE_ALIGNMENT`] boundary; on [`CodecError::BufferTooSmall`] retry with the
 /// size it names.
 pub fn encode_into(es: &EntityStructure, out: &mut [u8]) -> Result<usize, CodecError> {
-    if out.len() < ENVELOPE_LEN {
-        return Err(CodecError::BufferTooSmall { available: out.len(), needed: encoded_len(es)? });
-    }
-    let (envelope, body) = out.split_at_mut(ENVELOPE_LEN);
-    let written = match rkyv::api::high::to_bytes_in::<_, BoxedError>(
-        es,
-        rkyv::ser::writer::Buffer::from(&mut *body),
-    ) {
-        Ok(written) => written.len(),
-        Err(_) => {
-            let needed = encoded_len(es)?;
-            return Err(CodecError::BufferTooSmall { available: out.len(), needed });
-        }
+    let available = out.len();
+    let Some((envelope, body)) = out.split_at_mut_checked(ENVELOPE_LEN) else {
+        return Err(CodecError::BufferTooSmall { available, needed: encoded_len(es)? });
     };
-    write_envelope(envelope, written);
-    Ok(ENVELOPE_LEN + written)
+    let archive_len = encode_body(es, Buffer::from(body), available)?;
+    write_envelope(envelope, archive_len);
+    Ok(ENVELOPE_LEN + archive_len)
 }
 
-/// The number of bytes [`encode_into`] needs for `es`.
+/// [`encode_into`] for memory not yet initialised (a fresh shared-memory loan), so the
+/// caller need not zero it first. On success `out[..n]` is initialised (see the module
+/// docs) and the rest untouched; on error nothing in `out` may be assumed initialised.
+pub fn encode_into_uninit(
+    es: &EntityStructure,
+    out: &mut [MaybeUninit<u8>],
+) -> Result<usize, CodecError> {
+    let available = out.len();
+    let Some((head, body)) = out.split_at_mut_checked(ENVELOPE_LEN) else {
+        return Err(CodecError::BufferTooSmall { available, needed: encoded_len(es)? });
+    };
+    let archive_len = encode_body(es, Buffer::from(body), available)?;
+    for (to, byte) in head.iter_mut().zip(envelope(archive_len)) {
+        to.write(byte);
+    }
+    Ok(ENVELOPE_LEN + archive_len)
+}
+
+/// Serializes `es` into `body`, returning the archive's length.
+fn encode_body(
+    es: &EntityStructure,
+    body: Buffer<'_>,
+    available: usize,
+) -> Result<usize, CodecError> {
+    match rkyv::api::high::to_bytes_in::<_, BoxedError>(es, body) {
+        Ok(written) => Ok(written.len()),
+        // The buffer's overflow error is not distinguishable from others by type;
+        // measuring tells which it was.
+        Err(e) => match encoded_len(es)? {
+            needed if needed > available => Err(CodecError::BufferTooSmall { available, needed }),
+            _ => Err(CodecError::Encode(e.to_string())),
+        },
+    }
+}
+
+/// The number of bytes [`encode_into`] needs for `es`, envelope included.
+///
+/// Measured by serializing into a writer that only counts: no allocation, and octet
+/// sequences are counted, not copied, so an image costs what its few fields cost.
 pub fn encoded_len(es: &EntityStructure) -> Result<usize, CodecError> {
-    Ok(encode(es)?.len())
+    let counted = rkyv::api::high::to_bytes_in::<_, BoxedError>(es, CountingWriter::default())
+        .map_err(|e| CodecError::Encode(e.to_string()))?;
+    Ok(ENVELOPE_LEN + counted.len())
 }
 
 fn archive_body(bytes: &[u8]) -> Result<&[u8], CodecError> {
@@ -169,32 +244,6 @@ pub fn decode(archived: &ArchivedEntityStructure) -> Result<EntityStructure, Cod
         .map_err(|e| CodecError::Malformed { len: 0, reason: e.to_string() })
 }
 
-/// Archives an `Arc<[u8]>` as a plain byte vector: the archived form has no shared
-/// pointer bookkeeping, and readers see a `&[u8]` in place.
-#[derive(Debug)]
-pub struct SharedBytes;
-
-impl ArchiveWith<Arc<[u8]>> for SharedBytes {
-    type Archived = ArchivedVec<u8>;
-    type Resolver = VecResolver;
-
-    fn resolve_with(field: &Arc<[u8]>, resolver: Self::Resolver, out: Place<Self::Archived>) {
-        ArchivedVec::resolve_from_len(field.len(), resolver, out);
-    }
-}
-
-impl<S: Fallible + Allocator + Writer + ?Sized> SerializeWith<Arc<[u8]>, S> for SharedBytes {
-    fn serialize_with(field: &Arc<[u8]>, serializer: &mut S) -> Result<VecResolver, S::Error> {
-        ArchivedVec::<u8>::serialize_from_slice(field, serializer)
-    }
-}
-
-impl<D: Fallible + ?Sized> DeserializeWith<ArchivedVec<u8>, Arc<[u8]>, D> for SharedBytes {
-    fn deserialize_with(field: &ArchivedVec<u8>, _: &mut D) -> Result<Arc<[u8]>, D::Error> {
-        Ok(Arc::from(field.as_slice()))
-    }
-}
-
 // The archived forms are plain data; make sure of it at compile time.
 const _: fn() = || {
     fn portable<T: Portable>() {}
@@ -246,6 +295,38 @@ mod tests {
             encode_into(&es, &mut small),
             Err(CodecError::BufferTooSmall { available: 16, .. })
         ));
+    }
+
+    #[test]
+    fn encode_into_uninit_initialises_exactly_what_it_reports() {
+        let es = sample();
+        let reference = encode(&es).unwrap();
+        assert_eq!(encoded_len(&es).unwrap(), reference.len());
+        // Over two different backgrounds: a byte the encoder skipped would differ.
+        for background in [0xAAu8, 0x55] {
+            let mut buf = AlignedVec::<ARCHIVE_ALIGNMENT>::with_capacity(4096);
+            buf.resize(4096, background);
+            // SAFETY: `u8` and `MaybeUninit<u8>` have one layout, and only initialised
+            // bytes are written through the view.
+            let uninit = unsafe {
+                std::slice::from_raw_parts_mut(buf.as_mut_ptr().cast::<MaybeUninit<u8>>(), 4096)
+            };
+            let n = encode_into_uninit(&es, uninit).unwrap();
+            assert_eq!(&buf[..n], &reference[..]);
+            assert!(buf[n..].iter().all(|b| *b == background), "wrote past its length");
+        }
+        let mut small = [MaybeUninit::<u8>::uninit(); 8];
+        assert!(matches!(
+            encode_into_uninit(&es, &mut small),
+            Err(CodecError::BufferTooSmall { available: 8, needed }) if needed == reference.len()
+        ));
+    }
+
+    #[test]
+    fn encoded_len_counts_without_copying_octets() {
+        let es = EntityStructure::new("cam", 1, 2).with("px", Octets::from(vec![1u8; 100_000]));
+        assert_eq!(encoded_len(&es).unwrap(), encode(&es).unwrap().len());
+        assert_eq!(encoded_len(&EntityStructure::default()).unwrap(), ENVELOPE_LEN + 32);
     }
 
     #[test]

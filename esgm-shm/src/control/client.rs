@@ -1,0 +1,126 @@
+//! The client side of the control plane: asks the coordinator, with a deadline.
+
+use std::time::{Duration, Instant};
+
+use iceoryx2::node::NodeCreationFailure;
+use iceoryx2::port::client::{Client, RequestSendError};
+use iceoryx2::port::{LoanError, ReceiveError};
+use iceoryx2::prelude::{AllocationStrategy, NodeBuilder, ipc};
+use iceoryx2::service::builder::request_response::RequestResponseOpenError;
+use iceoryx2::service::port_factory::client::ClientCreateError;
+use iceoryx2::service::port_factory::request_response::PortFactory;
+
+use super::protocol::{ControlError, Request, Response, decode, encode};
+use super::server::MAX_CLIENTS;
+use crate::service::ShmNode;
+use crate::service_name::{NameError, control_service};
+
+/// A control call failed before an answer arrived.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ControlClientError {
+    /// The domain cannot be part of a service name.
+    #[error(transparent)]
+    InvalidDomain(#[from] NameError),
+    /// The iceoryx2 node could not be created.
+    #[error("cannot create a node: {0}")]
+    Node(#[source] NodeCreationFailure),
+    /// No coordinator serves this domain; start one with `esgm up`.
+    #[error("no coordinator is running for domain `{domain}` (start one with `esgm up`): {source}")]
+    NoCoordinator {
+        /// The domain.
+        domain: String,
+        /// iceoryx2's reason.
+        source: RequestResponseOpenError,
+    },
+    /// The client port could not be created (too many clients?).
+    #[error("cannot create the control client: {0}")]
+    Client(#[source] ClientCreateError),
+    /// Loaning memory for a request failed.
+    #[error("cannot loan a request: {0}")]
+    Loan(#[source] LoanError),
+    /// Sending the request failed.
+    #[error("cannot send the request: {0}")]
+    Send(#[source] RequestSendError),
+    /// Receiving the answer failed.
+    #[error("cannot receive the answer: {0}")]
+    Receive(#[source] ReceiveError),
+    /// No answer within the deadline: the coordinator is gone or stuck.
+    #[error("the coordinator of domain `{domain}` did not answer within {timeout:?}")]
+    Timeout {
+        /// The domain.
+        domain: String,
+        /// The deadline.
+        timeout: Duration,
+    },
+    /// The request could not be encoded or the answer decoded.
+    #[error("malformed control message: {0}")]
+    Malformed(#[source] serde_json::Error),
+    /// The coordinator answered with the seed's error.
+    #[error(transparent)]
+    Remote(#[from] ControlError),
+}
+
+/// Asks one domain's coordinator. Like every iceoryx2 port it stays on the thread that
+/// made it.
+#[derive(Debug)]
+pub struct ControlClient {
+    domain: String,
+    client: Client<ipc::Service, [u8], (), [u8], ()>,
+    _service: PortFactory<ipc::Service, [u8], (), [u8], ()>,
+    _node: ShmNode,
+    timeout: Duration,
+}
+
+impl ControlClient {
+    /// Connects to the coordinator of `domain`; calls wait up to `timeout` for answers.
+    pub fn connect(domain: &str, timeout: Duration) -> Result<Self, ControlClientError> {
+        let name = control_service(domain)?;
+        let node = NodeBuilder::new().create::<ipc::Service>().map_err(ControlClientError::Node)?;
+        let service = node
+            .service_builder(&name)
+            .request_response::<[u8], [u8]>()
+            .max_clients(MAX_CLIENTS)
+            .max_active_requests_per_client(4)
+            .open()
+            .map_err(|source| ControlClientError::NoCoordinator {
+                domain: domain.to_owned(),
+                source,
+            })?;
+        let client = service
+            .client_builder()
+            .initial_max_slice_len(4096)
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .create()
+            .map_err(ControlClientError::Client)?;
+        Ok(Self { domain: domain.to_owned(), client, _service: service, _node: node, timeout })
+    }
+
+    /// Sends `request` and waits for the answer; the seed's errors come back as
+    /// [`ControlClientError::Remote`].
+    pub fn call(&self, request: &Request) -> Result<Response, ControlClientError> {
+        let bytes = encode(request).map_err(ControlClientError::Malformed)?;
+        let loan = self.client.loan_slice_uninit(bytes.len()).map_err(ControlClientError::Loan)?;
+        let pending = loan.write_from_slice(&bytes).send().map_err(ControlClientError::Send)?;
+        let deadline = Instant::now() + self.timeout;
+        let mut pause = Duration::from_micros(20);
+        loop {
+            if let Some(answer) = pending.receive().map_err(ControlClientError::Receive)? {
+                return match decode::<Response>(answer.payload())
+                    .map_err(ControlClientError::Malformed)?
+                {
+                    Response::Error(e) => Err(ControlClientError::Remote(e)),
+                    ok => Ok(ok),
+                };
+            }
+            if Instant::now() >= deadline {
+                return Err(ControlClientError::Timeout {
+                    domain: self.domain.clone(),
+                    timeout: self.timeout,
+                });
+            }
+            std::thread::sleep(pause);
+            pause = (pause * 2).min(Duration::from_millis(2));
+        }
+    }
+}

@@ -1,0 +1,18 @@
+//! The control plane: one coordinator process owns the registry (types, sensors,
+//! units, trajectories and where each is written); every other process asks it over an
+//! iceoryx2 request-response service, `esgm/<domain>/control`.
+//!
+//! - [`protocol`]: the requests and answers, JSON on the wire.
+//! - [`Registry`]: the coordinator's state and rules, transport-free.
+//! - [`Coordinator`]: serves the registry.
+//! - [`ControlClient`]: asks it, with a deadline on every call.
+
+pub mod client;
+pub mod protocol;
+pub mod registry;
+pub mod server;
+
+pub use client::{ControlClient, ControlClientError};
+pub use protocol::{ControlError, Request, Response, TrajectoryRecord};
+pub use registry::Registry;
+pub use server::{Coordinator, CoordinatorError};

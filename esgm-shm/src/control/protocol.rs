@@ -1,0 +1,170 @@
+//! The control protocol: what clients ask the coordinator, and its answers.
+//!
+//! Messages are JSON. The control plane carries names, types and policies, a few
+//! hundred bytes at human rates, so readability (a stuck system can be inspected with
+//! a hex dump) and schema evolution beat speed here; structures themselves never pass
+//! through it — they travel on the data plane, archived and zero-copy.
+
+use esgm_core::catalog::{SensorRecord, UnitRecord};
+use esgm_core::esgm::{
+    CreateError, InputType, LookupError, RegistrationError, TrajectoryInfo, TrajectorySpec,
+};
+use esgm_core::{EntityStructureType, TypeRegistryError};
+use serde::{Deserialize, Serialize};
+
+/// A request to the coordinator. Operation names follow the seed's `esgm.idl`.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[non_exhaustive]
+pub enum Request {
+    /// E7 `ping`.
+    Ping,
+    /// E1.
+    CreateEntityStructureType {
+        /// Registered name.
+        type_name: String,
+        /// Definition.
+        entity_type: EntityStructureType,
+    },
+    /// E1.
+    DestroyEntityStructureType {
+        /// Registered name.
+        type_name: String,
+    },
+    /// E1.
+    GetEntityStructureType {
+        /// Registered name.
+        type_name: String,
+    },
+    /// Every registered type name.
+    ListEntityStructureTypes,
+    /// E6: a sensor served by the process `host`.
+    AddSensorInterface {
+        /// Sensor name.
+        sensor: String,
+        /// Type of its structures.
+        type_name: String,
+        /// The serving process.
+        host: String,
+    },
+    /// E6.
+    RemoveSensorInterface {
+        /// Sensor name.
+        sensor: String,
+    },
+    /// E6: a unit run by the process `host`.
+    AddCompUnit {
+        /// Unit name.
+        name: String,
+        /// Output type.
+        type_name: String,
+        /// Declared inputs.
+        input_types: Vec<InputType>,
+        /// The running process.
+        host: String,
+    },
+    /// E6.
+    RemoveCompUnit {
+        /// Unit name.
+        name: String,
+    },
+    /// E2–E5: create (or re-point) a trajectory; `host` is the asking process.
+    CreateTrajectory {
+        /// What to create.
+        spec: TrajectorySpec,
+        /// The asking process.
+        host: String,
+    },
+    /// E5.
+    GetEntityTrajectoryStructure {
+        /// Trajectory name.
+        name: String,
+    },
+    /// E5.
+    DestroyEntityTrajectoryStructure {
+        /// Trajectory name.
+        name: String,
+    },
+    /// Every trajectory.
+    ListTrajectories,
+    /// Every sensor.
+    ListSensors,
+    /// Every unit.
+    ListCompUnits,
+}
+
+/// Where a trajectory lives and what it holds: enough for any process to write or read
+/// it on the data plane.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TrajectoryRecord {
+    /// The listing (kind, type name, source, inputs, policy).
+    pub info: TrajectoryInfo,
+    /// The trajectory's type and every element type it names, so a process can check
+    /// structures without asking again.
+    pub types: Vec<(String, EntityStructureType)>,
+    /// The process that writes it: the creator of a primitive or operator trajectory,
+    /// the sensor's host for a sampled one, the unit's host for a computed one.
+    pub writer: String,
+    /// Incremented each time the name is re-pointed.
+    pub generation: u64,
+}
+
+/// A coordinator's answer.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[non_exhaustive]
+pub enum Response {
+    /// Done, nothing to return.
+    Done,
+    /// Answer to [`Request::Ping`].
+    Pong {
+        /// The coordinator's esgm version.
+        version: String,
+    },
+    /// A type.
+    Type(EntityStructureType),
+    /// Names.
+    Names(Vec<String>),
+    /// A trajectory.
+    Trajectory(TrajectoryRecord),
+    /// Trajectories.
+    Trajectories(Vec<TrajectoryInfo>),
+    /// Sensors.
+    Sensors(Vec<SensorRecord>),
+    /// Units.
+    CompUnits(Vec<UnitRecord>),
+    /// The operation failed with the seed's error.
+    Error(ControlError),
+}
+
+/// The seed's errors, as they cross the process boundary.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, thiserror::Error)]
+#[non_exhaustive]
+pub enum ControlError {
+    /// A type operation failed.
+    #[error(transparent)]
+    Type(#[from] TypeRegistryError),
+    /// Creating a trajectory failed.
+    #[error(transparent)]
+    Create(#[from] CreateError),
+    /// A trajectory name is unknown.
+    #[error(transparent)]
+    Lookup(#[from] LookupError),
+    /// Registering a sensor or unit failed.
+    #[error(transparent)]
+    Registration(#[from] RegistrationError),
+    /// The request could not be understood (a client of another version?).
+    #[error("bad request: {reason}")]
+    BadRequest {
+        /// What was wrong with it.
+        reason: String,
+    },
+}
+
+/// Encodes a message for the wire.
+pub fn encode<T: Serialize>(message: &T) -> Result<Vec<u8>, serde_json::Error> {
+    serde_json::to_vec(message)
+}
+
+/// Decodes a message from the wire; malformed bytes are an error, never a panic.
+pub fn decode<'a, T: Deserialize<'a>>(bytes: &'a [u8]) -> Result<T, serde_json::Error> {
+    serde_json::from_slice(bytes)
+}

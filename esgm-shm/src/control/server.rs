@@ -1,0 +1,188 @@
+//! The coordinator: serves the [`Registry`] on `esgm/<domain>/control`, and cleans up
+//! after processes that died.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use iceoryx2::node::{NodeCreationFailure, NodeState};
+use iceoryx2::port::server::Server;
+use iceoryx2::port::{LoanError, ReceiveError, SendError};
+use iceoryx2::prelude::{AllocationStrategy, NodeBuilder, ipc};
+use iceoryx2::service::builder::request_response::RequestResponseCreateError;
+use iceoryx2::service::port_factory::request_response::PortFactory;
+use iceoryx2::service::port_factory::server::ServerCreateError;
+
+use super::protocol::{ControlError, Request, Response, decode, encode};
+use super::registry::Registry;
+use crate::service::ShmNode;
+use crate::service_name::{NameError, control_service};
+
+/// Room for this many clients (processes and their threads) in one system.
+pub const MAX_CLIENTS: usize = 128;
+
+/// The coordinator could not start or serve.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum CoordinatorError {
+    /// The domain cannot be part of a service name.
+    #[error(transparent)]
+    InvalidDomain(#[from] NameError),
+    /// The iceoryx2 node could not be created (shared memory unavailable?).
+    #[error("cannot create the coordinator's node: {0}")]
+    Node(#[source] NodeCreationFailure),
+    /// The control service exists: another coordinator serves this domain.
+    #[error("a coordinator already serves domain `{domain}` (or its service is stale): {source}")]
+    AlreadyRunning {
+        /// The domain.
+        domain: String,
+        /// iceoryx2's reason.
+        source: RequestResponseCreateError,
+    },
+    /// The server port could not be created.
+    #[error("cannot create the control server: {0}")]
+    Server(#[source] ServerCreateError),
+    /// Receiving a request failed.
+    #[error("cannot receive a request: {0}")]
+    Receive(#[source] ReceiveError),
+    /// Loaning memory for a response failed.
+    #[error("cannot loan a response: {0}")]
+    Loan(#[source] LoanError),
+    /// Sending a response failed.
+    #[error("cannot send a response: {0}")]
+    Send(#[source] SendError),
+}
+
+/// Serves one domain's registry.
+#[derive(Debug)]
+pub struct Coordinator {
+    domain: String,
+    registry: Registry,
+    server: Server<ipc::Service, [u8], (), [u8], ()>,
+    _service: PortFactory<ipc::Service, [u8], (), [u8], ()>,
+    node: ShmNode,
+    served: u64,
+}
+
+impl Coordinator {
+    /// Starts a coordinator for `domain` with `registry`. Dead nodes left by crashed
+    /// processes are cleaned first.
+    pub fn create(domain: &str, registry: Registry) -> Result<Self, CoordinatorError> {
+        let name = control_service(domain)?;
+        let node = NodeBuilder::new().create::<ipc::Service>().map_err(CoordinatorError::Node)?;
+        cleanup_dead_nodes();
+        let service = node
+            .service_builder(&name)
+            .request_response::<[u8], [u8]>()
+            .max_clients(MAX_CLIENTS)
+            .max_active_requests_per_client(4)
+            .create()
+            .map_err(|source| CoordinatorError::AlreadyRunning {
+                domain: domain.to_owned(),
+                source,
+            })?;
+        let server = service
+            .server_builder()
+            .initial_max_slice_len(4096)
+            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .create()
+            .map_err(CoordinatorError::Server)?;
+        tracing::info!(domain, "coordinator serving");
+        Ok(Self { domain: domain.to_owned(), registry, server, _service: service, node, served: 0 })
+    }
+
+    /// The domain served.
+    pub fn domain(&self) -> &str {
+        &self.domain
+    }
+
+    /// The registry, read-only.
+    pub fn registry(&self) -> &Registry {
+        &self.registry
+    }
+
+    /// Requests answered so far.
+    pub fn served(&self) -> u64 {
+        self.served
+    }
+
+    /// The coordinator's iceoryx2 node.
+    pub fn node(&self) -> &ShmNode {
+        &self.node
+    }
+
+    /// Answers every request waiting now; returns how many.
+    pub fn serve_pending(&mut self) -> Result<usize, CoordinatorError> {
+        let mut n = 0;
+        while let Some(active) = self.server.receive().map_err(CoordinatorError::Receive)? {
+            let response = match decode::<Request>(active.payload()) {
+                Ok(request) => self.registry.handle(request),
+                Err(e) => {
+                    tracing::warn!(error = %e, "malformed control request");
+                    Response::Error(ControlError::BadRequest { reason: e.to_string() })
+                }
+            };
+            let bytes = match encode(&response) {
+                Ok(b) => b,
+                Err(e) => {
+                    let fallback =
+                        Response::Error(ControlError::BadRequest { reason: e.to_string() });
+                    encode(&fallback).unwrap_or_default()
+                }
+            };
+            let loan = active.loan_slice_uninit(bytes.len()).map_err(CoordinatorError::Loan)?;
+            loan.write_from_slice(&bytes).send().map_err(CoordinatorError::Send)?;
+            n += 1;
+            self.served += 1;
+        }
+        Ok(n)
+    }
+
+    /// Serves until `stop` is set, polling briefly after activity and backing off to
+    /// a few milliseconds when idle (the control plane is not latency-critical), and
+    /// cleaning up dead processes' resources every `cleanup_every`.
+    pub fn run(
+        &mut self,
+        stop: &AtomicBool,
+        cleanup_every: Duration,
+    ) -> Result<(), CoordinatorError> {
+        let mut idle = Duration::from_micros(100);
+        let mut next_cleanup = Instant::now() + cleanup_every;
+        while !stop.load(Ordering::Relaxed) {
+            if self.serve_pending()? > 0 {
+                idle = Duration::from_micros(100);
+            } else {
+                std::thread::sleep(idle);
+                idle = (idle * 2).min(Duration::from_millis(5));
+            }
+            if Instant::now() >= next_cleanup {
+                let removed = cleanup_dead_nodes();
+                if removed > 0 {
+                    tracing::info!(removed, "cleaned up resources of dead processes");
+                }
+                next_cleanup = Instant::now() + cleanup_every;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Removes what crashed processes left in shared memory (iceoryx2's dead-node cleanup);
+/// returns how many dead nodes were cleaned.
+pub fn cleanup_dead_nodes() -> usize {
+    let mut removed = 0;
+    let result = iceoryx2::node::Node::<ipc::Service>::list(
+        iceoryx2::config::Config::global_config(),
+        |state| {
+            if let NodeState::Dead(view) = state {
+                if view.try_remove_stale_resources().is_ok() {
+                    removed += 1;
+                }
+            }
+            iceoryx2::prelude::CallbackProgression::Continue
+        },
+    );
+    if let Err(e) = result {
+        tracing::warn!(error = %e, "cannot list nodes for cleanup");
+    }
+    removed
+}

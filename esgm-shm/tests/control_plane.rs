@@ -1,0 +1,106 @@
+//! The control plane end to end: a coordinator on its own thread (its own node), a
+//! client on the test thread; unique domains, deadlines on every wait.
+// Test helpers: a failed expectation is a failed test with its message.
+#![allow(clippy::expect_used, clippy::unwrap_used, clippy::panic)]
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use esgm_core::esgm::{CreateError, TrajectorySpec};
+use esgm_core::{EntityStructureType, TypeRegistry, ValueSort};
+use esgm_shm::control::{
+    ControlClient, ControlClientError, ControlError, Coordinator, Registry, Request, Response,
+};
+use esgm_shm::unique_domain;
+
+const DEADLINE: Duration = Duration::from_secs(10);
+
+/// Runs a coordinator for `domain` until the returned guard is dropped.
+struct Running {
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+fn start(domain: &str) -> Running {
+    let stop = Arc::new(AtomicBool::new(false));
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel();
+    let d = domain.to_owned();
+    let s = Arc::clone(&stop);
+    let thread = std::thread::spawn(move || {
+        let mut c = Coordinator::create(&d, Registry::new(TypeRegistry::with_library()))
+            .expect("coordinator starts");
+        ready_tx.send(()).expect("test is waiting");
+        c.run(&s, Duration::from_secs(1)).expect("coordinator serves");
+    });
+    ready_rx.recv_timeout(DEADLINE).expect("coordinator ready in time");
+    Running { stop, thread: Some(thread) }
+}
+
+#[test]
+fn seed_operations_and_errors_cross_the_process_boundary() {
+    let domain = unique_domain("control_ops");
+    let _coordinator = start(&domain);
+    let client = ControlClient::connect(&domain, DEADLINE).unwrap();
+
+    assert!(matches!(client.call(&Request::Ping).unwrap(), Response::Pong { .. }));
+    let t = EntityStructureType::new("Reading").attr("x", ValueSort::Double);
+    client
+        .call(&Request::CreateEntityStructureType { type_name: "Reading".into(), entity_type: t })
+        .unwrap();
+    let spec = TrajectorySpec::primitive("readings", "Reading");
+    match client.call(&Request::CreateTrajectory { spec, host: "test".into() }).unwrap() {
+        Response::Trajectory(r) => {
+            assert_eq!((r.writer.as_str(), r.info.type_name.as_str()), ("test", "Reading"))
+        }
+        other => panic!("{other:?}"),
+    }
+    // The seed's error, typed, with the suggestion, from the other side.
+    let err =
+        client.call(&Request::GetEntityTrajectoryStructure { name: "reading".into() }).unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        "no entity trajectory structure `reading`; did you mean `readings`?"
+    );
+    let err = client
+        .call(&Request::CreateTrajectory {
+            spec: TrajectorySpec::primitive("x", "Readin"),
+            host: "t".into(),
+        })
+        .unwrap_err();
+    assert!(matches!(
+        err,
+        ControlClientError::Remote(ControlError::Create(
+            CreateError::NoSuchEntityStructureType { .. }
+        ))
+    ));
+    match client.call(&Request::ListTrajectories).unwrap() {
+        Response::Trajectories(v) => assert_eq!(v.len(), 1),
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn no_coordinator_is_a_clear_error() {
+    let domain = unique_domain("control_none");
+    let err = ControlClient::connect(&domain, Duration::from_millis(200)).unwrap_err();
+    assert!(matches!(err, ControlClientError::NoCoordinator { .. }), "{err}");
+    assert!(err.to_string().contains("esgm up"));
+}
+
+#[test]
+fn a_second_coordinator_for_the_same_domain_is_refused() {
+    let domain = unique_domain("control_twice");
+    let _first = start(&domain);
+    let second = Coordinator::create(&domain, Registry::default());
+    assert!(second.is_err());
+}
