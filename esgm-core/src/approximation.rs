@@ -53,8 +53,9 @@ pub fn interpolate(
     t: Time,
     query_time: Time,
 ) -> EntityStructure {
-    let span = (b.valid_time - a.valid_time) as f64;
-    let f = if span > 0.0 { (t - a.valid_time) as f64 / span } else { 0.0 };
+    // In f64: the differences of extreme i64 times overflow i64.
+    let span = b.valid_time as f64 - a.valid_time as f64;
+    let f = if span > 0.0 { (t as f64 - a.valid_time as f64) / span } else { 0.0 };
     EntityStructure {
         name: a.name.clone(),
         valid_time: t,
@@ -84,7 +85,8 @@ fn l(a: f64, b: f64, f: f64) -> f64 {
 }
 
 fn li(a: i64, b: i64, f: f64) -> i64 {
-    (a as f64 + (b - a) as f64 * f).round() as i64
+    // In f64: `b - a` overflows i64 for far-apart values; `as` saturates.
+    (a as f64 + (b as f64 - a as f64) * f).round() as i64
 }
 
 fn lpos(a: &Position, b: &Position, f: f64) -> Position {
@@ -156,12 +158,14 @@ pub fn merge(group: &[&EntityStructure], rule: MergeRule) -> Option<EntityStruct
         MergeRule::KeepFirst => Some(first.clone()),
         MergeRule::KeepLast => Some(last.clone()),
         MergeRule::Average => {
-            // A running mean: after k samples, mean_k = lerp(mean_{k-1}, x_k, 1/k).
-            let mut acc = group[0].attributes.clone();
+            // A running mean in floating point (integers are rounded once, at the end):
+            // after k samples, mean_k = lerp(mean_{k-1}, x_k, 1/k).
+            let mut acc = lift(&group[0].attributes);
             for (k, e) in group.iter().enumerate().skip(1) {
-                acc = lerp_attributes(&acc, &e.attributes, 1.0 / (k as f64 + 1.0));
+                acc = lerp_attributes(&acc, &lift(&e.attributes), 1.0 / (k as f64 + 1.0));
             }
-            Some(with_attributes(last, fill_non_numeric(acc, &last.attributes)))
+            let mean = lower(acc, &last.attributes);
+            Some(with_attributes(last, fill_non_numeric(mean, &last.attributes)))
         }
         MergeRule::Median => {
             let attributes = last
@@ -177,6 +181,56 @@ pub fn merge(group: &[&EntityStructure], rule: MergeRule) -> Option<EntityStruct
                 .collect();
             Some(with_attributes(last, attributes))
         }
+    }
+}
+
+/// Integer attributes as floats (recursively), so averaging does not round per step.
+fn lift(attributes: &[AttributeValuePair]) -> Vec<AttributeValuePair> {
+    attributes
+        .iter()
+        .map(|p| AttributeValuePair { name: p.name.clone(), value: lift_value(&p.value) })
+        .collect()
+}
+
+fn lift_value(v: &Value) -> Value {
+    match v {
+        Value::Long(x) | Value::Time(x) => Value::Double(*x as f64),
+        Value::LongSeq(xs) => Value::DoubleSeq(xs.iter().map(|x| *x as f64).collect()),
+        Value::EntityFrame(f) => Value::EntityFrame(Box::new(EntityFrame {
+            name: f.name.clone(),
+            attributes: lift(&f.attributes),
+        })),
+        other => other.clone(),
+    }
+}
+
+/// Back to the sorts of `like` after [`lift`], rounding integers once.
+fn lower(mean: Vec<AttributeValuePair>, like: &[AttributeValuePair]) -> Vec<AttributeValuePair> {
+    mean.into_iter()
+        .map(|p| {
+            let value = match like.iter().find(|q| q.name == p.name) {
+                Some(q) => lower_value(p.value, &q.value),
+                None => p.value,
+            };
+            AttributeValuePair { name: p.name, value }
+        })
+        .collect()
+}
+
+fn lower_value(v: Value, like: &Value) -> Value {
+    match (v, like) {
+        (Value::Double(x), Value::Long(_)) => Value::Long(x.round() as i64),
+        (Value::Double(x), Value::Time(_)) => Value::Time(x.round() as i64),
+        (Value::DoubleSeq(xs), Value::LongSeq(_)) => {
+            Value::LongSeq(xs.into_iter().map(|x| x.round() as i64).collect())
+        }
+        (Value::EntityFrame(f), Value::EntityFrame(l)) => {
+            Value::EntityFrame(Box::new(EntityFrame {
+                name: f.name,
+                attributes: lower(f.attributes, &l.attributes),
+            }))
+        }
+        (v, _) => v,
     }
 }
 

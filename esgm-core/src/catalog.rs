@@ -245,6 +245,30 @@ impl Catalog {
         }
     }
 
+    /// A chain of inputs from `inputs` back to `target`, if the existing trajectories
+    /// form one (depth-first over the input graph).
+    fn path_to(&self, target: &str, inputs: &[String]) -> Option<Vec<String>> {
+        let mut stack: Vec<(String, Vec<String>)> =
+            inputs.iter().map(|i| (i.clone(), vec![i.clone()])).collect();
+        let mut seen = std::collections::HashSet::new();
+        while let Some((name, path)) = stack.pop() {
+            if name == target {
+                return Some(path);
+            }
+            if !seen.insert(name.clone()) {
+                continue;
+            }
+            if let Some(t) = self.trajectories.get(&name) {
+                for i in &t.inputs {
+                    let mut p = path.clone();
+                    p.push(i.clone());
+                    stack.push((i.clone(), p));
+                }
+            }
+        }
+        None
+    }
+
     fn input_type(&self, name: &str) -> Result<&str, CreateError> {
         match self.trajectories.get(name) {
             Some(t) => Ok(&t.type_name),
@@ -381,6 +405,18 @@ impl Catalog {
                 }
             }
         };
+        if let Some(old) = self.trajectories.get(&name) {
+            if old.type_name != checker.type_name() {
+                return Err(CreateError::TypeChange {
+                    name,
+                    old: old.type_name.clone(),
+                    new: checker.type_name().to_owned(),
+                });
+            }
+            if let Some(path) = self.path_to(&name, &input_names) {
+                return Err(CreateError::Cycle { name, path });
+            }
+        }
         spec.policy.validate()?;
         if let Some(src) = &spec.policy.filter {
             Filter::compile(src, &checker).map_err(PolicyError::from)?;
@@ -432,5 +468,16 @@ mod tests {
         ));
         assert!(c.resolve(&TrajectorySpec::primitive("images", "Image")).is_err(), "name taken");
         assert!(c.resolve(&TrajectorySpec::primitive("images", "Image").replace()).is_ok());
+        // Re-pointing keeps the type and may not loop back to itself.
+        c.insert_trajectory(blobs.info);
+        assert!(matches!(
+            c.resolve(&TrajectorySpec::primitive("images", "Blob").replace()),
+            Err(CreateError::TypeChange { .. })
+        ));
+        c.add_unit("Copy", "Image", vec!["Image".into()], "h").unwrap();
+        let err = c
+            .resolve(&TrajectorySpec::computed("images", "Copy", ["images"]).replace())
+            .unwrap_err();
+        assert!(matches!(err, CreateError::Cycle { .. }), "{err}");
     }
 }

@@ -66,9 +66,15 @@ impl FluentGenerator<'_> {
                 before.map(wrap).ok_or_else(|| fail("nothing before"))
             }
             ValueApproximation::Closest => match (before, after) {
-                (Some(b), Some(a)) => {
-                    Ok(wrap(if t - b.valid_time <= a.valid_time - t { b } else { a }))
-                }
+                (Some(b), Some(a)) => Ok(wrap(
+                    if i128::from(t) - i128::from(b.valid_time)
+                        <= i128::from(a.valid_time) - i128::from(t)
+                    {
+                        b
+                    } else {
+                        a
+                    },
+                )),
                 (Some(x), None) | (None, Some(x)) => Ok(wrap(x)),
                 (None, None) => Err(fail("the trajectory is empty")),
             },

@@ -80,6 +80,26 @@ pub enum CreateError {
     /// An operator's own settings are invalid (sync queue size, tolerance, …).
     #[error("illegal operator: {0}")]
     IllegalOperator(#[from] SyncError),
+    /// Re-pointing the name would make the trajectory read itself (directly or through
+    /// other trajectories), a loop with no source; read another name.
+    #[error("`{name}` would read itself through {}", path.join(" → "))]
+    Cycle {
+        /// The trajectory.
+        name: String,
+        /// The chain of inputs that leads back to it.
+        path: Vec<String>,
+    },
+    /// Re-pointing may not change a trajectory's type: trajectories reading the name
+    /// were checked against the old one. Destroy and re-create instead.
+    #[error("`{name}` has type `{old}`; re-pointing it to type `{new}` is refused")]
+    TypeChange {
+        /// The trajectory.
+        name: String,
+        /// Its current type.
+        old: String,
+        /// The type asked for.
+        new: String,
+    },
     /// The trajectory needs at least one input.
     #[error("`{name}` needs at least one input")]
     NoInputs {

@@ -40,6 +40,12 @@ pub struct WorkerStats {
     pub missed_periods: u64,
     /// Times the worker was restarted (out-of-process runtimes).
     pub restarts: u64,
+    /// Input samples an operator discarded without using them (e.g. a sync that found
+    /// no partner for them).
+    pub discarded: u64,
+    /// Input samples discarded because the worker fell behind its inputs (its input
+    /// buffer was full; the oldest went first).
+    pub input_overflow: u64,
 }
 
 /// Statistics of the whole ESGM.

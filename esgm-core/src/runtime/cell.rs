@@ -19,6 +19,8 @@ pub(crate) struct WorkerCounters {
     pub panics: AtomicU64,
     pub invalid_outputs: AtomicU64,
     pub missed_periods: AtomicU64,
+    pub discarded: AtomicU64,
+    pub input_overflow: AtomicU64,
 }
 
 impl WorkerCounters {
@@ -36,6 +38,8 @@ impl WorkerCounters {
             panics: l(&self.panics),
             invalid_outputs: l(&self.invalid_outputs),
             missed_periods: l(&self.missed_periods),
+            discarded: l(&self.discarded),
+            input_overflow: l(&self.input_overflow),
             restarts: 0,
         }
     }
@@ -66,6 +70,15 @@ pub(crate) struct TrajectoryCell {
     pub external_adds: bool,
     pub worker: Mutex<Option<Worker>>,
     pub counters: Arc<WorkerCounters>,
+    /// Wakes the runtime's release thread when a sample is held (C6 releases on time).
+    pub kick: crossbeam_channel::Sender<()>,
+}
+
+impl TrajectoryCell {
+    /// Tells the release thread a sample was held, so it re-plans its next wake-up.
+    pub fn kick_releaser(&self) {
+        let _ = self.kick.try_send(());
+    }
 }
 
 /// A name and the trajectory it denotes now (the seed's descriptor). Handles hold the

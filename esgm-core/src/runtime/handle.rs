@@ -34,7 +34,8 @@ impl InProcessTrajectory {
         AddError::NoSuchEntityStructure { trajectory: self.descriptor.name.clone() }
     }
 
-    /// Runs `f` on the current store, under its lock.
+    /// Runs `f` on the current store, under its lock. `f` must not call back into the
+    /// runtime for the same trajectory (that would wait for the lock it holds).
     pub fn with_store<R>(
         &self,
         f: impl FnOnce(&mut TrajectoryStore) -> R,
@@ -63,8 +64,11 @@ impl InProcessTrajectory {
                 operation: operation.into(),
             });
         }
-        let mut store = cell.store.lock();
-        f(&mut store)
+        let outcome = f(&mut cell.store.lock());
+        if let Ok(AddOutcome::Held { .. }) = outcome {
+            cell.kick_releaser();
+        }
+        outcome
     }
 
     /// Adds an already shared structure without copying it (zero-copy push).

@@ -1,50 +1,40 @@
-//! The input loop behind computed and operator trajectories: wait on the
-//! subscriptions of every input at once and hand each new sample on, in the order
-//! each input added them.
+//! The input loop behind computed and operator trajectories: every input feeds one
+//! tagged channel ([`FanIn`]), so the worker sees the inputs' samples in the order they
+//! were added across all inputs, and one blocking receive waits on all of them.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
-use crossbeam_channel::{Receiver, Select};
+use crossbeam_channel::{Receiver, select};
 
 use crate::sample::Sample;
-use crate::store::Subscription;
+use crate::store::FanIn;
 
 /// Calls `on_sample(input_index, sample)` for every sample any input adds, until
-/// `stop` is set, `wake` disconnects, or every input has ended.
+/// `stop` is set or `wake` disconnects (the worker is being stopped).
+///
+/// Samples the worker fell too far behind to keep are counted in `overflow`.
 pub(crate) fn run(
-    inputs: Vec<Subscription<Sample>>,
+    fan_in: FanIn<Sample>,
     wake: Receiver<()>,
     stop: &Arc<AtomicBool>,
+    overflow: &AtomicU64,
     mut on_sample: impl FnMut(usize, Sample),
 ) {
-    let mut live: Vec<Option<Subscription<Sample>>> = inputs.into_iter().map(Some).collect();
     loop {
-        if stop.load(Ordering::Relaxed) || live.iter().all(Option::is_none) {
+        if stop.load(Ordering::Relaxed) {
             return;
         }
-        let mut sel = Select::new();
-        let mut slots = Vec::new();
-        for (i, s) in live.iter().enumerate() {
-            if let Some(s) = s {
-                sel.recv(s.receiver());
-                slots.push(i);
-            }
-        }
-        let wake_op = sel.recv(&wake);
-        let op = sel.select();
-        let index = op.index();
-        if index == wake_op {
+        select! {
+            recv(fan_in.receiver()) -> msg => match msg {
+                Ok((input, sample)) => {
+                    overflow.store(fan_in.overflowed(), Ordering::Relaxed);
+                    on_sample(input, sample);
+                }
+                Err(_) => return,
+            },
             // Only ever disconnection: the worker is being stopped.
-            let _ = op.recv(&wake);
-            return;
-        }
-        let input = slots[index];
-        let Some(sub) = &live[input] else { continue };
-        match op.recv(sub.receiver()) {
-            Ok(sample) => on_sample(input, sample),
-            // The input trajectory was destroyed: keep going on the others.
-            Err(_) => live[input] = None,
+            recv(wake) -> _ => return,
         }
     }
 }

@@ -34,7 +34,7 @@ use crate::esgm::{
     TrajectorySpec,
 };
 use crate::sample::Sample;
-use crate::store::{SubscribeOptions, Subscription, TrajectoryStore};
+use crate::store::{FanIn, TrajectoryStore};
 use crate::type_registry::{TypeRegistry, TypeRegistryError};
 use crate::types::EntityStructureType;
 use cell::{Descriptor, TrajectoryCell};
@@ -68,6 +68,8 @@ pub(crate) struct Inner {
     subscriber_capacity: usize,
     log_level: AtomicU8,
     shutdown: AtomicBool,
+    /// Wakes the release thread (see `releaser`).
+    kick: crossbeam_channel::Sender<()>,
 }
 
 impl Inner {
@@ -79,6 +81,11 @@ impl Inner {
 impl Drop for Inner {
     fn drop(&mut self) {
         self.shutdown.store(true, Ordering::Relaxed);
+        // Workers hold their trajectory, not the runtime: stop them explicitly, or they
+        // would run on after the last handle on the runtime is gone.
+        for cell in self.cells() {
+            cell.worker.lock().take();
+        }
     }
 }
 
@@ -114,6 +121,7 @@ impl InProcessEsgmBuilder {
 
     /// Starts the runtime.
     pub fn create(self) -> InProcessEsgm {
+        let (kick, kicks) = crossbeam_channel::bounded(1);
         let inner = Arc::new(Inner {
             clock: self.clock.unwrap_or_else(SystemClock::shared),
             catalog: RwLock::new(Catalog::new(
@@ -125,11 +133,12 @@ impl InProcessEsgmBuilder {
             subscriber_capacity: self.subscriber_capacity.unwrap_or(1024),
             log_level: AtomicU8::new(LogLevel::Info as u8),
             shutdown: AtomicBool::new(false),
+            kick,
         });
         let weak = Arc::downgrade(&inner);
         if let Err(e) = std::thread::Builder::new()
             .name("esgm-releaser".into())
-            .spawn(move || releaser::run(weak))
+            .spawn(move || releaser::run(weak, kicks))
         {
             tracing::error!(error = %e, "could not start the release thread; held samples enter on the next add");
         }
@@ -186,14 +195,20 @@ impl InProcessEsgm {
             .collect()
     }
 
-    /// Subscribes to an input and reads its latest sample in one step, so no update
-    /// falls between the two.
-    fn subscribe_input(&self, cell: &TrajectoryCell) -> (Subscription<Sample>, Option<Sample>) {
-        let mut store = cell.store.lock();
-        let latest = store.get_latest().ok();
-        let sub =
-            store.subscribe(SubscribeOptions::default().capacity(self.inner.subscriber_capacity));
-        (sub, latest)
+    /// Subscribes a worker's fan-in to every input and reads each input's latest sample
+    /// in the same step (under its lock), so no update falls between the two.
+    fn subscribe_inputs(&self, inputs: &[Input]) -> (FanIn<Sample>, Vec<Option<Sample>>) {
+        let fan_in = FanIn::new(self.inner.subscriber_capacity);
+        let latest = inputs
+            .iter()
+            .enumerate()
+            .map(|(i, (_, cell))| {
+                let mut store = cell.store.lock();
+                store.subscribe_tagged(&fan_in, i);
+                store.get_latest().ok()
+            })
+            .collect();
+        (fan_in, latest)
     }
 
     /// A sampling schedule with the seed's zero rules: from = 0 is now, to = 0 forever.
@@ -219,19 +234,20 @@ impl InProcessEsgm {
             }
             TrajectorySource::Computed { unit, .. } => {
                 let cu = self.inner.units.read().get(unit).cloned();
-                let (subs, latest): (Vec<_>, Vec<_>) =
-                    inputs.iter().map(|(_, c)| self.subscribe_input(c)).unzip();
-                cu.map(|cu| workers::unit(cell, clock, cu, subs, latest))
+                cu.map(|cu| {
+                    let (fan_in, latest) = self.subscribe_inputs(inputs);
+                    workers::unit(cell, clock, cu, fan_in, latest)
+                })
             }
             TrajectorySource::Sync { policy, .. } => {
                 let synchronizer = policy.create::<Sample>(inputs.len())?;
-                let subs = inputs.iter().map(|(_, c)| self.subscribe_input(c).0).collect();
+                let (fan_in, _) = self.subscribe_inputs(inputs);
                 let names = inputs.iter().map(|(d, _)| d.name.clone()).collect();
-                Some(workers::sync(cell, clock, synchronizer, names, subs))
+                Some(workers::sync(cell, clock, synchronizer, names, fan_in))
             }
             TrajectorySource::Merge { .. } => {
-                let subs = inputs.iter().map(|(_, c)| self.subscribe_input(c).0).collect();
-                Some(workers::merge(cell, subs))
+                let (fan_in, _) = self.subscribe_inputs(inputs);
+                Some(workers::merge(cell, fan_in))
             }
             TrajectorySource::SampledGenerators { inputs: gens, from, to, sample_period } => {
                 let schedule = self.schedule(*from, *to, *sample_period);
@@ -278,7 +294,11 @@ impl Esgm for InProcessEsgm {
     }
 
     fn create_trajectory(&self, spec: TrajectorySpec) -> Result<InProcessTrajectory, CreateError> {
-        let resolved = self.inner.catalog.read().resolve(&spec)?;
+        // The catalog stays locked until the trajectory is published, so a concurrent
+        // create of the same name, or removal of its sensor or unit, cannot slip in
+        // between the checks and the start of its worker.
+        let mut catalog = self.inner.catalog.write();
+        let resolved = catalog.resolve(&spec)?;
         let inputs = self.input_cells(&spec.inputs())?;
         let name = spec.name.clone();
         let store = TrajectoryStore::builder(name.clone(), resolved.checker)
@@ -291,33 +311,43 @@ impl Esgm for InProcessEsgm {
             info: resolved.info.clone(),
             worker: parking_lot::Mutex::new(None),
             counters: Arc::default(),
+            kick: self.inner.kick.clone(),
         });
-        *cell.worker.lock() = self.start_worker(&spec, &cell, &inputs)?;
-
-        // Publish it under its name (re-pointing keeps subscribers and handles).
-        let mut catalog = self.inner.catalog.write();
         let mut map = self.inner.trajectories.write();
         let descriptor = match map.get(&name) {
-            Some(d) if spec.replace => {
+            Some(d) => {
+                // Re-pointing (the catalog refused it unless `replace` was set): the
+                // old trajectory's subscribers and held samples move to the new one.
                 let old = d.current.write().replace(Arc::clone(&cell));
                 if let Some(old) = old {
                     old.worker.lock().take();
                     let mut old_store = old.store.lock();
-                    cell.store.lock().adopt_subscribers(&mut old_store);
+                    cell.store.lock().adopt(&mut old_store);
                 }
                 Arc::clone(d)
             }
-            // Created concurrently under the same name since the catalog check.
-            Some(_) => return Err(CreateError::EntityStructureAlreadyExists { name }),
             None => {
                 let d = Arc::new(Descriptor {
                     name: name.clone(),
-                    current: parking_lot::RwLock::new(Some(cell)),
+                    current: parking_lot::RwLock::new(Some(Arc::clone(&cell))),
                 });
                 map.insert(name, Arc::clone(&d));
                 d
             }
         };
+        drop(map);
+        // Start the feeder last: it subscribes to its inputs, which may include the
+        // trajectory it replaced (now under the same name).
+        let worker = match self.start_worker(&spec, &cell, &inputs) {
+            Ok(w) => w,
+            Err(e) => {
+                // Not reachable after `resolve` succeeded; undo rather than leave a
+                // trajectory without its feeder.
+                self.inner.trajectories.write().remove(&spec.name);
+                return Err(e);
+            }
+        };
+        *cell.worker.lock() = worker;
         catalog.insert_trajectory(resolved.info);
         Ok(InProcessTrajectory { descriptor })
     }

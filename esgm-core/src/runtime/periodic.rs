@@ -44,10 +44,10 @@ pub(crate) fn run(
         if now < next {
             continue;
         }
-        let late = (now - next) / schedule.period;
+        let late = now.saturating_sub(next) / schedule.period;
         if late > 0 {
             missed(late as u64);
-            next += late * schedule.period;
+            next = next.saturating_add(late.saturating_mul(schedule.period));
             if schedule.to.is_some_and(|to| next > to) {
                 break;
             }
@@ -56,6 +56,10 @@ pub(crate) fn run(
             break;
         }
         tick(next);
-        next += schedule.period;
+        match next.checked_add(schedule.period) {
+            Some(n) => next = n,
+            // The end of time: nothing more to sample.
+            None => break,
+        }
     }
 }

@@ -17,7 +17,7 @@ use crate::frame::{AttributeValuePair, EntityFrame, EntityStructure};
 use crate::generator::GeneratorPolicy;
 use crate::operators::sync::Synchronizer;
 use crate::sample::Sample;
-use crate::store::{AddError, Subscription};
+use crate::store::{AddError, AddOutcome, FanIn};
 use crate::time::Time;
 use crate::value::Value;
 
@@ -60,6 +60,7 @@ fn emit(cell: &TrajectoryCell, es: Arc<EntityStructure>) {
     WorkerCounters::bump(&cell.counters.outputs);
     let result = cell.store.lock().add_shared(es, false);
     match result {
+        Ok(AddOutcome::Held { .. }) => cell.kick_releaser(),
         Ok(_) => {}
         Err(AddError::InvalidType { source, .. }) => {
             WorkerCounters::bump(&cell.counters.invalid_outputs);
@@ -110,13 +111,13 @@ pub(crate) fn unit(
     cell: &Arc<TrajectoryCell>,
     clock: SharedClock,
     cu: Arc<dyn CompUnit>,
-    subscriptions: Vec<Subscription<Sample>>,
+    fan_in: FanIn<Sample>,
     initial: Vec<Option<Sample>>,
 ) -> Worker {
     let c = Arc::clone(cell);
     spawn("unit", cell, move |stop, wake| {
         let mut latest = initial;
-        inputs::run(subscriptions, wake, &stop, |i, sample| {
+        inputs::run(fan_in, wake, &stop, &c.counters.input_overflow, |i, sample| {
             latest[i] = Some(sample);
             let Some(args) = latest.iter().cloned().collect::<Option<Vec<Sample>>>() else {
                 return;
@@ -169,13 +170,21 @@ pub(crate) fn sync(
     clock: SharedClock,
     mut synchronizer: Box<dyn Synchronizer<Sample> + Send>,
     names: Vec<String>,
-    subscriptions: Vec<Subscription<Sample>>,
+    fan_in: FanIn<Sample>,
 ) -> Worker {
     let c = Arc::clone(cell);
     spawn("sync", cell, move |stop, wake| {
-        inputs::run(subscriptions, wake, &stop, |i, sample| {
+        let mut discarded = 0;
+        inputs::run(fan_in, wake, &stop, &c.counters.input_overflow, |i, sample| {
             WorkerCounters::bump(&c.counters.calls);
-            match synchronizer.push(i, sample) {
+            let result = synchronizer.push(i, sample);
+            // Samples the synchronizer gave up on are counted, never lost silently.
+            let now_discarded = synchronizer.dropped();
+            c.counters
+                .discarded
+                .fetch_add(now_discarded - discarded, std::sync::atomic::Ordering::Relaxed);
+            discarded = now_discarded;
+            match result {
                 Ok(sets) => {
                     for set in sets {
                         let vt = set.iter().map(|s| s.valid_time).max().unwrap_or_default();
@@ -197,13 +206,10 @@ pub(crate) fn sync(
 }
 
 /// A merged trajectory (G3): every sample of every input, shared, not copied.
-pub(crate) fn merge(
-    cell: &Arc<TrajectoryCell>,
-    subscriptions: Vec<Subscription<Sample>>,
-) -> Worker {
+pub(crate) fn merge(cell: &Arc<TrajectoryCell>, fan_in: FanIn<Sample>) -> Worker {
     let c = Arc::clone(cell);
     spawn("merge", cell, move |stop, wake| {
-        inputs::run(subscriptions, wake, &stop, |_, sample| {
+        inputs::run(fan_in, wake, &stop, &c.counters.input_overflow, |_, sample| {
             WorkerCounters::bump(&c.counters.calls);
             emit(&c, sample.structure);
         });

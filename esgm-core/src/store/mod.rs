@@ -50,7 +50,9 @@ use subscription::Subscribers;
 
 pub use query::QueryError;
 pub use stats::TrajectoryStats;
-pub use subscription::{CallbackHandle, RecvError, SubscribeOptions, Subscription, SubscriptionId};
+pub use subscription::{
+    CallbackHandle, FanIn, RecvError, SubscribeOptions, Subscription, SubscriptionId,
+};
 pub use violation::{AddError, AddOutcome, DropCause, PolicyViolation};
 
 /// A sample waiting in the reorder buffer, ordered by (valid time, add sequence).
@@ -334,6 +336,13 @@ impl TrajectoryStore {
         self.subscribers.subscribe(options.capacity, backlog.into_iter())
     }
 
+    /// Subscribes `fan_in` to every structure that enters the stream from now on,
+    /// tagged with `tag`: a unit's worker reads all its inputs from one channel, in the
+    /// order they were added across inputs.
+    pub fn subscribe_tagged(&mut self, fan_in: &FanIn<Sample>, tag: usize) -> SubscriptionId {
+        self.subscribers.subscribe_tagged(fan_in, tag)
+    }
+
     /// Ends a subscription; false if it was not a subscription of this store.
     pub fn unsubscribe(&mut self, id: SubscriptionId) -> bool {
         self.subscribers.unsubscribe(id)
@@ -349,11 +358,19 @@ impl TrajectoryStore {
         self.violation_subscribers.unsubscribe(id)
     }
 
-    /// Moves every subscriber (stream and violations) of `old` to this store, so a
-    /// name re-pointed to a new trajectory keeps its subscribers (E5).
-    pub fn adopt_subscribers(&mut self, old: &mut TrajectoryStore) {
+    /// Takes over from `old` when a name is re-pointed to this store (E5): every
+    /// subscriber (stream and violations) moves here and sees this stream from now on,
+    /// and samples `old` held for reordering are offered here, under this policy, so
+    /// none is lost uncounted.
+    pub fn adopt(&mut self, old: &mut TrajectoryStore) {
         self.subscribers.adopt(&mut old.subscribers);
         self.violation_subscribers.adopt(&mut old.violation_subscribers);
+        let mut held: Vec<Held> = old.held.drain().map(|Reverse(h)| h).collect();
+        held.sort();
+        for h in held {
+            // Outcomes are counted in this store's stats.
+            let _ = self.offer(h.es, false);
+        }
     }
 
     /// A snapshot of the statistics.
@@ -412,11 +429,9 @@ impl TrajectoryStore {
             }
         }
         if let DelayConstraint::Max(d) = self.policy.delay {
-            if now - vt > d {
-                return Some((
-                    Constraint::Delay,
-                    format!("delay {} exceeds the maximum {d}", now - vt),
-                ));
+            let delay = now.saturating_sub(vt);
+            if delay > d {
+                return Some((Constraint::Delay, format!("delay {delay} exceeds the maximum {d}")));
             }
         }
         if let Some(f) = &self.filter {
@@ -456,10 +471,13 @@ impl TrajectoryStore {
                 {
                     return Some((Constraint::Change, "identical to the previous sample".into()));
                 }
-                ChangeConstraint::SampleEvery(p) if vt - lvt < p => {
+                ChangeConstraint::SampleEvery(p) if vt.saturating_sub(lvt) < p => {
                     return Some((
                         Constraint::Change,
-                        format!("valid time {vt} is {} after the previous, period {p}", vt - lvt),
+                        format!(
+                            "valid time {vt} is {} after the previous, period {p}",
+                            vt.saturating_sub(lvt)
+                        ),
                     ));
                 }
                 _ => {}
@@ -468,7 +486,7 @@ impl TrajectoryStore {
         if let (CacheConstraint::Duration(t), Some(newest)) =
             (self.policy.cache, self.history.max_valid_time())
         {
-            if newest - vt >= t {
+            if newest.saturating_sub(vt) >= t {
                 return Some((
                     Constraint::Cache,
                     format!("valid time {vt} is outside the cache window ({t} before {newest})"),
@@ -488,7 +506,7 @@ impl TrajectoryStore {
             return self.violated(&es, now, constraint, detail, blocking);
         }
         if let (ChangeConstraint::SampleEvery(p), Some(last)) = (self.policy.change, &self.last) {
-            let skipped = (es.valid_time - last.valid_time) / p - 1;
+            let skipped = es.valid_time.saturating_sub(last.valid_time) / p - 1;
             if skipped > 0 {
                 self.stats.record_missed_sample_points(skipped as u64);
             }
@@ -508,7 +526,9 @@ impl TrajectoryStore {
                 k
             }
             CacheConstraint::Duration(t) => match self.history.max_valid_time() {
-                Some(newest) => self.history.remove_older_than(newest - t + 1),
+                Some(newest) => {
+                    self.history.remove_older_than(newest.saturating_sub(t).saturating_add(1))
+                }
                 None => 0,
             },
         };

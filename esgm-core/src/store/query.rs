@@ -131,7 +131,8 @@ impl TrajectoryStore {
                 let after = self.history.after(t);
                 let pick = match (before, after) {
                     (Some(b), Some(a)) => {
-                        if t - b.vt <= a.vt - t {
+                        // In i128: distances between extreme i64 times overflow i64.
+                        if i128::from(t) - i128::from(b.vt) <= i128::from(a.vt) - i128::from(t) {
                             b
                         } else {
                             a

@@ -47,7 +47,9 @@ impl StatsRecorder {
         }
         self.recent_adds.push_back(add_time);
         if let Some(h) = &mut self.add_delay {
-            h.saturating_record(u64::try_from(add_time - valid_time).unwrap_or(0).max(1));
+            h.saturating_record(
+                u64::try_from(add_time.saturating_sub(valid_time)).unwrap_or(0).max(1),
+            );
         }
     }
 

@@ -152,14 +152,57 @@ impl Drop for CallbackHandle {
     }
 }
 
+/// Where one subscriber's items go.
+#[derive(Debug)]
+enum Sink<T> {
+    /// Its own channel; the writer keeps a second receiver to discard the oldest.
+    Own { sender: Sender<T>, oldest: Receiver<T> },
+    /// A channel shared with other trajectories' subscribers (a unit's inputs), each
+    /// item tagged with the input's index, so the reader sees every input's items in
+    /// the order they were added across all of them.
+    Tagged {
+        tag: usize,
+        sender: Sender<(usize, T)>,
+        oldest: Receiver<(usize, T)>,
+        /// Dead once the [`FanIn`] is dropped.
+        alive: std::sync::Weak<()>,
+    },
+}
+
 /// The writer's side of one subscription.
 #[derive(Debug)]
 struct Subscriber<T> {
     id: SubscriptionId,
-    sender: Sender<T>,
-    /// A second receiver so the writer can discard the oldest item when full.
-    oldest: Receiver<T>,
+    sink: Sink<T>,
     overflow: Arc<AtomicU64>,
+}
+
+/// One channel fed by several trajectories, each item tagged with its input index (see
+/// [`crate::TrajectoryStore::subscribe_tagged`]). Dropping it ends those subscriptions.
+#[derive(Debug)]
+pub struct FanIn<T> {
+    sender: Sender<(usize, T)>,
+    receiver: Receiver<(usize, T)>,
+    overflow: Arc<AtomicU64>,
+    token: Arc<()>,
+}
+
+impl<T> FanIn<T> {
+    /// A fan-in buffering up to `capacity` items before discarding the oldest.
+    pub fn new(capacity: usize) -> Self {
+        let (sender, receiver) = crossbeam_channel::bounded(capacity.max(1));
+        Self { sender, receiver, overflow: Arc::new(AtomicU64::new(0)), token: Arc::new(()) }
+    }
+
+    /// The receiving end, to `select!` on.
+    pub fn receiver(&self) -> &Receiver<(usize, T)> {
+        &self.receiver
+    }
+
+    /// Items discarded because the reader fell behind.
+    pub fn overflowed(&self) -> u64 {
+        self.overflow.load(Ordering::Relaxed)
+    }
 }
 
 /// The subscribers of one trajectory (or of its violations).
@@ -186,13 +229,33 @@ impl<T: Clone> Subscribers<T> {
         let id = SubscriptionId(self.next_id);
         self.next_id += 1;
         let overflow = Arc::new(AtomicU64::new(0));
-        let sub =
-            Subscriber { id, sender, oldest: receiver.clone(), overflow: Arc::clone(&overflow) };
+        let sub = Subscriber {
+            id,
+            sink: Sink::Own { sender, oldest: receiver.clone() },
+            overflow: Arc::clone(&overflow),
+        };
         for item in backlog {
             Self::deliver(&sub, item);
         }
         self.subscribers.push(sub);
         Subscription { id, receiver, overflow }
+    }
+
+    /// Adds a subscriber feeding `fan_in` with items tagged `tag`.
+    pub fn subscribe_tagged(&mut self, fan_in: &FanIn<T>, tag: usize) -> SubscriptionId {
+        let id = SubscriptionId(self.next_id);
+        self.next_id += 1;
+        self.subscribers.push(Subscriber {
+            id,
+            sink: Sink::Tagged {
+                tag,
+                sender: fan_in.sender.clone(),
+                oldest: fan_in.receiver.clone(),
+                alive: Arc::downgrade(&fan_in.token),
+            },
+            overflow: Arc::clone(&fan_in.overflow),
+        });
+        id
     }
 
     /// Removes a subscriber; false if there was none with that id.
@@ -217,29 +280,22 @@ impl<T: Clone> Subscribers<T> {
         overflowed
     }
 
-    fn deliver(s: &Subscriber<T>, mut item: T) -> Delivery {
+    fn deliver(s: &Subscriber<T>, item: T) -> Delivery {
         // The writer keeps a receiver of its own, so the channel never reports the
-        // subscriber gone; the shared overflow counter does: when only the writer's
-        // handle is left, the `Subscription` was dropped.
-        if Arc::strong_count(&s.overflow) == 1 {
-            return Delivery::Gone;
-        }
-        let mut discarded = false;
-        loop {
-            match s.sender.try_send(item) {
-                Ok(()) => {
-                    return if discarded { Delivery::Overflowed } else { Delivery::Sent };
+        // reader gone: an own subscription is gone when only the writer still holds its
+        // overflow counter, a tagged one when its fan-in's token is dropped.
+        match &s.sink {
+            Sink::Own { sender, oldest } => {
+                if Arc::strong_count(&s.overflow) == 1 {
+                    return Delivery::Gone;
                 }
-                Err(TrySendError::Disconnected(_)) => return Delivery::Gone,
-                Err(TrySendError::Full(back)) => {
-                    item = back;
-                    // Only the writer and the subscriber hold receivers: the subscriber
-                    // may have drained the slot meanwhile, which is also fine.
-                    if s.oldest.try_recv().is_ok() {
-                        s.overflow.fetch_add(1, Ordering::Relaxed);
-                        discarded = true;
-                    }
+                push_dropping_oldest(sender, oldest, item, &s.overflow)
+            }
+            Sink::Tagged { tag, sender, oldest, alive } => {
+                if alive.strong_count() == 0 {
+                    return Delivery::Gone;
                 }
+                push_dropping_oldest(sender, oldest, (*tag, item), &s.overflow)
             }
         }
     }
@@ -254,6 +310,31 @@ impl<T: Clone> Subscribers<T> {
     pub fn adopt(&mut self, other: &mut Subscribers<T>) {
         self.next_id = self.next_id.max(other.next_id);
         self.subscribers.append(&mut other.subscribers);
+    }
+}
+
+/// Sends `item`, discarding the oldest waiting item (counted) while the channel is
+/// full; never blocks.
+fn push_dropping_oldest<U>(
+    sender: &Sender<U>,
+    oldest: &Receiver<U>,
+    mut item: U,
+    overflow: &AtomicU64,
+) -> Delivery {
+    let mut discarded = false;
+    loop {
+        match sender.try_send(item) {
+            Ok(()) => return if discarded { Delivery::Overflowed } else { Delivery::Sent },
+            Err(TrySendError::Disconnected(_)) => return Delivery::Gone,
+            Err(TrySendError::Full(back)) => {
+                item = back;
+                // The reader may have drained the slot meanwhile, which is also fine.
+                if oldest.try_recv().is_ok() {
+                    overflow.fetch_add(1, Ordering::Relaxed);
+                    discarded = true;
+                }
+            }
+        }
     }
 }
 
@@ -275,6 +356,23 @@ mod tests {
         assert_eq!(subs.publish(&2), 1); // 7 discarded
         assert_eq!(s.drain(), vec![1, 2]);
         assert_eq!(s.overflowed(), 1);
+    }
+
+    #[test]
+    fn fan_in_keeps_order_across_writers_and_ends_when_dropped() {
+        let mut a = Subscribers::<u32>::default();
+        let mut b = Subscribers::<u32>::default();
+        let fan = FanIn::new(8);
+        a.subscribe_tagged(&fan, 0);
+        b.subscribe_tagged(&fan, 1);
+        a.publish(&10);
+        b.publish(&20);
+        a.publish(&11);
+        let got: Vec<_> = fan.receiver().try_iter().collect();
+        assert_eq!(got, vec![(0, 10), (1, 20), (0, 11)]);
+        drop(fan);
+        a.publish(&12);
+        assert_eq!(a.len(), 0, "a dropped fan-in ends its subscriptions");
     }
 
     #[test]

@@ -85,12 +85,11 @@ fn empty_trajectory_answers_value_not_available() {
 #[test]
 fn one_sample() {
     let mut f = store(FluentStreamPolicy::default());
-    f.clock.set(110);
     assert_eq!(f.store.add(reading(100, 1.0)), Ok(AddOutcome::Added));
-    f.clock.set(150);
+    f.clock.set(1_500);
     let s = &f.store;
     let latest = s.get_latest().unwrap();
-    assert_eq!((latest.valid_time, latest.add_time, latest.query_time), (100, 1_000, 1_000));
+    assert_eq!((latest.valid_time, latest.add_time, latest.query_time), (100, 1_000, 1_500));
     assert_eq!(s.get_nth_latest(0).unwrap().valid_time, 100);
     assert!(not_available(s.get_nth_latest(1)));
     assert_eq!(s.get_at(100).unwrap().valid_time, 100);
@@ -541,7 +540,7 @@ fn re_pointing_keeps_subscribers() {
     let mut old = store(FluentStreamPolicy::default());
     let sub = old.store.subscribe(SubscribeOptions::default());
     let mut new = store(FluentStreamPolicy::default());
-    new.store.adopt_subscribers(&mut old.store);
+    new.store.adopt(&mut old.store);
     new.store.add(reading(1, 0.0)).unwrap();
     old.store.add(reading(2, 0.0)).unwrap();
     assert_eq!(vts(&sub.drain()), vec![1]);
@@ -574,4 +573,47 @@ fn stats_rate_and_delay_percentiles() {
     assert!((st.rate_hz - 10.0).abs() < 1e-6, "{}", st.rate_hz);
     let p50 = st.add_delay_p50.unwrap();
     assert!((4_990_000..=5_010_000).contains(&p50), "{p50}");
+}
+
+#[test]
+fn extreme_times_and_values_never_overflow() {
+    // Delay: a valid time of i64::MIN is infinitely late, not wrapped into "on time".
+    let mut d = store(FluentStreamPolicy::default().delay(DelayConstraint::Max(10)));
+    assert!(matches!(
+        d.store.add(reading(i64::MIN, 0.0)),
+        Ok(AddOutcome::Dropped(PolicyViolation { constraint: Constraint::Delay, .. }))
+    ));
+    // Unconstrained: stats, queries and approximations at the ends of time.
+    let mut f = store(FluentStreamPolicy::default());
+    f.store.add(reading(i64::MIN + 1, 0.0).with("n", i64::MIN)).unwrap();
+    f.store.add(reading(i64::MAX, 0.0).with("n", i64::MAX)).unwrap();
+    let st = f.store.stats();
+    assert_eq!(st.added, 2);
+    assert_eq!(
+        f.store.get_at_approximating(5, &ValueApproximation::Closest).unwrap().valid_time,
+        i64::MAX
+    );
+    let lin = f.store.get_at_approximating(0, &ValueApproximation::Linear).unwrap();
+    assert!(matches!(lin.get("n"), Some(Value::Long(_))));
+    // Time caches and sample periods at the extremes.
+    let mut c = store(
+        FluentStreamPolicy::default()
+            .cache(CacheConstraint::Duration(100))
+            .change(ChangeConstraint::SampleEvery(10)),
+    );
+    c.store.add(reading(i64::MAX, 0.0)).unwrap();
+    assert!(matches!(c.store.add(reading(i64::MIN, 0.0)), Ok(AddOutcome::Dropped(_))));
+}
+
+#[test]
+fn adopting_moves_held_samples_under_the_new_policy() {
+    let mut old = store(FluentStreamPolicy::reasonable(100, 0).unwrap());
+    let sub = old.store.subscribe(SubscribeOptions::default());
+    assert!(matches!(old.store.add(reading(1_000, 1.0)), Ok(AddOutcome::Held { .. })));
+    let mut new = store(FluentStreamPolicy::default());
+    new.store.adopt(&mut old.store);
+    // Unconstrained: the held sample enters at once, and the adopted subscriber sees it.
+    assert_eq!(new.store.stats().added, 1);
+    assert_eq!(vts(&sub.drain()), vec![1_000]);
+    assert_eq!(old.store.stats().held, 0);
 }

@@ -88,6 +88,14 @@ pub fn re_pointing_keeps_subscribers_and_handles<H: Harness>(h: &H) {
     let got: Vec<_> = (0..2).map(|_| sub.recv_timeout(WAIT).map(|s| x_of(&s))).collect();
     assert_eq!(got, vec![Ok(Some(1.0)), Ok(Some(2.0))]);
     wait_stored(&downstream, 2);
+    // Re-pointing may not change the type (readers were checked against it) nor make
+    // the name read itself.
+    assert!(matches!(
+        e.create_trajectory(TrajectorySpec::primitive("r", "Image").replace()),
+        Err(CreateError::TypeChange { .. })
+    ));
+    let looped = e.create_trajectory(TrajectorySpec::computed("r", "copy", ["d"]).replace());
+    assert!(matches!(looped, Err(CreateError::Cycle { .. })), "{looped:?}");
 }
 
 /// T4: only primitive trajectories take structures from outside.

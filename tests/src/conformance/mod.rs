@@ -82,6 +82,7 @@ macro_rules! conformance_tests {
             operators::sync_exact,
             operators::sync_approximate,
             operators::merge_interleaves_inputs,
+            operators::merge_keeps_add_order_across_inputs,
             operators::sampled_generator_and_state,
         );
     };

@@ -30,7 +30,7 @@ fn valid_times<T: EntityTrajectoryStructure>(t: &T) -> Vec<Time> {
 pub fn sampling_periods_and_from_to<H: Harness>(h: &H) {
     register_reading(h);
     let e = h.esgm();
-    let (_, sensor) = counting_sensor();
+    let (calls, sensor) = counting_sensor();
     e.add_sensor_interface("cam", "Reading", sensor).unwrap();
     let t0 = h.now();
     let p = millis(100);
@@ -43,7 +43,11 @@ pub fn sampling_periods_and_from_to<H: Harness>(h: &H) {
     wait_stored(&t, 3);
     h.advance(p);
     h.advance(p);
+    // Past `to` the sensor is not asked again (give a wrongly running sampler time to
+    // show itself).
+    assert!(!wait_for(std::time::Duration::from_millis(200), || calls.load(Ordering::SeqCst) > 3));
     assert_eq!(valid_times(&t), vec![t0 + p, t0 + 2 * p, t0 + 3 * p]);
+    assert_eq!(t.stats().unwrap().dropped_total, 0);
     // from = 0: starts now; illegal policies are refused.
     let now = e.create_entity_trajectory_structure("now", "cam", 0, 0, p, 0, 0).unwrap();
     wait_stored(&now, 1);
