@@ -52,6 +52,21 @@ pub struct Resolved {
     pub info: TrajectoryInfo,
 }
 
+/// A sampling window with the seed's zero rules: `from = 0` is now, `to = 0` forever;
+/// otherwise both are non-negative and `from ≤ to`.
+fn check_window(from: i64, to: i64) -> Result<(), PolicyError> {
+    if from < 0 {
+        return Err(PolicyError::illegal("from", from, "must be 0 (now) or positive"));
+    }
+    if to < 0 {
+        return Err(PolicyError::illegal("to", to, "must be 0 (forever) or positive"));
+    }
+    if from != 0 && to != 0 && to < from {
+        return Err(PolicyError::illegal("to", to, "must not be before from"));
+    }
+    Ok(())
+}
+
 /// Types, sensors, units and trajectories, by name.
 #[derive(Debug, Clone, Default)]
 pub struct Catalog {
@@ -323,6 +338,11 @@ impl Catalog {
         if operator && inputs.is_empty() {
             return Err(CreateError::NoInputs { name });
         }
+        if let TrajectorySource::Sampled { from, to, .. }
+        | TrajectorySource::SampledGenerators { from, to, .. } = &spec.source
+        {
+            check_window(*from, *to)?;
+        }
         let (checker, source) = match &spec.source {
             TrajectorySource::Primitive { type_name } => (self.checker(type_name)?, None),
             TrajectorySource::Sampled { sensor, sample_period, .. } => {
@@ -468,6 +488,11 @@ mod tests {
         ));
         assert!(c.resolve(&TrajectorySpec::primitive("images", "Image")).is_err(), "name taken");
         assert!(c.resolve(&TrajectorySpec::primitive("images", "Image").replace()).is_ok());
+        // Sampling windows follow the seed's zero rules.
+        for (from, to) in [(-1, 0), (0, -5), (200, 100)] {
+            let spec = TrajectorySpec::sampled("w", "camera", 10).unwrap().between(from, to);
+            assert!(matches!(c.resolve(&spec), Err(CreateError::IllegalPolicy(_))), "{from} {to}");
+        }
         // Re-pointing keeps the type and may not loop back to itself.
         c.insert_trajectory(blobs.info);
         assert!(matches!(

@@ -24,8 +24,11 @@ pub enum SensorError {
 /// trajectory created from it.
 ///
 /// It must answer at any time, since it does not choose when it is asked. `qtime` is
-/// the sample time; a sensor that reads "now" should stamp its structure's valid time
-/// with it (or with the true acquisition time if it knows better).
+/// the scheduled sample time (an exact multiple of the period after the start); a
+/// sensor that reads "now" should stamp its structure's valid time with it. A sensor
+/// that stamps its own acquisition time instead must keep consecutive valid times at
+/// least a period apart, or the sampled trajectory's "sample every period" constraint
+/// drops the early ones (counted as change violations).
 pub trait SensorInterface: Send + Sync {
     /// The current value, as asked at `qtime`.
     fn get_current_value(&self, qtime: Time) -> Result<EntityStructure, SensorError>;

@@ -235,6 +235,8 @@ pub trait Esgm: Send + Sync {
     fn memory_stats(&self) -> MemoryStats;
     /// E7: the log level.
     fn log_level(&self) -> LogLevel;
-    /// E7: sets the log level.
+    /// E7: sets the log level. esgm logs through `tracing`; the level is applied by the
+    /// process's subscriber (the `esgm` binaries install one that follows it). A
+    /// library embedding the in-process runtime with its own subscriber reads it here.
     fn set_log_level(&self, level: LogLevel);
 }

@@ -162,7 +162,8 @@ impl TrajectorySpec {
         self
     }
 
-    /// Sets the start and end of a sampled source (0 rules as in E3).
+    /// Sets the start and end of a sampled source (0 rules as in E3), and, as E3 does,
+    /// the policy's duration constraint to the same interval.
     #[must_use]
     pub fn between(mut self, from_time: Time, to_time: Time) -> Self {
         match &mut self.source {
@@ -170,6 +171,8 @@ impl TrajectorySpec {
             | TrajectorySource::SampledGenerators { from, to, .. } => {
                 *from = from_time;
                 *to = to_time;
+                self.policy.duration =
+                    crate::policy::DurationConstraint::Between { from: from_time, to: to_time };
             }
             _ => {}
         }
