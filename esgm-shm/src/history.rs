@@ -16,6 +16,12 @@
 //! them from the same policy and maximum, so whoever comes first creates a service the
 //! others can open.
 //!
+//! Memory, measured: a writer of small structures with an `All` cache and the defaults
+//! (bound 1024, 8 readers, 4 KiB samples) maps a 73 MB segment in `/dev/shm` but
+//! commits 0.1 MB at start; with one reader holding 1024 samples, 9 MB (the samples and
+//! that reader's 1024-deep queue). Image trajectories want an `Elements(n)` cache and
+//! fewer `max_subscribers`.
+//!
 //! # Lookups by header times
 //! Queries are by valid time, but the history is in add order. When the two agree (any
 //! monotone stream) one deque answers both, with binary searches over the valid times
@@ -50,12 +56,14 @@ pub fn history_bound(cache: CacheConstraint, max_history: usize) -> usize {
 ///
 /// The publisher keeps `bound` samples for late readers; each reader may hold `bound`
 /// samples plus the one it is receiving; a reader's queue holds at least `bound` so
-/// that the whole history fits when it connects.
+/// that the whole history fits when it connects. Queue and held samples only grow from
+/// `base`, so a plain [`crate::TrajectorySubscriber`] with `base` settings (e.g. a unit
+/// that needs no history) can still open the service.
 pub fn history_qos(bound: usize, base: TrajectoryQos) -> TrajectoryQos {
     TrajectoryQos {
         history_size: bound,
         subscriber_buffer_size: base.subscriber_buffer_size.max(bound),
-        max_borrowed_samples: bound + 1,
+        max_borrowed_samples: base.max_borrowed_samples.max(bound + 1),
         ..base
     }
 }
@@ -356,11 +364,15 @@ mod tests {
         assert_eq!(history_bound(CacheConstraint::Elements(0), 16), 16);
         assert_eq!(history_bound(CacheConstraint::All, 0), 1);
         assert_eq!(history_bound(CacheConstraint::Duration(5), 32), 32);
-        let q = history_qos(20, TrajectoryQos::default());
+        let base = TrajectoryQos::default();
+        let q = history_qos(20, base);
         assert_eq!(
             (q.history_size, q.subscriber_buffer_size, q.max_borrowed_samples),
             (20, 20, 21)
         );
-        assert_eq!(q.max_subscribers, TrajectoryQos::default().max_subscribers);
+        assert_eq!(q.max_subscribers, base.max_subscribers);
+        // Never below the base: plain subscribers with the base settings still fit.
+        let q = history_qos(1, base);
+        assert_eq!((q.subscriber_buffer_size, q.max_borrowed_samples), (8, 4));
     }
 }

@@ -431,7 +431,7 @@ impl ShmTrajectoryReader {
         let h = *sample.header();
         if let Some(expected) = self.next_sequence {
             // A smaller number is a restarted writer, not a loss.
-            self.counts.lost += h.sequence.saturating_sub(expected);
+            self.counts.lost = self.counts.lost.saturating_add(h.sequence.saturating_sub(expected));
         }
         self.next_sequence = Some(h.sequence.wrapping_add(1));
         self.history.push(h.valid_time, sample);
@@ -514,7 +514,9 @@ impl ShmTrajectoryReader {
             ValueApproximation::Closest => {
                 let pick = match (self.history.before(t), self.history.after(t)) {
                     (Some(b), Some(a)) => {
-                        if t - b.vt <= a.vt - t {
+                        // Wide arithmetic: valid times come from another process and
+                        // may be anywhere in `i64`.
+                        if i128::from(t) - i128::from(b.vt) <= i128::from(a.vt) - i128::from(t) {
                             b
                         } else {
                             a

@@ -279,7 +279,7 @@ impl ViolationSubscriber {
         stats.received += 1;
         if let Some(expected) = self.next_sequence.get() {
             // A smaller sequence is a restarted writer, not a loss.
-            stats.lost += record.sequence.saturating_sub(expected);
+            stats.lost = stats.lost.saturating_add(record.sequence.saturating_sub(expected));
         }
         self.next_sequence.set(Some(record.sequence.wrapping_add(1)));
         let violation = record.to_violation(&self.trajectory);

@@ -24,16 +24,57 @@
 //! [`ShmTrajectoryWriter::release_due`], which the writer's owner calls at
 //! [`ShmTrajectoryWriter::next_release_time`].
 //!
+//! ```no_run
+//! use std::time::Duration;
+//! use esgm_core::{EntityStructure, FluentStreamPolicy, TypeChecker, TypeRegistry};
+//! use esgm_shm::{ShmTrajectoryReader, ShmTrajectoryWriter};
+//! use iceoryx2::prelude::{NodeBuilder, ipc};
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let registry = TypeRegistry::with_library();
+//! let checker = TypeChecker::new(&registry, "RobotState")?;
+//! // Monotone order, 50 ms delay with reordering, the last 100 kept.
+//! let policy = FluentStreamPolicy::reasonable(50_000_000, 100)?;
+//!
+//! // In the producing process:
+//! let node = NodeBuilder::new().create::<ipc::Service>()?;
+//! let mut writer = ShmTrajectoryWriter::builder("robot_state", checker.clone())
+//!     .domain("lab")
+//!     .policy(policy.clone())
+//!     .create(&node)?;
+//! let state = EntityStructure::new("robot1", 0, 0).with("x", 1.0).with("y", 2.0);
+//! writer.add(state.with("dir", 0.0))?; // held for the delay, then published in order
+//! writer.release_due()?;
+//!
+//! // In any other process, with the same policy:
+//! let node = NodeBuilder::new().create::<ipc::Service>()?;
+//! let mut reader = ShmTrajectoryReader::builder("robot_state", checker)
+//!     .domain("lab")
+//!     .policy(policy)
+//!     .create(&node)?;
+//! if let Some(sample) = reader.next_sample(Duration::from_millis(100))? {
+//!     let archived = sample.structure()?; // read in place, in shared memory
+//!     println!("{} valid at {}", archived.name, sample.valid_time());
+//! }
+//! let latest = reader.get_latest()?; // a lookup in this process, no round trip
+//! println!("latest valid at {}", latest.valid_time());
+//! # Ok(())
+//! # }
+//! ```
+//!
 //! # Costs
 //! A structure is type-checked and filtered on the writer's heap, then encoded once,
 //! into the loaned shared memory; readers then use it in place. Images pass the gate
 //! like any structure (one encode into the loan): the in-place image loans of
 //! [`crate::ImageLoan`] bypass the gate and suit trajectories without a policy.
 
+use std::cell::Cell;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicI64, Ordering};
 use std::time::Duration;
 
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::prelude::ipc;
 use iceoryx2::service::port_factory::PortFactory;
 
 use esgm_core::{
@@ -49,7 +90,7 @@ use crate::publisher::{
     TrajectoryPublisher,
 };
 use crate::qos::TrajectoryQos;
-use crate::service::{OpenError, ShmNode, open_data_service};
+use crate::service::{OpenError, ShmNode, WakeService, open_data_service, open_wake_service};
 use crate::service_name::{DEFAULT_DOMAIN, TrajectoryServiceNames};
 use crate::violations::ViolationPublisher;
 
@@ -213,6 +254,8 @@ impl ShmTrajectoryWriterBuilder {
         if publishers > 1 {
             return Err(WriterCreateError::AlreadyWritten { trajectory: self.name, publishers });
         }
+        let wake_service = open_wake_service(node, &names)?;
+        let wake = wake_service.notifier_builder().create().map_err(OpenError::Notifier)?;
         let violations = ViolationPublisher::create(node, &self.domain, &self.name)?;
         let capacity = INITIAL_GATE_CAPACITY;
         let entered = gate.subscribe(SubscribeOptions::default().capacity(capacity));
@@ -224,6 +267,9 @@ impl ShmTrajectoryWriterBuilder {
             capacity,
             publisher,
             violations,
+            wake,
+            wake_service,
+            readers_seen: Cell::new((0, 0)),
             add_time,
             policy: self.policy,
             domain: self.domain,
@@ -313,6 +359,11 @@ pub struct ShmTrajectoryWriter {
     capacity: usize,
     publisher: TrajectoryPublisher,
     violations: ViolationPublisher,
+    /// Wakes readers that received the history in [`Self::update_connections`].
+    wake: Notifier<ipc::Service>,
+    wake_service: WakeService,
+    /// Readers and wake-up listeners at the last [`Self::update_connections`].
+    readers_seen: Cell<(usize, usize)>,
     add_time: Arc<AddTimeClock>,
     policy: FluentStreamPolicy,
     domain: String,
@@ -368,10 +419,27 @@ impl ShmTrajectoryWriter {
         self.publisher.subscriber_count()
     }
 
-    /// Hands the history to readers that connected since the last publish; call it
-    /// periodically if the trajectory is written rarely (see [`crate::publisher`]).
+    /// Hands the history to readers that connected since the last publish, and wakes
+    /// them; call it periodically if the trajectory is written rarely (see
+    /// [`crate::publisher`]).
+    ///
+    /// iceoryx2 delivers the history without a wake-up, so a new reader blocked in
+    /// [`crate::ShmTrajectoryReader::next_sample`] would sleep until its timeout with
+    /// the history in its queue. The writer therefore notifies when the number of
+    /// readers or of their wake-up listeners changed since the last call (a reader's
+    /// listener appears a moment after its port; a publish notifies anyway).
     pub fn update_connections(&self) -> Result<(), PublishError> {
-        self.publisher.update_connections()
+        self.publisher.update_connections()?;
+        let readers = self.publisher.subscriber_count();
+        let listeners = self.wake_service.dynamic_config().number_of_listeners();
+        let now = (readers, listeners);
+        if now != self.readers_seen.replace(now) && readers > 0 {
+            // A lost wake-up only delays the new reader until its timeout.
+            if let Err(e) = self.wake.notify() {
+                tracing::debug!(trajectory = %self.name(), error = ?e, "cannot wake new readers");
+            }
+        }
+        Ok(())
     }
 
     /// Adds a structure; a constraint violation drops it, counts it and publishes it
