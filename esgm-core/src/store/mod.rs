@@ -333,6 +333,9 @@ impl TrajectoryStore {
                 query_time: e.add_time,
             })
             .collect();
+        // A replay longer than the buffer keeps its newest samples; the rest count as
+        // overflow, like any sample a subscriber had no room for.
+        self.stats.record_overflow(backlog.len().saturating_sub(options.capacity.max(1)) as u64);
         self.subscribers.subscribe(options.capacity, backlog.into_iter())
     }
 
@@ -557,7 +560,8 @@ impl TrajectoryStore {
             detail,
         };
         tracing::debug!(trajectory = %self.name, %constraint, detail = %v.detail, "sample dropped");
-        self.violation_subscribers.publish(&v);
+        let overflow = self.violation_subscribers.publish(&v);
+        self.stats.record_overflow(overflow);
         if blocking {
             Err(AddError::PolicyViolation(Box::new(v)))
         } else {

@@ -138,7 +138,8 @@ pub struct TrajectoryStats {
     pub held: usize,
     /// Live subscribers.
     pub subscribers: usize,
-    /// Samples discarded from slow subscribers' buffers.
+    /// Samples (and violation reports) discarded from slow subscribers' buffers,
+    /// replays longer than a new subscriber's buffer included.
     pub subscriber_overflow: u64,
     /// Sample points skipped by a sampled stream (gaps of two periods or more).
     pub missed_sample_points: u64,

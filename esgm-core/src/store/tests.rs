@@ -517,6 +517,10 @@ fn slow_subscriber_never_blocks_the_writer_and_overflow_is_counted() {
     assert_eq!(vts(&slow.drain()), vec![96, 97, 98, 99], "the freshest are kept");
     assert_eq!(slow.overflowed(), 96);
     assert_eq!(f.store.stats().subscriber_overflow, 96);
+    // A replay longer than the buffer keeps the newest and counts the rest.
+    let late = f.store.subscribe(SubscribeOptions::default().last(10).capacity(4));
+    assert_eq!(vts(&late.drain()), vec![96, 97, 98, 99]);
+    assert_eq!(f.store.stats().subscriber_overflow, 96 + 6);
     assert_eq!(f.store.stats().added, 100);
 }
 

@@ -90,7 +90,10 @@ pub fn subscriptions_in_add_order_with_replay<H: Harness>(h: &H) {
     assert_eq!(got, vec![Ok(Some(2.0)), Ok(Some(5.0)), Ok(Some(4.0))]);
     t.unsubscribe(late.id()).unwrap();
     t.add(reading(t0 + 9, 9.0)).unwrap();
-    assert!(late.recv_timeout(std::time::Duration::from_millis(50)).is_err());
+    assert_eq!(
+        late.recv_timeout(std::time::Duration::from_millis(50)).map(|s| s.valid_time),
+        Err(esgm_core::store::RecvError::Closed)
+    );
 }
 
 /// C7/T4: non-blocking adds drop, count and notify.
