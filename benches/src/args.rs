@@ -7,7 +7,9 @@ use anyhow::{Context as _, bail};
 use clap::Parser;
 
 use crate::config::RunConfig;
+use crate::peer_role::PeerRole;
 use crate::pin::Pinning;
+use crate::wait_mode::WaitMode;
 
 /// Latency benchmarks of esgm, each next to a baseline measured in the same run.
 ///
@@ -25,7 +27,7 @@ pub struct Args {
     pub json: Option<PathBuf>,
 
     /// Pin the measuring thread to the first core and its peers (echo threads, unit
-    /// and sampler workers) to the second.
+    /// and sampler workers, peer processes) to the second.
     #[arg(long)]
     pub pin: bool,
 
@@ -41,6 +43,23 @@ pub struct Args {
     /// List the scenarios and exit.
     #[arg(long)]
     pub list: bool,
+
+    /// Internal: run as the peer process of cross-process scenario SCENARIO (esgm-bench
+    /// starts itself this way; see `peer_role`).
+    #[arg(long, hide = true, value_name = "SCENARIO", requires_all = ["peer_wait", "peer_domain"])]
+    pub peer: Option<String>,
+
+    /// Internal: how the peer waits.
+    #[arg(long, hide = true, value_enum, requires = "peer")]
+    pub peer_wait: Option<WaitMode>,
+
+    /// Internal: the domain (service namespace, socket name) the peer meets in.
+    #[arg(long, hide = true, requires = "peer")]
+    pub peer_domain: Option<String>,
+
+    /// Internal: the core to pin the peer to.
+    #[arg(long, hide = true, requires = "peer")]
+    pub peer_core: Option<usize>,
 }
 
 impl Args {
@@ -58,7 +77,19 @@ impl Args {
                 }
             }
         }
-        let pin = if self.pin { Some(Pinning::detect().context("--pin")?) } else { None };
+        let peer = match (self.peer, self.peer_wait, self.peer_domain) {
+            (Some(scenario), Some(wait), Some(domain)) => {
+                Some(PeerRole { scenario, wait, domain, core: self.peer_core })
+            }
+            // clap's `requires` rules out the other combinations.
+            _ => None,
+        };
+        // A peer is pinned to the core it is given, not to the ones it can see.
+        let pin = if self.pin && peer.is_none() {
+            Some(Pinning::detect().context("--pin")?)
+        } else {
+            None
+        };
         Ok(RunConfig {
             quick: self.quick,
             json: self.json,
@@ -66,6 +97,7 @@ impl Args {
             only,
             samples: self.samples,
             list: self.list,
+            peer,
         })
     }
 }
@@ -86,6 +118,21 @@ mod tests {
         assert_eq!(c.only.as_deref(), Some("hop"));
         assert_eq!(c.samples, Some(5));
         assert!(c.pin.is_none());
+    }
+
+    #[test]
+    fn a_peer_role_round_trips_through_its_arguments() {
+        let role = PeerRole {
+            scenario: "esgm-small".into(),
+            wait: WaitMode::SpinThenBlock,
+            domain: "esgm-bench-1-0".into(),
+            core: Some(1),
+        };
+        let args = Args::try_parse_from(std::iter::once("esgm-bench".into()).chain(role.to_args()))
+            .unwrap();
+        assert_eq!(args.into_config().unwrap().peer, Some(role));
+        assert!(parse(&["--peer", "esgm-small"]).is_err(), "wait and domain are required");
+        assert!(parse(&["--peer-wait", "spin"]).is_err(), "only with --peer");
     }
 
     #[test]

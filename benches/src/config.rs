@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 
+use crate::peer_role::PeerRole;
 use crate::pin::Pinning;
 
 /// What to run and how, checked (see [`crate::args::Args::into_config`]).
@@ -19,4 +20,6 @@ pub struct RunConfig {
     pub samples: Option<u64>,
     /// List the scenarios instead of running them.
     pub list: bool,
+    /// Run as the peer process of a cross-process scenario instead of measuring.
+    pub peer: Option<PeerRole>,
 }

@@ -62,6 +62,7 @@ impl Latency {
             name: name.to_owned(),
             payload_bytes: 0,
             wait,
+            wait_strategy: None,
             n: self.len(),
             p50_ns: self.quantile(0.5),
             p99_ns: self.quantile(0.99),

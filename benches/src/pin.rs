@@ -3,7 +3,7 @@
 //! Pinning removes migrations and makes a cross-core hop really cross-core, so runs
 //! compare; without it the scheduler places threads as it likes (what an unpinned
 //! robot program gets). The first two cores the OS reports are used (0 and 1 on a
-//! two-core machine).
+//! two-core machine). A peer *process* is pinned to the peer core too.
 
 use std::cell::Cell;
 
@@ -64,6 +64,12 @@ impl Pinning {
         PINNED_TO.set(Some(self.peer.id));
         Ok(())
     }
+}
+
+/// Pins the calling thread to core `id`: for a peer process, which is told its core
+/// (see [`crate::peer_role::PeerRole::core`]).
+pub fn pin_to_core(id: usize) -> anyhow::Result<()> {
+    pin(CoreId { id })
 }
 
 fn pin(core: CoreId) -> anyhow::Result<()> {

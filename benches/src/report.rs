@@ -4,8 +4,14 @@
 //! compares runs: `{"scenarios":[{"name","payload_bytes","wait":"spin"|"event","n",
 //! "p50_ns","p99_ns","p999_ns","max_ns"}]}`. Fields may be added (the optional ones
 //! below are left out when empty); none may be renamed or removed.
+//!
+//! `(name, wait)` identifies a row. Where a scenario measures more than the two waits
+//! (esgm's default spin-then-block strategy beside pure blocking), the extra row gets
+//! its own name and says its strategy in `wait_strategy` (see [`crate::wait_mode`]).
 
 use serde::{Deserialize, Serialize};
+
+use crate::target::Target;
 
 /// How the receiving side waits for the next message.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -76,6 +82,10 @@ pub struct Measurement {
     pub payload_bytes: u64,
     /// How the receiver waits.
     pub wait: Wait,
+    /// The exact wait strategy where `wait` does not say it all (cross-process rows:
+    /// `busy-spin`, `block`, `spin-then-block`; see [`crate::wait_mode::WaitMode::label`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wait_strategy: Option<String>,
     /// Samples recorded (warm-up excluded).
     pub n: u64,
     /// Median.
@@ -106,6 +116,13 @@ impl Measurement {
     #[must_use]
     pub fn payload_bytes(mut self, bytes: u64) -> Self {
         self.payload_bytes = bytes;
+        self
+    }
+
+    /// Sets the exact wait strategy.
+    #[must_use]
+    pub fn wait_strategy(mut self, strategy: &str) -> Self {
+        self.wait_strategy = Some(strategy.to_owned());
         self
     }
 
@@ -143,6 +160,9 @@ impl Measurement {
 pub struct Report {
     /// One row per scenario and wait strategy.
     pub scenarios: Vec<Measurement>,
+    /// The goals the run's scenarios set, for the table; not part of the JSON.
+    #[serde(skip)]
+    pub targets: Vec<Target>,
 }
 
 impl Report {
@@ -163,6 +183,7 @@ mod tests {
             name: name.into(),
             payload_bytes: 100,
             wait,
+            wait_strategy: None,
             n: 10,
             p50_ns: 1,
             p99_ns: 2,
@@ -177,7 +198,7 @@ mod tests {
 
     #[test]
     fn json_has_the_issue_fields_and_leaves_empty_extras_out() {
-        let report = Report { scenarios: vec![row("a", Wait::Spin)] };
+        let report = Report { scenarios: vec![row("a", Wait::Spin)], ..Report::default() };
         let json = serde_json::to_value(&report).unwrap();
         let s = &json["scenarios"][0];
         for field in ["name", "payload_bytes", "wait", "n", "p50_ns", "p99_ns", "p999_ns", "max_ns"]
@@ -187,6 +208,7 @@ mod tests {
         assert_eq!(s["wait"], "spin");
         assert!(s.get("baseline").is_none());
         assert!(s.get("notes").is_none());
+        assert!(s.get("wait_strategy").is_none());
         let back: Report = serde_json::from_value(json).unwrap();
         assert_eq!(back, report);
     }
@@ -200,6 +222,7 @@ mod tests {
                 row("hop", Wait::Event).baseline("floor"),
                 row("chain", Wait::Event).baseline("missing"),
             ],
+            ..Report::default()
         };
         let hop = &report.scenarios[2];
         assert_eq!(report.baseline_of(hop).map(|b| b.wait), Some(Wait::Event));

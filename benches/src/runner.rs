@@ -6,6 +6,8 @@ use std::time::Instant;
 use anyhow::{Context as _, bail};
 
 use crate::config::RunConfig;
+use crate::peer_role::PeerRole;
+use crate::pin::pin_to_core;
 use crate::report::Report;
 use crate::scenario::{Context, Scenario};
 
@@ -44,6 +46,22 @@ pub fn run(
             scenario.run(&ctx).with_context(|| format!("scenario {} failed", scenario.name()))?;
         let _ = writeln!(progress, "{:>6.1} s", started.elapsed().as_secs_f64());
         report.scenarios.extend(rows);
+        report.targets.extend(scenario.targets());
     }
     Ok(report)
+}
+
+/// Runs as the peer process `role` describes (see [`crate::peer_role`]): the peer side
+/// of the scenario it names, pinned to its core if given one. Returns the notes the
+/// peer has for the report.
+pub fn run_peer(role: &PeerRole, all: &[Box<dyn Scenario>]) -> anyhow::Result<Vec<String>> {
+    let Some(scenario) = all.iter().find(|s| s.name() == role.scenario) else {
+        bail!("--peer {:?} names no scenario", role.scenario);
+    };
+    if let Some(core) = role.core {
+        pin_to_core(core).context("--peer-core")?;
+    }
+    scenario
+        .run_peer(role)
+        .with_context(|| format!("peer of {} ({})", role.scenario, role.wait.arg()))
 }

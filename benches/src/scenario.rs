@@ -8,8 +8,12 @@ use std::time::{Duration, Instant};
 use anyhow::Context as _;
 
 use crate::config::RunConfig;
+use crate::peer_process::PeerProcess;
+use crate::peer_role::PeerRole;
 use crate::pin::Pinning;
 use crate::report::{Measurement, Wait};
+use crate::target::Target;
+use crate::wait_mode::WaitMode;
 
 /// How long the measuring thread pauses before each `event` hop.
 ///
@@ -34,6 +38,19 @@ pub trait Scenario {
     fn summary(&self) -> &'static str;
     /// Measures.
     fn run(&self, ctx: &Context) -> anyhow::Result<Vec<Measurement>>;
+
+    /// The goals this scenario's rows are held to, printed with the table (none by
+    /// default).
+    fn targets(&self) -> Vec<Target> {
+        Vec::new()
+    }
+
+    /// The peer side of a cross-process scenario, run in the peer process that
+    /// [`Context::spawn_peer_process`] starts: echoes until told to stop, then returns
+    /// notes for the report. Scenarios without a peer process keep this default.
+    fn run_peer(&self, role: &PeerRole) -> anyhow::Result<Vec<String>> {
+        anyhow::bail!("scenario {} has no peer process (asked for {:?})", self.name(), role.wait)
+    }
 }
 
 /// The settings a scenario runs with.
@@ -101,6 +118,22 @@ impl Context {
             })
             .with_context(|| format!("could not start the {name} thread"))?;
         Ok(Peer { name: name.to_owned(), thread })
+    }
+
+    /// Starts `esgm-bench` again as the peer process of `scenario`, waiting with `wait`
+    /// and meeting in `domain`; pinned to the peer core under `--pin`.
+    pub fn spawn_peer_process(
+        &self,
+        scenario: &str,
+        wait: WaitMode,
+        domain: &str,
+    ) -> anyhow::Result<PeerProcess> {
+        PeerProcess::spawn(&PeerRole {
+            scenario: scenario.to_owned(),
+            wait,
+            domain: domain.to_owned(),
+            core: self.pin.map(|p| p.peer_core()),
+        })
     }
 }
 

@@ -6,6 +6,7 @@ use std::fmt::Write as _;
 use crate::config::RunConfig;
 use crate::report::{Measurement, Method, Report, Wait};
 use crate::scenario::EVENT_GAP;
+use crate::target::ratio_label;
 
 const HEADER: [&str; 12] = [
     "name",
@@ -104,6 +105,8 @@ pub fn render(report: &Report, config: &RunConfig) -> String {
     }
     let _ = writeln!(out, "{:>8}: ratio to the baseline row (and the difference)", "vs");
 
+    out.push_str(&targets(report));
+
     let notes: Vec<String> = report.scenarios.iter().flat_map(notes_of).collect();
     if !notes.is_empty() {
         let _ = writeln!(out, "notes:");
@@ -114,11 +117,72 @@ pub fn render(report: &Report, config: &RunConfig) -> String {
     out
 }
 
+/// The targets of the run, one aligned line each.
+fn targets(report: &Report) -> String {
+    let mut out = String::new();
+    if report.targets.is_empty() {
+        return out;
+    }
+    let _ = writeln!(
+        out,
+        "targets (p50 of a row / p50 of another, same wait, this run; shown, not asserted):"
+    );
+    let lines: Vec<[String; 5]> = report
+        .targets
+        .iter()
+        .map(|t| {
+            let what = format!("{} / {} ({})", t.row, t.baseline, t.wait.as_str());
+            match t.evaluate(report) {
+                Ok(o) => [
+                    what,
+                    format!("×{}", ratio_label(o.p50_ratio)),
+                    format!("(p99 ×{})", ratio_label(o.p99_ratio)),
+                    format!("target {}", t.bound_label()),
+                    if o.met { "met".to_owned() } else { "MISSED".to_owned() },
+                ],
+                Err(missing) => [
+                    what,
+                    "-".to_owned(),
+                    String::new(),
+                    format!("target {}", t.bound_label()),
+                    format!("({} not run)", missing.join(", ")),
+                ],
+            }
+        })
+        .collect();
+    let mut widths = [0usize; 5];
+    for line in &lines {
+        for (w, cell) in widths.iter_mut().zip(line) {
+            *w = (*w).max(cell.chars().count());
+        }
+    }
+    for line in &lines {
+        let mut text = String::new();
+        for (i, cell) in line.iter().enumerate() {
+            let pad = widths[i] - cell.chars().count();
+            text.push_str("  ");
+            // The ratio is a number: right-aligned.
+            if i == 1 {
+                text.extend(std::iter::repeat_n(' ', pad));
+                text.push_str(cell);
+            } else {
+                text.push_str(cell);
+                text.extend(std::iter::repeat_n(' ', pad));
+            }
+        }
+        let _ = writeln!(out, "{}", text.trim_end());
+    }
+    out
+}
+
 fn wait_legend(wait: Wait) -> String {
     match wait {
-        Wait::Spin => "receivers busy-poll (try_recv in a loop)".to_owned(),
+        Wait::Spin => {
+            "receivers busy-poll (try_recv, an iceoryx2 receive, a non-blocking read)".to_owned()
+        }
         Wait::Event => format!(
-            "receivers block in recv; each hop starts {} µs after the last, so they are asleep \
+            "receivers block until woken (recv, an iceoryx2 event, a blocking read; `-default` \
+             rows spin briefly first); each hop starts {} µs after the last, so they are asleep \
              when it comes (one wake-up per hop)",
             EVENT_GAP.as_micros()
         ),
@@ -184,6 +248,7 @@ fn thousands(n: u64) -> String {
 mod tests {
     use super::*;
     use crate::latency::Latency;
+    use crate::target::Target;
 
     #[test]
     fn durations_and_counts_read_well() {
@@ -207,8 +272,17 @@ mod tests {
         l.record_ns(250);
         let hop = l.measurement("hop", Wait::Spin).baseline("floor").note("shared");
         let orphan = l.measurement("hop", Wait::Event).baseline("floor");
-        let report = Report { scenarios: vec![floor, hop, orphan] };
+        let report = Report {
+            scenarios: vec![floor, hop, orphan],
+            targets: vec![
+                Target::at_most("hop", "floor", Wait::Spin, 3.0),
+                Target::at_most("hop", "floor", Wait::Event, 3.0),
+            ],
+        };
         let text = render(&report, &RunConfig::default());
+        let target = "hop / floor (spin)   ×2.50  (p99 ×2.50)  target ≤ ×3.00  met";
+        assert!(text.contains(target), "{text}");
+        assert!(text.contains("(floor not run)"), "{text}");
         assert!(text.contains("×2.50 (+150 ns)"), "{text}");
         assert!(text.contains("floor (not run)"), "{text}");
         assert!(text.contains("hop (spin): shared"), "{text}");

@@ -1,23 +1,42 @@
-//! Runs the real `esgm-bench` binary on one small scenario and reads its JSON back.
-//! No figure is asserted: speed is measured, not tested.
+//! Runs the real `esgm-bench` binary on small scenarios — in-process, and across
+//! processes (it starts itself as the peer) — and reads its JSON back. No figure is
+//! asserted: speed is measured, not tested.
 
+// Test helpers outside #[test] fns: a failed unwrap is a failed test with a message.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use std::io::Read;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// Generous for a debug build; only there so that a hang fails instead of blocking CI.
 const WATCHDOG: Duration = Duration::from_secs(120);
 
-#[test]
-fn quick_hop_small_writes_the_json_report() {
+/// Runs `esgm-bench --quick --samples 200 --only <only> --json FILE` under the watchdog;
+/// returns the printed table and the JSON report.
+fn run_quick(only: &str) -> (String, serde_json::Value) {
     let dir = tempfile::tempdir().unwrap();
     let json = dir.path().join("report.json");
     let mut child = Command::new(env!("CARGO_BIN_EXE_esgm-bench"))
-        .args(["--quick", "--only", "inproc-hop-small", "--samples", "200", "--json"])
+        .args(["--quick", "--only", only, "--samples", "200", "--json"])
         .arg(&json)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
+    // Read on threads: a full pipe must not block the child while we wait.
+    let mut out = child.stdout.take().unwrap();
+    let mut err = child.stderr.take().unwrap();
+    let stdout = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = out.read_to_string(&mut s);
+        s
+    });
+    let stderr = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = err.read_to_string(&mut s);
+        s
+    });
 
     let started = Instant::now();
     let status = loop {
@@ -27,30 +46,76 @@ fn quick_hop_small_writes_the_json_report() {
         if started.elapsed() > WATCHDOG {
             let _ = child.kill();
             let _ = child.wait();
-            panic!("esgm-bench did not finish within {WATCHDOG:?}");
+            panic!("esgm-bench --only {only} did not finish within {WATCHDOG:?}");
         }
         std::thread::sleep(Duration::from_millis(20));
     };
-    let output = child.wait_with_output().unwrap();
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert!(status.success(), "esgm-bench failed ({status}):\n{stdout}\n{stderr}");
-    assert!(stdout.contains("inproc-hop-small"), "the table lacks the scenario:\n{stdout}");
+    let stdout = stdout.join().unwrap();
+    let stderr = stderr.join().unwrap();
+    assert!(status.success(), "esgm-bench --only {only} failed ({status}):\n{stdout}\n{stderr}");
 
     let text = std::fs::read_to_string(&json).unwrap();
-    let report: serde_json::Value = serde_json::from_str(&text).unwrap();
+    (stdout, serde_json::from_str(&text).unwrap())
+}
+
+/// The `(name, wait)` of every row, sorted, after checking each row's counts.
+fn rows(report: &serde_json::Value) -> Vec<(String, String)> {
     let rows = report["scenarios"].as_array().expect("a `scenarios` array");
-    let mut waits: Vec<&str> = Vec::new();
-    for row in rows {
-        assert_eq!(row["name"], "inproc-hop-small", "{row}");
-        for field in ["payload_bytes", "n", "p50_ns", "p99_ns", "p999_ns", "max_ns"] {
-            assert!(row[field].is_u64(), "{field} is not a count in {row}");
-        }
-        assert_eq!(row["n"], 200, "{row}");
-        waits.push(row["wait"].as_str().expect("`wait` is a string"));
+    let mut keys: Vec<(String, String)> = rows
+        .iter()
+        .map(|row| {
+            for field in ["payload_bytes", "n", "p50_ns", "p99_ns", "p999_ns", "max_ns"] {
+                assert!(row[field].is_u64(), "{field} is not a count in {row}");
+            }
+            assert_eq!(row["n"], 200, "{row}");
+            let name = row["name"].as_str().expect("`name` is a string").to_owned();
+            let wait = row["wait"].as_str().expect("`wait` is a string").to_owned();
+            (name, wait)
+        })
+        .collect();
+    keys.sort_unstable();
+    keys
+}
+
+fn key(name: &str, wait: &str) -> (String, String) {
+    (name.to_owned(), wait.to_owned())
+}
+
+#[test]
+fn quick_hop_small_writes_the_json_report() {
+    let (stdout, report) = run_quick("inproc-hop-small");
+    assert!(stdout.contains("inproc-hop-small"), "the table lacks the scenario:\n{stdout}");
+    assert_eq!(rows(&report), [key("inproc-hop-small", "event"), key("inproc-hop-small", "spin")]);
+}
+
+#[test]
+fn quick_floor_iceoryx2_runs_against_a_peer_process() {
+    let (stdout, report) = run_quick("floor-iceoryx2");
+    assert!(stdout.contains("floor-iceoryx2"), "the table lacks the scenario:\n{stdout}");
+    assert_eq!(rows(&report), [key("floor-iceoryx2", "event"), key("floor-iceoryx2", "spin")]);
+    for row in report["scenarios"].as_array().unwrap() {
+        assert_eq!(row["payload_bytes"], 64, "{row}");
     }
-    waits.sort_unstable();
-    assert_eq!(waits, ["event", "spin"]);
+}
+
+#[test]
+fn quick_esgm_small_reports_three_waits_and_idle_cpu() {
+    let (stdout, report) = run_quick("esgm-small");
+    assert_eq!(
+        rows(&report),
+        [key("esgm-small", "event"), key("esgm-small", "spin"), key("esgm-small-default", "event"),]
+    );
+    let strategies: Vec<&str> = report["scenarios"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|row| row["wait_strategy"].as_str().expect("a wait_strategy"))
+        .collect();
+    assert_eq!(strategies, ["busy-spin", "block", "spin-then-block"]);
+    assert!(stdout.contains("idle: a subscriber with this default wait used"), "{stdout}");
+    // Its baselines did not run: the targets say so instead of failing.
+    assert!(stdout.contains("esgm-small / floor-iceoryx2 (spin)"), "{stdout}");
+    assert!(stdout.contains("(floor-iceoryx2 not run)"), "{stdout}");
 }
 
 #[test]
@@ -63,4 +128,15 @@ fn an_unknown_scenario_is_one_clear_error() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("matches no scenario"), "{stderr}");
     assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
+}
+
+#[test]
+fn a_peer_role_for_no_scenario_is_one_clear_error() {
+    let output = Command::new(env!("CARGO_BIN_EXE_esgm-bench"))
+        .args(["--peer", "no-such-scenario", "--peer-wait", "spin", "--peer-domain", "x"])
+        .output()
+        .unwrap();
+    assert!(!output.status.success());
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(stderr.contains("names no scenario"), "{stderr}");
 }

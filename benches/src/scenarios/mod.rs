@@ -9,6 +9,22 @@
 //!   small structure and of a 640×480 RGB image;
 //! - [`inproc_chain3`]: a three-unit computed chain, against a single hop;
 //! - [`inproc_sampling_jitter`]: lateness of a 100 Hz sampled trajectory.
+//!
+//! Cross-process (issue 4): the measuring process against a peer process — `esgm-bench`
+//! itself, started again in a hidden peer role ([`crate::peer_role`]) — one per
+//! measurement, in service domains and socket names unique to it (they hold the
+//! measuring process's id). Latency is half a round trip; `spin` rows busy-poll,
+//! `event` rows block, and esgm adds its default strategy as `-default` rows
+//! ([`crate::wait_mode`]).
+//! - [`ipc_floor_iceoryx2`]: the floor, raw iceoryx2 with a 64-byte message;
+//! - [`ipc_uds_small`] and [`ipc_uds_image`]: the baselines, the codec's bytes through a
+//!   Unix socket ([`ipc_uds_echo`], [`ipc_uds_frames`]);
+//! - [`ipc_esgm_small`] and [`ipc_esgm_image`]: esgm-shm's trajectories, a small
+//!   structure and an image written in place ([`ipc_esgm_echo`]); what they carry is in
+//!   [`ipc_payload`], their node in [`ipc_node`].
+//!
+//! Order: the floor, then `uds-small` (the baseline of `esgm-small-default`), then the
+//! esgm scenarios, then `uds-image` (compared with `esgm-image`).
 
 pub mod inproc_chain3;
 pub mod inproc_echo;
@@ -16,6 +32,16 @@ pub mod inproc_floor_crossbeam;
 pub mod inproc_hop_image;
 pub mod inproc_hop_small;
 pub mod inproc_sampling_jitter;
+pub mod ipc_esgm_echo;
+pub mod ipc_esgm_image;
+pub mod ipc_esgm_small;
+pub mod ipc_floor_iceoryx2;
+pub mod ipc_node;
+pub mod ipc_payload;
+pub mod ipc_uds_echo;
+pub mod ipc_uds_frames;
+pub mod ipc_uds_image;
+pub mod ipc_uds_small;
 
 use crate::scenario::Scenario;
 
@@ -27,6 +53,11 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(inproc_hop_image::InprocHopImage),
         Box::new(inproc_chain3::InprocChain3),
         Box::new(inproc_sampling_jitter::InprocSamplingJitter),
+        Box::new(ipc_floor_iceoryx2::FloorIceoryx2),
+        Box::new(ipc_uds_small::UdsSmall),
+        Box::new(ipc_esgm_small::EsgmSmall),
+        Box::new(ipc_esgm_image::EsgmImage),
+        Box::new(ipc_uds_image::UdsImage),
     ]
 }
 
@@ -44,5 +75,28 @@ mod tests {
             assert!(seen.insert(s.name()), "duplicate scenario {}", s.name());
         }
         assert_eq!(all[0].name(), inproc_floor_crossbeam::NAME);
+    }
+
+    #[test]
+    fn the_cross_process_names_are_the_issues() {
+        let names: Vec<_> = all().iter().map(|s| s.name()).collect();
+        for name in ["floor-iceoryx2", "esgm-small", "esgm-image", "uds-small", "uds-image"] {
+            assert!(names.contains(&name), "{name} missing from {names:?}");
+        }
+    }
+
+    #[test]
+    fn targets_name_rows_of_scenarios_that_run_before_the_table() {
+        let all = all();
+        let position = |row: &str| {
+            // A row is named for its scenario, possibly with a suffix (`-default`).
+            all.iter().position(|s| row == s.name() || row.starts_with(&format!("{}-", s.name())))
+        };
+        for (i, s) in all.iter().enumerate() {
+            for t in s.targets() {
+                assert_eq!(position(&t.row), Some(i), "{t:?} is not a row of {}", s.name());
+                assert!(position(&t.baseline).is_some(), "{t:?}: no such scenario");
+            }
+        }
     }
 }
