@@ -11,8 +11,6 @@
 
 mod common;
 
-use std::io::Read;
-use std::process::{Child, Command, ExitStatus, Stdio};
 use std::thread;
 use std::time::{Duration, Instant};
 
@@ -66,43 +64,8 @@ fn child_role() {
     assert_eq!(got.header().valid_time, SMALL + FRAMES as i64);
 }
 
-fn spawn_producer(domain: &str) -> Child {
-    let exe = std::env::current_exe().expect("test binary path");
-    Command::new(exe)
-        .args(["--exact", "child_role", "--nocapture", "--test-threads=1"])
-        .env(ROLE, "producer")
-        .env(DOMAIN, domain)
-        .stdin(Stdio::null())
-        // Kept for the failure message; a passing child's test-harness lines would
-        // otherwise mix with ours.
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn the producer process")
-}
-
-/// Waits for the child, killing it if it outlives `timeout`; returns its status and
-/// output.
-fn reap(mut child: Child, timeout: Duration) -> (ExitStatus, String) {
-    let deadline = Instant::now() + timeout;
-    loop {
-        if let Some(status) = child.try_wait().expect("child status") {
-            let mut output = String::new();
-            if let Some(mut out) = child.stdout.take() {
-                let _ = out.read_to_string(&mut output);
-            }
-            if let Some(mut err) = child.stderr.take() {
-                let _ = err.read_to_string(&mut output);
-            }
-            return (status, output);
-        }
-        if Instant::now() >= deadline {
-            let _ = child.kill();
-            let _ = child.wait();
-            panic!("producer process did not finish within {timeout:?}");
-        }
-        thread::sleep(Duration::from_millis(5));
-    }
+fn spawn_producer(domain: &str) -> std::process::Child {
+    common::spawn_child("child_role", (ROLE, "producer"), (DOMAIN, domain))
 }
 
 #[test]

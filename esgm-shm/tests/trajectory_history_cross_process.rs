@@ -13,8 +13,6 @@
 mod common;
 mod history_support;
 
-use std::io::Read;
-use std::process::{Child, Command, ExitStatus, Stdio};
 use std::thread;
 use std::time::{Duration, Instant};
 
@@ -78,41 +76,8 @@ fn child_writer_role() {
     }
 }
 
-fn spawn_writer(domain: &str) -> Child {
-    let exe = std::env::current_exe().expect("test binary path");
-    Command::new(exe)
-        .args(["--exact", "child_writer_role", "--nocapture", "--test-threads=1"])
-        .env(ROLE, "writer")
-        .env(DOMAIN, domain)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawn the writer process")
-}
-
-/// Waits for the child, killing it if it outlives `timeout`; returns its status and
-/// output.
-fn reap(mut child: Child, timeout: Duration) -> (ExitStatus, String) {
-    let deadline = Instant::now() + timeout;
-    loop {
-        if let Some(status) = child.try_wait().expect("child status") {
-            let mut output = String::new();
-            if let Some(mut out) = child.stdout.take() {
-                let _ = out.read_to_string(&mut output);
-            }
-            if let Some(mut err) = child.stderr.take() {
-                let _ = err.read_to_string(&mut output);
-            }
-            return (status, output);
-        }
-        if Instant::now() >= deadline {
-            let _ = child.kill();
-            let _ = child.wait();
-            panic!("writer process did not finish within {timeout:?}");
-        }
-        thread::sleep(Duration::from_millis(5));
-    }
+fn spawn_writer(domain: &str) -> std::process::Child {
+    common::spawn_child("child_writer_role", (ROLE, "writer"), (DOMAIN, domain))
 }
 
 #[test]
@@ -155,7 +120,7 @@ fn the_history_is_read_in_other_processes() {
         }
         ack.publish(&EntityStructure::new("ack", 0, 0)).unwrap();
     }));
-    let (status, output) = reap(child, TIMEOUT * 2);
+    let (status, output) = common::reap(child, TIMEOUT * 2);
     if let Err(panic) = result {
         eprintln!("writer output:\n{output}");
         std::panic::resume_unwind(panic);

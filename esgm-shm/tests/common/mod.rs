@@ -71,3 +71,52 @@ pub fn image(a: &ArchivedEntityStructure) -> (i64, i64, i64, &[u8]) {
 }
 
 pub const RGB8: i64 = Image::FORMAT_RGB8;
+
+/// Re-runs this test binary as a child process that runs only the test `role_test`,
+/// with `role_env=role` and `domain_env=domain` set (the child's role and its
+/// iceoryx2 domain). Output is kept for the failure message.
+pub fn spawn_child(
+    role_test: &str,
+    (role_env, role): (&str, &str),
+    (domain_env, domain): (&str, &str),
+) -> std::process::Child {
+    use std::process::{Command, Stdio};
+    let exe = std::env::current_exe().expect("test binary path");
+    Command::new(exe)
+        .args(["--exact", role_test, "--nocapture", "--test-threads=1"])
+        .env(role_env, role)
+        .env(domain_env, domain)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn the child process")
+}
+
+/// Waits for the child, killing it if it outlives `timeout`; returns its status and
+/// output.
+pub fn reap(
+    mut child: std::process::Child,
+    timeout: Duration,
+) -> (std::process::ExitStatus, String) {
+    use std::io::Read;
+    let deadline = std::time::Instant::now() + timeout;
+    loop {
+        if let Some(status) = child.try_wait().expect("child status") {
+            let mut output = String::new();
+            if let Some(mut out) = child.stdout.take() {
+                let _ = out.read_to_string(&mut output);
+            }
+            if let Some(mut err) = child.stderr.take() {
+                let _ = err.read_to_string(&mut output);
+            }
+            return (status, output);
+        }
+        if std::time::Instant::now() >= deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("child process did not finish within {timeout:?}");
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
