@@ -422,7 +422,10 @@ impl fmt::Debug for Octets {
     __S::Error: rkyv::rancor::Source,
 ))]
 #[rkyv(deserialize_bounds(__D::Error: rkyv::rancor::Source))]
-#[rkyv(bytecheck(bounds(__C: rkyv::validation::ArchiveContext)))]
+#[rkyv(bytecheck(bounds(
+    __C: rkyv::validation::ArchiveContext + crate::codec::NestingContext,
+    <__C as rkyv::rancor::Fallible>::Error: rkyv::rancor::Source,
+)))]
 #[rkyv(derive(Debug))]
 pub enum Value {
     /// The special value meaning "no value" (Definition 3.3.3).
@@ -467,13 +470,13 @@ pub enum Value {
     /// `POSITION_ALTITUDE_ROTATION_TYPE`.
     PositionAltitudeRotation(PositionAltitudeRotation),
     /// `AGG_TYPE`: a tuple of values.
-    Agg(#[rkyv(omit_bounds)] Vec<Value>),
+    Agg(#[rkyv(omit_bounds, with = crate::codec::Nest)] Vec<Value>),
     /// `COLLECTION_TYPE`: a collection of values.
-    Collection(#[rkyv(omit_bounds)] Vec<Value>),
+    Collection(#[rkyv(omit_bounds, with = crate::codec::Nest)] Vec<Value>),
     /// `ENTITY_FRAME_TYPE`: a nested frame.
-    EntityFrame(#[rkyv(omit_bounds)] Box<EntityFrame>),
+    EntityFrame(#[rkyv(omit_bounds, with = crate::codec::Nest)] Box<EntityFrame>),
     /// `ENTITY_FRAME_SEQ_TYPE`: a sequence of frames.
-    EntityFrameSeq(#[rkyv(omit_bounds)] Vec<EntityFrame>),
+    EntityFrameSeq(#[rkyv(omit_bounds, with = crate::codec::Nest)] Vec<EntityFrame>),
 }
 
 impl Value {

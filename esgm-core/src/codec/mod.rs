@@ -24,6 +24,7 @@
 //! image layout.
 
 mod image;
+mod nesting;
 mod octets;
 mod writer;
 
@@ -40,6 +41,7 @@ pub use crate::value::{ArchivedOctets, ArchivedValue, ArchivedValueSort};
 pub use image::{
     IMAGE_NAME_MAX, IMAGE_OVERHEAD_MAX, IMAGE_PIXELS_MAX, IMAGE_PIXELS_OFFSET, encode_image_into,
 };
+pub use nesting::{ArchivedNest, MAX_NESTING, Nest, NestingContext};
 pub use octets::{PlaceOctets, SharedBytes, SharedBytesResolver};
 use writer::CountingWriter;
 
@@ -221,8 +223,11 @@ fn archive_body(bytes: &[u8]) -> Result<&[u8], CodecError> {
 /// Use this for every buffer written by another process.
 pub fn access(bytes: &[u8]) -> Result<&ArchivedEntityStructure, CodecError> {
     let body = archive_body(bytes)?;
-    rkyv::access::<ArchivedEntityStructure, BoxedError>(body)
-        .map_err(|e| malformed(bytes, e.to_string()))
+    rkyv::api::access_with_context::<ArchivedEntityStructure, _, BoxedError>(
+        body,
+        &mut nesting::Validator::new(body),
+    )
+    .map_err(|e| malformed(bytes, e.to_string()))
 }
 
 /// Returns the archived structure in `bytes` checking only the envelope.
