@@ -197,18 +197,18 @@ impl InProcessEsgm {
 
     /// Subscribes a worker's fan-in to every input and reads each input's latest sample
     /// in the same step (under its lock), so no update falls between the two.
-    fn subscribe_inputs(&self, inputs: &[Input]) -> (FanIn<Sample>, Vec<Option<Sample>>) {
+    fn subscribe_inputs(&self, inputs: &[Input]) -> (FanIn<Sample>, Vec<workers::InputState>) {
         let fan_in = FanIn::new(self.inner.subscriber_capacity);
-        let latest = inputs
+        let states = inputs
             .iter()
             .enumerate()
             .map(|(i, (_, cell))| {
                 let mut store = cell.store.lock();
                 store.subscribe_tagged(&fan_in, i);
-                store.get_latest().ok()
+                workers::InputState::new(store.get_latest().ok(), store.reset_counter())
             })
             .collect();
-        (fan_in, latest)
+        (fan_in, states)
     }
 
     /// A sampling schedule with the seed's zero rules: from = 0 is now, to = 0 forever.
@@ -240,10 +240,11 @@ impl InProcessEsgm {
                 })
             }
             TrajectorySource::Sync { policy, .. } => {
-                let synchronizer = policy.create::<Sample>(inputs.len())?;
-                let (fan_in, _) = self.subscribe_inputs(inputs);
+                // Validated here so the worker can re-create it after a reset.
+                policy.create::<Sample>(inputs.len())?;
+                let (fan_in, states) = self.subscribe_inputs(inputs);
                 let names = inputs.iter().map(|(d, _)| d.name.clone()).collect();
-                Some(workers::sync(cell, clock, synchronizer, names, fan_in))
+                Some(workers::sync(cell, clock, policy.clone(), names, fan_in, states))
             }
             TrajectorySource::Merge { .. } => {
                 let (fan_in, _) = self.subscribe_inputs(inputs);

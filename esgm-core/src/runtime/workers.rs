@@ -15,7 +15,7 @@ use crate::clock::SharedClock;
 use crate::esgm::{CompUnit, ComputeError, SensorError, SensorInterface};
 use crate::frame::{AttributeValuePair, EntityFrame, EntityStructure};
 use crate::generator::GeneratorPolicy;
-use crate::operators::sync::Synchronizer;
+use crate::operators::sync::SyncPolicy;
 use crate::sample::Sample;
 use crate::store::{AddError, AddOutcome, FanIn};
 use crate::time::Time;
@@ -105,6 +105,47 @@ pub(crate) fn sampler(
     })
 }
 
+/// What a worker remembers of one input: its latest sample, and the input's reset count
+/// when that sample arrived (a reset of the input makes the sample forgotten: after a
+/// reset the input has no latest sample until it gets a new one).
+#[derive(Debug)]
+pub(crate) struct InputState {
+    latest: Option<Sample>,
+    seen_resets: u64,
+    resets: Arc<std::sync::atomic::AtomicU64>,
+}
+
+impl InputState {
+    pub(crate) fn new(latest: Option<Sample>, resets: Arc<std::sync::atomic::AtomicU64>) -> Self {
+        let seen_resets = resets.load(std::sync::atomic::Ordering::Relaxed);
+        Self { latest, seen_resets, resets }
+    }
+
+    /// True (and forgets the latest sample) if the input was reset since it was seen.
+    fn forget_if_reset(&mut self) -> bool {
+        let now = self.resets.load(std::sync::atomic::Ordering::Relaxed);
+        if now != self.seen_resets {
+            self.seen_resets = now;
+            self.latest = None;
+            return true;
+        }
+        false
+    }
+}
+
+/// Forgets what was reset, then records `sample` as input `i`'s latest; true if any
+/// input had been reset.
+fn update_inputs(states: &mut [InputState], i: usize, sample: Sample) -> bool {
+    let mut any_reset = false;
+    for s in states.iter_mut() {
+        any_reset |= s.forget_if_reset();
+    }
+    if let Some(s) = states.get_mut(i) {
+        s.latest = Some(sample);
+    }
+    any_reset
+}
+
 /// A computed trajectory: on every input update, calls the unit with the latest sample
 /// of each input, once every input has one.
 pub(crate) fn unit(
@@ -112,14 +153,15 @@ pub(crate) fn unit(
     clock: SharedClock,
     cu: Arc<dyn CompUnit>,
     fan_in: FanIn<Sample>,
-    initial: Vec<Option<Sample>>,
+    mut states: Vec<InputState>,
 ) -> Worker {
     let c = Arc::clone(cell);
     spawn("unit", cell, move |stop, wake| {
-        let mut latest = initial;
         inputs::run(fan_in, wake, &stop, &c.counters.input_overflow, |i, sample| {
-            latest[i] = Some(sample);
-            let Some(args) = latest.iter().cloned().collect::<Option<Vec<Sample>>>() else {
+            update_inputs(&mut states, i, sample);
+            let Some(args) =
+                states.iter().map(|s| s.latest.clone()).collect::<Option<Vec<Sample>>>()
+            else {
                 return;
             };
             WorkerCounters::bump(&c.counters.calls);
@@ -168,15 +210,28 @@ pub(crate) fn state(
 pub(crate) fn sync(
     cell: &Arc<TrajectoryCell>,
     clock: SharedClock,
-    mut synchronizer: Box<dyn Synchronizer<Sample> + Send>,
+    policy: SyncPolicy,
     names: Vec<String>,
     fan_in: FanIn<Sample>,
+    mut states: Vec<InputState>,
 ) -> Worker {
     let c = Arc::clone(cell);
     spawn("sync", cell, move |stop, wake| {
+        let Ok(mut synchronizer) = policy.create::<Sample>(names.len()) else { return };
         let mut discarded = 0;
         inputs::run(fan_in, wake, &stop, &c.counters.input_overflow, |i, sample| {
             WorkerCounters::bump(&c.counters.calls);
+            // A reset input's queued samples belong to a stream that no longer exists:
+            // start matching afresh (what was queued counts as discarded).
+            if states.iter_mut().fold(false, |any, s| s.forget_if_reset() | any) {
+                c.counters
+                    .discarded
+                    .fetch_add(synchronizer.queued() as u64, std::sync::atomic::Ordering::Relaxed);
+                if let Ok(fresh) = policy.create::<Sample>(names.len()) {
+                    synchronizer = fresh;
+                    discarded = 0;
+                }
+            }
             let result = synchronizer.push(i, sample);
             // Samples the synchronizer gave up on are counted, never lost silently.
             let now_discarded = synchronizer.dropped();

@@ -148,6 +148,7 @@ impl TrajectoryStoreBuilder {
             subscribers: Subscribers::default(),
             violation_subscribers: Subscribers::default(),
             stats: StatsRecorder::default(),
+            resets: Arc::default(),
         })
     }
 }
@@ -171,6 +172,9 @@ pub struct TrajectoryStore {
     subscribers: Subscribers<Sample>,
     violation_subscribers: Subscribers<PolicyViolation>,
     stats: StatsRecorder,
+    /// Bumped by every reset, so readers that remember samples (units' latest inputs)
+    /// know to forget them.
+    resets: Arc<std::sync::atomic::AtomicU64>,
 }
 
 impl TrajectoryStore {
@@ -296,11 +300,18 @@ impl TrajectoryStore {
     /// Empties the stream (T5): stored and held samples go (held ones are counted as
     /// dropped for [`DropCause::Reset`]); policy, subscribers and stats stay.
     pub fn reset(&mut self) {
+        self.resets.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         for _ in self.held.drain() {
             self.stats.record_dropped(DropCause::Reset);
         }
         self.history.clear();
         self.last = None;
+    }
+
+    /// A counter bumped by every reset: whoever remembers samples of this trajectory
+    /// compares it to forget them after a reset.
+    pub fn reset_counter(&self) -> Arc<std::sync::atomic::AtomicU64> {
+        Arc::clone(&self.resets)
     }
 
     /// The same as [`TrajectoryStore::reset`]: in process, every reset completes

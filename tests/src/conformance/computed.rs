@@ -186,3 +186,28 @@ pub fn computed_policy_applies<H: Harness>(h: &H) {
     assert!(wait_for(WAIT, || out.stats().map(|s| s.added + s.dropped_total) == Ok(3)));
     assert_eq!(out.stats().unwrap().violations, 1);
 }
+
+/// T5/E4: after an input is reset it has no latest sample, so the unit is not called
+/// again until that input gets a new one (no pre-reset values mixed in).
+pub fn reset_inputs_are_forgotten<H: Harness>(h: &H) {
+    register_reading(h);
+    let e = h.esgm();
+    e.add_comp_unit("digits", "Reading", vec![ValueSort::EntityFrame.into(); 2], Arc::new(digits))
+        .unwrap();
+    let a = e.create_primitive_entity_trajectory_structure("a", "Reading").unwrap();
+    let b = e.create_primitive_entity_trajectory_structure("b", "Reading").unwrap();
+    let out = e.create_computed_entity_trajectory_structure("ab", "digits", &["a", "b"]).unwrap();
+    let t0 = h.now();
+    a.add(reading(t0, 1.0)).unwrap();
+    b.add(reading(t0 + 1, 2.0)).unwrap();
+    wait_stored(&out, 1);
+    a.reset_blocking().unwrap();
+    b.add(reading(t0 + 2, 3.0)).unwrap();
+    assert!(
+        wait_for(WAIT, || worker_stats(h, "ab").calls == 1 && b.stats().map(|s| s.added) == Ok(2))
+    );
+    a.add(reading(t0 + 3, 4.0)).unwrap();
+    wait_stored(&out, 2);
+    assert_eq!(x_of(&out.get_latest().unwrap()), Some(43.0), "a's new sample with b's latest");
+    assert_eq!(worker_stats(h, "ab").calls, 2, "no call mixed a pre-reset sample in");
+}

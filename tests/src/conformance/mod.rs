@@ -73,6 +73,7 @@ macro_rules! conformance_tests {
             computed::unit_output_is_type_checked,
             computed::inputs_are_checked_at_creation,
             computed::computed_policy_applies,
+            computed::reset_inputs_are_forgotten,
             lifecycle::unknown_names_get_the_seed_errors,
             lifecycle::destroy_and_reuse_a_name,
             lifecycle::re_pointing_keeps_subscribers_and_handles,
