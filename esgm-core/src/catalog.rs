@@ -201,7 +201,8 @@ impl Catalog {
                 suggestion: closest_name(name, self.units.keys().map(String::as_str)),
             });
         }
-        let users = self.users_of(crate::esgm::TrajectoryKind::Computed, name);
+        let mut users = self.users_of(crate::esgm::TrajectoryKind::Computed, name);
+        users.extend(self.users_of(crate::esgm::TrajectoryKind::SampledFunction, name));
         if !users.is_empty() {
             return Err(RegistrationError::InUse { name: name.to_owned(), users });
         }
@@ -284,6 +285,39 @@ impl Catalog {
         None
     }
 
+    /// The unit `unit`, checked against the inputs (name, type) it would be given.
+    fn unit_for(
+        &self,
+        unit: &str,
+        inputs: &[(String, String)],
+    ) -> Result<&UnitRecord, CreateError> {
+        let record = self.units.get(unit).ok_or_else(|| CreateError::NoSuchCompUnit {
+            name: unit.to_owned(),
+            suggestion: closest_name(unit, self.units.keys().map(String::as_str)),
+        })?;
+        if record.input_types.len() != inputs.len() {
+            return Err(CreateError::WrongInputCount {
+                unit: unit.to_owned(),
+                expected: record.input_types.len(),
+                found: inputs.len(),
+            });
+        }
+        for (position, (declared, (input, actual))) in
+            record.input_types.iter().zip(inputs).enumerate()
+        {
+            if !declared.accepts(actual) {
+                return Err(CreateError::InvalidInput {
+                    unit: unit.to_owned(),
+                    input: input.clone(),
+                    position,
+                    expected: declared.to_string(),
+                    actual: actual.clone(),
+                });
+            }
+        }
+        Ok(record)
+    }
+
     fn input_type(&self, name: &str) -> Result<&str, CreateError> {
         match self.trajectories.get(name) {
             Some(t) => Ok(&t.type_name),
@@ -361,30 +395,7 @@ impl Catalog {
                 (self.checker(&record.type_name)?, Some(sensor.clone()))
             }
             TrajectorySource::Computed { unit, .. } => {
-                let record = self.units.get(unit).ok_or_else(|| CreateError::NoSuchCompUnit {
-                    name: unit.clone(),
-                    suggestion: closest_name(unit, self.units.keys().map(String::as_str)),
-                })?;
-                if record.input_types.len() != inputs.len() {
-                    return Err(CreateError::WrongInputCount {
-                        unit: unit.clone(),
-                        expected: record.input_types.len(),
-                        found: inputs.len(),
-                    });
-                }
-                for (position, (declared, (input, actual))) in
-                    record.input_types.iter().zip(&inputs).enumerate()
-                {
-                    if !declared.accepts(actual) {
-                        return Err(CreateError::InvalidInput {
-                            unit: unit.clone(),
-                            input: input.clone(),
-                            position,
-                            expected: declared.to_string(),
-                            actual: actual.clone(),
-                        });
-                    }
-                }
+                let record = self.unit_for(unit, &inputs)?;
                 (self.checker(&record.type_name)?, Some(unit.clone()))
             }
             TrajectorySource::Merge { .. } => {
@@ -409,7 +420,7 @@ impl Catalog {
                 policy.create::<Sample>(inputs.len())?;
                 (self.state_checker(&name, &inputs)?, Some("sync".into()))
             }
-            TrajectorySource::SampledGenerators { sample_period, .. } => {
+            TrajectorySource::SampledGenerators { sample_period, unit, .. } => {
                 if *sample_period <= 0 {
                     return Err(PolicyError::illegal(
                         "sample_period",
@@ -418,10 +429,15 @@ impl Catalog {
                     )
                     .into());
                 }
-                if inputs.len() == 1 {
-                    (self.checker(&inputs[0].1)?, Some("generator".into()))
-                } else {
-                    (self.state_checker(&name, &inputs)?, Some("state".into()))
+                match unit {
+                    Some(unit) => {
+                        let record = self.unit_for(unit, &inputs)?;
+                        (self.checker(&record.type_name)?, Some(unit.clone()))
+                    }
+                    None if inputs.len() == 1 => {
+                        (self.checker(&inputs[0].1)?, Some("generator".into()))
+                    }
+                    None => (self.state_checker(&name, &inputs)?, Some("state".into())),
                 }
             }
         };

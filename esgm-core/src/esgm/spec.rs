@@ -48,10 +48,14 @@ pub enum TrajectorySource {
     },
     /// A stream sampled from fluent generators over other trajectories (G4,
     /// `fstream(l, s, c)`): with one input, the generator's values; with several, a
-    /// state of all of them (`state(s1..sn)`).
+    /// state of all of them (`state(s1..sn)`); with a `unit`, the unit's temporal
+    /// function of them (`feature(l, f(s1..sn))` sampled: `compute_at(values, t)`).
     SampledGenerators {
         /// The inputs and the generator policy (approximation + merge) for each.
         inputs: Vec<(String, GeneratorPolicy)>,
+        /// A computational unit whose `compute_at` combines the inputs' values at each
+        /// sample time, if any.
+        unit: Option<String>,
         /// First sample time (0 = now).
         from: Time,
         /// Last sample time (0 = forever).
@@ -148,11 +152,27 @@ impl TrajectorySpec {
             name,
             TrajectorySource::SampledGenerators {
                 inputs: inputs.into_iter().map(|(n, g)| (n.into(), g)).collect(),
+                unit: None,
                 from: 0,
                 to: 0,
                 sample_period,
             },
         )
+    }
+
+    /// A trajectory sampled every `sample_period` from `unit`'s temporal function
+    /// (`compute_at`) of the values of generators over `inputs` at each sample time.
+    pub fn sampled_function<S: Into<String>>(
+        name: impl Into<String>,
+        unit: impl Into<String>,
+        inputs: impl IntoIterator<Item = (S, GeneratorPolicy)>,
+        sample_period: Time,
+    ) -> Self {
+        let mut s = Self::sampled_generators(name, inputs, sample_period);
+        if let TrajectorySource::SampledGenerators { unit: u, .. } = &mut s.source {
+            *u = Some(unit.into());
+        }
+        s
     }
 
     /// Sets the policy.
@@ -194,6 +214,9 @@ impl TrajectorySpec {
             TrajectorySource::Computed { .. } => TrajectoryKind::Computed,
             TrajectorySource::Sync { .. } => TrajectoryKind::Sync,
             TrajectorySource::Merge { .. } => TrajectoryKind::Merge,
+            TrajectorySource::SampledGenerators { unit: Some(_), .. } => {
+                TrajectoryKind::SampledFunction
+            }
             TrajectorySource::SampledGenerators { .. } => TrajectoryKind::SampledGenerators,
         }
     }
@@ -227,6 +250,8 @@ pub enum TrajectoryKind {
     Merge,
     /// Sampled from generators.
     SampledGenerators,
+    /// Sampled from a unit's temporal function of generators.
+    SampledFunction,
 }
 
 impl TrajectoryKind {
@@ -239,6 +264,7 @@ impl TrajectoryKind {
             TrajectoryKind::Sync => "sync",
             TrajectoryKind::Merge => "merge",
             TrajectoryKind::SampledGenerators => "sampled-generators",
+            TrajectoryKind::SampledFunction => "sampled-function",
         }
     }
 }

@@ -250,14 +250,15 @@ impl InProcessEsgm {
                 let (fan_in, _) = self.subscribe_inputs(inputs);
                 Some(workers::merge(cell, fan_in))
             }
-            TrajectorySource::SampledGenerators { inputs: gens, from, to, sample_period } => {
+            TrajectorySource::SampledGenerators { inputs: gens, unit, from, to, sample_period } => {
                 let schedule = self.schedule(*from, *to, *sample_period);
+                let cu = unit.as_ref().and_then(|u| self.inner.units.read().get(u).cloned());
                 let with_policies = inputs
                     .iter()
                     .zip(gens)
                     .map(|((d, _), (_, g))| (Arc::clone(d), g.clone()))
                     .collect();
-                Some(workers::sampled_generators(cell, clock, with_policies, schedule))
+                Some(workers::sampled_generators(cell, clock, with_policies, cu, schedule))
             }
         })
     }

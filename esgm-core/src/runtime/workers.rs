@@ -278,6 +278,7 @@ pub(crate) fn sampled_generators(
     cell: &Arc<TrajectoryCell>,
     clock: SharedClock,
     inputs: Vec<(Arc<Descriptor>, GeneratorPolicy)>,
+    cu: Option<Arc<dyn CompUnit>>,
     schedule: periodic::Schedule,
 ) -> Worker {
     let c = Arc::clone(cell);
@@ -298,6 +299,21 @@ pub(crate) fn sampled_generators(
                         return;
                     }
                 }
+            }
+            if let Some(cu) = &cu {
+                // A temporal function: the unit estimates the value at exactly `t`.
+                match guarded(&c, "compute_at", || cu.compute_at(&values, t)) {
+                    Some(Ok(es)) => emit(&c, Arc::new(es)),
+                    Some(Err(ComputeError::ValueNotAvailable)) => {
+                        WorkerCounters::bump(&c.counters.no_value)
+                    }
+                    Some(Err(e)) => {
+                        WorkerCounters::bump(&c.counters.failures);
+                        tracing::warn!(trajectory = %c.info.name, error = %e, "compute_at failed");
+                    }
+                    None => {}
+                }
+                return;
             }
             let es = match values.as_slice() {
                 [one] => EntityStructure {

@@ -85,6 +85,7 @@ macro_rules! conformance_tests {
             operators::merge_interleaves_inputs,
             operators::merge_keeps_add_order_across_inputs,
             operators::sampled_generator_and_state,
+            operators::sampled_temporal_function,
         );
     };
     (@each $make:expr; $($module:ident :: $test:ident),* $(,)?) => {

@@ -153,3 +153,91 @@ pub fn sampled_generator_and_state<H: Harness>(h: &H) {
     let mid = st.get_at(t0 + millis(50)).unwrap();
     assert_eq!((frame_x(&mid, "a"), frame_x(&mid, "b")), (Some(5.0), Some(5.0)));
 }
+
+/// A unit's temporal function (`compute_at`) sampled over generators: the seed's
+/// `feature(l, f(s1..sn))` as a stream, with E6's optional `compute_at`.
+pub fn sampled_temporal_function<H: Harness>(h: &H) {
+    use std::sync::Arc;
+
+    use esgm_core::{CompUnit, ComputeError, EntityStructure, Sample, Time};
+
+    /// Sums the inputs' x at exactly `t`.
+    struct Sum;
+    impl CompUnit for Sum {
+        fn compute(&self, _: &[Sample], _: Time) -> Result<EntityStructure, ComputeError> {
+            Err(ComputeError::OperationNotSupported)
+        }
+        fn compute_at(&self, inputs: &[Sample], t: Time) -> Result<EntityStructure, ComputeError> {
+            Ok(reading(t, inputs.iter().filter_map(|s| x_of(s)).sum()))
+        }
+    }
+    register_reading(h);
+    let e = h.esgm();
+    e.add_comp_unit("sum", "Reading", vec!["Reading".into(), "Reading".into()], Arc::new(Sum))
+        .unwrap();
+    let only_compute = |i: &[Sample], _: Time| -> Result<EntityStructure, ComputeError> {
+        Ok((*i[0].structure).clone())
+    };
+    e.add_comp_unit(
+        "plain",
+        "Reading",
+        vec!["Reading".into(), "Reading".into()],
+        Arc::new(only_compute),
+    )
+    .unwrap();
+    let a = e.create_primitive_entity_trajectory_structure("a", "Reading").unwrap();
+    let b = e.create_primitive_entity_trajectory_structure("b", "Reading").unwrap();
+    let t0 = h.now();
+    a.add(reading(t0, 0.0)).unwrap();
+    a.add(reading(t0 + millis(100), 10.0)).unwrap();
+    b.add(reading(t0, 5.0)).unwrap();
+    let linear =
+        GeneratorPolicy { approximation: ValueApproximation::Linear, merge: MergeRule::KeepLast };
+    let recent = GeneratorPolicy {
+        approximation: ValueApproximation::MostRecent,
+        merge: MergeRule::KeepLast,
+    };
+    let f = e
+        .create_trajectory(
+            TrajectorySpec::sampled_function(
+                "f",
+                "sum",
+                [("a", linear.clone()), ("b", recent.clone())],
+                millis(50),
+            )
+            .between(t0, t0 + millis(100)),
+        )
+        .unwrap();
+    let g = e
+        .create_trajectory(
+            TrajectorySpec::sampled_function(
+                "g",
+                "plain",
+                [("a", linear), ("b", recent)],
+                millis(50),
+            )
+            .between(t0, t0 + millis(100)),
+        )
+        .unwrap();
+    // A unit without compute_at: every tick is a counted failure, nothing is stored.
+    let failures = || {
+        e.stats()
+            .trajectories
+            .into_iter()
+            .find(|(i, _, _)| i.name == "g")
+            .map(|(_, _, w)| w.failures)
+    };
+    // Both samplers must take each tick before the clock moves on (a late sampler
+    // skips a period, as it should).
+    wait_stored(&f, 1);
+    assert!(wait_for(WAIT, || failures() == Some(1)), "{:?}", failures());
+    for k in 1..=2 {
+        h.advance(millis(50));
+        wait_stored(&f, k + 1);
+        assert!(wait_for(WAIT, || failures() == Some(k as u64 + 1)), "{:?}", failures());
+    }
+    let xs: Vec<_> = f.get_between(t0, t0 + millis(100)).unwrap().iter().map(|s| x_of(s)).collect();
+    assert_eq!(xs, vec![Some(5.0), Some(10.0), Some(15.0)]);
+    assert!(g.get_latest().is_err());
+    assert!(matches!(e.remove_comp_unit("sum"), Err(esgm_core::RegistrationError::InUse { .. })));
+}
