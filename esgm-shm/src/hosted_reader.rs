@@ -54,6 +54,9 @@ enum Request {
     Stop,
 }
 
+/// How long a caller waits for the reader's thread to run its job.
+const JOB_DEADLINE: std::time::Duration = std::time::Duration::from_secs(30);
+
 #[derive(Debug)]
 struct Host {
     trajectory: String,
@@ -136,13 +139,24 @@ impl HostedTrajectoryReader {
         f: impl FnOnce(&mut ShmTrajectoryReader) -> R + Send + 'static,
     ) -> Result<R, HistoryError> {
         let stopped = || HistoryError::ReaderStopped { trajectory: self.host.trajectory.clone() };
+        if self.host.thread.as_ref().is_some_and(|t| t.thread().id() == std::thread::current().id())
+        {
+            return Err(HistoryError::Reentrant { trajectory: self.host.trajectory.clone() });
+        }
         let (reply, answer) = mpsc::sync_channel(1);
         let job: Job = Box::new(move |reader| {
             let _ = reply.send(f(reader));
         });
         self.host.requests.send(Request::Run(job)).map_err(|_| stopped())?;
-        // The thread runs the job or drops it on its way out (disconnecting the reply).
-        answer.recv().map_err(|_| stopped())
+        // The thread runs the job or drops it on its way out (disconnecting the reply);
+        // a deadline still bounds the wait for a job that never ends.
+        answer.recv_timeout(JOB_DEADLINE).map_err(|e| match e {
+            mpsc::RecvTimeoutError::Timeout => HistoryError::Timeout {
+                trajectory: self.host.trajectory.clone(),
+                timeout: JOB_DEADLINE,
+            },
+            mpsc::RecvTimeoutError::Disconnected => stopped(),
+        })
     }
 
     /// Samples stored.

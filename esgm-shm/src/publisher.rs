@@ -370,14 +370,20 @@ impl TrajectoryPublisher {
             flags,
             reserved: 0,
         };
-        let subscribers = sample.send().map_err(|e| match e {
+        let sent = sample.send();
+        if matches!(sent, Ok(_) | Err(SendError::UnableToDeliver)) {
+            // Delivered to every reader, or to all but the ones that stayed full past
+            // the timeout: either way the number is used, so a reader that missed it
+            // sees a gap in the sequence and counts the sample as lost.
+            self.sequence.set(sequence + 1);
+            self.wake();
+        }
+        let subscribers = sent.map_err(|e| match e {
             SendError::UnableToDeliver => {
                 PublishError::NotDelivered { timeout: self.lossless_timeout }
             }
             e => PublishError::Send(e),
         })?;
-        self.sequence.set(sequence + 1);
-        self.wake();
         Ok(Published { sequence, subscribers })
     }
 

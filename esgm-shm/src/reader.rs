@@ -77,6 +77,22 @@ pub enum HistoryError {
         /// The trajectory.
         trajectory: String,
     },
+    /// A job running on the reader's own thread asked that thread to run another job
+    /// and wait for it: it would wait for itself forever. Use the `&mut` reader the job
+    /// was given instead.
+    #[error("a job of the reader of `{trajectory}` called back into the same reader")]
+    Reentrant {
+        /// The trajectory.
+        trajectory: String,
+    },
+    /// The reader's thread did not answer in time (a job took too long).
+    #[error("the reader of `{trajectory}` did not answer within {timeout:?}")]
+    Timeout {
+        /// The trajectory.
+        trajectory: String,
+        /// How long the caller waited.
+        timeout: std::time::Duration,
+    },
 }
 
 /// What a reader has seen and kept.

@@ -93,8 +93,10 @@ impl ReceivedSample {
         match self.checked.get() {
             Checked::Valid => {
                 // SAFETY: these exact bytes passed `codec::access` (full validation) in
-                // this sample's lifetime, and the chunk is read-only to us while we hold
-                // it, so they are still what an encoder produced.
+                // this sample's lifetime. Shared memory stays writable by its publisher:
+                // validation guards against corrupt or foreign-version writers, not
+                // against a publisher that changes a chunk after sending it (a peer that
+                // hostile must not share memory with this process; see the crate docs).
                 unsafe { codec::access_unchecked(bytes) }
             }
             Checked::No | Checked::Invalid => match validate(bytes, self.header()) {

@@ -127,9 +127,10 @@ pub enum WriteError {
     #[error(transparent)]
     Add(#[from] AddError),
     /// The structure entered the stream (the policy counts it as the previous sample)
-    /// but could not be published, so readers will not see it. Do not add it again;
-    /// fix the cause (e.g. readers holding every sample) — see [`PublishError`].
-    #[error("entered the stream of `{trajectory}` but was not published: {source}")]
+    /// but did not reach every reader: with [`PublishError::NotDelivered`] it reached
+    /// all but the readers whose buffers stayed full (they count it as lost), otherwise
+    /// none. Do not add it again; fix the cause (e.g. readers holding every sample).
+    #[error("entered the stream of `{trajectory}` but was not published to every reader: {source}")]
     Publish {
         /// The trajectory.
         trajectory: String,

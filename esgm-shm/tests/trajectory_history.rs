@@ -472,6 +472,10 @@ fn a_hosted_reader_answers_from_any_thread() {
         hosted.get_at(31),
         Err(HistoryError::Query(QueryError::ValueNotAvailable { .. }))
     ));
+    // A job calling back into its own reader gets an error, not a wait for itself.
+    let inner = hosted.clone();
+    let reentrant = hosted.with(move |_| inner.len()).unwrap();
+    assert!(matches!(reentrant, Err(HistoryError::Reentrant { .. })), "{reentrant:?}");
     drop(hosted);
     writer.finish();
 }

@@ -61,6 +61,7 @@ pub struct Coordinator {
     _service: PortFactory<ipc::Service, [u8], (), [u8], ()>,
     node: ShmNode,
     served: u64,
+    failures: u64,
 }
 
 impl Coordinator {
@@ -87,7 +88,15 @@ impl Coordinator {
             .create()
             .map_err(CoordinatorError::Server)?;
         tracing::info!(domain, "coordinator serving");
-        Ok(Self { domain: domain.to_owned(), registry, server, _service: service, node, served: 0 })
+        Ok(Self {
+            domain: domain.to_owned(),
+            registry,
+            server,
+            _service: service,
+            node,
+            served: 0,
+            failures: 0,
+        })
     }
 
     /// The domain served.
@@ -110,10 +119,22 @@ impl Coordinator {
         &self.node
     }
 
-    /// Answers every request waiting now; returns how many.
+    /// Answers every request waiting now; returns how many were answered.
+    ///
+    /// One bad request or one failed answer (a client that vanished, no memory for a
+    /// large response) is logged and counted in [`Coordinator::failures`], never fatal:
+    /// the coordinator keeps serving everyone else and keeps cleaning up.
     pub fn serve_pending(&mut self) -> Result<usize, CoordinatorError> {
         let mut n = 0;
-        while let Some(active) = self.server.receive().map_err(CoordinatorError::Receive)? {
+        loop {
+            let active = match self.server.receive() {
+                Ok(Some(active)) => active,
+                Ok(None) => return Ok(n),
+                Err(e) => {
+                    self.fail(CoordinatorError::Receive(e));
+                    return Ok(n);
+                }
+            };
             let response = match decode::<Request>(active.payload()) {
                 Ok(request) => self.registry.handle(request),
                 Err(e) => {
@@ -129,12 +150,28 @@ impl Coordinator {
                     encode(&fallback).unwrap_or_default()
                 }
             };
-            let loan = active.loan_slice_uninit(bytes.len()).map_err(CoordinatorError::Loan)?;
-            loan.write_from_slice(&bytes).send().map_err(CoordinatorError::Send)?;
-            n += 1;
-            self.served += 1;
+            let sent = match active.loan_slice_uninit(bytes.len()) {
+                Ok(loan) => loan.write_from_slice(&bytes).send().map_err(CoordinatorError::Send),
+                Err(e) => Err(CoordinatorError::Loan(e)),
+            };
+            match sent {
+                Ok(()) => {
+                    n += 1;
+                    self.served += 1;
+                }
+                Err(e) => self.fail(e),
+            }
         }
-        Ok(n)
+    }
+
+    /// Requests that could not be answered (logged where they failed).
+    pub fn failures(&self) -> u64 {
+        self.failures
+    }
+
+    fn fail(&mut self, e: CoordinatorError) {
+        self.failures += 1;
+        tracing::warn!(error = %e, failures = self.failures, "control request not answered");
     }
 
     /// Serves until `stop` is set, polling briefly after activity and backing off to
