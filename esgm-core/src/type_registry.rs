@@ -31,6 +31,15 @@ pub enum TypeRegistryError {
     /// The definition is not self-consistent.
     #[error(transparent)]
     InvalidDefinition(#[from] TypeDefinitionError),
+    /// The ESGM could not be reached or did not answer (a remote runtime whose
+    /// coordinator is gone, stuck or unreachable — CORBA's `COMM_FAILURE`). Nothing
+    /// was changed by this call as far as the caller can tell; retry or check the
+    /// coordinator.
+    #[error("the ESGM is unavailable: {reason}")]
+    Unavailable {
+        /// What failed.
+        reason: String,
+    },
 }
 
 pub(crate) fn did_you_mean(s: &Option<String>) -> String {

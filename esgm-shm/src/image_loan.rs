@@ -200,8 +200,7 @@ impl<'p> ImageLoan<'p> {
         self.publisher.send(
             sample,
             archive_len,
-            valid_time,
-            create_time,
+            (valid_time, create_time),
             SampleHeader::FLAG_IMAGE_IN_PLACE,
         )
     }

@@ -134,4 +134,7 @@ pub use type_id::type_id;
 pub use violations::{ViolationPublisher, ViolationRecord, ViolationSubscriber};
 pub use wait::WaitStrategy;
 pub use writer::{ShmTrajectoryWriter, WriteError, WriterCreateError, WriterStats};
+pub mod client;
 pub mod control;
+
+pub use client::{ConnectError, ShmEsgm, ShmEsgmBuilder, connect};

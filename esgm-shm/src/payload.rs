@@ -139,6 +139,11 @@ impl SampleHeader {
     /// The payload is a codec-encoded entity structure (envelope + archive).
     pub const KIND_STRUCTURE: u32 = 1;
 
+    /// The writer reset the trajectory (T5): readers forget every sample before this
+    /// one. No payload (`archive_len` 0); it takes a sequence number like a structure,
+    /// and sits in the publisher's history so a late reader forgets what came before.
+    pub const KIND_RESET: u32 = 2;
+
     /// The structure is an `Image` whose pixels the producer wrote straight into shared
     /// memory: a cache can keep the sample itself instead of copying the bytes out.
     pub const FLAG_IMAGE_IN_PLACE: u32 = 1;

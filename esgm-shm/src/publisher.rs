@@ -304,6 +304,24 @@ impl TrajectoryPublisher {
     /// The structure is not type-checked here: the caller (the runtime) checks it
     /// against the trajectory's type before publishing.
     pub fn publish(&self, es: &EntityStructure) -> Result<Published, PublishError> {
+        self.publish_inner(es, None)
+    }
+
+    /// [`Self::publish`] with the add time the gate gave the structure (a runtime
+    /// whose store admitted it at `add_time`), instead of the time of sending.
+    pub fn publish_added(
+        &self,
+        es: &EntityStructure,
+        add_time: Time,
+    ) -> Result<Published, PublishError> {
+        self.publish_inner(es, Some(add_time))
+    }
+
+    fn publish_inner(
+        &self,
+        es: &EntityStructure,
+        add_time: Option<Time>,
+    ) -> Result<Published, PublishError> {
         let mut want = archived_size_hint(es);
         if want > self.max_len {
             want = codec::encoded_len(es).map_err(PublishError::Encode)?;
@@ -319,7 +337,13 @@ impl TrajectoryPublisher {
                     // SAFETY: the encoder initialised `..len` (it promises every byte it
                     // reports) and `zero_fill` the rest of the payload.
                     let sample = unsafe { sample.assume_init() };
-                    return self.send(sample, len, es.valid_time, es.create_time, 0);
+                    return self.send_kind(
+                        sample,
+                        len,
+                        (es.valid_time, es.create_time),
+                        (0, SampleHeader::KIND_STRUCTURE),
+                        add_time,
+                    );
                 }
                 Err(CodecError::BufferTooSmall { needed, .. }) if !retried => {
                     tracing::debug!(trajectory = %self.trajectory, hint = want, needed,
@@ -352,21 +376,49 @@ impl TrajectoryPublisher {
     /// Fills the header, sends, and wakes sleeping readers.
     pub(crate) fn send(
         &self,
+        sample: LoanedSample,
+        archive_len: usize,
+        (valid_time, create_time): (Time, Time),
+        flags: u32,
+    ) -> Result<Published, PublishError> {
+        self.send_kind(
+            sample,
+            archive_len,
+            (valid_time, create_time),
+            (flags, SampleHeader::KIND_STRUCTURE),
+            None,
+        )
+    }
+
+    /// Tells every reader that the trajectory was reset (T5): a marker sample
+    /// ([`SampleHeader::KIND_RESET`]) in stream order, so a reader forgets exactly the
+    /// samples sent before it.
+    pub fn publish_reset(&self) -> Result<Published, PublishError> {
+        let mut sample = self.port.loan_slice_uninit(1).map_err(PublishError::Loan)?;
+        zero_fill(as_uninit_bytes(sample.payload_mut()));
+        // SAFETY: `zero_fill` initialised the whole payload.
+        let sample = unsafe { sample.assume_init() };
+        let now = self.clock.now();
+        self.send_kind(sample, 0, (now, now), (0, SampleHeader::KIND_RESET), None)
+    }
+
+    fn send_kind(
+        &self,
         mut sample: LoanedSample,
         archive_len: usize,
-        valid_time: Time,
-        create_time: Time,
-        flags: u32,
+        (valid_time, create_time): (Time, Time),
+        (flags, kind): (u32, u32),
+        add_time: Option<Time>,
     ) -> Result<Published, PublishError> {
         let sequence = self.sequence.get();
         *sample.user_header_mut() = SampleHeader {
             valid_time,
             create_time,
-            add_time: self.clock.now(),
+            add_time: add_time.unwrap_or_else(|| self.clock.now()),
             archive_len: archive_len as u64,
             type_id: self.type_id,
             sequence,
-            kind: SampleHeader::KIND_STRUCTURE,
+            kind,
             flags,
             reserved: 0,
         };

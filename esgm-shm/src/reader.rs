@@ -113,6 +113,8 @@ pub struct ReaderStats {
     /// Samples the writer sent that never reached this reader (overwritten in its
     /// queue while it was not reading): gaps in the header's sequence numbers.
     pub lost: u64,
+    /// Resets (T5) the writer announced; each emptied the history.
+    pub resets: u64,
 }
 
 /// Builds a [`ShmTrajectoryReader`]; every setting but the name and type has a default.
@@ -206,6 +208,7 @@ struct Counts {
     evicted: u64,
     evicted_over_bound: u64,
     lost: u64,
+    resets: u64,
 }
 
 /// A sample in a reader's history, as a query answers it: the sample in shared memory
@@ -373,6 +376,7 @@ impl ShmTrajectoryReader {
             evicted: c.evicted,
             evicted_over_bound: c.evicted_over_bound,
             lost: c.lost,
+            resets: c.resets,
         }
     }
 
@@ -428,6 +432,13 @@ impl ShmTrajectoryReader {
     /// are skipped, a full hand makes room; anything else is the caller's.
     fn handle(&mut self, e: ReceiveError) -> Result<(), ReceiveError> {
         match e {
+            ReceiveError::Reset { sequence } => {
+                // T5 across processes: what came before the marker is gone.
+                while self.history.pop_oldest().is_some() {}
+                self.next_sequence = Some(sequence.wrapping_add(1));
+                self.counts.resets += 1;
+                Ok(())
+            }
             ReceiveError::TypeMismatch { .. }
             | ReceiveError::UnknownKind { .. }
             | ReceiveError::Truncated { .. }

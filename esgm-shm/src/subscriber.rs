@@ -65,6 +65,13 @@ pub enum ReceiveError {
         /// The sample's.
         found: u64,
     },
+    /// Not a fault: the writer reset the trajectory (T5). Forget every sample received
+    /// before this point, then receive again. `sequence` is the marker's number.
+    #[error("the trajectory was reset (sequence {sequence})")]
+    Reset {
+        /// The marker's sequence number.
+        sequence: u64,
+    },
     /// The header names a payload kind this build does not know (a newer or foreign
     /// writer). The sample was dropped.
     #[error("unknown sample kind {kind}")]
@@ -262,6 +269,9 @@ impl TrajectorySubscriber {
             }
             Err(e)
         };
+        if header.kind == SampleHeader::KIND_RESET {
+            return Err(ReceiveError::Reset { sequence: header.sequence });
+        }
         if header.kind != SampleHeader::KIND_STRUCTURE {
             return rejected(ReceiveError::UnknownKind { kind: header.kind });
         }

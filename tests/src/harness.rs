@@ -53,6 +53,53 @@ impl Harness for InProcessHarness {
     }
 }
 
+/// The shared-memory runtime ([`esgm_shm::connect`]) against a coordinator of its own
+/// (on a thread, in a unique domain so tests run in parallel), on a simulated clock
+/// starting at 1000 s.
+#[derive(Debug)]
+pub struct ShmHarness {
+    clock: Arc<SimClock>,
+    // Dropped in this order: the client leaves before its coordinator stops.
+    esgm: esgm_shm::ShmEsgm,
+    _coordinator: esgm_shm::control::CoordinatorThread,
+}
+
+impl ShmHarness {
+    /// A fresh system with the library types.
+    pub fn new() -> Self {
+        let domain = esgm_shm::unique_domain("conformance");
+        let registry = esgm_shm::control::Registry::new(esgm_core::TypeRegistry::with_library());
+        let coordinator =
+            esgm_shm::control::Coordinator::spawn(&domain, registry).expect("start a coordinator");
+        let clock = SimClock::shared(secs(1_000));
+        let esgm = esgm_shm::ShmEsgm::builder()
+            .domain(&domain)
+            .clock(clock.clone())
+            .connect()
+            .expect("connect to the coordinator");
+        Self { clock, esgm, _coordinator: coordinator }
+    }
+}
+
+impl Default for ShmHarness {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Harness for ShmHarness {
+    type E = esgm_shm::ShmEsgm;
+    fn esgm(&self) -> &esgm_shm::ShmEsgm {
+        &self.esgm
+    }
+    fn now(&self) -> Time {
+        self.clock.now()
+    }
+    fn advance(&self, d: Time) {
+        self.clock.advance(d);
+    }
+}
+
 /// Polls `cond` until it holds or `timeout` passes; returns whether it held. Tests
 /// assert on the result, so a runtime that never gets there fails instead of hanging.
 pub fn wait_for(timeout: Duration, mut cond: impl FnMut() -> bool) -> bool {

@@ -11,4 +11,4 @@
 pub mod conformance;
 mod harness;
 
-pub use harness::{Harness, InProcessHarness, wait_for};
+pub use harness::{Harness, InProcessHarness, ShmHarness, wait_for};

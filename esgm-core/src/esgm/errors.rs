@@ -106,6 +106,15 @@ pub enum CreateError {
         /// The trajectory.
         name: String,
     },
+    /// The ESGM could not be reached or did not answer (a remote runtime whose
+    /// coordinator is gone, stuck or unreachable — CORBA's `COMM_FAILURE`). Nothing
+    /// was changed by this call as far as the caller can tell; retry or check the
+    /// coordinator.
+    #[error("the ESGM is unavailable: {reason}")]
+    Unavailable {
+        /// What failed.
+        reason: String,
+    },
 }
 
 /// Errors of looking a trajectory up or destroying it.
@@ -119,6 +128,15 @@ pub enum LookupError {
         name: String,
         /// The closest existing name.
         suggestion: Option<String>,
+    },
+    /// The ESGM could not be reached or did not answer (a remote runtime whose
+    /// coordinator is gone, stuck or unreachable — CORBA's `COMM_FAILURE`). Nothing
+    /// was changed by this call as far as the caller can tell; retry or check the
+    /// coordinator.
+    #[error("the ESGM is unavailable: {reason}")]
+    Unavailable {
+        /// What failed.
+        reason: String,
     },
 }
 
@@ -169,6 +187,15 @@ pub enum RegistrationError {
         name: String,
         /// The trajectories that use it.
         users: Vec<String>,
+    },
+    /// The ESGM could not be reached or did not answer (a remote runtime whose
+    /// coordinator is gone, stuck or unreachable — CORBA's `COMM_FAILURE`). Nothing
+    /// was changed by this call as far as the caller can tell; retry or check the
+    /// coordinator.
+    #[error("the ESGM is unavailable: {reason}")]
+    Unavailable {
+        /// What failed.
+        reason: String,
     },
 }
 

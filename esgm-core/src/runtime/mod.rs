@@ -170,6 +170,58 @@ impl InProcessEsgm {
         &self.inner.clock
     }
 
+    /// Creates a replica of a trajectory written in another process: a local store
+    /// with the writer's `info` (kind, type, policy) that takes no structures from
+    /// users and runs no worker; a bridge feeds it with
+    /// [`TrajectoryStore::replicate`] through [`InProcessTrajectory::with_store`].
+    /// Local units, syncs and merges can read it like any trajectory. `types` are the
+    /// definitions its type needs (registered here if missing).
+    pub fn create_replica(
+        &self,
+        info: TrajectoryInfo,
+        types: &[(String, EntityStructureType)],
+    ) -> Result<InProcessTrajectory, CreateError> {
+        let mut catalog = self.inner.catalog.write();
+        for (name, t) in types {
+            if catalog.types().get_entity_structure_type(name).is_err() {
+                // Registration only checks the definition itself, so element types
+                // may come in any order.
+                let _ = catalog.types_mut().create_entity_structure_type(name, t.clone());
+            }
+        }
+        if self.descriptor(&info.name).is_some() {
+            return Err(CreateError::EntityStructureAlreadyExists { name: info.name.clone() });
+        }
+        let checker = crate::TypeChecker::new(catalog.types(), &info.type_name).map_err(|_| {
+            CreateError::NoSuchEntityStructureType {
+                name: info.type_name.clone(),
+                suggestion: crate::type_registry::closest_name(
+                    &info.type_name,
+                    catalog.types().names().iter().map(String::as_str),
+                ),
+            }
+        })?;
+        let store = TrajectoryStore::builder(info.name.clone(), checker)
+            .policy(info.policy.clone())
+            .clock(self.inner.clock.clone())
+            .create()?;
+        let cell = Arc::new(TrajectoryCell {
+            store: parking_lot::Mutex::new(store),
+            external_adds: false,
+            info: info.clone(),
+            worker: parking_lot::Mutex::new(None),
+            counters: Arc::default(),
+            kick: self.inner.kick.clone(),
+        });
+        let descriptor = Arc::new(Descriptor {
+            name: info.name.clone(),
+            current: parking_lot::RwLock::new(Some(cell)),
+        });
+        self.inner.trajectories.write().insert(info.name.clone(), Arc::clone(&descriptor));
+        catalog.insert_trajectory(info);
+        Ok(InProcessTrajectory { descriptor })
+    }
+
     /// Stops every worker; trajectories stay queryable.
     pub fn shutdown(&self) {
         self.inner.shutdown.store(true, Ordering::Relaxed);

@@ -149,6 +149,7 @@ impl TrajectoryStoreBuilder {
             violation_subscribers: Subscribers::default(),
             stats: StatsRecorder::default(),
             resets: Arc::default(),
+            tap: None,
         })
     }
 }
@@ -175,6 +176,21 @@ pub struct TrajectoryStore {
     /// Bumped by every reset, so readers that remember samples (units' latest inputs)
     /// know to forget them.
     resets: Arc<std::sync::atomic::AtomicU64>,
+    /// Everything that happens to the stream, in order, for one observer (a bridge
+    /// that mirrors the stream into another process).
+    tap: Option<crossbeam_channel::Sender<StoreEvent>>,
+}
+
+/// One thing that happened to a stream, as a [`TrajectoryStore::tap`] reports it.
+#[derive(Debug, Clone)]
+#[non_exhaustive]
+pub enum StoreEvent {
+    /// A structure entered the stream (directly or on release from the hold).
+    Entered(Sample),
+    /// A structure was dropped for breaking the policy.
+    Violation(PolicyViolation),
+    /// The stream was emptied (T5).
+    Reset,
 }
 
 impl TrajectoryStore {
@@ -306,6 +322,7 @@ impl TrajectoryStore {
         }
         self.history.clear();
         self.last = None;
+        self.tell_tap(StoreEvent::Reset);
     }
 
     /// A counter bumped by every reset: whoever remembers samples of this trajectory
@@ -379,6 +396,9 @@ impl TrajectoryStore {
     pub fn adopt(&mut self, old: &mut TrajectoryStore) {
         self.subscribers.adopt(&mut old.subscribers);
         self.violation_subscribers.adopt(&mut old.violation_subscribers);
+        if self.tap.is_none() {
+            self.tap = old.tap.take();
+        }
         let mut held: Vec<Held> = old.held.drain().map(|Reverse(h)| h).collect();
         held.sort();
         for h in held {
@@ -525,6 +545,14 @@ impl TrajectoryStore {
                 self.stats.record_missed_sample_points(skipped as u64);
             }
         }
+        self.admit(es, now);
+        Ok(AddOutcome::Added)
+    }
+
+    /// Stores a structure that passed every check, added at `add_time`: evicts as the
+    /// cache says and tells subscribers and the tap.
+    fn admit(&mut self, es: Arc<EntityStructure>, add_time: Time) {
+        let now = add_time;
         let seq = self.next_seq;
         self.next_seq += 1;
         self.stats.record_added(now, es.valid_time);
@@ -547,10 +575,48 @@ impl TrajectoryStore {
             },
         };
         self.stats.record_evicted(evicted);
-        let overflow =
-            self.subscribers.publish(&Sample { structure: es, add_time: now, query_time: now });
+        let sample = Sample { structure: es, add_time: now, query_time: now };
+        let overflow = self.subscribers.publish(&sample);
         self.stats.record_overflow(overflow);
-        Ok(AddOutcome::Added)
+        if self.tap.is_some() {
+            self.tell_tap(StoreEvent::Entered(sample));
+        }
+    }
+
+    /// Enters a structure that another store's gate already admitted — this store is a
+    /// replica of a trajectory written in another process. No type check and no
+    /// constraint but the cache apply (the writer applied them), and the writer's add
+    /// time is kept, so queries, subscribers and stats agree with the writer's.
+    pub fn replicate(&mut self, es: Arc<EntityStructure>, add_time: Time) {
+        self.admit(es, add_time);
+    }
+
+    /// Reports a violation the writer of a replicated trajectory found: counted and
+    /// passed to this store's violation subscribers, as if found here.
+    pub fn replicate_violation(&mut self, v: PolicyViolation) {
+        self.stats.record_dropped(DropCause::Violation(v.constraint));
+        let overflow = self.violation_subscribers.publish(&v);
+        self.stats.record_overflow(overflow);
+    }
+
+    /// Everything that happens to the stream from now on — entries, violations,
+    /// resets — in order, on one channel of `capacity` (events that find it full are
+    /// counted as overflow). One tap per store; a new tap replaces the old one. This is
+    /// how a stream is mirrored elsewhere: subscribers see entries only, and a reset
+    /// seen on a second channel could not be ordered against them.
+    pub fn tap(&mut self, capacity: usize) -> crossbeam_channel::Receiver<StoreEvent> {
+        let (tx, rx) = crossbeam_channel::bounded(capacity.max(1));
+        self.tap = Some(tx);
+        rx
+    }
+
+    fn tell_tap(&mut self, event: StoreEvent) {
+        let Some(tap) = &self.tap else { return };
+        match tap.try_send(event) {
+            Ok(()) => {}
+            Err(crossbeam_channel::TrySendError::Full(_)) => self.stats.record_overflow(1),
+            Err(crossbeam_channel::TrySendError::Disconnected(_)) => self.tap = None,
+        }
     }
 
     fn violated(
@@ -573,6 +639,9 @@ impl TrajectoryStore {
         tracing::debug!(trajectory = %self.name, %constraint, detail = %v.detail, "sample dropped");
         let overflow = self.violation_subscribers.publish(&v);
         self.stats.record_overflow(overflow);
+        if self.tap.is_some() {
+            self.tell_tap(StoreEvent::Violation(v.clone()));
+        }
         if blocking {
             Err(AddError::PolicyViolation(Box::new(v)))
         } else {

@@ -56,6 +56,12 @@ pub enum ControlClientError {
     /// The request could not be encoded or the answer decoded.
     #[error("malformed control message: {0}")]
     Malformed(#[source] serde_json::Error),
+    /// This process's location thread, which makes the calls, has stopped or is stuck.
+    #[error("the location thread is unavailable: {reason}")]
+    LocationUnavailable {
+        /// What happened.
+        reason: String,
+    },
     /// The coordinator answered with the seed's error.
     #[error(transparent)]
     Remote(#[from] ControlError),

@@ -13,6 +13,6 @@ pub mod registry;
 pub mod server;
 
 pub use client::{ControlClient, ControlClientError};
-pub use protocol::{ControlError, Request, Response, TrajectoryRecord};
+pub use protocol::{Assignment, ControlError, Request, Response, TrajectoryRecord};
 pub use registry::Registry;
-pub use server::{Coordinator, CoordinatorError};
+pub use server::{Coordinator, CoordinatorError, CoordinatorThread};

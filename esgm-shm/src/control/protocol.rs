@@ -37,6 +37,12 @@ pub enum Request {
     },
     /// Every registered type name.
     ListEntityStructureTypes,
+    /// A type with every element type it names, so another process can check its
+    /// structures.
+    GetTypeDefinitions {
+        /// Registered name.
+        type_name: String,
+    },
     /// E6: a sensor served by the process `host`.
     AddSensorInterface {
         /// Sensor name.
@@ -90,6 +96,21 @@ pub enum Request {
     ListSensors,
     /// Every unit.
     ListCompUnits,
+    /// The trajectories the process `host` must write (its sampled and computed
+    /// trajectories created by others, too): it polls this to serve them.
+    Assignments {
+        /// The asking process.
+        host: String,
+    },
+}
+
+/// A trajectory a process must write, and how to build it.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Assignment {
+    /// What to build (as the creator asked).
+    pub spec: TrajectorySpec,
+    /// Where it stands now.
+    pub record: TrajectoryRecord,
 }
 
 /// Where a trajectory lives and what it holds: enough for any process to write or read
@@ -123,6 +144,8 @@ pub enum Response {
     Type(EntityStructureType),
     /// Names.
     Names(Vec<String>),
+    /// Type definitions, by name.
+    Definitions(Vec<(String, EntityStructureType)>),
     /// A trajectory.
     Trajectory(TrajectoryRecord),
     /// Trajectories.
@@ -131,6 +154,8 @@ pub enum Response {
     Sensors(Vec<SensorRecord>),
     /// Units.
     CompUnits(Vec<UnitRecord>),
+    /// Answer to [`Request::Assignments`].
+    Assignments(Vec<Assignment>),
     /// The operation failed with the seed's error.
     Error(ControlError),
 }

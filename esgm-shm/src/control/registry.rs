@@ -4,17 +4,25 @@
 use std::collections::BTreeMap;
 
 use esgm_core::catalog::Catalog;
-use esgm_core::esgm::{TrajectoryKind, TrajectorySource};
+use esgm_core::esgm::{TrajectoryKind, TrajectorySource, TrajectorySpec};
 use esgm_core::{TypeChecker, TypeRegistry};
 
-use super::protocol::{ControlError, Request, Response, TrajectoryRecord};
+use super::protocol::{Assignment, ControlError, Request, Response, TrajectoryRecord};
+
+#[derive(Debug, Clone)]
+struct Placement {
+    writer: String,
+    generation: u64,
+    spec: TrajectorySpec,
+}
 
 /// Names, types, sensors, units and trajectories of one esgm system.
 #[derive(Debug, Default)]
 pub struct Registry {
     catalog: Catalog,
-    /// Per trajectory: its writer process and generation.
-    placement: BTreeMap<String, (String, u64)>,
+    /// Per trajectory: its writer process, generation and the spec it was made from
+    /// (which the writer needs to build it).
+    placement: BTreeMap<String, Placement>,
 }
 
 impl Registry {
@@ -45,7 +53,8 @@ impl Registry {
             // rebuilt from the inputs by whoever writes it.
             Err(_) => Vec::new(),
         };
-        let (writer, generation) = self.placement.get(name).cloned().unwrap_or_default();
+        let (writer, generation) =
+            self.placement.get(name).map(|p| (p.writer.clone(), p.generation)).unwrap_or_default();
         Ok(TrajectoryRecord { info, types, writer, generation })
     }
 
@@ -64,6 +73,9 @@ impl Registry {
                 self.catalog.types().get_entity_structure_type(&type_name)?.as_ref().clone(),
             ),
             Request::ListEntityStructureTypes => Response::Names(self.catalog.types().names()),
+            Request::GetTypeDefinitions { type_name } => Response::Definitions(
+                TypeChecker::new(self.catalog.types(), &type_name)?.definitions(),
+            ),
             Request::AddSensorInterface { sensor, type_name, host } => {
                 self.catalog.add_sensor(&sensor, &type_name, &host)?;
                 Response::Done
@@ -92,9 +104,9 @@ impl Registry {
                     _ => host,
                 };
                 let name = spec.name.clone();
-                let generation = self.placement.get(&name).map_or(0, |(_, g)| g + 1);
+                let generation = self.placement.get(&name).map_or(0, |p| p.generation + 1);
                 self.catalog.insert_trajectory(resolved.info);
-                self.placement.insert(name.clone(), (writer, generation));
+                self.placement.insert(name.clone(), Placement { writer, generation, spec });
                 Response::Trajectory(self.record(&name)?)
             }
             Request::GetEntityTrajectoryStructure { name } => {
@@ -110,12 +122,21 @@ impl Registry {
             }
             Request::ListSensors => Response::Sensors(self.catalog.sensors().cloned().collect()),
             Request::ListCompUnits => Response::CompUnits(self.catalog.units().cloned().collect()),
+            Request::Assignments { host } => {
+                let mut out = Vec::new();
+                for (name, p) in &self.placement {
+                    if p.writer == host {
+                        out.push(Assignment { spec: p.spec.clone(), record: self.record(name)? });
+                    }
+                }
+                Response::Assignments(out)
+            }
         })
     }
 
     /// The trajectories a process writes (what it must serve), e.g. after a restart.
     pub fn written_by(&self, host: &str) -> Vec<String> {
-        self.placement.iter().filter(|(_, (w, _))| w == host).map(|(n, _)| n.clone()).collect()
+        self.placement.iter().filter(|(_, p)| p.writer == host).map(|(n, _)| n.clone()).collect()
     }
 
     /// True if `name` is a primitive trajectory (writable by any process that holds it).

@@ -1,6 +1,7 @@
 //! The coordinator: serves the [`Registry`] on `esgm/<domain>/control`, and cleans up
 //! after processes that died.
 
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
@@ -50,6 +51,12 @@ pub enum CoordinatorError {
     /// Sending a response failed.
     #[error("cannot send a response: {0}")]
     Send(#[source] SendError),
+    /// The coordinator's thread could not be started.
+    #[error("cannot start the coordinator thread: {0}")]
+    Spawn(#[source] std::io::Error),
+    /// The coordinator's thread ended before it was serving.
+    #[error("the coordinator thread stopped while starting")]
+    Stopped,
 }
 
 /// Serves one domain's registry.
@@ -174,8 +181,38 @@ impl Coordinator {
         tracing::warn!(error = %e, failures = self.failures, "control request not answered");
     }
 
+    /// Starts a coordinator for `domain` on a thread of its own (iceoryx2 ports stay on
+    /// the thread that made them); it serves until the returned handle is dropped.
+    pub fn spawn(domain: &str, registry: Registry) -> Result<CoordinatorThread, CoordinatorError> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let (ready, started) = std::sync::mpsc::sync_channel(1);
+        let (d, s) = (domain.to_owned(), Arc::clone(&stop));
+        let thread = std::thread::Builder::new()
+            .name(format!("esgm-coordinator-{domain}"))
+            .spawn(move || {
+                let mut coordinator = match Coordinator::create(&d, registry) {
+                    Ok(c) => c,
+                    Err(e) => {
+                        let _ = ready.send(Err(e));
+                        return;
+                    }
+                };
+                let _ = ready.send(Ok(()));
+                if let Err(e) = coordinator.run(&s, Duration::from_secs(1)) {
+                    tracing::error!(error = %e, "coordinator stopped");
+                }
+            })
+            .map_err(CoordinatorError::Spawn)?;
+        match started.recv() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => return Err(e),
+            Err(_) => return Err(CoordinatorError::Stopped),
+        }
+        Ok(CoordinatorThread { domain: domain.to_owned(), stop, thread: Some(thread) })
+    }
+
     /// Serves until `stop` is set, polling briefly after activity and backing off to
-    /// a few milliseconds when idle (the control plane is not latency-critical), and
+    /// a millisecond when idle (the control plane is not latency-critical), and
     /// cleaning up dead processes' resources every `cleanup_every`.
     pub fn run(
         &mut self,
@@ -189,7 +226,7 @@ impl Coordinator {
                 idle = Duration::from_micros(100);
             } else {
                 std::thread::sleep(idle);
-                idle = (idle * 2).min(Duration::from_millis(5));
+                idle = (idle * 2).min(Duration::from_millis(1));
             }
             if Instant::now() >= next_cleanup {
                 let removed = cleanup_dead_nodes();
@@ -200,6 +237,31 @@ impl Coordinator {
             }
         }
         Ok(())
+    }
+}
+
+/// A coordinator serving on its own thread ([`Coordinator::spawn`]); dropping it stops
+/// and joins the thread.
+#[derive(Debug)]
+pub struct CoordinatorThread {
+    domain: String,
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl CoordinatorThread {
+    /// The domain served.
+    pub fn domain(&self) -> &str {
+        &self.domain
+    }
+}
+
+impl Drop for CoordinatorThread {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
     }
 }
 

@@ -1,0 +1,311 @@
+//! The location thread: the one thread of a process that owns its iceoryx2 ports (the
+//! control client, and every export and import), as the seed's "location" is the
+//! process-side end of the ESGM. API calls reach it as [`Command`]s.
+//!
+//! Everything that changes which trajectories this process writes or mirrors runs
+//! here, one command at a time, so a create asked by a user and the same trajectory
+//! assigned by the coordinator can never be built twice.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::time::{Duration, Instant};
+
+use crossbeam_channel::{Receiver, Select, Sender, TryRecvError};
+use esgm_core::esgm::{CreateError, Esgm, LookupError, TrajectorySpec};
+use esgm_core::{EntityStructureType, InProcessEsgm, InProcessTrajectory};
+
+use super::bridge::{Export, Import};
+use crate::control::protocol::{Assignment, ControlError, Request, Response, TrajectoryRecord};
+use crate::control::{ControlClient, ControlClientError};
+use crate::service::ShmNode;
+
+/// How often a process that serves sensors or units asks the coordinator for the
+/// trajectories it must write, and publishers hand late readers their history.
+pub(crate) const MAINTENANCE_PERIOD: Duration = Duration::from_millis(20);
+
+/// The longest the thread sleeps when nothing happens: bounds the delay of a sample
+/// arriving from another process at an idle moment.
+const MAX_IDLE: Duration = Duration::from_millis(1);
+
+/// What the API asks the location thread.
+pub(crate) enum Command {
+    /// One control request, answered as is.
+    Control(Request, Sender<Result<Response, ControlClientError>>),
+    /// Create (or re-point) a trajectory and build it here or mirror it.
+    Create(Box<TrajectorySpec>, Sender<Result<InProcessTrajectory, CreateError>>),
+    /// A handle on a trajectory, mirrored here if another process writes it.
+    Get(String, Sender<Result<InProcessTrajectory, LookupError>>),
+    /// Destroy a trajectory everywhere.
+    Destroy(String, Sender<Result<(), LookupError>>),
+    /// This process now serves sensors or units: poll for assignments.
+    Serving,
+}
+
+/// A control call failed: the seed's error if the coordinator gave one.
+pub(crate) fn unavailable(e: &ControlClientError) -> String {
+    e.to_string()
+}
+
+pub(crate) struct Location {
+    pub domain: String,
+    pub host: String,
+    pub local: InProcessEsgm,
+    pub node: ShmNode,
+    pub control: ControlClient,
+    pub exports: BTreeMap<String, Export>,
+    pub imports: BTreeMap<String, Import>,
+    /// Assignments that failed to build (reported once each).
+    pub failed: BTreeSet<String>,
+    pub serving: bool,
+}
+
+impl Location {
+    /// Serves commands and pumps bridges until the API side is gone.
+    pub fn run(mut self, commands: &Receiver<Command>) {
+        let mut idle = Duration::from_micros(20);
+        let mut next_maintenance = Instant::now();
+        loop {
+            let mut work = 0;
+            loop {
+                match commands.try_recv() {
+                    Ok(c) => {
+                        self.handle(c);
+                        work += 1;
+                    }
+                    Err(TryRecvError::Empty) => break,
+                    Err(TryRecvError::Disconnected) => return,
+                }
+            }
+            for e in self.exports.values_mut() {
+                work += e.pump();
+            }
+            for i in self.imports.values_mut() {
+                work += i.pump();
+            }
+            if Instant::now() >= next_maintenance {
+                self.maintain();
+                next_maintenance = Instant::now() + MAINTENANCE_PERIOD;
+            }
+            if work > 0 {
+                idle = Duration::from_micros(20);
+                continue;
+            }
+            // Wake at once for a command or a local event; imports are polled.
+            let mut sel = Select::new();
+            sel.recv(commands);
+            for e in self.exports.values() {
+                sel.recv(&e.events);
+            }
+            let _ = sel.ready_timeout(idle);
+            idle = (idle * 2).min(MAX_IDLE);
+        }
+    }
+
+    fn handle(&mut self, command: Command) {
+        match command {
+            Command::Control(request, reply) => {
+                let _ = reply.send(self.control.call(&request));
+            }
+            Command::Create(spec, reply) => {
+                let _ = reply.send(self.create(&spec));
+            }
+            Command::Get(name, reply) => {
+                let _ = reply.send(self.get(&name));
+            }
+            Command::Destroy(name, reply) => {
+                let _ = reply.send(self.destroy(&name));
+            }
+            Command::Serving => {
+                self.serving = true;
+                self.poll_assignments();
+            }
+        }
+    }
+
+    fn maintain(&mut self) {
+        if self.serving {
+            self.poll_assignments();
+        }
+        for e in self.exports.values() {
+            // Readers that connected since the last send receive the history now,
+            // not only at the next sample.
+            let _ = e.publisher.update_connections();
+        }
+    }
+
+    fn create(&mut self, spec: &TrajectorySpec) -> Result<InProcessTrajectory, CreateError> {
+        let request = Request::CreateTrajectory { spec: spec.clone(), host: self.host.clone() };
+        let record = match self.control.call(&request) {
+            Ok(Response::Trajectory(r)) => r,
+            Ok(other) => return Err(unexpected(&other)),
+            Err(ControlClientError::Remote(ControlError::Create(e))) => return Err(e),
+            Err(e) => return Err(CreateError::Unavailable { reason: unavailable(&e) }),
+        };
+        if record.writer == self.host {
+            self.build(spec, &record, true)
+        } else {
+            self.replica(&record)
+        }
+    }
+
+    /// Builds a trajectory this process writes: its inputs available here, the local
+    /// runtime runs its policy and worker, an export publishes it.
+    fn build(
+        &mut self,
+        spec: &TrajectorySpec,
+        record: &TrajectoryRecord,
+        undo_on_failure: bool,
+    ) -> Result<InProcessTrajectory, CreateError> {
+        let built = self.build_inner(spec, record);
+        if built.is_err() && undo_on_failure && !spec.replace {
+            let _ = self
+                .control
+                .call(&Request::DestroyEntityTrajectoryStructure { name: spec.name.clone() });
+        }
+        built
+    }
+
+    fn build_inner(
+        &mut self,
+        spec: &TrajectorySpec,
+        record: &TrajectoryRecord,
+    ) -> Result<InProcessTrajectory, CreateError> {
+        install(&self.local, &record.types);
+        for input in spec.inputs() {
+            self.ensure_available(&input)?;
+        }
+        let handle = self.local.create_trajectory(spec.clone())?;
+        if !self.exports.contains_key(&spec.name) {
+            let export = Export::start(
+                &self.node,
+                &self.domain,
+                &handle,
+                &record.info.type_name,
+                &record.info.policy,
+            )
+            .map_err(|e| CreateError::Unavailable { reason: e.to_string() })?;
+            self.exports.insert(spec.name.clone(), export);
+        }
+        Ok(handle)
+    }
+
+    /// Makes `name` readable here: local already, or mirrored from its writer.
+    fn ensure_available(&mut self, name: &str) -> Result<(), CreateError> {
+        if self.local.get_entity_trajectory_structure(name).is_ok() {
+            return Ok(());
+        }
+        let record = self.record(name).map_err(|e| match e {
+            LookupError::NoSuchEntityStructure { name, suggestion } => {
+                CreateError::NoSuchEntityStructure { name, suggestion }
+            }
+            other => CreateError::Unavailable { reason: other.to_string() },
+        })?;
+        if record.writer == self.host {
+            // Assigned here but not built yet (its creator asked another process).
+            self.poll_assignments();
+            return match self.local.get_entity_trajectory_structure(name) {
+                Ok(_) => Ok(()),
+                Err(e) => Err(CreateError::Unavailable { reason: e.to_string() }),
+            };
+        }
+        self.replica(&record).map(|_| ())
+    }
+
+    /// Mirrors a trajectory another process writes.
+    fn replica(&mut self, record: &TrajectoryRecord) -> Result<InProcessTrajectory, CreateError> {
+        let name = &record.info.name;
+        if let Ok(h) = self.local.get_entity_trajectory_structure(name) {
+            return Ok(h);
+        }
+        let handle = self.local.create_replica(record.info.clone(), &record.types)?;
+        match Import::start(
+            &self.node,
+            &self.domain,
+            handle.clone(),
+            &record.info.type_name,
+            &record.info.policy,
+        ) {
+            Ok(import) => {
+                self.imports.insert(name.clone(), import);
+                Ok(handle)
+            }
+            Err(e) => {
+                let _ = self.local.destroy_entity_trajectory_structure(name);
+                Err(CreateError::Unavailable { reason: e.to_string() })
+            }
+        }
+    }
+
+    fn record(&mut self, name: &str) -> Result<TrajectoryRecord, LookupError> {
+        match self.control.call(&Request::GetEntityTrajectoryStructure { name: name.to_owned() }) {
+            Ok(Response::Trajectory(r)) => Ok(r),
+            Ok(other) => Err(LookupError::Unavailable { reason: format!("{other:?}") }),
+            Err(ControlClientError::Remote(ControlError::Lookup(e))) => Err(e),
+            Err(e) => Err(LookupError::Unavailable { reason: unavailable(&e) }),
+        }
+    }
+
+    fn get(&mut self, name: &str) -> Result<InProcessTrajectory, LookupError> {
+        if let Ok(h) = self.local.get_entity_trajectory_structure(name) {
+            return Ok(h);
+        }
+        let record = self.record(name)?;
+        if record.writer == self.host {
+            self.poll_assignments();
+            return self.local.get_entity_trajectory_structure(name);
+        }
+        self.replica(&record).map_err(|e| LookupError::Unavailable { reason: e.to_string() })
+    }
+
+    fn destroy(&mut self, name: &str) -> Result<(), LookupError> {
+        let request = Request::DestroyEntityTrajectoryStructure { name: name.to_owned() };
+        match self.control.call(&request) {
+            Ok(_) => {}
+            Err(ControlClientError::Remote(ControlError::Lookup(e))) => return Err(e),
+            Err(e) => return Err(LookupError::Unavailable { reason: unavailable(&e) }),
+        }
+        self.exports.remove(name);
+        self.imports.remove(name);
+        let _ = self.local.destroy_entity_trajectory_structure(name);
+        self.failed.remove(name);
+        Ok(())
+    }
+
+    /// Builds the trajectories the coordinator placed here that are not built yet
+    /// (sampled on this process's sensors, computed by its units, created by others).
+    fn poll_assignments(&mut self) {
+        let list = match self.control.call(&Request::Assignments { host: self.host.clone() }) {
+            Ok(Response::Assignments(list)) => list,
+            Ok(_) => return,
+            Err(e) => {
+                tracing::debug!(error = %e, "cannot ask for assignments");
+                return;
+            }
+        };
+        for Assignment { spec, record } in list {
+            if self.exports.contains_key(&spec.name) || self.failed.contains(&spec.name) {
+                continue;
+            }
+            match self.build(&spec, &record, false) {
+                Ok(_) => tracing::info!(trajectory = %spec.name, "writing trajectory"),
+                Err(e) => {
+                    tracing::warn!(trajectory = %spec.name, error = %e,
+                        "cannot build an assigned trajectory");
+                    self.failed.insert(spec.name.clone());
+                }
+            }
+        }
+    }
+}
+
+/// Registers `types` in the local runtime where missing (names defined elsewhere).
+pub(crate) fn install(local: &InProcessEsgm, types: &[(String, EntityStructureType)]) {
+    for (name, t) in types {
+        if local.get_entity_structure_type(name).is_err() {
+            let _ = local.create_entity_structure_type(name, t.clone());
+        }
+    }
+}
+
+fn unexpected(r: &Response) -> CreateError {
+    CreateError::Unavailable { reason: format!("unexpected answer from the coordinator: {r:?}") }
+}

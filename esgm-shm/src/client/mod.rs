@@ -1,0 +1,502 @@
+//! [`connect`]: the [`Esgm`] interface of a whole system — a coordinator and any number
+//! of processes — from one process, over shared memory.
+//!
+//! Each process runs the trajectories it *writes* in a local [`InProcessEsgm`] (so the
+//! policy gate, workers, queries and subscriptions are exactly the in-process ones) and
+//! mirrors into it every trajectory it *reads* from another process:
+//!
+//! - The coordinator decides who writes what: the creator of a primitive, sync or merge
+//!   trajectory; the sensor's process for a sampled one; the unit's process for a
+//!   computed one. A process serving sensors or units polls for trajectories placed on
+//!   it and builds them (so a camera process samples its camera and publishes the image
+//!   once, from its own memory, for every reader).
+//! - Everything a local trajectory admits is published on its iceoryx2 service with
+//!   the gate's add time; violations and resets too, in order.
+//! - A trajectory written elsewhere becomes a local replica fed from its service
+//!   (starting with the writer's history), which local units, syncs and merges read.
+//!
+//! Names, types and errors are system-wide: every registration and creation is checked
+//! by the coordinator, and its errors are the seed's, as if the call were local.
+//!
+//! Trajectory handles are [`InProcessTrajectory`] handles on the local runtime: the
+//! trait answers with owned [`esgm_core::Sample`]s. For zero-copy access to another
+//! process's structures (images), read the trajectory with an
+//! [`crate::ShmTrajectoryReader`] or [`crate::TrajectorySubscriber`] instead.
+//!
+//! Left out: adding to a primitive trajectory another process writes (only its writer
+//! adds; the handle refuses with `OperationNotSupported`); re-pointing a name is seen
+//! by the process that re-points it, not by replicas elsewhere.
+
+mod bridge;
+mod location;
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use crossbeam_channel::Sender;
+use esgm_core::clock::SharedClock;
+use esgm_core::esgm::{
+    CompUnit, CreateError, Esgm, EsgmStats, InputType, LogLevel, LookupError, MemoryStats,
+    RegistrationError, SensorInterface, TrajectoryInfo, TrajectorySpec,
+};
+use esgm_core::{EntityStructureType, InProcessEsgm, InProcessTrajectory, TypeRegistryError};
+use iceoryx2::prelude::{NodeBuilder, ipc};
+
+use crate::control::protocol::{ControlError, Request, Response};
+use crate::control::{ControlClient, ControlClientError};
+use location::{Command, Location, install};
+
+/// How long a control call may take by default (the coordinator answers in
+/// milliseconds; a longer wait means it is gone or stuck).
+pub const DEFAULT_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// [`connect`] failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ConnectError {
+    /// No coordinator answered (see the reason; start one with `esgm up`).
+    #[error(transparent)]
+    Control(#[from] ControlClientError),
+    /// The location thread could not be started.
+    #[error("cannot start the location thread: {0}")]
+    Spawn(#[source] std::io::Error),
+}
+
+/// Connects to the coordinator of `domain` with the default settings.
+pub fn connect(domain: &str) -> Result<ShmEsgm, ConnectError> {
+    ShmEsgm::builder().domain(domain).connect()
+}
+
+/// Builds a [`ShmEsgm`].
+#[derive(Debug, Default)]
+pub struct ShmEsgmBuilder {
+    domain: Option<String>,
+    clock: Option<SharedClock>,
+    host: Option<String>,
+    timeout: Option<Duration>,
+}
+
+impl ShmEsgmBuilder {
+    /// The system's domain (default `esgm`, as the coordinator's).
+    #[must_use]
+    pub fn domain(mut self, domain: impl Into<String>) -> Self {
+        self.domain = Some(domain.into());
+        self
+    }
+
+    /// The clock of this process's trajectories (default: the system clock, the one
+    /// timeline every process shares).
+    #[must_use]
+    pub fn clock(mut self, clock: SharedClock) -> Self {
+        self.clock = Some(clock);
+        self
+    }
+
+    /// The name this process goes by in the registry (default: program name, process
+    /// id and a counter — unique per connection).
+    #[must_use]
+    pub fn host(mut self, host: impl Into<String>) -> Self {
+        self.host = Some(host.into());
+        self
+    }
+
+    /// How long a control call may take ([`DEFAULT_TIMEOUT`]).
+    #[must_use]
+    pub fn timeout(mut self, timeout: Duration) -> Self {
+        self.timeout = Some(timeout);
+        self
+    }
+
+    /// Connects: starts the location thread, which opens the control service.
+    pub fn connect(self) -> Result<ShmEsgm, ConnectError> {
+        let domain = self.domain.unwrap_or_else(|| crate::service_name::DEFAULT_DOMAIN.to_owned());
+        let host = self.host.unwrap_or_else(default_host);
+        let timeout = self.timeout.unwrap_or(DEFAULT_TIMEOUT);
+        let mut local = InProcessEsgm::builder();
+        if let Some(c) = self.clock {
+            local = local.clock(c);
+        }
+        let local = local.create();
+        let (commands, inbox) = crossbeam_channel::unbounded();
+        let (ready, started) = crossbeam_channel::bounded(1);
+        let (d, h, l) = (domain.clone(), host.clone(), local.clone());
+        let thread = std::thread::Builder::new()
+            .name(format!("esgm-location-{host}"))
+            .spawn(move || {
+                let setup = NodeBuilder::new()
+                    .create::<ipc::Service>()
+                    .map_err(ControlClientError::Node)
+                    .and_then(|node| Ok((ControlClient::connect(&d, timeout)?, node)));
+                let (control, node) = match setup {
+                    Ok(ok) => ok,
+                    Err(e) => {
+                        let _ = ready.send(Err(e));
+                        return;
+                    }
+                };
+                let _ = ready.send(Ok(()));
+                let location = Location {
+                    domain: d,
+                    host: h,
+                    local: l,
+                    node,
+                    control,
+                    exports: Default::default(),
+                    imports: Default::default(),
+                    failed: Default::default(),
+                    serving: false,
+                };
+                location.run(&inbox);
+            })
+            .map_err(ConnectError::Spawn)?;
+        // The thread reports right after connecting (or dies trying, disconnecting).
+        started.recv().map_err(|_| {
+            ConnectError::Control(ControlClientError::Timeout { domain: domain.clone(), timeout })
+        })??;
+        tracing::info!(%domain, %host, "connected");
+        let thread = parking_lot::Mutex::new(Some(thread));
+        Ok(ShmEsgm { inner: Arc::new(Inner { domain, host, local, commands, timeout, thread }) })
+    }
+}
+
+fn default_host() -> String {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static NEXT: AtomicU64 = AtomicU64::new(0);
+    let program = std::env::args()
+        .next()
+        .and_then(|p| {
+            std::path::Path::new(&p).file_name().map(|f| f.to_string_lossy().into_owned())
+        })
+        .unwrap_or_else(|| "process".into());
+    let clean: String = program
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' })
+        .collect();
+    format!("{clean}-{}-{}", std::process::id(), NEXT.fetch_add(1, Ordering::Relaxed))
+}
+
+#[derive(Debug)]
+struct Inner {
+    domain: String,
+    host: String,
+    local: InProcessEsgm,
+    commands: Sender<Command>,
+    timeout: Duration,
+    thread: parking_lot::Mutex<Option<std::thread::JoinHandle<()>>>,
+}
+
+impl Drop for Inner {
+    fn drop(&mut self) {
+        // Disconnect the command channel: the location thread closes its ports and
+        // ends; wait for it, so nothing of this connection outlives it.
+        let (closed, _) = crossbeam_channel::bounded(0);
+        drop(std::mem::replace(&mut self.commands, closed));
+        if let Some(t) = self.thread.lock().take() {
+            if t.thread().id() != std::thread::current().id() {
+                let _ = t.join();
+            }
+        }
+        self.local.shutdown();
+    }
+}
+
+/// The ESGM of a shared-memory system, seen from this process (see the module docs).
+/// Cheap to clone; the process leaves the system when the last clone is dropped.
+#[derive(Debug, Clone)]
+pub struct ShmEsgm {
+    inner: Arc<Inner>,
+}
+
+impl std::fmt::Debug for Command {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Command")
+    }
+}
+
+impl ShmEsgm {
+    /// Starts building a connection.
+    pub fn builder() -> ShmEsgmBuilder {
+        ShmEsgmBuilder::default()
+    }
+
+    /// The system's domain.
+    pub fn domain(&self) -> &str {
+        &self.inner.domain
+    }
+
+    /// This process's name in the registry.
+    pub fn host(&self) -> &str {
+        &self.inner.host
+    }
+
+    /// The local runtime holding this process's trajectories and replicas.
+    pub fn local(&self) -> &InProcessEsgm {
+        &self.inner.local
+    }
+
+    /// Sends a command and waits for its answer, with a deadline a little longer than
+    /// a control call's (the location thread may be making one for someone else).
+    fn ask<T>(
+        &self,
+        make: impl FnOnce(Sender<T>) -> Command,
+        unavailable: impl FnOnce(String) -> T,
+    ) -> T {
+        let (reply, answer) = crossbeam_channel::bounded(1);
+        if self.inner.commands.send(make(reply)).is_err() {
+            return unavailable("the location thread has stopped".into());
+        }
+        match answer.recv_timeout(self.inner.timeout * 3) {
+            Ok(t) => t,
+            Err(_) => unavailable(format!(
+                "no answer from the location thread within {:?}",
+                self.inner.timeout * 3
+            )),
+        }
+    }
+
+    /// One control request, answered by the coordinator.
+    pub fn control(&self, request: Request) -> Result<Response, ControlClientError> {
+        self.ask(
+            |reply| Command::Control(request, reply),
+            |reason| Err(ControlClientError::LocationUnavailable { reason }),
+        )
+    }
+
+    /// Registers `type_name` (and every element type it names) locally from the
+    /// coordinator, if it is not known here yet.
+    fn sync_type(&self, type_name: &str) -> Result<(), ControlClientError> {
+        if self.inner.local.get_entity_structure_type(type_name).is_ok() {
+            return Ok(());
+        }
+        let request = Request::GetTypeDefinitions { type_name: type_name.to_owned() };
+        if let Response::Definitions(defs) = self.control(request)? {
+            install(&self.inner.local, &defs);
+        }
+        Ok(())
+    }
+}
+
+fn type_error(e: ControlClientError) -> TypeRegistryError {
+    match e {
+        ControlClientError::Remote(ControlError::Type(e)) => e,
+        e => TypeRegistryError::Unavailable { reason: e.to_string() },
+    }
+}
+
+fn registration_error(e: ControlClientError) -> RegistrationError {
+    match e {
+        ControlClientError::Remote(ControlError::Registration(e)) => e,
+        ControlClientError::Remote(ControlError::Type(
+            TypeRegistryError::NoSuchEntityStructureType { name, suggestion },
+        )) => RegistrationError::NoSuchEntityStructureType { name, suggestion },
+        e => RegistrationError::Unavailable { reason: e.to_string() },
+    }
+}
+
+impl Esgm for ShmEsgm {
+    type Trajectory = InProcessTrajectory;
+
+    fn create_entity_structure_type(
+        &self,
+        type_name: &str,
+        entity_type: EntityStructureType,
+    ) -> Result<(), TypeRegistryError> {
+        let request = Request::CreateEntityStructureType {
+            type_name: type_name.to_owned(),
+            entity_type: entity_type.clone(),
+        };
+        self.control(request).map_err(type_error)?;
+        // Already known here (e.g. from a destroyed-and-recreated name): take the
+        // coordinator's, which is the one just registered.
+        let _ = self.inner.local.destroy_entity_structure_type(type_name);
+        let _ = self.inner.local.create_entity_structure_type(type_name, entity_type);
+        Ok(())
+    }
+
+    fn destroy_entity_structure_type(&self, type_name: &str) -> Result<(), TypeRegistryError> {
+        let request = Request::DestroyEntityStructureType { type_name: type_name.to_owned() };
+        self.control(request).map_err(type_error)?;
+        let _ = self.inner.local.destroy_entity_structure_type(type_name);
+        Ok(())
+    }
+
+    fn get_entity_structure_type(
+        &self,
+        type_name: &str,
+    ) -> Result<EntityStructureType, TypeRegistryError> {
+        let request = Request::GetEntityStructureType { type_name: type_name.to_owned() };
+        match self.control(request).map_err(type_error)? {
+            Response::Type(t) => Ok(t),
+            other => Err(TypeRegistryError::Unavailable { reason: format!("{other:?}") }),
+        }
+    }
+
+    fn entity_structure_type_names(&self) -> Vec<String> {
+        match self.control(Request::ListEntityStructureTypes) {
+            Ok(Response::Names(names)) => names,
+            _ => self.inner.local.entity_structure_type_names(),
+        }
+    }
+
+    fn create_trajectory(&self, spec: TrajectorySpec) -> Result<InProcessTrajectory, CreateError> {
+        self.ask(
+            |reply| Command::Create(Box::new(spec), reply),
+            |reason| Err(CreateError::Unavailable { reason }),
+        )
+    }
+
+    fn get_entity_trajectory_structure(
+        &self,
+        name: &str,
+    ) -> Result<InProcessTrajectory, LookupError> {
+        let name = name.to_owned();
+        self.ask(
+            |reply| Command::Get(name, reply),
+            |reason| Err(LookupError::Unavailable { reason }),
+        )
+    }
+
+    fn get_entity_trajectory_structure_type(
+        &self,
+        name: &str,
+    ) -> Result<EntityStructureType, LookupError> {
+        let request = Request::GetEntityTrajectoryStructure { name: name.to_owned() };
+        let record = match self.control(request) {
+            Ok(Response::Trajectory(r)) => r,
+            Ok(other) => return Err(LookupError::Unavailable { reason: format!("{other:?}") }),
+            Err(ControlClientError::Remote(ControlError::Lookup(e))) => return Err(e),
+            Err(e) => return Err(LookupError::Unavailable { reason: e.to_string() }),
+        };
+        match record.types.into_iter().find(|(n, _)| *n == record.info.type_name) {
+            Some((_, t)) => Ok(t),
+            // A synthesized type (state over generators) lives with its writer.
+            None => self.get_entity_trajectory_structure(name).and_then(|h| {
+                esgm_core::EntityTrajectoryStructure::entity_type(&h)
+                    .map_err(|e| LookupError::Unavailable { reason: e.to_string() })
+            }),
+        }
+    }
+
+    fn destroy_entity_trajectory_structure(&self, name: &str) -> Result<(), LookupError> {
+        let name = name.to_owned();
+        self.ask(
+            |reply| Command::Destroy(name, reply),
+            |reason| Err(LookupError::Unavailable { reason }),
+        )
+    }
+
+    fn trajectories(&self) -> Vec<TrajectoryInfo> {
+        match self.control(Request::ListTrajectories) {
+            Ok(Response::Trajectories(t)) => t,
+            _ => self.inner.local.trajectories(),
+        }
+    }
+
+    fn add_sensor_interface(
+        &self,
+        sensor: &str,
+        type_name: &str,
+        iface: Arc<dyn SensorInterface>,
+    ) -> Result<(), RegistrationError> {
+        let request = Request::AddSensorInterface {
+            sensor: sensor.to_owned(),
+            type_name: type_name.to_owned(),
+            host: self.inner.host.clone(),
+        };
+        self.control(request).map_err(registration_error)?;
+        let local = self
+            .sync_type(type_name)
+            .map_err(registration_error)
+            .and_then(|()| self.inner.local.add_sensor_interface(sensor, type_name, iface));
+        if let Err(e) = local {
+            let _ = self.control(Request::RemoveSensorInterface { sensor: sensor.to_owned() });
+            return Err(e);
+        }
+        let _ = self.inner.commands.send(Command::Serving);
+        Ok(())
+    }
+
+    fn remove_sensor_interface(&self, sensor: &str) -> Result<(), RegistrationError> {
+        let request = Request::RemoveSensorInterface { sensor: sensor.to_owned() };
+        self.control(request).map_err(registration_error)?;
+        let _ = self.inner.local.remove_sensor_interface(sensor);
+        Ok(())
+    }
+
+    fn add_comp_unit(
+        &self,
+        name: &str,
+        type_name: &str,
+        input_types: Vec<InputType>,
+        cu: Arc<dyn CompUnit>,
+    ) -> Result<(), RegistrationError> {
+        let request = Request::AddCompUnit {
+            name: name.to_owned(),
+            type_name: type_name.to_owned(),
+            input_types: input_types.clone(),
+            host: self.inner.host.clone(),
+        };
+        self.control(request).map_err(registration_error)?;
+        let mut local = self.sync_type(type_name).map_err(registration_error);
+        for t in &input_types {
+            if let (Ok(()), InputType::Type(t)) = (&local, t) {
+                local = self.sync_type(t).map_err(registration_error);
+            }
+        }
+        let local =
+            local.and_then(|()| self.inner.local.add_comp_unit(name, type_name, input_types, cu));
+        if let Err(e) = local {
+            let _ = self.control(Request::RemoveCompUnit { name: name.to_owned() });
+            return Err(e);
+        }
+        let _ = self.inner.commands.send(Command::Serving);
+        Ok(())
+    }
+
+    fn remove_comp_unit(&self, name: &str) -> Result<(), RegistrationError> {
+        let request = Request::RemoveCompUnit { name: name.to_owned() };
+        self.control(request).map_err(registration_error)?;
+        let _ = self.inner.local.remove_comp_unit(name);
+        Ok(())
+    }
+
+    fn sensors(&self) -> Vec<(String, String)> {
+        match self.control(Request::ListSensors) {
+            Ok(Response::Sensors(s)) => s.into_iter().map(|s| (s.name, s.type_name)).collect(),
+            _ => self.inner.local.sensors(),
+        }
+    }
+
+    fn comp_units(&self) -> Vec<(String, String, Vec<InputType>)> {
+        match self.control(Request::ListCompUnits) {
+            Ok(Response::CompUnits(u)) => {
+                u.into_iter().map(|u| (u.name, u.type_name, u.input_types)).collect()
+            }
+            _ => self.inner.local.comp_units(),
+        }
+    }
+
+    fn ping(&self) -> bool {
+        matches!(self.control(Request::Ping), Ok(Response::Pong { .. }))
+    }
+
+    fn reset(&self) {
+        self.inner.local.reset();
+    }
+
+    fn stats(&self) -> EsgmStats {
+        self.inner.local.stats()
+    }
+
+    fn memory_stats(&self) -> MemoryStats {
+        self.inner.local.memory_stats()
+    }
+
+    fn log_level(&self) -> LogLevel {
+        self.inner.local.log_level()
+    }
+
+    fn set_log_level(&self, level: LogLevel) {
+        self.inner.local.set_log_level(level);
+    }
+}
