@@ -1,0 +1,238 @@
+//! `connect` across locations: two connections (two "processes" in the registry, each
+//! with its own ports and local runtime) in one test process, and then a real child
+//! process that serves a sensor and a unit for trajectories its parent creates.
+//!
+//! Each test has its own coordinator in a unique domain; every wait has a deadline.
+
+// Test helpers outside #[test] fns: a failed unwrap is a failed test with a message.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+mod common;
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use common::{TIMEOUT, reap, spawn_child};
+use esgm_core::esgm::{
+    ComputeError, CreateError, InputType, LookupError, SensorError, TrajectorySpec,
+};
+use esgm_core::{
+    AddError, EntityStructure, EntityTrajectoryStructure, Esgm, FluentStreamPolicy, Sample,
+    SubscribeOptions, Time, TypeRegistry, ValueApproximation, millis,
+};
+use esgm_shm::control::{Coordinator, CoordinatorThread, Registry};
+use esgm_shm::{ShmEsgm, unique_domain};
+
+const ROLE: &str = "ESGM_LOCATIONS_ROLE";
+const DOMAIN: &str = "ESGM_LOCATIONS_DOMAIN";
+
+fn coordinator(prefix: &str) -> CoordinatorThread {
+    common::node(); // quiet iceoryx2's config warning
+    let domain = unique_domain(prefix);
+    Coordinator::spawn(&domain, Registry::new(TypeRegistry::with_library())).unwrap()
+}
+
+fn location(c: &CoordinatorThread, host: &str) -> ShmEsgm {
+    ShmEsgm::builder().domain(c.domain()).host(host).connect().unwrap()
+}
+
+fn wait_for(mut cond: impl FnMut() -> bool) -> bool {
+    let deadline = Instant::now() + TIMEOUT;
+    while Instant::now() < deadline {
+        if cond() {
+            return true;
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    cond()
+}
+
+fn state(vt: Time, x: f64) -> EntityStructure {
+    EntityStructure::new("robot1", vt, vt).with("x", x).with("y", 0.0).with("dir", 0.0)
+}
+
+fn x(s: &Sample) -> f64 {
+    s.structure.get("x").and_then(|v| v.as_double()).unwrap()
+}
+
+#[test]
+fn a_primitive_written_here_is_read_there_with_history_violations_and_reset() {
+    let c = coordinator("loc-primitive");
+    let a = location(&c, "a");
+    let b = location(&c, "b");
+    let policy = FluentStreamPolicy::default()
+        .cache(esgm_core::CacheConstraint::Elements(3))
+        .order(esgm_core::OrderConstraint::Monotone);
+    let robot = a
+        .create_trajectory(TrajectorySpec::primitive("robot", "RobotState").policy(policy))
+        .unwrap();
+    for i in 1..=4 {
+        robot.add(state(i * 10, i as f64)).unwrap();
+    }
+
+    // A late reader starts with the writer's view: the cache's last 3.
+    let there = b.get_entity_trajectory_structure("robot").unwrap();
+    let ok = wait_for(|| there.stats().map(|s| s.stored) == Ok(3));
+    assert!(ok, "{:?} / writer {:?}", there.stats(), robot.stats());
+    let xs: Vec<f64> = there.get_between(0, 100).unwrap().iter().map(x).collect();
+    assert_eq!(xs, [2.0, 3.0, 4.0]);
+    assert_eq!(there.get_latest().unwrap().add_time, robot.get_latest().unwrap().add_time);
+    let approx = there.get_at_approximating(25, &ValueApproximation::MostRecent).unwrap();
+    assert_eq!(x(&approx), 2.0);
+
+    // Only the writer adds.
+    assert!(matches!(there.add(state(99, 9.0)), Err(AddError::OperationNotSupported { .. })));
+
+    // New samples and violations arrive in order; the writer's gate decided them.
+    let sub = there.subscribe(SubscribeOptions::default()).unwrap();
+    let violations = there.subscribe_violations(16).unwrap();
+    robot.add(state(50, 5.0)).unwrap();
+    robot.add(state(45, 4.5)).unwrap(); // out of order: monotone policy drops it
+    assert_eq!(x(&sub.recv_timeout(TIMEOUT).unwrap()), 5.0);
+    let v = violations.recv_timeout(TIMEOUT).unwrap();
+    assert_eq!(v.valid_time, 45);
+
+    // Reset (T5) empties the replica too.
+    robot.reset().unwrap();
+    assert!(wait_for(|| there.stats().map(|s| s.stored) == Ok(0)));
+    robot.add(state(60, 6.0)).unwrap();
+    assert!(wait_for(|| there.get_latest().map(|s| x(&s)) == Ok(6.0)));
+    assert_eq!(there.stats().unwrap().stored, 1);
+}
+
+#[test]
+fn sampling_runs_where_the_sensor_is_and_units_where_they_are() {
+    let c = coordinator("loc-placement");
+    let camera = location(&c, "camera");
+    let planner = location(&c, "planner");
+    let user = location(&c, "user");
+
+    // The sensor lives in `camera`; `user` creates a trajectory sampling it.
+    let calls = Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let k = Arc::clone(&calls);
+    let sensor = move |q: Time| -> Result<EntityStructure, SensorError> {
+        k.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        Ok(state(q, (q / millis(10)) as f64))
+    };
+    camera.add_sensor_interface("odometry", "RobotState", Arc::new(sensor)).unwrap();
+    // The unit lives in `planner`; it doubles x.
+    let unit = |inputs: &[Sample], _q: Time| -> Result<EntityStructure, ComputeError> {
+        let s = &inputs[0].structure;
+        Ok(state(s.valid_time, 2.0 * s.get("x").and_then(|v| v.as_double()).unwrap_or(0.0)))
+    };
+    planner
+        .add_comp_unit(
+            "double",
+            "RobotState",
+            vec![InputType::Type("RobotState".into())],
+            Arc::new(unit),
+        )
+        .unwrap();
+
+    let sampled = user
+        .create_entity_trajectory_structure("odom", "odometry", 0, 0, millis(10), 0, 0)
+        .unwrap();
+    let doubled =
+        user.create_computed_entity_trajectory_structure("doubled", "double", &["odom"]).unwrap();
+    assert!(wait_for(|| doubled.stats().map(|s| s.stored >= 3).unwrap_or(false)));
+    assert!(calls.load(std::sync::atomic::Ordering::Relaxed) >= 3);
+    // Written where the data is made: the sensor's and the unit's processes.
+    let writers = |e: &ShmEsgm| e.local().stats().trajectories.len();
+    assert!(
+        writers(&camera) >= 1 && writers(&planner) >= 2,
+        "odom at camera, doubled (+ odom replica) at planner"
+    );
+    let latest = doubled.get_latest().unwrap();
+    assert!(wait_for(|| sampled.get_at(latest.structure.valid_time).is_ok()));
+    let input = sampled.get_at(latest.structure.valid_time).unwrap();
+    assert_eq!(x(&latest), 2.0 * x(&input));
+
+    // The seed's errors cross the boundary.
+    assert!(matches!(
+        user.get_entity_trajectory_structure("odon"),
+        Err(LookupError::NoSuchEntityStructure { suggestion: Some(s), .. }) if s == "odom"
+    ));
+    assert!(matches!(
+        user.create_entity_trajectory_structure("x", "odometri", 0, 0, millis(10), 0, 0),
+        Err(CreateError::NoSuchSensor { .. })
+    ));
+    // In use across processes: the sensor cannot go while `odom` samples it.
+    assert!(camera.remove_sensor_interface("odometry").is_err());
+    user.destroy_entity_trajectory_structure("doubled").unwrap();
+    user.destroy_entity_trajectory_structure("odom").unwrap();
+    camera.remove_sensor_interface("odometry").unwrap();
+}
+
+/// Runs only inside the child process: serves the sensor `counter` and the unit
+/// `negate` until the parent's `done` trajectory has a sample.
+#[test]
+fn child_location() {
+    if std::env::var(ROLE).as_deref() != Ok("serve") {
+        return;
+    }
+    let domain = std::env::var(DOMAIN).unwrap();
+    let esgm = ShmEsgm::builder().domain(&domain).host("child").connect().unwrap();
+    let sensor =
+        |q: Time| -> Result<EntityStructure, SensorError> { Ok(state(q, (q % 1000) as f64)) };
+    esgm.add_sensor_interface("counter", "RobotState", Arc::new(sensor)).unwrap();
+    let unit = |inputs: &[Sample], _q: Time| -> Result<EntityStructure, ComputeError> {
+        let s = &inputs[0].structure;
+        Ok(state(s.valid_time, -s.get("x").and_then(|v| v.as_double()).unwrap_or(0.0)))
+    };
+    esgm.add_comp_unit(
+        "negate",
+        "RobotState",
+        vec![InputType::Sort(esgm_core::ValueSort::EntityFrame)],
+        Arc::new(unit),
+    )
+    .unwrap();
+    esgm.create_primitive_entity_trajectory_structure("child_ready", "RobotState")
+        .unwrap()
+        .add(state(1, 1.0))
+        .unwrap();
+    let deadline = Instant::now() + TIMEOUT * 2;
+    while Instant::now() < deadline {
+        if let Ok(done) = esgm.get_entity_trajectory_structure("done") {
+            if done.get_latest().is_ok() {
+                return;
+            }
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    panic!("the parent never said done");
+}
+
+#[test]
+fn a_child_process_serves_a_sensor_and_a_unit() {
+    let c = coordinator("loc-child");
+    let parent = location(&c, "parent");
+    let child = spawn_child("child_location", (ROLE, "serve"), (DOMAIN, c.domain()));
+    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        assert!(wait_for(|| parent
+            .get_entity_trajectory_structure("child_ready")
+            .is_ok_and(|t| t.get_latest().is_ok())));
+        let counter = parent
+            .create_entity_trajectory_structure("counter_10ms", "counter", 0, 0, millis(10), 0, 0)
+            .unwrap();
+        let negated = parent
+            .create_computed_entity_trajectory_structure("negated", "negate", &["counter_10ms"])
+            .unwrap();
+        assert!(wait_for(|| negated.stats().map(|s| s.stored >= 3).unwrap_or(false)));
+        let n = negated.get_latest().unwrap();
+        // The input reaches this process on its own path; it may come a moment later.
+        assert!(wait_for(|| counter.get_at(n.structure.valid_time).is_ok()));
+        let input = counter.get_at(n.structure.valid_time).unwrap();
+        assert_eq!(x(&n), -x(&input));
+        parent
+            .create_primitive_entity_trajectory_structure("done", "RobotState")
+            .unwrap()
+            .add(state(1, 1.0))
+            .unwrap();
+    }));
+    let (status, output) = reap(child, TIMEOUT * 3);
+    if let Err(panic) = result {
+        eprintln!("child output:\n{output}");
+        std::panic::resume_unwind(panic);
+    }
+    assert!(status.success(), "child failed ({status}):\n{output}");
+}
