@@ -26,12 +26,14 @@ use cu_workers::{DrivingDirectionUnit, register_tutorial_units};
 use esgm_core::library::{Blob, DrivingDirection, RobotState};
 use esgm_core::time::millis;
 use esgm_core::{
-    Entity, EntityTrajectoryStructure, Esgm, FluentStreamPolicy, InProcessEsgm, SubscribeOptions,
-    TIMEUNITS_PER_MILLI_SECOND, TIMEUNITS_PER_SECOND, Time, TrajectorySpec, ValueApproximation,
+    Entity, EntityTrajectoryStructure, Esgm, FluentStreamPolicy, InProcessEsgm, SharedClock,
+    SubscribeOptions, TIMEUNITS_PER_MILLI_SECOND, TIMEUNITS_PER_SECOND, Time, TrajectorySpec,
+    ValueApproximation,
 };
 use robot_publisher::RobotPublisher;
 
-const USAGE: &str = "usage: tutorial [--seconds N] [--seed S] [--blobs N] [--image-period-ms MS]";
+const USAGE: &str =
+    "usage: tutorial [--seconds N] [--seed S] [--blobs N] [--image-period-ms MS] [--shm]";
 
 /// The robot's states may arrive this late (the seed's "small delay"): far more than an
 /// in-process push takes, far less than the 100 ms between states.
@@ -46,6 +48,9 @@ struct Config {
     seed: u64,
     blobs: usize,
     image_period: Time,
+    /// Run against shared memory (a coordinator and `esgm_shm::connect`) instead of
+    /// the in-process runtime: the same code, the other runtime.
+    shm: bool,
 }
 
 /// Parses `--flag value` pairs; `Ok(None)` means help was asked for.
@@ -55,11 +60,16 @@ fn parse_args(args: impl IntoIterator<Item = String>) -> anyhow::Result<Option<C
         seed: 0,
         blobs: 3,
         image_period: TIMEUNITS_PER_SECOND,
+        shm: false,
     };
     let mut args = args.into_iter();
     while let Some(flag) = args.next() {
         if flag == "-h" || flag == "--help" {
             return Ok(None);
+        }
+        if flag == "--shm" {
+            config.shm = true;
+            continue;
         }
         let value = args.next().with_context(|| format!("{flag} needs a value"))?;
         let number = || format!("{flag} takes a number, got `{value}`");
@@ -108,12 +118,38 @@ fn side(degrees: f64) -> &'static str {
     }
 }
 
+/// Runs the tutorial on the runtime `config` names.
 fn run(config: &Config) -> anyhow::Result<bool> {
-    let esgm = InProcessEsgm::default();
-    let t0 = esgm.clock().now();
+    if config.shm {
+        let domain = esgm_shm::unique_domain("tutorial");
+        let registry = esgm_shm::control::Registry::new(esgm_core::TypeRegistry::with_library());
+        let _coordinator = esgm_shm::control::Coordinator::spawn(&domain, registry)?;
+        let esgm = esgm_shm::connect(&domain)?;
+        let clock = esgm.local().clock().clone();
+        run_on(&esgm, &clock, config, "over shared memory")
+    } else {
+        let esgm = InProcessEsgm::default();
+        let clock = esgm.clock().clone();
+        let ok = run_on(&esgm, &clock, config, "in process");
+        esgm.shutdown();
+        ok
+    }
+}
+
+/// The tutorial itself, on any runtime.
+fn run_on<E: Esgm>(
+    esgm: &E,
+    clock: &SharedClock,
+    config: &Config,
+    where_: &str,
+) -> anyhow::Result<bool>
+where
+    E::Trajectory: 'static,
+{
+    let t0 = clock.now();
     let image_period_s = config.image_period as f64 / TIMEUNITS_PER_SECOND as f64;
     println!(
-        "esgm tutorial (seed chapters 8-10): in process, {:.1} s on the system clock",
+        "esgm tutorial (seed chapters 8-10): {where_}, {:.1} s on the system clock",
         config.run_for.as_secs_f64()
     );
 
@@ -154,7 +190,7 @@ fn run(config: &Config) -> anyhow::Result<bool> {
     )?;
 
     // Chapter 9: the units, and the trajectories computed by them.
-    register_tutorial_units(&esgm)?;
+    register_tutorial_units(esgm)?;
     let _blobs =
         esgm.create_computed_entity_trajectory_structure("blobs", "BlobDetection", &["images"])?;
     let current_blob = esgm.create_computed_entity_trajectory_structure(
@@ -190,7 +226,7 @@ fn run(config: &Config) -> anyhow::Result<bool> {
 
     // The seed's robot thread, here a simulated robot steering by the directions.
     let driving_dir = esgm.get_entity_trajectory_structure("driving_direction")?;
-    let robot = RobotPublisher::builder(robot_state.clone(), esgm.clock().clone())
+    let robot = RobotPublisher::builder(robot_state.clone(), clock.clone())
         .follow(driving_dir.clone())
         .create()?;
 
@@ -264,7 +300,7 @@ fn run(config: &Config) -> anyhow::Result<bool> {
         Ok(latest) => latest,
         Err(e) => {
             println!("  get_latest: {e}");
-            print_stats(&esgm);
+            print_stats(esgm);
             if config.blobs == 0 {
                 println!(
                     "\nas expected: without blobs, BlobSelection has no value, so nothing follows"
@@ -297,18 +333,16 @@ fn run(config: &Config) -> anyhow::Result<bool> {
         Err(e) => println!("  {label:<52} {e}"),
     }
 
-    print_stats(&esgm);
+    print_stats(esgm);
 
-    let consistent = check(&scene, t0, &latest, &robot_state, &current_blob)?;
-    esgm.shutdown();
-    Ok(consistent)
+    check(&scene, t0, &latest, &robot_state, &current_blob)
 }
 
 /// The tutorial's trajectories in data-flow order.
 const PIPELINE: [&str; 5] = ["robot_state", "images", "blobs", "current_blob", "driving_direction"];
 
 /// The per-trajectory statistics (E7) as a table.
-fn print_stats(esgm: &InProcessEsgm) {
+fn print_stats(esgm: &impl Esgm) {
     let ms = |t: Option<Time>| {
         t.map_or_else(
             || "-".to_owned(),
