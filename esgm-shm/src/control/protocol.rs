@@ -18,6 +18,9 @@ use serde::{Deserialize, Serialize};
 pub enum Request {
     /// E7 `ping`.
     Ping,
+    /// Stop the coordinator (`esgm down`); processes of the system notice it is gone
+    /// and leave.
+    Shutdown,
     /// E1.
     CreateEntityStructureType {
         /// Registered name.

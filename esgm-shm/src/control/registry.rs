@@ -77,7 +77,15 @@ impl Registry {
                 TypeChecker::new(self.catalog.types(), &type_name)?.definitions(),
             ),
             Request::AddSensorInterface { sensor, type_name, host } => {
-                self.catalog.add_sensor(&sensor, &type_name, &host)?;
+                // The same process registering the same sensor again (a restarted
+                // worker under its stable name) takes its place back.
+                let again = self
+                    .catalog
+                    .sensor(&sensor)
+                    .is_some_and(|s| s.host == host && s.type_name == type_name);
+                if !again {
+                    self.catalog.add_sensor(&sensor, &type_name, &host)?;
+                }
                 Response::Done
             }
             Request::RemoveSensorInterface { sensor } => {
@@ -85,9 +93,16 @@ impl Registry {
                 Response::Done
             }
             Request::AddCompUnit { name, type_name, input_types, host } => {
-                self.catalog.add_unit(&name, &type_name, input_types, &host)?;
+                let again = self.catalog.unit(&name).is_some_and(|u| {
+                    u.host == host && u.type_name == type_name && u.input_types == input_types
+                });
+                if !again {
+                    self.catalog.add_unit(&name, &type_name, input_types, &host)?;
+                }
                 Response::Done
             }
+            // Answered by the coordinator, which then stops.
+            Request::Shutdown => Response::Done,
             Request::RemoveCompUnit { name } => {
                 self.catalog.remove_unit(&name)?;
                 Response::Done

@@ -69,6 +69,7 @@ pub struct Coordinator {
     node: ShmNode,
     served: u64,
     failures: u64,
+    shutdown_requested: bool,
 }
 
 impl Coordinator {
@@ -103,6 +104,7 @@ impl Coordinator {
             node,
             served: 0,
             failures: 0,
+            shutdown_requested: false,
         })
     }
 
@@ -143,6 +145,11 @@ impl Coordinator {
                 }
             };
             let response = match decode::<Request>(active.payload()) {
+                Ok(Request::Shutdown) => {
+                    tracing::info!(domain = %self.domain, "shutdown requested");
+                    self.shutdown_requested = true;
+                    Response::Done
+                }
                 Ok(request) => self.registry.handle(request),
                 Err(e) => {
                     tracing::warn!(error = %e, "malformed control request");
@@ -169,6 +176,11 @@ impl Coordinator {
                 Err(e) => self.fail(e),
             }
         }
+    }
+
+    /// True once a client asked the coordinator to stop ([`Request::Shutdown`]).
+    pub fn shutdown_requested(&self) -> bool {
+        self.shutdown_requested
     }
 
     /// Requests that could not be answered (logged where they failed).
@@ -221,7 +233,7 @@ impl Coordinator {
     ) -> Result<(), CoordinatorError> {
         let mut idle = Duration::from_micros(100);
         let mut next_cleanup = Instant::now() + cleanup_every;
-        while !stop.load(Ordering::Relaxed) {
+        while !stop.load(Ordering::Relaxed) && !self.shutdown_requested {
             if self.serve_pending()? > 0 {
                 idle = Duration::from_micros(100);
             } else {

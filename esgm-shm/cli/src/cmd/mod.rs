@@ -1,0 +1,54 @@
+//! One file per subcommand.
+
+pub mod demo;
+pub mod down;
+pub mod echo;
+pub mod graph;
+pub mod hz;
+pub mod query;
+pub mod registry;
+pub mod stats;
+pub mod supervise;
+pub mod traj;
+pub mod types;
+pub mod up;
+pub mod violations;
+pub mod worker;
+
+use crate::{Cli, Command};
+
+/// The name this process's log lines carry.
+pub fn process_name(c: &Command) -> String {
+    match c {
+        Command::Up(_) => "coordinator".into(),
+        Command::Demo(_) => "demo".into(),
+        Command::Worker(role) => role.process_name(),
+        _ => "cli".into(),
+    }
+}
+
+/// Runs the command line's command.
+pub fn run(cli: &Cli) -> anyhow::Result<()> {
+    let (domain, json) = (cli.domain.as_str(), cli.json);
+    match &cli.command {
+        Command::Up(a) => up::run(domain, a),
+        Command::Down => down::run(domain),
+        Command::Demo(a) => demo::run(domain, a),
+        Command::Type(c) => types::run(domain, json, c),
+        Command::Traj(c) => traj::run(domain, json, c),
+        Command::Sensor(c) => registry::sensors(domain, json, c),
+        Command::Unit(c) => registry::units(domain, json, c),
+        Command::Latest(a) => query::latest(domain, json, a),
+        Command::Nth(a) => query::nth(domain, json, a),
+        Command::Between(a) => query::between(domain, json, a),
+        Command::At(a) => query::at(domain, json, a, false),
+        Command::Closest(a) => query::at(domain, json, a, true),
+        Command::Approx(a) => query::approx(domain, json, a),
+        Command::Echo(a) => echo::run(domain, json, a),
+        Command::Hz(a) => hz::run(domain, json, a),
+        Command::Stats => stats::run(domain, json),
+        Command::Graph(a) => graph::run(domain, json, a),
+        Command::Violations(a) => violations::run(domain, json, a),
+        Command::Worker(role) => worker::run(domain, role),
+    }
+}

@@ -1,0 +1,67 @@
+//! `esgm traj list|show|rm`.
+
+use esgm_core::{EntityTrajectoryStructure, Esgm};
+use serde_json::json;
+
+use crate::session::{connect, trajectory};
+
+/// `esgm traj` subcommands.
+#[derive(Debug, clap::Subcommand)]
+pub enum TrajCommand {
+    /// Every trajectory: name, kind, type, source.
+    List,
+    /// One trajectory: its description, policy and statistics.
+    Show {
+        /// Trajectory name.
+        name: String,
+    },
+    /// Destroy a trajectory.
+    Rm {
+        /// Trajectory name.
+        name: String,
+    },
+}
+
+/// Runs an `esgm traj` subcommand.
+pub fn run(domain: &str, json: bool, c: &TrajCommand) -> anyhow::Result<()> {
+    let esgm = connect(domain)?;
+    match c {
+        TrajCommand::List => {
+            let list = esgm.trajectories();
+            if !json {
+                println!("{:<20} {:<10} {:<18} source", "trajectory", "kind", "type");
+            }
+            for i in list {
+                if json {
+                    println!("{}", serde_json::to_string(&i)?);
+                    continue;
+                }
+                let source = match (&i.source, i.inputs.as_slice()) {
+                    (Some(s), []) => s.clone(),
+                    (Some(s), inputs) => format!("{s}({})", inputs.join(", ")),
+                    (None, []) => "pushed".to_owned(),
+                    (None, inputs) => inputs.join(", "),
+                };
+                println!("{:<20} {:<10} {:<18} {source}", i.name, i.kind.name(), i.type_name);
+            }
+        }
+        TrajCommand::Show { name } => {
+            let t = trajectory(&esgm, name)?;
+            let info = esgm.trajectories().into_iter().find(|i| i.name == *name);
+            let stats = t.stats()?;
+            if json {
+                println!("{}", json!({ "info": info, "stats": stats }));
+            } else {
+                if let Some(i) = info {
+                    println!("{}", serde_json::to_string_pretty(&i)?);
+                }
+                println!("{}", serde_json::to_string_pretty(&stats)?);
+            }
+        }
+        TrajCommand::Rm { name } => {
+            esgm.destroy_entity_trajectory_structure(name)?;
+            println!("destroyed trajectory `{name}`");
+        }
+    }
+    Ok(())
+}

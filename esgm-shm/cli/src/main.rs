@@ -1,0 +1,104 @@
+//! `esgm`: start a system, drive it, look inside it — and run the seed's tutorial as
+//! separate processes (`esgm demo`).
+//!
+//! Every command that talks to a running system connects to the coordinator of its
+//! domain (`--domain`, or `ESGM_DOMAIN`, default `esgm`). User errors print one line
+//! naming what was wrong and exit 1; usage errors exit 2.
+
+mod cmd;
+mod session;
+mod show;
+mod time_arg;
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// esgm — knowledge processing for robots over zero-copy shared memory.
+#[derive(Debug, Parser)]
+#[command(name = "esgm", version, about, propagate_version = true)]
+struct Cli {
+    /// The system to talk to (one coordinator per domain).
+    #[arg(long, global = true, env = "ESGM_DOMAIN", default_value = "esgm")]
+    domain: String,
+    /// Print data as JSON (one object per line for streams).
+    #[arg(long, global = true)]
+    json: bool,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Start the coordinator of a domain (foreground unless --detach).
+    Up(cmd::up::Args),
+    /// Stop the coordinator; the processes of the system leave with it.
+    Down,
+    /// The seed's tutorial as separate processes: coordinator, camera, robot, units.
+    Demo(cmd::demo::Args),
+    /// Entity structure types.
+    #[command(subcommand)]
+    Type(cmd::types::TypeCommand),
+    /// Trajectories.
+    #[command(subcommand)]
+    Traj(cmd::traj::TrajCommand),
+    /// Sensors.
+    #[command(subcommand)]
+    Sensor(cmd::registry::ListOnly),
+    /// Computational units.
+    #[command(subcommand)]
+    Unit(cmd::registry::ListOnly),
+    /// The latest sample of a trajectory.
+    Latest(cmd::query::One),
+    /// The n-th latest sample (0 = latest).
+    Nth(cmd::query::Nth),
+    /// Samples valid between two times.
+    Between(cmd::query::Between),
+    /// The sample valid exactly at a time.
+    At(cmd::query::At),
+    /// The closest sample at or before a time.
+    Closest(cmd::query::At),
+    /// The value at a time, approximated.
+    Approx(cmd::query::Approx),
+    /// Print samples as they arrive.
+    Echo(cmd::echo::Args),
+    /// Rate and add-delay percentiles of a trajectory.
+    Hz(cmd::hz::Args),
+    /// Statistics of every trajectory.
+    Stats,
+    /// The dataflow: sensors, units and trajectories.
+    Graph(cmd::graph::Args),
+    /// Policy violations of a trajectory as they happen.
+    Violations(cmd::violations::Args),
+    /// Run one of the system's processes (started by `esgm demo`; also by hand).
+    #[command(subcommand, hide = true)]
+    Worker(cmd::worker::Role),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
+    iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
+    let process = cmd::process_name(&cli.command);
+    let span = tracing::info_span!("esgm", process = %process);
+    let _entered = span.enter();
+
+    match cmd::run(&cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            // One line: the error and its causes, never a backtrace.
+            let chain: Vec<String> = e.chain().map(ToString::to_string).collect();
+            let mut line = chain.first().cloned().unwrap_or_default();
+            for cause in chain.iter().skip(1) {
+                if !line.contains(cause.as_str()) {
+                    line.push_str(": ");
+                    line.push_str(cause);
+                }
+            }
+            eprintln!("esgm: {line}");
+            ExitCode::FAILURE
+        }
+    }
+}

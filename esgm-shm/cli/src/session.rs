@@ -1,0 +1,39 @@
+//! Connecting to a running system, and reading a trajectory from the command line.
+
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use esgm_core::{EntityTrajectoryStructure, Esgm, InProcessTrajectory};
+use esgm_shm::ShmEsgm;
+
+/// How long a command waits for a trajectory's history to arrive from its writer.
+const SETTLE: Duration = Duration::from_millis(500);
+
+/// Connects to the coordinator of `domain` as the CLI.
+pub fn connect(domain: &str) -> anyhow::Result<ShmEsgm> {
+    let host = format!("esgm-cli-{}", std::process::id());
+    ShmEsgm::builder()
+        .domain(domain)
+        .host(host)
+        .timeout(Duration::from_secs(3))
+        .connect()
+        .with_context(|| format!("cannot reach the system `{domain}`"))
+}
+
+/// A handle on `name` with the writer's history received (the CLI is a late reader:
+/// it waits until samples stop arriving, at most [`SETTLE`]).
+pub fn trajectory(esgm: &ShmEsgm, name: &str) -> anyhow::Result<InProcessTrajectory> {
+    let t = esgm.get_entity_trajectory_structure(name)?;
+    let deadline = Instant::now() + SETTLE;
+    let mut last = (0, Instant::now());
+    while Instant::now() < deadline {
+        let added = t.stats().map(|s| s.added).unwrap_or(0);
+        if added != last.0 {
+            last = (added, Instant::now());
+        } else if added > 0 && last.1.elapsed() > Duration::from_millis(50) {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    Ok(t)
+}
