@@ -53,9 +53,11 @@ pub fn interpolate(
     t: Time,
     query_time: Time,
 ) -> EntityStructure {
-    // In f64: the differences of extreme i64 times overflow i64.
-    let span = b.valid_time as f64 - a.valid_time as f64;
-    let f = if span > 0.0 { (t as f64 - a.valid_time as f64) / span } else { 0.0 };
+    // Differences in i128 (extreme i64 times overflow i64), then f64: converting the
+    // absolute times first would lose the nanoseconds of wall-clock times (~1.7e18).
+    let span = (i128::from(b.valid_time) - i128::from(a.valid_time)) as f64;
+    let offset = (i128::from(t) - i128::from(a.valid_time)) as f64;
+    let f = if span > 0.0 { offset / span } else { 0.0 };
     EntityStructure {
         name: a.name.clone(),
         valid_time: t,

@@ -10,6 +10,14 @@ use crate::time_arg::display;
 pub fn value_json(v: &Value) -> serde_json::Value {
     match v {
         Value::NoValue => serde_json::Value::Null,
+        Value::Long(v) => json!(v),
+        Value::Double(v) => json!(v),
+        Value::Bool(v) => json!(v),
+        Value::Time(v) => json!(v),
+        Value::String(v) | Value::Symbol(v) => json!(v),
+        Value::LongSeq(v) => json!(v),
+        Value::DoubleSeq(v) => json!(v),
+        Value::SymbolSeq(v) => json!(v),
         Value::OctetSeq(o) => json!({ "octets": o.len() }),
         Value::Agg(vs) | Value::Collection(vs) => vs.iter().map(value_json).collect(),
         Value::EntityFrame(f) => frame_json(f),

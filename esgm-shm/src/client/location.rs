@@ -29,7 +29,7 @@ const MAX_IDLE: Duration = Duration::from_millis(1);
 /// What the API asks the location thread.
 pub(crate) enum Command {
     /// One control request, answered as is.
-    Control(Request, Sender<Result<Response, ControlClientError>>),
+    Control(Box<Request>, Sender<Result<Response, ControlClientError>>),
     /// Create (or re-point) a trajectory and build it here or mirror it.
     Create(Box<TrajectorySpec>, Sender<Result<InProcessTrajectory, CreateError>>),
     /// A handle on a trajectory, mirrored here if another process writes it.
@@ -103,6 +103,7 @@ impl Location {
     fn handle(&mut self, command: Command) {
         match command {
             Command::Control(request, reply) => {
+                let request = *request;
                 let _ = reply.send(self.control.call(&request));
             }
             Command::Create(spec, reply) => {

@@ -257,7 +257,7 @@ impl ShmEsgm {
     /// One control request, answered by the coordinator.
     pub fn control(&self, request: Request) -> Result<Response, ControlClientError> {
         self.ask(
-            |reply| Command::Control(request, reply),
+            |reply| Command::Control(Box::new(request), reply),
             |reason| Err(ControlClientError::LocationUnavailable { reason }),
         )
     }

@@ -233,7 +233,16 @@ impl Coordinator {
     ) -> Result<(), CoordinatorError> {
         let mut idle = Duration::from_micros(100);
         let mut next_cleanup = Instant::now() + cleanup_every;
-        while !stop.load(Ordering::Relaxed) && !self.shutdown_requested {
+        let mut leaving: Option<Instant> = None;
+        while !stop.load(Ordering::Relaxed) {
+            // After a shutdown request, answer for a moment longer: the answer lives in
+            // this server's memory until the client has taken it.
+            if self.shutdown_requested {
+                let since = *leaving.get_or_insert_with(Instant::now);
+                if since.elapsed() > Duration::from_millis(300) {
+                    break;
+                }
+            }
             if self.serve_pending()? > 0 {
                 idle = Duration::from_micros(100);
             } else {

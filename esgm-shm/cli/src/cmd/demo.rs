@@ -43,7 +43,7 @@ const UNITS: [&str; 3] = ["BlobDetection", "BlobSelection", "DrivingDirection"];
 
 /// Runs the demo; an inconsistent result is an error (exit 1).
 pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
-    if !(a.seconds > 0.0) {
+    if a.seconds.is_nan() || a.seconds <= 0.0 {
         bail!("--seconds must be positive, got {}", a.seconds);
     }
     if a.image_period_ms == 0 {

@@ -10,8 +10,14 @@ use esgm_shm::control::{ControlClient, Request};
 pub fn run(domain: &str) -> anyhow::Result<()> {
     let client = ControlClient::connect(domain, Duration::from_secs(3))
         .with_context(|| format!("cannot stop `{domain}`"))?;
-    client.call(&Request::Shutdown).with_context(|| format!("cannot stop `{domain}`"))?;
+    let answer = client.call(&Request::Shutdown);
     drop(client);
+    // No answer but gone is stopped too (the answer may be lost as the server leaves).
+    if let Err(e) = answer {
+        if ControlClient::connect(domain, Duration::from_millis(200)).is_ok() {
+            return Err(anyhow::Error::new(e).context(format!("cannot stop `{domain}`")));
+        }
+    }
     let deadline = Instant::now() + Duration::from_secs(10);
     while ControlClient::connect(domain, Duration::from_millis(200)).is_ok() {
         if Instant::now() > deadline {
