@@ -15,7 +15,7 @@ pub fn connect(domain: &str) -> anyhow::Result<ShmEsgm> {
     ShmEsgm::builder()
         .domain(domain)
         .host(host)
-        .timeout(Duration::from_secs(3))
+        .timeout(Duration::from_secs(5))
         .connect()
         .with_context(|| format!("cannot reach the system `{domain}`"))
 }

@@ -15,6 +15,14 @@ use esgm_shm::control::ControlClient;
 
 const ESGM: &str = env!("CARGO_BIN_EXE_esgm");
 
+/// One system at a time: each starts six processes, and a 2-core CI machine running
+/// them all at once (in debug builds) would measure the machine, not esgm.
+static ONE_SYSTEM: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn one_system() -> std::sync::MutexGuard<'static, ()> {
+    ONE_SYSTEM.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 struct Output {
     code: Option<i32>,
     stdout: String,
@@ -64,6 +72,7 @@ fn coordinator_is_gone(domain: &str) -> bool {
 
 #[test]
 fn demo_follows_the_largest_blob_and_leaves_nothing_behind() {
+    let _one = one_system();
     let d = domain("cli-demo");
     let o = esgm(&["--domain", &d, "demo", "--seconds", "3"], Duration::from_secs(90));
     assert_eq!(o.code, Some(0), "demo failed:\n{}\n{}", o.stdout, o.stderr);
@@ -82,6 +91,7 @@ fn demo_follows_the_largest_blob_and_leaves_nothing_behind() {
 
 #[test]
 fn every_query_command_against_a_running_system() {
+    let _one = one_system();
     let d = domain("cli-queries");
     ok(&["--domain", &d, "up", "--detach"]);
     let result = std::panic::catch_unwind(|| {
@@ -188,6 +198,7 @@ fn lines_of(child: &mut Child) -> mpsc::Receiver<String> {
 
 #[test]
 fn a_killed_unit_worker_is_restarted_and_the_trajectory_resumes() {
+    let _one = one_system();
     let d = domain("cli-kill");
     let mut demo = Command::new(ESGM)
         .args(["--domain", &d, "demo", "--seconds", "8"])

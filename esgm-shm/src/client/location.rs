@@ -18,9 +18,13 @@ use crate::control::protocol::{Assignment, ControlError, Request, Response, Traj
 use crate::control::{ControlClient, ControlClientError};
 use crate::service::ShmNode;
 
-/// How often a process that serves sensors or units asks the coordinator for the
-/// trajectories it must write, and publishers hand late readers their history.
+/// How often publishers hand late readers their history.
 pub(crate) const MAINTENANCE_PERIOD: Duration = Duration::from_millis(20);
+
+/// How often a process that serves sensors or units asks the coordinator for the
+/// trajectories it must write (creations it asks for itself are built at once). Every
+/// serving process polls, so this bounds the coordinator's load.
+pub(crate) const ASSIGNMENT_PERIOD: Duration = Duration::from_millis(200);
 
 /// The longest the thread sleeps when nothing happens: bounds the delay of a sample
 /// arriving from another process at an idle moment.
@@ -63,6 +67,7 @@ impl Location {
     pub fn run(mut self, commands: &Receiver<Command>) {
         let mut idle = Duration::from_micros(20);
         let mut next_maintenance = Instant::now();
+        let mut next_assignments = Instant::now();
         loop {
             let mut work = 0;
             loop {
@@ -84,6 +89,10 @@ impl Location {
             if Instant::now() >= next_maintenance {
                 self.maintain();
                 next_maintenance = Instant::now() + MAINTENANCE_PERIOD;
+            }
+            if self.serving && Instant::now() >= next_assignments {
+                self.poll_assignments();
+                next_assignments = Instant::now() + ASSIGNMENT_PERIOD;
             }
             if work > 0 {
                 idle = Duration::from_micros(20);
@@ -123,9 +132,6 @@ impl Location {
     }
 
     fn maintain(&mut self) {
-        if self.serving {
-            self.poll_assignments();
-        }
         for e in self.exports.values() {
             // Readers that connected since the last send receive the history now,
             // not only at the next sample.

@@ -61,7 +61,7 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
     if let Ok(c) = ControlClient::connect(&domain, Duration::from_secs(2)) {
         let _ = c.call(&Request::Shutdown);
     }
-    workers.wait_all(Duration::from_secs(5));
+    workers.wait_all(Duration::from_secs(10));
     let deadline = Instant::now() + Duration::from_secs(5);
     while coordinator.try_wait().ok().flatten().is_none() && Instant::now() < deadline {
         std::thread::sleep(Duration::from_millis(10));

@@ -66,7 +66,7 @@ pub fn run(domain: &str, role: &Role) -> anyhow::Result<()> {
         .domain(domain)
         .host(role.process_name())
         // Short: a worker notices quickly that its coordinator is gone.
-        .timeout(Duration::from_millis(500))
+        .timeout(Duration::from_secs(2))
         .connect()
         .with_context(|| format!("cannot reach the system `{domain}`"))?;
     let _robot = match role {
