@@ -44,9 +44,22 @@ pub(crate) enum Command {
     Serving,
 }
 
-/// A control call failed: the seed's error if the coordinator gave one.
-pub(crate) fn unavailable(e: &ControlClientError) -> String {
-    e.to_string()
+/// The seed's lookup error if the coordinator gave one, else `Unavailable`.
+pub(crate) fn lookup_error(e: ControlClientError) -> LookupError {
+    match e {
+        ControlClientError::Remote(ControlError::Lookup(e)) => e,
+        e => LookupError::Unavailable { reason: e.to_string() },
+    }
+}
+
+/// The record a `GetEntityTrajectoryStructure` call answered, or the seed's error.
+pub(crate) fn trajectory_record(
+    answer: Result<Response, ControlClientError>,
+) -> Result<TrajectoryRecord, LookupError> {
+    match answer.map_err(lookup_error)? {
+        Response::Trajectory(r) => Ok(r),
+        other => Err(LookupError::Unavailable { reason: format!("{other:?}") }),
+    }
 }
 
 pub(crate) struct Location {
@@ -145,7 +158,7 @@ impl Location {
             Ok(Response::Trajectory(r)) => r,
             Ok(other) => return Err(unexpected(&other)),
             Err(ControlClientError::Remote(ControlError::Create(e))) => return Err(e),
-            Err(e) => return Err(CreateError::Unavailable { reason: unavailable(&e) }),
+            Err(e) => return Err(CreateError::Unavailable { reason: e.to_string() }),
         };
         if record.writer == self.host {
             self.build(spec, &record, true)
@@ -243,12 +256,9 @@ impl Location {
     }
 
     fn record(&mut self, name: &str) -> Result<TrajectoryRecord, LookupError> {
-        match self.control.call(&Request::GetEntityTrajectoryStructure { name: name.to_owned() }) {
-            Ok(Response::Trajectory(r)) => Ok(r),
-            Ok(other) => Err(LookupError::Unavailable { reason: format!("{other:?}") }),
-            Err(ControlClientError::Remote(ControlError::Lookup(e))) => Err(e),
-            Err(e) => Err(LookupError::Unavailable { reason: unavailable(&e) }),
-        }
+        trajectory_record(
+            self.control.call(&Request::GetEntityTrajectoryStructure { name: name.to_owned() }),
+        )
     }
 
     fn get(&mut self, name: &str) -> Result<InProcessTrajectory, LookupError> {
@@ -265,11 +275,7 @@ impl Location {
 
     fn destroy(&mut self, name: &str) -> Result<(), LookupError> {
         let request = Request::DestroyEntityTrajectoryStructure { name: name.to_owned() };
-        match self.control.call(&request) {
-            Ok(_) => {}
-            Err(ControlClientError::Remote(ControlError::Lookup(e))) => return Err(e),
-            Err(e) => return Err(LookupError::Unavailable { reason: unavailable(&e) }),
-        }
+        self.control.call(&request).map_err(lookup_error)?;
         self.exports.remove(name);
         self.imports.remove(name);
         let _ = self.local.destroy_entity_trajectory_structure(name);

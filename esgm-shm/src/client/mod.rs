@@ -361,12 +361,7 @@ impl Esgm for ShmEsgm {
         name: &str,
     ) -> Result<EntityStructureType, LookupError> {
         let request = Request::GetEntityTrajectoryStructure { name: name.to_owned() };
-        let record = match self.control(request) {
-            Ok(Response::Trajectory(r)) => r,
-            Ok(other) => return Err(LookupError::Unavailable { reason: format!("{other:?}") }),
-            Err(ControlClientError::Remote(ControlError::Lookup(e))) => return Err(e),
-            Err(e) => return Err(LookupError::Unavailable { reason: e.to_string() }),
-        };
+        let record = location::trajectory_record(self.control(request))?;
         match record.types.into_iter().find(|(n, _)| *n == record.info.type_name) {
             Some((_, t)) => Ok(t),
             // A synthesized type (state over generators) lives with its writer.
