@@ -60,6 +60,10 @@ pub struct Args {
     /// Internal: the core to pin the peer to.
     #[arg(long, hide = true, requires = "peer")]
     pub peer_core: Option<usize>,
+
+    /// Internal: which of several peers of one measurement this is.
+    #[arg(long, hide = true, requires = "peer")]
+    pub peer_arg: Option<String>,
 }
 
 impl Args {
@@ -79,7 +83,7 @@ impl Args {
         }
         let peer = match (self.peer, self.peer_wait, self.peer_domain) {
             (Some(scenario), Some(wait), Some(domain)) => {
-                Some(PeerRole { scenario, wait, domain, core: self.peer_core })
+                Some(PeerRole { scenario, wait, domain, core: self.peer_core, arg: self.peer_arg })
             }
             // clap's `requires` rules out the other combinations.
             _ => None,
@@ -127,6 +131,7 @@ mod tests {
             wait: WaitMode::SpinThenBlock,
             domain: "esgm-bench-1-0".into(),
             core: Some(1),
+            arg: Some("coordinator".into()),
         };
         let args = Args::try_parse_from(std::iter::once("esgm-bench".into()).chain(role.to_args()))
             .unwrap();

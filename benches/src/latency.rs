@@ -40,6 +40,26 @@ impl Latency {
         self.record_ns(u64::try_from(round_trip.as_nanos() / 2).unwrap_or(u64::MAX));
     }
 
+    /// Records `count` samples of `ns` nanoseconds (merging another recorder's
+    /// buckets, e.g. sent by a peer process as [`Latency::buckets`]).
+    pub fn record_count(&mut self, ns: u64, count: u64) {
+        let _ = self.histogram.record_n(ns.clamp(1, HIGHEST_NS), count);
+    }
+
+    /// The recorded values as (value, count) pairs, one per non-empty bucket: enough to
+    /// rebuild the percentiles elsewhere ([`Latency::record_count`]).
+    pub fn buckets(&self) -> Vec<(u64, u64)> {
+        self.histogram
+            .iter_recorded()
+            .map(|v| (v.value_iterated_to(), v.count_at_value()))
+            .collect()
+    }
+
+    /// The value at each of `points` quantiles, for a CDF plot.
+    pub fn cdf(&self, points: &[f64]) -> Vec<(f64, u64)> {
+        points.iter().map(|&q| (q, self.quantile(q))).collect()
+    }
+
     /// Samples recorded.
     pub fn len(&self) -> u64 {
         self.histogram.len()
@@ -71,6 +91,8 @@ impl Latency {
             method: Method::HalfRoundTrip,
             baseline: None,
             producer_write_p50_ns: None,
+            msgs_per_s: None,
+            lost: None,
             notes: Vec::new(),
         }
     }
@@ -91,6 +113,21 @@ mod tests {
         assert_eq!(m.p50_ns, 500);
         assert_eq!(m.p99_ns, 990);
         assert_eq!(m.max_ns, 1000);
+    }
+
+    #[test]
+    fn buckets_rebuild_the_percentiles() {
+        let mut l = Latency::new().unwrap();
+        for ns in [100, 100, 2_000, 50_000] {
+            l.record_ns(ns);
+        }
+        let mut m = Latency::new().unwrap();
+        for (v, c) in l.buckets() {
+            m.record_count(v, c);
+        }
+        assert_eq!(m.len(), 4);
+        assert_eq!(m.quantile(0.5), l.quantile(0.5));
+        assert_eq!(m.quantile(1.0), l.quantile(1.0));
     }
 
     #[test]

@@ -52,6 +52,11 @@ impl PeerProcess {
         Ok(peer)
     }
 
+    /// The peer's process id (to read its memory use in `/proc`).
+    pub fn id(&self) -> u32 {
+        self.child.id()
+    }
+
     /// Fails if the peer has exited. A peer exits only when told to stop, so while a
     /// scenario still waits for it, an exit is a failure; the error carries its stderr.
     pub fn check_running(&mut self) -> anyhow::Result<()> {

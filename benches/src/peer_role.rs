@@ -26,6 +26,9 @@ pub struct PeerRole {
     /// inherits the affinity of the (pinned) thread that started it, and so could not
     /// find the second core by itself.
     pub core: Option<usize>,
+    /// What this peer is among several of one measurement (`coordinator`, a unit's
+    /// name, a subscriber's index), for scenarios that start more than one kind.
+    pub arg: Option<String>,
 }
 
 impl PeerRole {
@@ -42,6 +45,10 @@ impl PeerRole {
         if let Some(core) = self.core {
             args.push("--peer-core".into());
             args.push(core.to_string().into());
+        }
+        if let Some(arg) = &self.arg {
+            args.push("--peer-arg".into());
+            args.push(arg.clone().into());
         }
         args
     }

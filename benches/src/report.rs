@@ -48,6 +48,12 @@ pub enum Method {
     OneWay,
     /// Lateness of a periodic action: when it happened minus when it was scheduled.
     Lateness,
+    /// Stamped in one process, read in another, both on the host's system clock (one
+    /// kernel clock for every process): an add time in a sample's header against the
+    /// reader's clock, or the add times of two stages of a pipeline.
+    SystemClock,
+    /// The duration of one call in one thread (a query, a unit's computation).
+    Call,
 }
 
 impl Method {
@@ -57,6 +63,8 @@ impl Method {
             Method::HalfRoundTrip => "rtt/2",
             Method::OneWay => "one-way",
             Method::Lateness => "late",
+            Method::SystemClock => "clock",
+            Method::Call => "call",
         }
     }
 
@@ -68,6 +76,10 @@ impl Method {
             }
             Method::OneWay => "one-way latency timed directly (one thread sends and receives)",
             Method::Lateness => "actual add time - scheduled sample time",
+            Method::SystemClock => {
+                "stamped in one process, read in another, on the host's system clock"
+            }
+            Method::Call => "duration of one call, timed in the calling thread",
         }
     }
 }
@@ -106,6 +118,12 @@ pub struct Measurement {
     /// (e.g. writing a frame's pixels): reported beside the hop, never inside it.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub producer_write_p50_ns: Option<u64>,
+    /// Messages per second, for throughput rows.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub msgs_per_s: Option<f64>,
+    /// Samples that never arrived (throughput rows: gaps in the sequence numbers).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lost: Option<u64>,
     /// Facts worth printing under the table (missed periods, whether data was shared).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub notes: Vec<String>,
@@ -147,6 +165,14 @@ impl Measurement {
         self
     }
 
+    /// Sets the throughput and the losses (throughput rows).
+    #[must_use]
+    pub fn throughput(mut self, msgs_per_s: f64, lost: u64) -> Self {
+        self.msgs_per_s = Some(msgs_per_s);
+        self.lost = Some(lost);
+        self
+    }
+
     /// Adds a note printed under the table.
     #[must_use]
     pub fn note(mut self, note: impl Into<String>) -> Self {
@@ -155,11 +181,32 @@ impl Measurement {
     }
 }
 
+/// One memory figure: how much of something a process or a trajectory uses, after
+/// how many structures.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct MemoryRow {
+    /// What is measured (`coordinator-rss`, `writer-rss`, `shm-small-cache1000`, …).
+    pub name: String,
+    /// Structures added to the trajectory when it was measured.
+    pub after_structures: u64,
+    /// Resident bytes (VmRSS), or shared-memory bytes committed (tmpfs blocks in use).
+    pub bytes: u64,
+    /// For shared memory: the bytes mapped (file sizes), of which `bytes` are committed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mapped_bytes: Option<u64>,
+    /// What the figure covers.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub note: String,
+}
+
 /// Everything a run measured, in run order.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Report {
     /// One row per scenario and wait strategy.
     pub scenarios: Vec<Measurement>,
+    /// Memory figures (the `memory` scenario), beside the latency rows.
+    #[serde(default)]
+    pub memory: Vec<MemoryRow>,
     /// The goals the run's scenarios set, for the table; not part of the JSON.
     #[serde(skip)]
     pub targets: Vec<Target>,
@@ -192,6 +239,8 @@ mod tests {
             method: Method::HalfRoundTrip,
             baseline: None,
             producer_write_p50_ns: None,
+            msgs_per_s: None,
+            lost: None,
             notes: Vec::new(),
         }
     }

@@ -46,6 +46,7 @@ pub fn run(
             scenario.run(&ctx).with_context(|| format!("scenario {} failed", scenario.name()))?;
         let _ = writeln!(progress, "{:>6.1} s", started.elapsed().as_secs_f64());
         report.scenarios.extend(rows);
+        report.memory.extend(ctx.take_memory());
         report.targets.extend(scenario.targets());
     }
     Ok(report)

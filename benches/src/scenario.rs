@@ -1,7 +1,7 @@
 //! A benchmark scenario and what it is handed to run.
 
-use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -11,7 +11,7 @@ use crate::config::RunConfig;
 use crate::peer_process::PeerProcess;
 use crate::peer_role::PeerRole;
 use crate::pin::Pinning;
-use crate::report::{Measurement, Wait};
+use crate::report::{Measurement, MemoryRow, Wait};
 use crate::target::Target;
 use crate::wait_mode::WaitMode;
 
@@ -59,12 +59,30 @@ pub struct Context {
     quick: bool,
     samples: Option<u64>,
     pin: Option<Pinning>,
+    memory: Arc<Mutex<Vec<MemoryRow>>>,
 }
 
 impl Context {
     /// The context of a run with `config`.
     pub fn new(config: &RunConfig) -> Self {
-        Self { quick: config.quick, samples: config.samples, pin: config.pin }
+        Self {
+            quick: config.quick,
+            samples: config.samples,
+            pin: config.pin,
+            memory: Arc::default(),
+        }
+    }
+
+    /// Records a memory figure for the report's `memory` section.
+    pub fn record_memory(&self, row: MemoryRow) {
+        if let Ok(mut rows) = self.memory.lock() {
+            rows.push(row);
+        }
+    }
+
+    /// The memory figures recorded so far, taken out.
+    pub fn take_memory(&self) -> Vec<MemoryRow> {
+        self.memory.lock().map(|mut rows| std::mem::take(&mut *rows)).unwrap_or_default()
     }
 
     /// How many samples to record: `--samples` if given, else `quick` under `--quick`,
@@ -128,12 +146,30 @@ impl Context {
         wait: WaitMode,
         domain: &str,
     ) -> anyhow::Result<PeerProcess> {
+        self.spawn_peer_process_as(scenario, wait, domain, None)
+    }
+
+    /// [`Context::spawn_peer_process`] for a scenario with several kinds of peer:
+    /// `arg` tells the peer which it is ([`PeerRole::arg`]).
+    pub fn spawn_peer_process_as(
+        &self,
+        scenario: &str,
+        wait: WaitMode,
+        domain: &str,
+        arg: Option<&str>,
+    ) -> anyhow::Result<PeerProcess> {
         PeerProcess::spawn(&PeerRole {
             scenario: scenario.to_owned(),
             wait,
             domain: domain.to_owned(),
             core: self.pin.map(|p| p.peer_core()),
+            arg: arg.map(str::to_owned),
         })
+    }
+
+    /// True under `--quick`.
+    pub fn is_quick(&self) -> bool {
+        self.quick
     }
 }
 

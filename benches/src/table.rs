@@ -278,6 +278,7 @@ mod tests {
                 Target::at_most("hop", "floor", Wait::Spin, 3.0),
                 Target::at_most("hop", "floor", Wait::Event, 3.0),
             ],
+            memory: Vec::new(),
         };
         let text = render(&report, &RunConfig::default());
         let target = "hop / floor (spin)   ×2.50  (p99 ×2.50)  target ≤ ×3.00  met";

@@ -38,6 +38,8 @@ pub mod ipc_esgm_small;
 pub mod ipc_floor_iceoryx2;
 pub mod ipc_node;
 pub mod ipc_payload;
+pub mod ipc_query;
+pub mod ipc_throughput;
 pub mod ipc_uds_echo;
 pub mod ipc_uds_frames;
 pub mod ipc_uds_image;
@@ -58,6 +60,10 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(ipc_esgm_small::EsgmSmall),
         Box::new(ipc_esgm_image::EsgmImage),
         Box::new(ipc_uds_image::UdsImage),
+        Box::new(ipc_throughput::Throughput::ONE),
+        Box::new(ipc_throughput::Throughput::FOUR),
+        Box::new(ipc_query::Query::THOUSAND),
+        Box::new(ipc_query::Query::MILLION),
     ]
 }
 
