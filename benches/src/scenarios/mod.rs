@@ -38,6 +38,7 @@ pub mod ipc_esgm_small;
 pub mod ipc_floor_iceoryx2;
 pub mod ipc_node;
 pub mod ipc_payload;
+pub mod ipc_pipeline;
 pub mod ipc_query;
 pub mod ipc_throughput;
 pub mod ipc_uds_echo;
@@ -64,6 +65,7 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(ipc_throughput::Throughput::FOUR),
         Box::new(ipc_query::Query::THOUSAND),
         Box::new(ipc_query::Query::MILLION),
+        Box::new(ipc_pipeline::Pipeline),
     ]
 }
 

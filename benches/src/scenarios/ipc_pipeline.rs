@@ -1,0 +1,436 @@
+//! `pipeline-<stage>`: the seed's tutorial pipeline — camera → `images` → `blobs` →
+//! `current_blob` → `driving_direction` — across processes, and the latency each stage
+//! adds.
+//!
+//! Processes, all `esgm-bench` peers except the robot: a coordinator
+//! ([`esgm_shm::control::Coordinator`]), a camera process serving a synthetic camera
+//! ([`camera_publisher::CameraSensor`]) and one process per unit
+//! ([`cu_workers::BlobDetectionUnit`], [`cu_workers::BlobSelectionUnit`],
+//! [`cu_workers::DrivingDirectionUnit`]), each connected with [`esgm_shm::connect`] as
+//! `esgm worker` does; this process creates the trajectories (so the coordinator
+//! places each on the process that writes it, as in `esgm demo`), pushes the robot's
+//! `RobotState` at 10 Hz ([`robot_publisher::RobotPublisher`]) and subscribes to every
+//! trajectory of the pipeline.
+//!
+//! Every sample carries its structure's valid and create times and the add time its
+//! writer's gate gave it, all on the host's system clock. Per stage:
+//! - `pipeline-images`: add time − valid time of each image: the camera renders the
+//!   frame for its sample time and writes it into shared memory;
+//! - `pipeline-blobs`, `pipeline-current_blob`, `pipeline-driving_direction`: add time
+//!   of the output − add time of the input sample that triggered it (the latest input
+//!   added before the unit's call, whose time is the output's create time): the hop to
+//!   the unit's process, the unit's computation and the publish;
+//! - `pipeline-end-to-end`: add time of a driving direction computed from a new blob −
+//!   valid time of the image it came from.
+//!
+//! Beside them, each unit's computation alone, timed in this process on the same
+//! synthetic frames (`pipeline-<stage>-compute`): what the stage would cost with no
+//! transport at all.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context as _, bail};
+use camera_publisher::{CameraSensor, FrameSource, SyntheticScene};
+use cu_workers::{
+    BlobDetectionUnit, BlobDetector, BlobSelectionUnit, ComputeDirection, DrivingDirectionConfig,
+    DrivingDirectionUnit, select_blob,
+};
+use esgm_core::esgm::{CompUnit, TrajectorySpec};
+use esgm_core::library::{Blob, RobotState};
+use esgm_core::{
+    Entity, EntityTrajectoryStructure, Esgm, FluentStreamPolicy, Sample, SubscribeOptions, Time,
+    TypeRegistry, millis,
+};
+use esgm_shm::ShmEsgm;
+use esgm_shm::control::{ControlClient, Coordinator, Registry, Request};
+use esgm_shm::unique_domain;
+use robot_publisher::RobotPublisher;
+
+use crate::latency::Latency;
+use crate::peer_process::PeerProcess;
+use crate::peer_role::PeerRole;
+use crate::report::{Measurement, Method, Wait};
+use crate::scenario::{Context, Scenario};
+use crate::wait_mode::WaitMode;
+
+/// The scenario's name.
+pub const NAME: &str = "pipeline";
+/// The stages, in data-flow order, and their inputs.
+const STAGES: [(&str, &[&str]); 4] = [
+    ("images", &[]),
+    ("blobs", &["images"]),
+    ("current_blob", &["blobs"]),
+    ("driving_direction", &["robot_state", "current_blob"]),
+];
+const UNITS: [&str; 3] =
+    [BlobDetectionUnit::NAME, BlobSelectionUnit::NAME, DrivingDirectionUnit::NAME];
+/// Time between two camera images.
+const IMAGE_PERIOD_MS: i64 = 50;
+/// How long anything may take to come up.
+const STARTUP: Duration = Duration::from_secs(30);
+
+/// See the module docs.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Pipeline;
+
+impl Scenario for Pipeline {
+    fn name(&self) -> &'static str {
+        NAME
+    }
+
+    fn summary(&self) -> &'static str {
+        "rows pipeline-<stage>: the tutorial's camera -> images -> blobs -> current_blob -> \
+         driving_direction across six processes, latency added per stage; unit compute \
+         time alone beside it"
+    }
+
+    fn run(&self, ctx: &Context) -> anyhow::Result<Vec<Measurement>> {
+        let seconds = if ctx.is_quick() { 3 } else { 30 };
+        let collected = run_system(ctx, Duration::from_secs(seconds))?;
+        let mut rows = stage_rows(&collected)?;
+        rows.extend(compute_rows(ctx)?);
+        Ok(rows)
+    }
+
+    fn run_peer(&self, role: &PeerRole) -> anyhow::Result<Vec<String>> {
+        match role.arg.as_deref() {
+            Some("coordinator") => {
+                iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
+                let mut c =
+                    Coordinator::create(&role.domain, Registry::new(TypeRegistry::with_library()))
+                        .context("could not start the coordinator")?;
+                c.run(&AtomicBool::new(false), Duration::from_secs(1))?;
+                Ok(Vec::new())
+            }
+            Some(worker) => serve(&role.domain, worker),
+            None => bail!("the pipeline peer needs --peer-arg"),
+        }
+    }
+}
+
+/// A camera or unit process: registers what it serves and stays until the
+/// coordinator is gone.
+fn serve(domain: &str, worker: &str) -> anyhow::Result<Vec<String>> {
+    iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
+    let esgm = ShmEsgm::builder()
+        .domain(domain)
+        .host(format!("bench-{worker}"))
+        .timeout(Duration::from_secs(2))
+        .connect()
+        .with_context(|| format!("{worker}: cannot reach the coordinator"))?;
+    if worker == "camera" {
+        let scene = SyntheticScene::builder().create()?;
+        esgm.add_sensor_interface(
+            "camera",
+            CameraSensor::<SyntheticScene>::TYPE_NAME,
+            Arc::new(CameraSensor::new(scene)),
+        )?;
+    } else {
+        let (output, inputs, unit): (_, _, Arc<dyn CompUnit>) = match worker {
+            BlobDetectionUnit::NAME => (
+                BlobDetectionUnit::OUTPUT_TYPE,
+                BlobDetectionUnit::input_types(),
+                Arc::new(BlobDetectionUnit::default()),
+            ),
+            BlobSelectionUnit::NAME => (
+                BlobSelectionUnit::OUTPUT_TYPE,
+                BlobSelectionUnit::input_types(),
+                Arc::new(BlobSelectionUnit),
+            ),
+            DrivingDirectionUnit::NAME => (
+                DrivingDirectionUnit::OUTPUT_TYPE,
+                DrivingDirectionUnit::input_types(),
+                Arc::new(DrivingDirectionUnit::default()),
+            ),
+            other => bail!("unknown pipeline worker {other}"),
+        };
+        esgm.add_comp_unit(worker, output, inputs, unit)?;
+    }
+    let started = Instant::now();
+    let mut misses = 0;
+    while misses < 2 {
+        std::thread::sleep(Duration::from_millis(100));
+        misses = if esgm.ping() { 0 } else { misses + 1 };
+        if started.elapsed() > Duration::from_secs(600) {
+            bail!("{worker}: still running after 10 minutes");
+        }
+    }
+    Ok(Vec::new())
+}
+
+/// What the measuring process saw of each trajectory.
+type Collected = HashMap<&'static str, Vec<Sample>>;
+
+fn run_system(ctx: &Context, run_for: Duration) -> anyhow::Result<Collected> {
+    // iceoryx2's warnings (no config file, buffer sizes adjusted) are not news here.
+    iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
+    let domain = unique_domain("esgm-bench-pipe");
+    let mut coordinator =
+        ctx.spawn_peer_process_as(NAME, WaitMode::SpinThenBlock, &domain, Some("coordinator"))?;
+    let started = Instant::now();
+    loop {
+        if let Ok(c) = ControlClient::connect(&domain, Duration::from_millis(200)) {
+            if c.call(&Request::Ping).is_ok() {
+                break;
+            }
+        }
+        coordinator.check_running()?;
+        if started.elapsed() > STARTUP {
+            bail!("the coordinator did not answer within {STARTUP:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let mut workers: Vec<PeerProcess> = Vec::new();
+    for worker in std::iter::once("camera").chain(UNITS) {
+        workers.push(ctx.spawn_peer_process_as(
+            NAME,
+            WaitMode::SpinThenBlock,
+            &domain,
+            Some(worker),
+        )?);
+    }
+    let result = drive(&domain, run_for, &mut workers);
+
+    // Stop: the coordinator leaves, the workers notice within two pings.
+    if let Ok(c) = ControlClient::connect(&domain, Duration::from_secs(2)) {
+        let _ = c.call(&Request::Shutdown);
+    }
+    let mut failures = Vec::new();
+    for peer in workers.into_iter().chain(std::iter::once(coordinator)) {
+        if let Err(e) = peer.finish(Duration::from_secs(15)) {
+            failures.push(format!("{e:#}"));
+        }
+    }
+    let collected = result?;
+    if !failures.is_empty() {
+        bail!("pipeline processes failed: {}", failures.join("; "));
+    }
+    Ok(collected)
+}
+
+fn drive(
+    domain: &str,
+    run_for: Duration,
+    workers: &mut [PeerProcess],
+) -> anyhow::Result<Collected> {
+    let esgm = ShmEsgm::builder()
+        .domain(domain)
+        .host("bench-robot")
+        .connect()
+        .context("cannot reach the pipeline's coordinator")?;
+    let started = Instant::now();
+    loop {
+        let sensors = esgm.sensors();
+        let units = esgm.comp_units();
+        if sensors.iter().any(|(n, _)| n == "camera")
+            && UNITS.iter().all(|u| units.iter().any(|(n, _, _)| n == u))
+        {
+            break;
+        }
+        for w in workers.iter_mut() {
+            w.check_running()?;
+        }
+        if started.elapsed() > STARTUP {
+            bail!("the camera and the units did not register within {STARTUP:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+
+    let policy = FluentStreamPolicy::reasonable(millis(50), 600)?.reorder(false);
+    let robot_state = esgm.create_trajectory(
+        TrajectorySpec::primitive("robot_state", RobotState::TYPE_NAME).policy(policy),
+    )?;
+    let images = esgm.create_entity_trajectory_structure(
+        "images",
+        "camera",
+        0,
+        0,
+        millis(IMAGE_PERIOD_MS),
+        0,
+        5,
+    )?;
+    let blobs = esgm.create_computed_entity_trajectory_structure(
+        "blobs",
+        BlobDetectionUnit::NAME,
+        &["images"],
+    )?;
+    let current = esgm.create_computed_entity_trajectory_structure(
+        "current_blob",
+        BlobSelectionUnit::NAME,
+        &["blobs"],
+    )?;
+    let directions = esgm.create_computed_entity_trajectory_structure(
+        "driving_direction",
+        DrivingDirectionUnit::NAME,
+        &["robot_state", "current_blob"],
+    )?;
+    let options = SubscribeOptions::default;
+    let subs = [
+        ("robot_state", robot_state.subscribe(options())?),
+        ("images", images.subscribe(options())?),
+        ("blobs", blobs.subscribe(options())?),
+        ("current_blob", current.subscribe(options())?),
+        ("driving_direction", directions.subscribe(options())?),
+    ];
+    let clock = esgm.local().clock().clone();
+    let robot = RobotPublisher::builder(robot_state.clone(), clock)
+        .period(millis(100))
+        .follow(directions.clone())
+        .create()?;
+
+    let mut collected: Collected = HashMap::new();
+    let started = Instant::now();
+    let mut next_check = Instant::now();
+    while started.elapsed() < run_for {
+        let mut any = false;
+        for (name, sub) in &subs {
+            while let Some(s) = sub.try_recv() {
+                collected.entry(name).or_default().push(s);
+                any = true;
+            }
+        }
+        if Instant::now() >= next_check {
+            for w in workers.iter_mut() {
+                w.check_running()?;
+            }
+            next_check = Instant::now() + Duration::from_millis(200);
+        }
+        if !any {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
+    drop(robot);
+    Ok(collected)
+}
+
+/// The latency rows, from the samples' times.
+fn stage_rows(c: &Collected) -> anyhow::Result<Vec<Measurement>> {
+    let empty = Vec::new();
+    let of = |name: &str| c.get(name).unwrap_or(&empty);
+    let mut rows = Vec::new();
+    for (stage, inputs) in STAGES {
+        let mut latency = Latency::new()?;
+        let outputs = of(stage);
+        let mut untriggered = 0u64;
+        for out in outputs {
+            if inputs.is_empty() {
+                latency
+                    .record_ns(u64::try_from(out.add_time - out.structure.valid_time).unwrap_or(0));
+                continue;
+            }
+            match trigger(c, inputs, out.structure.create_time) {
+                Some((_, input)) => {
+                    latency.record_ns(u64::try_from(out.add_time - input.add_time).unwrap_or(0));
+                }
+                None => untriggered += 1,
+            }
+        }
+        let mut row = latency
+            .measurement(&format!("pipeline-{stage}"), Wait::Event)
+            .payload_bytes(payload_of(outputs))
+            .method(Method::SystemClock)
+            .wait_strategy("esgm runtime default (spin, then block)");
+        row = row.note(if inputs.is_empty() {
+            "valid time -> added by the camera process (render + write into shared memory)".to_owned()
+        } else {
+            format!("added here - added to its input ({}): hop to the unit's process + compute + publish", inputs.join(" or "))
+        });
+        if untriggered > 0 {
+            row = row.note(format!(
+                "{untriggered} samples with no input added before them were left out"
+            ));
+        }
+        if stage == "images" {
+            row = row.note(format!("{} images at one per {IMAGE_PERIOD_MS} ms", outputs.len()));
+        }
+        rows.push(row);
+    }
+    // End to end: directions triggered by a new blob, back to the image's valid time.
+    let mut e2e = Latency::new()?;
+    for out in of("driving_direction") {
+        if let Some(("current_blob", blob)) =
+            trigger(c, &["robot_state", "current_blob"], out.structure.create_time)
+        {
+            e2e.record_ns(u64::try_from(out.add_time - blob.structure.valid_time).unwrap_or(0));
+        }
+    }
+    rows.push(
+        e2e.measurement("pipeline-end-to-end", Wait::Event)
+            .method(Method::SystemClock)
+            .wait_strategy("esgm runtime default (spin, then block)")
+            .note("image valid time -> driving direction added, for directions computed from a new blob"),
+    );
+    Ok(rows)
+}
+
+/// The input sample added last at or before `at` among `inputs`.
+fn trigger<'a>(
+    c: &'a Collected,
+    inputs: &[&'static str],
+    at: Time,
+) -> Option<(&'static str, &'a Sample)> {
+    inputs
+        .iter()
+        .filter_map(|name| {
+            let samples = c.get(name)?;
+            // Samples arrive in add order.
+            let i = samples.partition_point(|s| s.add_time <= at);
+            samples.get(i.checked_sub(1)?).map(|s| (*name, s))
+        })
+        .max_by_key(|(_, s)| s.add_time)
+}
+
+fn payload_of(samples: &[Sample]) -> u64 {
+    samples
+        .first()
+        .and_then(|s| esgm_core::codec::encode(&s.structure).ok())
+        .map_or(0, |b| b.len() as u64)
+}
+
+/// Each unit's computation alone, in this process, on the camera's frames.
+fn compute_rows(ctx: &Context) -> anyhow::Result<Vec<Measurement>> {
+    let frames = ctx.samples(1_000, 50).min(10_000);
+    let scene = SyntheticScene::builder().create()?;
+    let mut detector = BlobDetector::default();
+    let direction = ComputeDirection::new(DrivingDirectionConfig::default())?;
+    let robot = RobotState { x: 1.0, y: 2.0, dir: 3.0 };
+    let (mut detect, mut select, mut steer) = (Latency::new()?, Latency::new()?, Latency::new()?);
+    let mut last_blob = Blob { x: 320, y: 240, size: 100 };
+    for i in 0..frames {
+        let image = scene.frame(i as Time * millis(IMAGE_PERIOD_MS));
+        let start = Instant::now();
+        let blobs = detector.detect(&image).context("detecting blobs")?;
+        detect.record(start.elapsed());
+        let start = Instant::now();
+        let blob = select_blob(&blobs);
+        select.record(start.elapsed());
+        if let Some(b) = blob {
+            last_blob = b;
+        }
+        let start = Instant::now();
+        std::hint::black_box(direction.compute(&robot, &last_blob));
+        steer.record(start.elapsed());
+    }
+    let bytes = (scene.frame_len()) as u64;
+    Ok(vec![
+        detect
+            .measurement("pipeline-blobs-compute", Wait::Spin)
+            .payload_bytes(bytes)
+            .method(Method::Call)
+            .wait_strategy("none (in process)")
+            .note("BlobDetector::detect on a 640x480 RGB frame of the synthetic scene"),
+        select
+            .measurement("pipeline-current_blob-compute", Wait::Spin)
+            .method(Method::Call)
+            .wait_strategy("none (in process)")
+            .note("select_blob on the detected blobs"),
+        steer
+            .measurement("pipeline-driving_direction-compute", Wait::Spin)
+            .method(Method::Call)
+            .wait_strategy("none (in process)")
+            .note("ComputeDirection::compute"),
+    ])
+}
