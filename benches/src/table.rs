@@ -106,6 +106,7 @@ pub fn render(report: &Report, config: &RunConfig) -> String {
     let _ = writeln!(out, "{:>8}: ratio to the baseline row (and the difference)", "vs");
 
     out.push_str(&targets(report));
+    out.push_str(&memory(report));
 
     let notes: Vec<String> = report.scenarios.iter().flat_map(notes_of).collect();
     if !notes.is_empty() {
@@ -173,6 +174,40 @@ fn targets(report: &Report) -> String {
         let _ = writeln!(out, "{}", text.trim_end());
     }
     out
+}
+
+/// The memory section: one line per figure.
+fn memory(report: &Report) -> String {
+    let mut out = String::new();
+    if report.memory.is_empty() {
+        return out;
+    }
+    let _ =
+        writeln!(out, "memory (resident: VmRSS; shared memory: /dev/shm files of the trajectory):");
+    let width = report.memory.iter().map(|m| m.name.chars().count()).max().unwrap_or(0);
+    for m in &report.memory {
+        let amount = if m.name.ends_with("-rate") {
+            format!("{}/s", thousands(m.bytes))
+        } else {
+            match m.mapped_bytes {
+                Some(mapped) => format!("{} committed of {} mapped", bytes(m.bytes), bytes(mapped)),
+                None => bytes(m.bytes),
+            }
+        };
+        let _ = writeln!(
+            out,
+            "  {:<width$}  after {:>9}  {amount}  ({})",
+            m.name,
+            thousands(m.after_structures),
+            m.note
+        );
+    }
+    out
+}
+
+/// `12.3 MiB`.
+fn bytes(b: u64) -> String {
+    format!("{:.1} MiB", b as f64 / (1024.0 * 1024.0))
 }
 
 fn wait_legend(wait: Wait) -> String {

@@ -111,6 +111,45 @@ impl Scenario for Pipeline {
     }
 }
 
+/// A coordinator process: serves `domain` until told to shut down.
+pub fn coordinator(domain: &str) -> anyhow::Result<Vec<String>> {
+    iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
+    let mut c = Coordinator::create(domain, Registry::new(TypeRegistry::with_library()))
+        .context("could not start the coordinator")?;
+    c.run(&AtomicBool::new(false), Duration::from_secs(1))?;
+    Ok(Vec::new())
+}
+
+/// Starts a coordinator peer of `scenario` for `domain` and waits until it answers.
+pub fn spawn_coordinator(
+    ctx: &Context,
+    scenario: &str,
+    domain: &str,
+) -> anyhow::Result<PeerProcess> {
+    let mut coordinator =
+        ctx.spawn_peer_process_as(scenario, WaitMode::SpinThenBlock, domain, Some("coordinator"))?;
+    let started = Instant::now();
+    loop {
+        if let Ok(c) = ControlClient::connect(domain, Duration::from_millis(200)) {
+            if c.call(&Request::Ping).is_ok() {
+                return Ok(coordinator);
+            }
+        }
+        coordinator.check_running()?;
+        if started.elapsed() > STARTUP {
+            bail!("the coordinator did not answer within {STARTUP:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Asks the coordinator of `domain` to shut down (its workers notice and leave).
+pub fn shutdown(domain: &str) {
+    if let Ok(c) = ControlClient::connect(domain, Duration::from_secs(2)) {
+        let _ = c.call(&Request::Shutdown);
+    }
+}
+
 /// A camera or unit process: registers what it serves and stays until the
 /// coordinator is gone.
 fn serve(domain: &str, worker: &str) -> anyhow::Result<Vec<String>> {
@@ -168,21 +207,7 @@ fn run_system(ctx: &Context, run_for: Duration) -> anyhow::Result<Collected> {
     // iceoryx2's warnings (no config file, buffer sizes adjusted) are not news here.
     iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
     let domain = unique_domain("esgm-bench-pipe");
-    let mut coordinator =
-        ctx.spawn_peer_process_as(NAME, WaitMode::SpinThenBlock, &domain, Some("coordinator"))?;
-    let started = Instant::now();
-    loop {
-        if let Ok(c) = ControlClient::connect(&domain, Duration::from_millis(200)) {
-            if c.call(&Request::Ping).is_ok() {
-                break;
-            }
-        }
-        coordinator.check_running()?;
-        if started.elapsed() > STARTUP {
-            bail!("the coordinator did not answer within {STARTUP:?}");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
+    let coordinator = spawn_coordinator(ctx, NAME, &domain)?;
     let mut workers: Vec<PeerProcess> = Vec::new();
     for worker in std::iter::once("camera").chain(UNITS) {
         workers.push(ctx.spawn_peer_process_as(
@@ -195,9 +220,7 @@ fn run_system(ctx: &Context, run_for: Duration) -> anyhow::Result<Collected> {
     let result = drive(&domain, run_for, &mut workers);
 
     // Stop: the coordinator leaves, the workers notice within two pings.
-    if let Ok(c) = ControlClient::connect(&domain, Duration::from_secs(2)) {
-        let _ = c.call(&Request::Shutdown);
-    }
+    shutdown(&domain);
     let mut failures = Vec::new();
     for peer in workers.into_iter().chain(std::iter::once(coordinator)) {
         if let Err(e) = peer.finish(Duration::from_secs(15)) {

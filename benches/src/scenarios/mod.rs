@@ -36,6 +36,7 @@ pub mod ipc_esgm_echo;
 pub mod ipc_esgm_image;
 pub mod ipc_esgm_small;
 pub mod ipc_floor_iceoryx2;
+pub mod ipc_memory;
 pub mod ipc_node;
 pub mod ipc_payload;
 pub mod ipc_pipeline;
@@ -66,6 +67,7 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(ipc_query::Query::THOUSAND),
         Box::new(ipc_query::Query::MILLION),
         Box::new(ipc_pipeline::Pipeline),
+        Box::new(ipc_memory::Memory),
     ]
 }
 
