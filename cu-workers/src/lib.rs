@@ -8,7 +8,7 @@
 //! | [`BlobDetector`] | [`BlobDetectionUnit`] (`BlobDetection`, the seed's BlobDetector) | `Image` → `BlobSeq` |
 //! | [`select_blob`] | [`BlobSelectionUnit`] (`BlobSelection`, the seed's ObjectSelector) | `BlobSeq` → `Blob` or no value |
 //! | [`ComputeDirection`] | [`DrivingDirectionUnit`] (`DrivingDirection`, the seed's ComputeDirection) | `RobotState`, `Blob` → `DrivingDirection` |
-//! | [`MovingAverage`] | — | any structure → the same structure, averaged |
+//! | [`MovingAverage`] | [`MovingAverageUnit`] (`MovingAverage`, one per smoothed type) | any structure → the same structure, averaged |
 //!
 //! [`register_tutorial_units`] registers the three tutorial units on any runtime;
 //! `examples/tutorial.rs` runs the seed's whole tutorial (chapters 8–10) in process.
@@ -68,6 +68,7 @@ pub mod blob_selection_unit;
 pub mod driving_direction;
 pub mod driving_direction_unit;
 pub mod moving_average;
+pub mod moving_average_unit;
 pub mod tutorial;
 pub mod unit_input;
 
@@ -80,6 +81,7 @@ pub use driving_direction::{
 };
 pub use driving_direction_unit::DrivingDirectionUnit;
 pub use moving_average::MovingAverage;
+pub use moving_average_unit::MovingAverageUnit;
 pub use tutorial::register_tutorial_units;
 pub use unit_input::UnitInputError;
 

@@ -137,4 +137,4 @@ pub use writer::{ShmTrajectoryWriter, WriteError, WriterCreateError, WriterStats
 pub mod client;
 pub mod control;
 
-pub use client::{ConnectError, ShmEsgm, ShmEsgmBuilder, connect};
+pub use client::{ConnectError, DOMAIN_ENV, ShmEsgm, ShmEsgmBuilder, WORKER_ENV, connect};

@@ -6,6 +6,8 @@
 //! naming what was wrong and exit 1; usage errors exit 2.
 
 mod cmd;
+mod config;
+mod policy_args;
 mod session;
 mod show;
 mod time_arg;
@@ -34,6 +36,10 @@ enum Command {
     Up(cmd::up::Args),
     /// Stop the coordinator; the processes of the system leave with it.
     Down,
+    /// Declare types, sensors, units and trajectories from a configuration file.
+    Apply(cmd::apply::Args),
+    /// The processes the system keeps running, with restarts.
+    Ps,
     /// The seed's tutorial as separate processes: coordinator, camera, robot, units.
     Demo(cmd::demo::Args),
     /// Entity structure types.
@@ -85,7 +91,20 @@ fn main() -> ExitCode {
     let span = tracing::info_span!("esgm", process = %process);
     let _entered = span.enter();
 
-    match cmd::run(&cli) {
+    // `esgm echo x | head`: a closed stdout ends the command quietly (println! panics
+    // on a broken pipe; the panic unwinds, so every connection is closed properly).
+    let default_hook = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        if !is_broken_pipe(info.payload()) {
+            default_hook(info);
+        }
+    }));
+    let result = match std::panic::catch_unwind(|| cmd::run(&cli)) {
+        Ok(result) => result,
+        Err(payload) if is_broken_pipe(payload.as_ref()) => return ExitCode::SUCCESS,
+        Err(payload) => std::panic::resume_unwind(payload),
+    };
+    match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             // One line: the error and its causes, never a backtrace.
@@ -101,4 +120,14 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// True for the panic `println!` raises when stdout's reader has gone.
+fn is_broken_pipe(payload: &(dyn std::any::Any + Send)) -> bool {
+    let message = payload
+        .downcast_ref::<String>()
+        .map(String::as_str)
+        .or_else(|| payload.downcast_ref::<&str>().copied())
+        .unwrap_or_default();
+    message.contains("Broken pipe")
 }

@@ -220,7 +220,7 @@ fn a_killed_unit_worker_is_restarted_and_the_trajectory_resumes() {
             }
             continue;
         };
-        if let Some(rest) = line.trim().strip_prefix("started BlobDetection") {
+        if let Some(rest) = line.trim().strip_prefix("started unit-BlobDetection") {
             pid = rest.split_whitespace().last().and_then(|p| p.parse::<u32>().ok());
         }
         if line.trim_start().starts_with(|c: char| c.is_ascii_digit()) && line.contains('.') {
@@ -262,4 +262,259 @@ fn a_killed_unit_worker_is_restarted_and_the_trajectory_resumes() {
         .unwrap_or(0);
     assert!(blobs >= 20, "blobs did not resume after the restart ({blobs}):\n{text}");
     assert!(coordinator_is_gone(&d));
+}
+
+/// Pids of the system's processes, as `esgm ps --json` reports them.
+fn process_pids(d: &str) -> Vec<u32> {
+    ok(&["--domain", d, "--json", "ps"])
+        .lines()
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter_map(|v| v["status"]["pid"].as_u64())
+        .filter_map(|p| u32::try_from(p).ok())
+        .collect()
+}
+
+/// Polls `esgm latest traj` until it prints a sample, or fails after `limit`.
+fn wait_for_sample(d: &str, traj: &str, limit: Duration) -> String {
+    let deadline = Instant::now() + limit;
+    loop {
+        let o = esgm(&["--domain", d, "latest", traj], Duration::from_secs(30));
+        if o.code == Some(0) && !o.stdout.trim().is_empty() {
+            return o.stdout;
+        }
+        assert!(Instant::now() < deadline, "no sample in `{traj}` within {limit:?}: {}", o.stderr);
+        std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+fn fails_with(args: &[&str], needles: &[&str]) {
+    let o = esgm(args, Duration::from_secs(30));
+    assert_eq!(
+        o.code,
+        Some(1),
+        "`esgm {}` should fail:\n{}\n{}",
+        args.join(" "),
+        o.stdout,
+        o.stderr
+    );
+    assert_eq!(o.stderr.trim().lines().count(), 1, "one line expected:\n{}", o.stderr);
+    for n in needles {
+        assert!(o.stderr.contains(n), "`{n}` missing in: {}", o.stderr);
+    }
+}
+
+#[test]
+fn a_system_from_a_config_file_with_built_in_generic_and_user_units() {
+    let _one = one_system();
+    let d = domain("cli-apply");
+    let dir = tempfile::tempdir().unwrap();
+    let user_unit =
+        std::path::Path::new(ESGM).parent().unwrap().join("examples").join("large_blob_unit");
+    assert!(
+        user_unit.exists(),
+        "{} is missing: `cargo test` builds the esgm-cli examples",
+        user_unit.display()
+    );
+    let config = format!(
+        r#"
+[[type]]
+name = "Waypoint"
+attributes = ["x: Double", "y: Double"]
+
+[[sensor]]
+name = "camera"
+camera = "synthetic"
+seed = 3
+blobs = 2
+width = 320
+height = 240
+
+[[unit]]
+name = "BlobDetection"
+
+[[unit]]
+name = "BlobSelection"
+
+[[unit]]
+name = "smooth"
+builtin = "MovingAverage"
+type = "Blob"
+window = 3
+
+[[unit]]
+name = "LargeBlob"
+exec = "{exe}"
+args = ["--min-size", "1"]
+
+[[trajectory]]
+name = "poses"
+primitive = "Waypoint"
+policy = {{ cache = 10, order = "monotone" }}
+
+[[trajectory]]
+name = "images"
+sampled = "camera"
+period = "100ms"
+policy = {{ cache = 3 }}
+
+[[trajectory]]
+name = "blobs"
+computed = "BlobDetection"
+inputs = ["images"]
+
+[[trajectory]]
+name = "smooth_blob"
+computed = "smooth"
+inputs = ["current_blob"]
+
+[[trajectory]]
+name = "current_blob"
+computed = "BlobSelection"
+inputs = ["blobs"]
+policy = {{ cache = "5s", change = "any-update" }}
+
+[[trajectory]]
+name = "large_blob"
+computed = "LargeBlob"
+inputs = ["current_blob"]
+
+[[trajectory]]
+name = "any_blob"
+merge = ["large_blob", "smooth_blob"]
+"#,
+        exe = user_unit.display()
+    );
+    let file = dir.path().join("system.toml");
+    std::fs::write(&file, &config).unwrap();
+    let file = file.to_str().unwrap();
+
+    ok(&["--domain", &d, "up", "--detach"]);
+    let applied = ok(&["--domain", &d, "apply", file]);
+    for expected in [
+        "type       Waypoint",
+        "unit       LargeBlob            registered",
+        "unit       smooth               registered",
+        "trajectory any_blob             created",
+    ] {
+        assert!(applied.contains(expected), "`{expected}` missing in:\n{applied}");
+    }
+    // Inputs were created before the trajectories that read them (smooth_blob is
+    // declared before current_blob).
+    let pos = |s: &str| applied.find(s).unwrap();
+    assert!(pos("trajectory current_blob") < pos("trajectory smooth_blob"), "{applied}");
+
+    // Built-in, generic (moving average), user executable and merge all produce.
+    for traj in ["blobs", "smooth_blob", "large_blob", "any_blob"] {
+        wait_for_sample(&d, traj, Duration::from_secs(60));
+    }
+    let json = ok(&["--domain", &d, "--json", "traj", "show", "current_blob"]);
+    assert!(json.contains("\"Duration\":5000000000") && json.contains("AnyUpdate"), "{json}");
+
+    // Applying the same file again changes nothing.
+    let again = ok(&["--domain", &d, "apply", file]);
+    assert!(!again.contains("created"), "{again}");
+    assert!(again.contains("trajectory large_blob           unchanged"), "{again}");
+
+    // Files with errors: one line naming file and line; nothing running is disturbed.
+    let pids = process_pids(&d);
+    assert_eq!(pids.len(), 5, "{pids:?}");
+    let bad = |name: &str, text: &str| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, text).unwrap();
+        p.to_str().unwrap().to_owned()
+    };
+    let unknown_field = bad(
+        "a.toml",
+        "[[trajectory]]\nname = \"x\"\nprimitive = \"Blob\"\npolicy = { cahce = 3 }\n",
+    );
+    fails_with(&["--domain", &d, "apply", &unknown_field], &["a.toml:4:", "cahce"]);
+    let illegal = bad(
+        "b.toml",
+        "\n[[trajectory]]\nname = \"x\"\nprimitive = \"Blob\"\npolicy = { cache = -1 }\n",
+    );
+    fails_with(&["--domain", &d, "apply", &illegal], &["b.toml:2:", "cache"]);
+    let unknown_unit = bad(
+        "c.toml",
+        "[[trajectory]]\nname = \"x\"\nprimitive = \"Blob\"\n\n[[trajectory]]\nname = \"y\"\ncomputed = \"LargBlob\"\ninputs = [\"x\"]\n",
+    );
+    fails_with(
+        &["--domain", &d, "apply", &unknown_unit],
+        &["c.toml:5:", "unknown unit `LargBlob`; did you mean `LargeBlob`?"],
+    );
+    let redefined = bad("d.toml", "[[trajectory]]\nname = \"images\"\nprimitive = \"Image\"\n");
+    fails_with(
+        &["--domain", &d, "apply", &redefined],
+        &["d.toml:1:", "exists with another definition"],
+    );
+    let syntax = bad("e.toml", "[[trajectory]\nname = \"x\"\n");
+    fails_with(&["--domain", &d, "apply", &syntax], &["e.toml:1:"]);
+    // The file with an unknown unit declared `x` before failing: nothing was created.
+    let list = ok(&["--domain", &d, "traj", "list"]);
+    assert!(!list.lines().any(|l| l.starts_with("x ")), "{list}");
+    assert_eq!(process_pids(&d), pids, "a bad file disturbed the processes");
+    wait_for_sample(&d, "large_blob", Duration::from_secs(30));
+
+    // The command-line faces of the same declarations.
+    ok(&["--domain", &d, "type", "add", "Odometry", "dist:Double", "ticks:Long"]);
+    assert!(ok(&["--domain", &d, "type", "show", "Odometry"]).contains("ticks"));
+    fails_with(&["--domain", &d, "type", "add", "Bad", "x:Meters"], &["unknown sort `Meters`"]);
+    let created = ok(&[
+        "--domain",
+        &d,
+        "traj",
+        "create",
+        "odometry",
+        "--primitive",
+        "Odometry",
+        "--cache",
+        "10",
+        "--order",
+        "strict",
+        "--delay",
+        "50ms",
+        "--reorder",
+        "false",
+    ]);
+    assert!(created.contains("created primitive trajectory `odometry`"), "{created}");
+    ok(&[
+        "--domain",
+        &d,
+        "traj",
+        "create",
+        "blobs_again",
+        "--computed",
+        "BlobDetection",
+        "--inputs",
+        "images",
+    ]);
+    ok(&[
+        "--domain",
+        &d,
+        "traj",
+        "create",
+        "pair",
+        "--sync",
+        "current_blob,large_blob",
+        "--tolerance",
+        "10ms",
+    ]);
+    fails_with(
+        &["--domain", &d, "traj", "create", "y", "--sampled", "camra", "--period", "1s"],
+        &["camra", "did you mean `camera`?"],
+    );
+    fails_with(
+        &["--domain", &d, "traj", "create", "y", "--primitive", "Odometry", "--order", "sorted"],
+        &["order"],
+    );
+    fails_with(&["--domain", &d, "traj", "create", "y"], &["needs a source"]);
+    wait_for_sample(&d, "blobs_again", Duration::from_secs(30));
+    wait_for_sample(&d, "pair", Duration::from_secs(30));
+
+    // `esgm down` stops the coordinator and every process it started.
+    ok(&["--domain", &d, "down"]);
+    assert!(coordinator_is_gone(&d));
+    for pid in pids {
+        let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+        assert!(stat.is_empty() || stat.contains(") Z"), "worker {pid} still runs: {stat}");
+    }
 }

@@ -76,7 +76,28 @@ pub struct ShmEsgmBuilder {
     timeout: Option<Duration>,
 }
 
+/// The environment variable naming the domain of the system a worker belongs to.
+pub const DOMAIN_ENV: &str = "ESGM_DOMAIN";
+/// The environment variable naming a worker process (its host name in the registry);
+/// set by the supervisor for every process it starts.
+pub const WORKER_ENV: &str = "ESGM_WORKER";
+
 impl ShmEsgmBuilder {
+    /// Domain and host as the supervisor passes them to a worker it starts
+    /// ([`DOMAIN_ENV`], [`WORKER_ENV`]); unset variables keep the defaults. A user's
+    /// unit executable named in a configuration starts with
+    /// `ShmEsgm::builder().from_env().connect()`.
+    #[must_use]
+    pub fn from_env(mut self) -> Self {
+        if let Ok(d) = std::env::var(DOMAIN_ENV) {
+            self.domain = Some(d);
+        }
+        if let Ok(h) = std::env::var(WORKER_ENV) {
+            self.host = Some(h);
+        }
+        self
+    }
+
     /// The system's domain (default `esgm`, as the coordinator's).
     #[must_use]
     pub fn domain(mut self, domain: impl Into<String>) -> Self {
@@ -232,6 +253,29 @@ impl ShmEsgm {
     /// The local runtime holding this process's trajectories and replicas.
     pub fn local(&self) -> &InProcessEsgm {
         &self.inner.local
+    }
+
+    /// Makes this process write the trajectories the coordinator places on it even
+    /// though it serves no sensor or unit (registering one does this too): primitive,
+    /// sync and merge trajectories created for it by others, e.g. the system's own
+    /// location in `esgm up`, which writes what the command line creates.
+    pub fn serve_assignments(&self) {
+        let _ = self.inner.commands.send(Command::Serving);
+    }
+
+    /// Blocks while the coordinator answers; returns once it has been gone for
+    /// `patience` (a worker's main loop: it leaves with its system).
+    pub fn serve_until_coordinator_gone(&self, patience: Duration) {
+        const PING_EVERY: Duration = Duration::from_millis(250);
+        let mut gone_since = None;
+        loop {
+            std::thread::sleep(PING_EVERY);
+            if self.ping() {
+                gone_since = None;
+            } else if gone_since.get_or_insert_with(std::time::Instant::now).elapsed() >= patience {
+                return;
+            }
+        }
     }
 
     /// Sends a command and waits for its answer, with a deadline a little longer than
@@ -407,7 +451,7 @@ impl Esgm for ShmEsgm {
             let _ = self.control(Request::RemoveSensorInterface { sensor: sensor.to_owned() });
             return Err(e);
         }
-        let _ = self.inner.commands.send(Command::Serving);
+        self.serve_assignments();
         Ok(())
     }
 
@@ -444,7 +488,7 @@ impl Esgm for ShmEsgm {
             let _ = self.control(Request::RemoveCompUnit { name: name.to_owned() });
             return Err(e);
         }
-        let _ = self.inner.commands.send(Command::Serving);
+        self.serve_assignments();
         Ok(())
     }
 

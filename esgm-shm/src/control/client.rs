@@ -53,6 +53,13 @@ pub enum ControlClientError {
         /// The deadline.
         timeout: Duration,
     },
+    /// No coordinator serves the domain any more (it stopped; its service lingers
+    /// only while clients hold it). Known at once, without waiting for a deadline.
+    #[error("no coordinator is serving domain `{domain}`")]
+    NotServing {
+        /// The domain.
+        domain: String,
+    },
     /// The request could not be encoded or the answer decoded.
     #[error("malformed control message: {0}")]
     Malformed(#[source] serde_json::Error),
@@ -108,6 +115,9 @@ impl ControlClient {
         let bytes = encode(request).map_err(ControlClientError::Malformed)?;
         let loan = self.client.loan_slice_uninit(bytes.len()).map_err(ControlClientError::Loan)?;
         let pending = loan.write_from_slice(&bytes).send().map_err(ControlClientError::Send)?;
+        if pending.number_of_server_connections() == 0 {
+            return Err(ControlClientError::NotServing { domain: self.domain.clone() });
+        }
         let deadline = Instant::now() + self.timeout;
         let mut pause = Duration::from_micros(20);
         loop {

@@ -5,14 +5,17 @@
 //! - [`protocol`]: the requests and answers, JSON on the wire.
 //! - [`Registry`]: the coordinator's state and rules, transport-free.
 //! - [`Coordinator`]: serves the registry.
+//! - [`processes`]: the workers a system keeps running, declared to the coordinator.
 //! - [`ControlClient`]: asks it, with a deadline on every call.
 
 pub mod client;
+pub mod processes;
 pub mod protocol;
 pub mod registry;
 pub mod server;
 
 pub use client::{ControlClient, ControlClientError};
+pub use processes::{ProcessError, ProcessRecord, ProcessSpec, ProcessStatus};
 pub use protocol::{Assignment, ControlError, Request, Response, TrajectoryRecord};
 pub use registry::Registry;
 pub use server::{Coordinator, CoordinatorError, CoordinatorThread};

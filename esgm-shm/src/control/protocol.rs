@@ -12,6 +12,8 @@ use esgm_core::esgm::{
 use esgm_core::{EntityStructureType, TypeRegistryError};
 use serde::{Deserialize, Serialize};
 
+use super::processes::{ProcessError, ProcessRecord, ProcessSpec, ProcessStatus};
+
 /// A request to the coordinator. Operation names follow the seed's `esgm.idl`.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[non_exhaustive]
@@ -105,6 +107,26 @@ pub enum Request {
         /// The asking process.
         host: String,
     },
+    /// Keep a process running (see [`super::processes`]); the same declaration again
+    /// changes nothing, another under the same name replaces it.
+    DeclareProcess {
+        /// What to run.
+        spec: ProcessSpec,
+    },
+    /// Stop keeping a process running; its supervisor stops it.
+    RemoveProcess {
+        /// Its name.
+        name: String,
+    },
+    /// Every declared process with its last reported status.
+    ListProcesses,
+    /// The supervisor's report on one process.
+    ReportProcess {
+        /// Its name.
+        name: String,
+        /// What the supervisor saw.
+        status: ProcessStatus,
+    },
 }
 
 /// A trajectory a process must write, and how to build it.
@@ -142,6 +164,9 @@ pub enum Response {
     Pong {
         /// The coordinator's esgm version.
         version: String,
+        /// The coordinator's process id (`esgm down` waits for it to exit).
+        #[serde(default)]
+        pid: u32,
     },
     /// A type.
     Type(EntityStructureType),
@@ -159,6 +184,8 @@ pub enum Response {
     CompUnits(Vec<UnitRecord>),
     /// Answer to [`Request::Assignments`].
     Assignments(Vec<Assignment>),
+    /// Answer to [`Request::ListProcesses`].
+    Processes(Vec<ProcessRecord>),
     /// The operation failed with the seed's error.
     Error(ControlError),
 }
@@ -179,6 +206,9 @@ pub enum ControlError {
     /// Registering a sensor or unit failed.
     #[error(transparent)]
     Registration(#[from] RegistrationError),
+    /// A process operation failed.
+    #[error(transparent)]
+    Process(#[from] ProcessError),
     /// The request could not be understood (a client of another version?).
     #[error("bad request: {reason}")]
     BadRequest {

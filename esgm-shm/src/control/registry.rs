@@ -4,9 +4,10 @@
 use std::collections::BTreeMap;
 
 use esgm_core::catalog::Catalog;
-use esgm_core::esgm::{TrajectoryKind, TrajectorySource, TrajectorySpec};
-use esgm_core::{TypeChecker, TypeRegistry};
+use esgm_core::esgm::{TrajectoryInfo, TrajectoryKind, TrajectorySource, TrajectorySpec};
+use esgm_core::{EntityStructureType, TypeChecker, TypeRegistry};
 
+use super::processes::ProcessTable;
 use super::protocol::{Assignment, ControlError, Request, Response, TrajectoryRecord};
 
 #[derive(Debug, Clone)]
@@ -23,12 +24,18 @@ pub struct Registry {
     /// Per trajectory: its writer process, generation and the spec it was made from
     /// (which the writer needs to build it).
     placement: BTreeMap<String, Placement>,
+    /// The processes the system keeps running.
+    processes: ProcessTable,
 }
 
 impl Registry {
     /// A registry with `types` (the library types, usually).
     pub fn new(types: TypeRegistry) -> Self {
-        Self { catalog: Catalog::new(types), placement: BTreeMap::new() }
+        Self {
+            catalog: Catalog::new(types),
+            placement: BTreeMap::new(),
+            processes: ProcessTable::default(),
+        }
     }
 
     /// The catalog, read-only.
@@ -49,9 +56,10 @@ impl Registry {
         let checker = TypeChecker::new(self.catalog.types(), &info.type_name);
         let types = match checker {
             Ok(c) => c.definitions(),
-            // A synthesized state type is not in the registry; its definition is
-            // rebuilt from the inputs by whoever writes it.
-            Err(_) => Vec::new(),
+            // A synthesized state type (sync) is not in the registry: one frame per
+            // input, named after it, of the input's type — what a reader in another
+            // process needs to check the states it receives.
+            Err(_) => self.state_definitions(&info),
         };
         let (writer, generation) =
             self.placement.get(name).map(|p| (p.writer.clone(), p.generation)).unwrap_or_default();
@@ -60,7 +68,10 @@ impl Registry {
 
     fn apply(&mut self, request: Request) -> Result<Response, ControlError> {
         Ok(match request {
-            Request::Ping => Response::Pong { version: env!("CARGO_PKG_VERSION").to_owned() },
+            Request::Ping => Response::Pong {
+                version: env!("CARGO_PKG_VERSION").to_owned(),
+                pid: std::process::id(),
+            },
             Request::CreateEntityStructureType { type_name, entity_type } => {
                 self.catalog.types_mut().create_entity_structure_type(type_name, entity_type)?;
                 Response::Done
@@ -146,7 +157,38 @@ impl Registry {
                 }
                 Response::Assignments(out)
             }
+            Request::DeclareProcess { spec } => {
+                self.processes.declare(spec)?;
+                Response::Done
+            }
+            Request::RemoveProcess { name } => {
+                self.processes.remove(&name)?;
+                Response::Done
+            }
+            Request::ListProcesses => Response::Processes(self.processes.list()),
+            Request::ReportProcess { name, status } => {
+                self.processes.report(&name, status)?;
+                Response::Done
+            }
         })
+    }
+
+    fn state_definitions(&self, info: &TrajectoryInfo) -> Vec<(String, EntityStructureType)> {
+        let mut state = EntityStructureType::new(info.type_name.clone());
+        let mut out = Vec::new();
+        for input in &info.inputs {
+            let Ok(t) = self.catalog.trajectory(input) else { continue };
+            state = state.frame(input.clone(), t.type_name.clone());
+            if let Ok(c) = TypeChecker::new(self.catalog.types(), &t.type_name) {
+                for d in c.definitions() {
+                    if !out.iter().any(|(n, _)| *n == d.0) {
+                        out.push(d);
+                    }
+                }
+            }
+        }
+        out.insert(0, (info.type_name.clone(), state));
+        out
     }
 
     /// The trajectories a process writes (what it must serve), e.g. after a restart.

@@ -275,6 +275,12 @@ impl CoordinatorThread {
     pub fn domain(&self) -> &str {
         &self.domain
     }
+
+    /// True once the coordinator has stopped serving (after [`Request::Shutdown`], or
+    /// an error it logged): the process hosting it can wind down.
+    pub fn is_finished(&self) -> bool {
+        self.thread.as_ref().is_none_or(std::thread::JoinHandle::is_finished)
+    }
 }
 
 impl Drop for CoordinatorThread {

@@ -2,20 +2,21 @@
 //! coordinator, a camera, a robot and three unit workers, supervised — driven from
 //! this process as the seed's main program drives its ESGM.
 
+use std::path::Path;
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use camera_publisher::SyntheticScene;
 use esgm_core::library::{Blob, DrivingDirection, RobotState};
 use esgm_core::{
-    Entity, EntityTrajectoryStructure, Esgm, Sample, SubscribeOptions, Time, ValueApproximation,
-    millis,
+    Entity, EntityTrajectoryStructure, Esgm, InProcessTrajectory, Sample, SubscribeOptions, Time,
+    ValueApproximation, millis,
 };
 use esgm_shm::control::server::cleanup_dead_nodes;
-use esgm_shm::control::{ControlClient, Request};
-use esgm_shm::{ShmEsgm, unique_domain};
+use esgm_shm::unique_domain;
 
-use super::supervise::Supervisor;
+use crate::config::{self, Plan};
 use crate::session;
 use crate::show::ms;
 
@@ -39,7 +40,8 @@ pub struct Args {
 /// The tutorial's trajectories in data-flow order.
 const PIPELINE: [&str; 5] = ["robot_state", "images", "blobs", "current_blob", "driving_direction"];
 
-const UNITS: [&str; 3] = ["BlobDetection", "BlobSelection", "DrivingDirection"];
+/// The system, as a configuration file (also shipped as an example of the format).
+const TUTORIAL: &str = include_str!("../../tutorial.toml");
 
 /// Runs the demo; an inconsistent result is an error (exit 1).
 pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
@@ -49,20 +51,19 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
     if a.image_period_ms == 0 {
         bail!("--image-period-ms must be positive");
     }
+    let plan = plan(a)?;
     // A fresh system unless the user named one.
     let domain = if domain == "esgm" { unique_domain("demo") } else { domain.to_owned() };
     println!("esgm demo: the seed's tutorial as separate processes, domain `{domain}`");
-    let mut coordinator = super::up::spawn_detached(&domain)?;
-    let mut workers = Supervisor::default();
-    let result = drive(&domain, a, &mut workers);
+    // The coordinator's log (worker restarts among it) goes to this terminal.
+    let mut coordinator = super::up::spawn_detached(&domain, Stdio::inherit())?;
+    let result = drive(&domain, a, &plan);
+    let processes = super::ps::processes(&domain).unwrap_or_default();
 
-    // Shut down: the coordinator goes, the workers notice and leave, stale resources
-    // of anything that died are cleaned.
-    if let Ok(c) = ControlClient::connect(&domain, Duration::from_secs(2)) {
-        let _ = c.call(&Request::Shutdown);
-    }
-    workers.wait_all(Duration::from_secs(10));
-    let deadline = Instant::now() + Duration::from_secs(5);
+    // Shut down: the coordinator goes, the workers notice and leave, `esgm up` waits
+    // for them and cleans up after anything that died.
+    super::up::shutdown(&domain);
+    let deadline = Instant::now() + Duration::from_secs(20);
     while coordinator.try_wait().ok().flatten().is_none() && Instant::now() < deadline {
         std::thread::sleep(Duration::from_millis(10));
     }
@@ -71,50 +72,60 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
         let _ = coordinator.wait();
     }
     cleanup_dead_nodes();
-    let restarts: u32 = workers.workers.iter().map(|w| w.restarts).sum();
-    println!("\nstopped: coordinator and {} workers ({restarts} restarts)", workers.workers.len());
+    let restarts: u32 = processes.iter().map(|p| p.status.restarts).sum();
+    println!("\nstopped: coordinator and {} workers ({restarts} restarts)", processes.len());
     result
 }
 
-fn drive(domain: &str, a: &Args, workers: &mut Supervisor) -> anyhow::Result<()> {
-    let (seed, blobs) = (a.seed.to_string(), a.blobs.to_string());
-    let d = ["--domain", domain];
-    workers.start(
-        "camera",
-        &[&d[..], &["worker", "camera", "--seed", &seed, "--blobs", &blobs]].concat(),
-    )?;
-    for unit in UNITS {
-        workers.start(unit, &[&d[..], &["worker", "unit", unit]].concat())?;
+/// The tutorial's configuration file with the demo's settings.
+fn plan(a: &Args) -> anyhow::Result<Plan> {
+    let mut doc: toml::Table = toml::from_str(TUTORIAL).context("tutorial.toml")?;
+    let section = |doc: &mut toml::Table, key: &str, name: &str| -> anyhow::Result<toml::Table> {
+        doc.get(key)
+            .and_then(toml::Value::as_array)
+            .and_then(|list| {
+                list.iter().find(|t| t.get("name").and_then(toml::Value::as_str) == Some(name))
+            })
+            .and_then(toml::Value::as_table)
+            .cloned()
+            .with_context(|| format!("tutorial.toml has no {key} `{name}`"))
+    };
+    let mut camera = section(&mut doc, "sensor", "camera")?;
+    camera.insert("seed".into(), toml::Value::Integer(i64::try_from(a.seed).context("--seed")?));
+    camera.insert("blobs".into(), toml::Value::Integer(i64::try_from(a.blobs).context("--blobs")?));
+    let mut images = section(&mut doc, "trajectory", "images")?;
+    images.insert("period".into(), toml::Value::String(format!("{}ms", a.image_period_ms)));
+    for (key, table) in [("sensor", camera), ("trajectory", images)] {
+        if let Some(list) = doc.get_mut(key).and_then(toml::Value::as_array_mut) {
+            for t in list.iter_mut() {
+                if t.get("name") == table.get("name") {
+                    *t = toml::Value::Table(table.clone());
+                }
+            }
+        }
     }
-    workers.start("robot", &[&d[..], &["worker", "robot"]].concat())?;
-    for (name, pid) in workers.pids() {
-        println!("  started {name:<17} pid {pid}");
+    Ok(config::parse("tutorial.toml", &toml::to_string(&doc)?, Path::new("."))?)
+}
+
+fn drive(domain: &str, a: &Args, plan: &Plan) -> anyhow::Result<()> {
+    // The seed's main program, declared: the camera, the units and the robot run in
+    // processes `esgm up` keeps alive; each trajectory is written by the process that
+    // makes its data.
+    config::apply::apply(domain, plan, &mut |_| {})?;
+    for p in super::ps::processes(domain)? {
+        let pid = p.status.pid.map_or_else(|| "-".to_owned(), |p| p.to_string());
+        println!("  started {:<24} pid {pid}", p.spec.name);
     }
 
     let esgm = session::connect(domain)?;
-    wait_until(workers, "the camera, the units and the robot", || {
-        let sensors = esgm.sensors();
-        let units = esgm.comp_units();
-        sensors.iter().any(|(n, _)| n == "camera")
-            && UNITS.iter().all(|u| units.iter().any(|(n, _, _)| n == u))
-            && esgm.trajectories().iter().any(|t| t.name == "robot_state")
-    })?;
-
-    // The seed's main program: sample the camera, compute blobs, the current blob and
-    // the driving direction. Each is written by the process that makes its data.
-    let period = millis(i64::from(a.image_period_ms));
-    esgm.create_entity_trajectory_structure("images", "camera", 0, 0, period, 0, 5)?;
-    esgm.create_computed_entity_trajectory_structure("blobs", "BlobDetection", &["images"])?;
-    let current_blob = esgm.create_computed_entity_trajectory_structure(
-        "current_blob",
-        "BlobSelection",
-        &["blobs"],
-    )?;
-    let directions = esgm.create_computed_entity_trajectory_structure(
-        "driving_direction",
-        "DrivingDirection",
-        &["robot_state", "current_blob"],
-    )?;
+    // Read every stage from the start (replicas fill as the writers publish), for the
+    // latency table at the end.
+    let stages = PIPELINE
+        .iter()
+        .map(|name| esgm.get_entity_trajectory_structure(name))
+        .collect::<Result<Vec<_>, _>>()?;
+    let directions = esgm.get_entity_trajectory_structure("driving_direction")?;
+    let current_blob = esgm.get_entity_trajectory_structure("current_blob")?;
     let robot_state = esgm.get_entity_trajectory_structure("robot_state")?;
     println!("\n  {:<18} {:<10} {:<17} source", "trajectory", "kind", "type");
     for name in PIPELINE {
@@ -137,7 +148,6 @@ fn drive(domain: &str, a: &Args, workers: &mut Supervisor) -> anyhow::Result<()>
     let run_for = Duration::from_secs_f64(a.seconds);
     let mut t0 = None;
     while start.elapsed() < run_for {
-        workers.poll();
         let Ok(s) = sub.recv_timeout(Duration::from_millis(50)) else { continue };
         let t0 = *t0.get_or_insert(s.structure.valid_time);
         print_direction(&s, t0, &robot_state);
@@ -147,24 +157,8 @@ fn drive(domain: &str, a: &Args, workers: &mut Supervisor) -> anyhow::Result<()>
     let latest = directions.get_latest().context("no driving direction was computed")?;
     let t0 = t0.unwrap_or(latest.structure.valid_time);
     queries(&directions, &latest, t0)?;
-    stage_latencies(&esgm)?;
+    stage_latencies(&stages)?;
     check(a, &latest, &current_blob)
-}
-
-fn wait_until(
-    workers: &mut Supervisor,
-    what: &str,
-    mut ready: impl FnMut() -> bool,
-) -> anyhow::Result<()> {
-    let deadline = Instant::now() + Duration::from_secs(30);
-    while !ready() {
-        workers.poll();
-        if Instant::now() > deadline {
-            bail!("{what} did not come up within 30 s");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    Ok(())
 }
 
 fn since(t0: Time, t: Time) -> f64 {
@@ -221,13 +215,12 @@ fn queries(
 }
 
 /// Valid → add time per stage, as carried in every sample from its writer.
-fn stage_latencies(esgm: &ShmEsgm) -> anyhow::Result<()> {
+fn stage_latencies(stages: &[InProcessTrajectory]) -> anyhow::Result<()> {
     println!(
         "\nlatency of each stage (valid time -> added by its writer)\n  {:<18} {:>7} {:>11} {:>11}",
         "trajectory", "samples", "p50 ms", "p99 ms"
     );
-    for name in PIPELINE {
-        let t = esgm.get_entity_trajectory_structure(name)?;
+    for (name, t) in PIPELINE.iter().zip(stages) {
         let s = t.stats()?;
         println!(
             "  {:<18} {:>7} {:>11} {:>11}",

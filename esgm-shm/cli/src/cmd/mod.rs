@@ -1,10 +1,12 @@
 //! One file per subcommand.
 
+pub mod apply;
 pub mod demo;
 pub mod down;
 pub mod echo;
 pub mod graph;
 pub mod hz;
+pub mod ps;
 pub mod query;
 pub mod registry;
 pub mod stats;
@@ -33,6 +35,8 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
     match &cli.command {
         Command::Up(a) => up::run(domain, a),
         Command::Down => down::run(domain),
+        Command::Apply(a) => apply::run(domain, json, a),
+        Command::Ps => ps::run(domain, json),
         Command::Demo(a) => demo::run(domain, a),
         Command::Type(c) => types::run(domain, json, c),
         Command::Traj(c) => traj::run(domain, json, c),

@@ -1,5 +1,6 @@
 //! `esgm stats`: every trajectory's statistics, as its readers see them (add delay is
-//! the writer's valid → add time, carried in every sample).
+//! the writer's valid → add time, carried in every sample), then the system's processes
+//! with their restarts.
 
 use esgm_core::{EntityTrajectoryStructure, Esgm};
 use serde_json::json;
@@ -38,5 +39,9 @@ pub fn run(domain: &str, json: bool) -> anyhow::Result<()> {
             );
         }
     }
-    Ok(())
+    let processes = super::ps::processes(domain)?;
+    if !processes.is_empty() && !json {
+        println!();
+    }
+    super::ps::print(&processes, json)
 }

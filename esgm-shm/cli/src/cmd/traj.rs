@@ -1,8 +1,13 @@
-//! `esgm traj list|show|rm`.
+//! `esgm traj list|show|create|rm`.
 
 use esgm_core::{EntityTrajectoryStructure, Esgm};
 use serde_json::json;
 
+use anyhow::bail;
+use esgm_shm::control::{Request, Response};
+
+use crate::config::apply::SYSTEM_HOST;
+use crate::config::decl::TrajectoryDecl;
 use crate::session::{connect, trajectory};
 
 /// `esgm traj` subcommands.
@@ -15,6 +20,9 @@ pub enum TrajCommand {
         /// Trajectory name.
         name: String,
     },
+    /// Create a trajectory: exactly one of --primitive, --sampled, --computed, --sync,
+    /// --merge, and any policy settings.
+    Create(Box<TrajectoryDecl>),
     /// Destroy a trajectory.
     Rm {
         /// Trajectory name.
@@ -56,6 +64,29 @@ pub fn run(domain: &str, json: bool, c: &TrajCommand) -> anyhow::Result<()> {
                     println!("{}", serde_json::to_string_pretty(&i)?);
                 }
                 println!("{}", serde_json::to_string_pretty(&stats)?);
+            }
+        }
+        TrajCommand::Create(decl) => {
+            let spec = decl.to_spec()?;
+            // The command line does not stay to write what it creates: primitive, sync
+            // and merge trajectories are written by the system's own process (or the
+            // named writer); sampled and computed ones where their sensor or unit runs.
+            let host = decl.writer.clone().unwrap_or_else(|| SYSTEM_HOST.to_owned());
+            let record = match esgm.control(Request::CreateTrajectory { spec, host })? {
+                Response::Trajectory(r) => r,
+                Response::Error(e) => return Err(e.into()),
+                other => bail!("unexpected answer from the coordinator: {other:?}"),
+            };
+            if json {
+                println!("{}", serde_json::to_string(&record.info)?);
+            } else {
+                println!(
+                    "created {} trajectory `{}` of {}, written by {}",
+                    record.info.kind.name(),
+                    record.info.name,
+                    record.info.type_name,
+                    record.writer
+                );
             }
         }
         TrajCommand::Rm { name } => {

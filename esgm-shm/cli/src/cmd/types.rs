@@ -1,8 +1,9 @@
-//! `esgm type list|show|rm`.
+//! `esgm type list|show|add|rm`.
 
 use esgm_core::Esgm;
 use serde_json::json;
 
+use crate::config::decl::TypeDecl;
 use crate::session::connect;
 
 /// `esgm type` subcommands.
@@ -15,6 +16,8 @@ pub enum TypeCommand {
         /// Type name.
         name: String,
     },
+    /// Register a type: `esgm type add Pose x:Double y:Double`.
+    Add(TypeDecl),
     /// Destroy a type.
     Rm {
         /// Type name.
@@ -42,6 +45,10 @@ pub fn run(domain: &str, json: bool, c: &TypeCommand) -> anyhow::Result<()> {
             } else {
                 println!("{}", serde_json::to_string_pretty(&t)?);
             }
+        }
+        TypeCommand::Add(decl) => {
+            esgm.create_entity_structure_type(&decl.name, decl.to_type()?)?;
+            println!("created type `{}`", decl.name);
         }
         TypeCommand::Rm { name } => {
             esgm.destroy_entity_structure_type(name)?;

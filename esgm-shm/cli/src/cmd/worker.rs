@@ -3,15 +3,20 @@
 //! trajectories back), registers what it serves, and leaves when the coordinator is
 //! gone.
 
+use std::num::NonZeroUsize;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use camera_publisher::{CameraSensor, SyntheticScene};
-use cu_workers::{BlobDetectionUnit, BlobSelectionUnit, DrivingDirectionUnit};
-use esgm_core::esgm::{CreateError, TrajectorySpec};
+use camera_publisher::{CameraSensor, FrameSource, ImageDirectory, SyntheticScene};
+use cu_workers::{BlobDetectionUnit, BlobSelectionUnit, DrivingDirectionUnit, MovingAverageUnit};
+use esgm_core::esgm::{CompUnit, CreateError, TrajectorySpec};
 use esgm_core::{Esgm, FluentStreamPolicy, millis};
 use esgm_shm::ShmEsgm;
+
+use crate::config;
+use crate::config::decl::BUILTIN_UNITS;
+use crate::policy_args::duration;
 use robot_publisher::RobotPublisher;
 
 /// The roles.
@@ -28,6 +33,18 @@ pub enum Role {
         /// Number of moving blobs.
         #[arg(long, default_value_t = 3)]
         blobs: usize,
+        /// Frame width in pixels.
+        #[arg(long, default_value_t = 640)]
+        width: u32,
+        /// Frame height in pixels.
+        #[arg(long, default_value_t = 480)]
+        height: u32,
+        /// Serve the PNG/JPEG frames of this directory instead of a synthetic scene.
+        #[arg(long)]
+        dir: Option<std::path::PathBuf>,
+        /// With --dir: how long each frame is shown (`100ms`).
+        #[arg(long, default_value = "100ms")]
+        frame_period: String,
     },
     /// Push `RobotState`s at a rate, steering by the latest `DrivingDirection`.
     Robot {
@@ -41,21 +58,34 @@ pub enum Role {
         #[arg(long, default_value_t = 100)]
         period_ms: u32,
     },
-    /// Serve a built-in computational unit: BlobDetection, BlobSelection or
-    /// DrivingDirection.
+    /// Serve a built-in computational unit: BlobDetection, BlobSelection,
+    /// DrivingDirection or MovingAverage.
     Unit {
         /// The unit's name.
         name: String,
+        /// Which built-in unit (default: the one called NAME).
+        #[arg(long)]
+        builtin: Option<String>,
+        /// MovingAverage: the type it averages.
+        #[arg(long = "type")]
+        type_name: Option<String>,
+        /// MovingAverage: samples in the window.
+        #[arg(long, default_value_t = 5)]
+        window: usize,
     },
 }
 
 impl Role {
     /// The stable name of this worker in the registry and in logs.
+    /// The supervisor names it in `ESGM_WORKER`; by hand, it is named after its role.
     pub fn process_name(&self) -> String {
+        if let Ok(name) = std::env::var(esgm_shm::WORKER_ENV) {
+            return name;
+        }
         match self {
-            Role::Camera { name, .. } => format!("camera-{name}"),
-            Role::Robot { trajectory, .. } => format!("robot-{trajectory}"),
-            Role::Unit { name } => format!("unit-{name}"),
+            Role::Camera { name, .. } => config::sensor_process(name),
+            Role::Robot { trajectory, .. } => config::robot_process(trajectory),
+            Role::Unit { name, .. } => config::unit_process(name),
         }
     }
 }
@@ -70,39 +100,33 @@ pub fn run(domain: &str, role: &Role) -> anyhow::Result<()> {
         .connect()
         .with_context(|| format!("cannot reach the system `{domain}`"))?;
     let _robot = match role {
-        Role::Camera { name, seed, blobs } => {
-            let scene = SyntheticScene::builder().blobs(*blobs).seed(*seed).create()?;
-            esgm.add_sensor_interface(
-                name,
-                CameraSensor::<SyntheticScene>::TYPE_NAME,
-                Arc::new(CameraSensor::new(scene)),
-            )?;
+        Role::Camera { name, seed, blobs, width, height, dir, frame_period } => {
+            match dir {
+                Some(dir) => {
+                    let period = duration(frame_period).context("--frame-period")?;
+                    let frames = ImageDirectory::open(dir, period)?;
+                    serve_camera(&esgm, name, frames)?;
+                }
+                None => {
+                    let scene = SyntheticScene::builder()
+                        .blobs(*blobs)
+                        .seed(*seed)
+                        .width(*width)
+                        .height(*height)
+                        .create()?;
+                    serve_camera(&esgm, name, scene)?;
+                }
+            }
             None
         }
-        Role::Unit { name } => {
-            let (output, inputs, unit): (_, _, Arc<dyn esgm_core::esgm::CompUnit>) =
-                match name.as_str() {
-                    BlobDetectionUnit::NAME => (
-                        BlobDetectionUnit::OUTPUT_TYPE,
-                        BlobDetectionUnit::input_types(),
-                        Arc::new(BlobDetectionUnit::default()),
-                    ),
-                    BlobSelectionUnit::NAME => (
-                        BlobSelectionUnit::OUTPUT_TYPE,
-                        BlobSelectionUnit::input_types(),
-                        Arc::new(BlobSelectionUnit),
-                    ),
-                    DrivingDirectionUnit::NAME => (
-                        DrivingDirectionUnit::OUTPUT_TYPE,
-                        DrivingDirectionUnit::input_types(),
-                        Arc::new(DrivingDirectionUnit::default()),
-                    ),
-                    other => bail!(
-                        "unknown unit `{other}`; built in: BlobDetection, BlobSelection, \
-                         DrivingDirection"
-                    ),
-                };
-            esgm.add_comp_unit(name, output, inputs, unit)?;
+        Role::Unit { name, builtin, type_name, window } => {
+            serve_unit(
+                &esgm,
+                name,
+                builtin.as_deref().unwrap_or(name),
+                type_name.as_deref(),
+                *window,
+            )?;
             None
         }
         Role::Robot { trajectory, follow, period_ms } => {
@@ -110,13 +134,57 @@ pub fn run(domain: &str, role: &Role) -> anyhow::Result<()> {
         }
     };
     tracing::info!("serving");
-    // Leave when the coordinator is gone (two failed pings in a row).
-    let mut misses = 0;
-    while misses < 2 {
-        std::thread::sleep(Duration::from_millis(250));
-        misses = if esgm.ping() { 0 } else { misses + 1 };
-    }
+    // Leave when the coordinator is gone (for half a second).
+    esgm.serve_until_coordinator_gone(Duration::from_millis(500));
     tracing::info!("the coordinator is gone; leaving");
+    Ok(())
+}
+
+fn serve_camera<S: FrameSource + Send + Sync + 'static>(
+    esgm: &ShmEsgm,
+    name: &str,
+    source: S,
+) -> anyhow::Result<()> {
+    esgm.add_sensor_interface(
+        name,
+        CameraSensor::<S>::TYPE_NAME,
+        Arc::new(CameraSensor::new(source)),
+    )?;
+    Ok(())
+}
+
+fn serve_unit(
+    esgm: &ShmEsgm,
+    name: &str,
+    builtin: &str,
+    type_name: Option<&str>,
+    window: usize,
+) -> anyhow::Result<()> {
+    let (output, inputs, unit): (String, _, Arc<dyn CompUnit>) = match builtin {
+        BlobDetectionUnit::NAME => (
+            BlobDetectionUnit::OUTPUT_TYPE.into(),
+            BlobDetectionUnit::input_types(),
+            Arc::new(BlobDetectionUnit::default()),
+        ),
+        BlobSelectionUnit::NAME => (
+            BlobSelectionUnit::OUTPUT_TYPE.into(),
+            BlobSelectionUnit::input_types(),
+            Arc::new(BlobSelectionUnit),
+        ),
+        DrivingDirectionUnit::NAME => (
+            DrivingDirectionUnit::OUTPUT_TYPE.into(),
+            DrivingDirectionUnit::input_types(),
+            Arc::new(DrivingDirectionUnit::default()),
+        ),
+        MovingAverageUnit::BUILTIN => {
+            let t = type_name.context("MovingAverage needs --type, the type it averages")?;
+            let window = NonZeroUsize::new(window).context("--window must be at least 1")?;
+            let unit = MovingAverageUnit::new(window, t);
+            (t.to_owned(), unit.input_types(), Arc::new(unit))
+        }
+        other => bail!("unknown built-in unit `{other}`; built in: {}", BUILTIN_UNITS.join(", ")),
+    };
+    esgm.add_comp_unit(name, &output, inputs, unit)?;
     Ok(())
 }
 

@@ -1,0 +1,333 @@
+//! The declarations a configuration file (and the command line) is made of: one struct
+//! per kind of thing, read from TOML tables and, where the command line creates the
+//! same thing (`esgm type add`, `esgm traj create`), from flags — one declaration, two
+//! faces.
+
+use std::collections::BTreeMap;
+
+use anyhow::{Context, bail};
+use esgm_core::esgm::TrajectorySpec;
+use esgm_core::operators::sync::{ApproximateConfig, ExactConfig, SyncPolicy};
+use esgm_core::value::ValueSort;
+use esgm_core::{Attr, EntityStructureType, Time};
+use serde::Deserialize;
+
+use crate::policy_args::{PolicyArgs, duration};
+use crate::time_arg::TimeArg;
+
+/// `[[type]]` / `esgm type add`: an entity structure type.
+#[derive(Debug, Clone, clap::Args, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TypeDecl {
+    /// The type's name.
+    pub name: String,
+    /// Attributes as `name:Sort`, e.g. `x:Double`, `blobs:EntityFrameSeq<Blob>`.
+    #[arg(required = true)]
+    pub attributes: Vec<String>,
+}
+
+impl TypeDecl {
+    /// The type, or an error naming the attribute that is wrong.
+    pub fn to_type(&self) -> anyhow::Result<EntityStructureType> {
+        let mut t = EntityStructureType::new(&self.name);
+        for a in &self.attributes {
+            t.attributes.push(attr(a)?);
+        }
+        t.validate()?;
+        Ok(t)
+    }
+}
+
+/// `name:Sort` or `name:Sort<ElementType>` (spaces allowed).
+fn attr(spec: &str) -> anyhow::Result<Attr> {
+    let (name, sort) = spec
+        .split_once(':')
+        .with_context(|| format!("attribute `{spec}` must be written name:Sort, e.g. x:Double"))?;
+    let (sort, element) = match sort.trim().split_once('<') {
+        Some((s, rest)) => {
+            let element = rest
+                .strip_suffix('>')
+                .with_context(|| format!("attribute `{spec}`: missing `>`"))?;
+            (s.trim(), Some(element.trim().to_owned()))
+        }
+        None => (sort.trim(), None),
+    };
+    let sort = ValueSort::parse(sort).with_context(|| {
+        format!("attribute `{spec}`: unknown sort `{sort}` (e.g. Long, Double, String, Pos2, OctetSeq, EntityFrameSeq)")
+    })?;
+    Ok(Attr { name: name.trim().to_owned(), sort, element_type: element })
+}
+
+/// `[[sensor]]`: a pull sensor served by a process the system keeps running — a
+/// built-in camera, or your own executable.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensorDecl {
+    /// The sensor's name.
+    pub name: String,
+    /// `"synthetic"` (moving bright blobs), or a directory of PNG/JPEG frames.
+    pub camera: Option<String>,
+    /// Your own executable serving the sensor (it registers it under `name`).
+    pub exec: Option<String>,
+    /// Its arguments.
+    #[serde(default)]
+    pub args: Vec<String>,
+    /// Extra environment for it.
+    #[serde(default)]
+    pub env: BTreeMap<String, String>,
+    /// Synthetic scene: seed (same seed, same scene).
+    pub seed: Option<u64>,
+    /// Synthetic scene: number of blobs.
+    pub blobs: Option<usize>,
+    /// Synthetic scene: width in pixels.
+    pub width: Option<u32>,
+    /// Synthetic scene: height in pixels.
+    pub height: Option<u32>,
+    /// Directory camera: time each frame is shown (e.g. `100ms`).
+    pub frame_period: Option<String>,
+}
+
+/// `[[unit]]`: a computational unit served by a process the system keeps running —
+/// built in (BlobDetection, BlobSelection, DrivingDirection, MovingAverage), or your
+/// own executable.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UnitDecl {
+    /// The unit's registered name.
+    pub name: String,
+    /// Which built-in unit (default: the one called `name`).
+    pub builtin: Option<String>,
+    /// Your own executable serving the unit (it registers it under `name`).
+    pub exec: Option<String>,
+    /// Its arguments.
+    #[serde(default)]
+    pub args: Vec<String>,
+    /// Extra environment for it.
+    #[serde(default)]
+    pub env: BTreeMap<String, String>,
+    /// MovingAverage: the type it averages (input and output).
+    #[serde(rename = "type")]
+    pub type_name: Option<String>,
+    /// MovingAverage: samples in the window.
+    pub window: Option<usize>,
+}
+
+/// The built-in units a worker can serve.
+pub const BUILTIN_UNITS: [&str; 4] =
+    ["BlobDetection", "BlobSelection", "DrivingDirection", "MovingAverage"];
+
+/// `[[robot]]`: the tutorial's robot, pushing its state and steering by a direction.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotDecl {
+    /// The primitive trajectory it pushes `RobotState`s into.
+    #[serde(default = "robot_state")]
+    pub trajectory: String,
+    /// The `DrivingDirection` trajectory it follows.
+    #[serde(default = "driving_direction")]
+    pub follow: String,
+    /// Time between states (default `100ms`: 10 Hz).
+    pub period: Option<String>,
+}
+
+fn robot_state() -> String {
+    "robot_state".into()
+}
+
+fn driving_direction() -> String {
+    "driving_direction".into()
+}
+
+/// `[[trajectory]]` / `esgm traj create`: a trajectory, its source and its policy.
+/// Exactly one source: `primitive`, `sampled`, `computed`, `sync` or `merge`.
+#[derive(Debug, Clone, Default, clap::Args, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrajectoryDecl {
+    /// The trajectory's name.
+    pub name: String,
+    /// Pushed structures of this type.
+    #[arg(long, value_name = "TYPE")]
+    pub primitive: Option<String>,
+    /// Sampled from this sensor every `period`.
+    #[arg(long, value_name = "SENSOR")]
+    pub sampled: Option<String>,
+    /// Computed by this unit from `inputs`.
+    #[arg(long, value_name = "UNIT")]
+    pub computed: Option<String>,
+    /// States of these trajectories with the same valid time.
+    #[arg(long, value_delimiter = ',', value_name = "TRAJ,TRAJ")]
+    pub sync: Option<Vec<String>>,
+    /// Every sample of these trajectories (one type), as they come.
+    #[arg(long, value_delimiter = ',', value_name = "TRAJ,TRAJ")]
+    pub merge: Option<Vec<String>>,
+    /// Inputs of a computed trajectory, in the unit's order.
+    #[arg(long, value_delimiter = ',', value_name = "TRAJ,TRAJ")]
+    pub inputs: Option<Vec<String>>,
+    /// Sampled: time between samples (`100ms`).
+    #[arg(long)]
+    pub period: Option<String>,
+    /// Sampled: first sample time (ns or RFC 3339; 0 = now).
+    #[arg(long = "start", value_name = "TIME")]
+    #[serde(rename = "start")]
+    pub start: Option<String>,
+    /// Sampled: last sample time (ns or RFC 3339; 0 = forever).
+    #[arg(long = "stop", value_name = "TIME")]
+    #[serde(rename = "stop")]
+    pub stop: Option<String>,
+    /// Sync: match items within this tolerance (ROS ApproximateTime) instead of exactly.
+    #[arg(long)]
+    pub tolerance: Option<String>,
+    /// Sync: items held per input (default 10).
+    #[arg(long)]
+    pub queue: Option<usize>,
+    /// Primitive: the process that pushes into it (default: the coordinator's own
+    /// process; name a worker, e.g. `robot-robot_state`, to let it add).
+    #[arg(long)]
+    pub writer: Option<String>,
+    /// If the name exists, re-point it to the new trajectory (subscribers move over).
+    #[arg(long)]
+    #[serde(default)]
+    pub replace: bool,
+    /// The policy (C1–C6).
+    #[command(flatten)]
+    #[serde(default)]
+    pub policy: PolicyArgs,
+}
+
+impl TrajectoryDecl {
+    /// The names of the trajectories it reads.
+    pub fn inputs(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        for list in [&self.sync, &self.merge, &self.inputs].into_iter().flatten() {
+            out.extend(list.iter().cloned());
+        }
+        out
+    }
+
+    /// The spec to create, or an error naming what is missing or wrong.
+    pub fn to_spec(&self) -> anyhow::Result<TrajectorySpec> {
+        let sources = [
+            self.primitive.is_some(),
+            self.sampled.is_some(),
+            self.computed.is_some(),
+            self.sync.is_some(),
+            self.merge.is_some(),
+        ];
+        match sources.iter().filter(|s| **s).count() {
+            1 => {}
+            0 => bail!(
+                "trajectory `{}` needs a source: primitive, sampled, computed, sync or merge",
+                self.name
+            ),
+            _ => bail!(
+                "trajectory `{}` has more than one source (primitive, sampled, computed, sync, merge)",
+                self.name
+            ),
+        }
+        let only_for = |set: bool, what: &str, source: &str| -> anyhow::Result<()> {
+            if set {
+                bail!("trajectory `{}`: `{what}` is only for {source} trajectories", self.name);
+            }
+            Ok(())
+        };
+        only_for(self.sampled.is_none() && self.period.is_some(), "period", "sampled")?;
+        only_for(self.sampled.is_none() && self.start.is_some(), "start", "sampled")?;
+        only_for(self.sampled.is_none() && self.stop.is_some(), "stop", "sampled")?;
+        only_for(self.computed.is_none() && self.inputs.is_some(), "inputs", "computed")?;
+        only_for(self.sync.is_none() && self.tolerance.is_some(), "tolerance", "sync")?;
+        only_for(self.sync.is_none() && self.queue.is_some(), "queue", "sync")?;
+        only_for(self.primitive.is_none() && self.writer.is_some(), "writer", "primitive")?;
+
+        let mut spec = if let Some(t) = &self.primitive {
+            TrajectorySpec::primitive(&self.name, t)
+        } else if let Some(sensor) = &self.sampled {
+            let period = self.period.as_deref().with_context(|| {
+                format!("sampled trajectory `{}` needs a period, e.g. 100ms", self.name)
+            })?;
+            let period = duration(period).context("period")?;
+            let start = self.start.as_deref().map_or(Ok(0), |s| absolute("start", s))?;
+            let stop = self.stop.as_deref().map_or(Ok(0), |s| absolute("stop", s))?;
+            TrajectorySpec::sampled(&self.name, sensor, period)?.between(start, stop)
+        } else if let Some(unit) = &self.computed {
+            let inputs = self.inputs.clone().unwrap_or_default();
+            if inputs.is_empty() {
+                bail!("computed trajectory `{}` needs inputs", self.name);
+            }
+            TrajectorySpec::computed(&self.name, unit, inputs)
+        } else if let Some(inputs) = &self.sync {
+            let queue = self.queue.unwrap_or(10);
+            let policy = match &self.tolerance {
+                Some(t) => SyncPolicy::Approximate(
+                    ApproximateConfig::default()
+                        .queue_size(queue)
+                        .max_interval_duration(duration(t).context("tolerance")?),
+                ),
+                None => SyncPolicy::Exact(ExactConfig::default().queue_size(queue)),
+            };
+            TrajectorySpec::sync(&self.name, inputs.clone(), policy)
+        } else {
+            TrajectorySpec::merge(&self.name, self.merge.clone().unwrap_or_default())
+        };
+        spec.policy = self.policy.apply_to(spec.policy)?;
+        if self.replace {
+            spec = spec.replace();
+        }
+        Ok(spec)
+    }
+}
+
+fn absolute(field: &str, s: &str) -> anyhow::Result<Time> {
+    match s.parse::<TimeArg>() {
+        Ok(TimeArg::Absolute(t)) => Ok(t),
+        _ => bail!("{field} = `{s}`: expected nanoseconds or an RFC 3339 time (0 = default)"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use esgm_core::esgm::TrajectoryKind;
+
+    use super::*;
+
+    #[test]
+    fn attributes_with_sorts_and_element_types() {
+        let t = TypeDecl {
+            name: "Scan".into(),
+            attributes: vec!["range: Double".into(), "hits: EntityFrameSeq<Blob>".into()],
+        }
+        .to_type()
+        .unwrap();
+        assert_eq!(t.attributes[0].sort, ValueSort::Double);
+        assert_eq!(t.attributes[1].element_type.as_deref(), Some("Blob"));
+        for bad in ["range", "range: Meters", "hits: frames<Blob"] {
+            let decl = TypeDecl { name: "Scan".into(), attributes: vec![bad.into()] };
+            assert!(decl.to_type().is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn exactly_one_source_and_options_only_where_they_mean_something() {
+        let sampled = TrajectoryDecl {
+            name: "images".into(),
+            sampled: Some("camera".into()),
+            period: Some("100ms".into()),
+            ..Default::default()
+        };
+        assert_eq!(sampled.to_spec().unwrap().kind(), TrajectoryKind::Sampled);
+        let none = TrajectoryDecl { name: "x".into(), ..Default::default() };
+        assert!(format!("{:#}", none.to_spec().unwrap_err()).contains("needs a source"));
+        let two = TrajectoryDecl { primitive: Some("Blob".into()), ..sampled.clone() };
+        assert!(format!("{:#}", two.to_spec().unwrap_err()).contains("more than one source"));
+        let stray = TrajectoryDecl {
+            name: "b".into(),
+            primitive: Some("Blob".into()),
+            period: Some("1s".into()),
+            ..Default::default()
+        };
+        assert!(format!("{:#}", stray.to_spec().unwrap_err()).contains("only for sampled"));
+        let no_period = TrajectoryDecl { period: None, ..sampled };
+        assert!(format!("{:#}", no_period.to_spec().unwrap_err()).contains("period"));
+    }
+}

@@ -1,0 +1,448 @@
+//! Configuration files: a whole system — types, sensors, units, robots and
+//! trajectories with their policies — declared in TOML and brought up by `esgm apply`
+//! or `esgm up --config`. The declarative face of DyKnow's policies.
+//!
+//! The format is documented by example in `esgm-shm/cli/tutorial.toml` (the seed's
+//! tutorial as a file, which `esgm demo` itself runs). In short:
+//!
+//! ```toml
+//! [[type]]                       # an entity structure type
+//! name = "Pose"
+//! attributes = ["x: Double", "y: Double"]
+//!
+//! [[sensor]]                     # a pull sensor in a process esgm keeps running
+//! name = "camera"
+//! camera = "synthetic"           # or a directory of PNG/JPEG frames, or exec = "path"
+//!
+//! [[unit]]                       # a computational unit, built in or exec = "path"
+//! name = "BlobDetection"
+//!
+//! [[robot]]                      # the tutorial's robot (pushes robot_state)
+//!
+//! [[trajectory]]                 # exactly one of primitive/sampled/computed/sync/merge
+//! name = "images"
+//! sampled = "camera"
+//! period = "250ms"
+//! policy = { cache = 5, order = "monotone", delay = "100ms" }
+//! ```
+//!
+//! Every error names the file and line of the declaration it is about. A file is
+//! checked whole — syntax, policies, sorts, and every name it uses against itself and
+//! the running system — before anything is changed, so a file with an error leaves the
+//! running system as it was.
+
+pub mod apply;
+pub mod decl;
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use esgm_core::EntityStructureType;
+use esgm_core::esgm::TrajectorySpec;
+use esgm_shm::control::ProcessSpec;
+use serde::Deserialize;
+use toml::Spanned;
+
+use decl::{BUILTIN_UNITS, RobotDecl, SensorDecl, TrajectoryDecl, TypeDecl, UnitDecl};
+
+/// A configuration file as written.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SystemFile {
+    #[serde(default, rename = "type")]
+    types: Vec<Spanned<TypeDecl>>,
+    #[serde(default, rename = "sensor")]
+    sensors: Vec<Spanned<SensorDecl>>,
+    #[serde(default, rename = "unit")]
+    units: Vec<Spanned<UnitDecl>>,
+    #[serde(default, rename = "robot")]
+    robots: Vec<Spanned<RobotDecl>>,
+    #[serde(default, rename = "trajectory")]
+    trajectories: Vec<Spanned<TrajectoryDecl>>,
+}
+
+/// Something wrong in a configuration file, at a line.
+#[derive(Debug, thiserror::Error)]
+#[error("{file}:{line}: {message}")]
+pub struct ConfigError {
+    /// The file, as given.
+    pub file: String,
+    /// 1-based line of the declaration (or of the syntax error).
+    pub line: usize,
+    /// What is wrong.
+    pub message: String,
+}
+
+/// One declaration of a plan, with the line it came from.
+#[derive(Debug, Clone)]
+pub struct Item<T> {
+    /// 1-based line in the file.
+    pub line: usize,
+    /// The declaration, checked.
+    pub what: T,
+}
+
+/// What a worker process serves, so `apply` knows what to wait for.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Serves {
+    /// A sensor of this name.
+    Sensor(String),
+    /// A unit of this name.
+    Unit(String),
+    /// Structures pushed into this trajectory.
+    Pushes(String),
+}
+
+/// A process the system keeps running and what it serves.
+#[derive(Debug, Clone)]
+pub struct Worker {
+    /// How to run it.
+    pub spec: ProcessSpec,
+    /// What it registers.
+    pub serves: Serves,
+}
+
+/// A trajectory to create and the process that writes it (for primitive ones).
+#[derive(Debug, Clone)]
+pub struct PlannedTrajectory {
+    /// What to create.
+    pub spec: TrajectorySpec,
+    /// Trajectories it reads.
+    pub inputs: Vec<String>,
+    /// Primitive trajectories: the pushing process; `None`: decided by the source.
+    pub writer: Option<String>,
+}
+
+/// A checked configuration: everything in it is well-formed; names it uses may still
+/// be unknown to the running system (checked by `apply`).
+#[derive(Debug, Clone)]
+pub struct Plan {
+    /// The file, as given.
+    pub file: String,
+    /// Types to register.
+    pub types: Vec<Item<(String, EntityStructureType)>>,
+    /// Processes to keep running.
+    pub workers: Vec<Item<Worker>>,
+    /// Trajectories to create, in the file's order.
+    pub trajectories: Vec<Item<PlannedTrajectory>>,
+}
+
+impl Plan {
+    /// Every declaration as (line, kind, name), in file order.
+    pub fn items(&self) -> Vec<(usize, &'static str, String)> {
+        let mut out: Vec<_> = self
+            .types
+            .iter()
+            .map(|i| (i.line, "type", i.what.0.clone()))
+            .chain(self.workers.iter().map(|i| (i.line, "process", i.what.spec.name.clone())))
+            .chain(
+                self.trajectories.iter().map(|i| (i.line, "trajectory", i.what.spec.name.clone())),
+            )
+            .collect();
+        out.sort();
+        out
+    }
+
+    /// An error about line `line` of this plan's file.
+    pub fn error(&self, line: usize, message: impl std::fmt::Display) -> ConfigError {
+        ConfigError { file: self.file.clone(), line, message: message.to_string() }
+    }
+}
+
+/// Reads and checks a configuration file.
+pub fn load(path: &Path) -> anyhow::Result<Plan> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("cannot read the configuration `{}`", path.display()))?;
+    let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    Ok(parse(&path.display().to_string(), &text, &base)?)
+}
+
+/// Checks a configuration given as text; `base` resolves relative paths in it.
+pub fn parse(file: &str, text: &str, base: &Path) -> Result<Plan, ConfigError> {
+    let line_of = |offset: usize| text[..offset.min(text.len())].matches('\n').count() + 1;
+    let parsed: SystemFile = toml::from_str(text).map_err(|e| ConfigError {
+        file: file.to_owned(),
+        line: e.span().map_or(1, |s| line_of(s.start)),
+        message: e.message().trim().to_owned(),
+    })?;
+    let esgm = std::env::current_exe().unwrap_or_else(|_| PathBuf::from("esgm"));
+    let mut plan = Plan {
+        file: file.to_owned(),
+        types: Vec::new(),
+        workers: Vec::new(),
+        trajectories: Vec::new(),
+    };
+
+    for t in &parsed.types {
+        let line = line_of(t.span().start);
+        let ty = t.get_ref().to_type().map_err(|e| plan.error(line, format!("{e:#}")))?;
+        plan.types.push(Item { line, what: (t.get_ref().name.clone(), ty) });
+    }
+    for s in &parsed.sensors {
+        let line = line_of(s.span().start);
+        let worker = sensor_worker(s.get_ref(), &esgm, base)
+            .map_err(|e| plan.error(line, format!("{e:#}")))?;
+        plan.workers.push(Item { line, what: worker });
+    }
+    for u in &parsed.units {
+        let line = line_of(u.span().start);
+        let worker = unit_worker(u.get_ref(), &esgm, base)
+            .map_err(|e| plan.error(line, format!("{e:#}")))?;
+        plan.workers.push(Item { line, what: worker });
+    }
+    for r in &parsed.robots {
+        let line = line_of(r.span().start);
+        let worker =
+            robot_worker(r.get_ref(), &esgm).map_err(|e| plan.error(line, format!("{e:#}")))?;
+        plan.workers.push(Item { line, what: worker });
+    }
+    for t in &parsed.trajectories {
+        let line = line_of(t.span().start);
+        let decl = t.get_ref();
+        let spec = decl.to_spec().map_err(|e| plan.error(line, format!("{e:#}")))?;
+        // A primitive trajectory a robot pushes is written by the robot's process.
+        let pusher = plan.workers.iter().find_map(|w| match &w.what.serves {
+            Serves::Pushes(t) if *t == decl.name => Some(w.what.spec.name.clone()),
+            _ => None,
+        });
+        let writer = decl.writer.clone().or(if decl.primitive.is_some() { pusher } else { None });
+        plan.trajectories
+            .push(Item { line, what: PlannedTrajectory { spec, inputs: decl.inputs(), writer } });
+    }
+    check_duplicates(&plan)?;
+    Ok(plan)
+}
+
+fn check_duplicates(plan: &Plan) -> Result<(), ConfigError> {
+    let mut seen = std::collections::BTreeMap::new();
+    let names = plan
+        .types
+        .iter()
+        .map(|i| (i.line, format!("type `{}`", i.what.0)))
+        .chain(plan.workers.iter().map(|i| (i.line, format!("process `{}`", i.what.spec.name))))
+        .chain(
+            plan.trajectories
+                .iter()
+                .map(|i| (i.line, format!("trajectory `{}`", i.what.spec.name))),
+        );
+    for (line, name) in names {
+        if let Some(first) = seen.insert(name.clone(), line) {
+            return Err(
+                plan.error(line, format!("{name} is declared twice (first at line {first})"))
+            );
+        }
+    }
+    Ok(())
+}
+
+/// The environment variable naming the sensor or unit an `exec` program was declared
+/// for (one program can serve differently named units).
+pub const NAME_ENV: &str = "ESGM_NAME";
+
+/// The process name of a worker serving sensor `name` (also its registry host).
+pub fn sensor_process(name: &str) -> String {
+    format!("camera-{name}")
+}
+
+/// The process name of a worker serving unit `name`.
+pub fn unit_process(name: &str) -> String {
+    format!("unit-{name}")
+}
+
+/// The process name of a robot pushing into `trajectory`.
+pub fn robot_process(trajectory: &str) -> String {
+    format!("robot-{trajectory}")
+}
+
+fn spec(name: String, program: &Path, args: Vec<String>) -> ProcessSpec {
+    ProcessSpec { name, program: program.display().to_string(), args, env: Vec::new() }
+}
+
+/// A user's executable: relative paths are taken from the configuration's directory;
+/// `ESGM_NAME` tells it the sensor or unit name it was declared for.
+fn user_program(
+    name: String,
+    declared: &str,
+    exec: &str,
+    args: &[String],
+    env: &std::collections::BTreeMap<String, String>,
+    base: &Path,
+) -> ProcessSpec {
+    let program = if exec.contains('/') && Path::new(exec).is_relative() {
+        base.join(exec).display().to_string()
+    } else {
+        exec.to_owned()
+    };
+    ProcessSpec {
+        name,
+        program,
+        args: args.to_vec(),
+        env: std::iter::once((NAME_ENV.to_owned(), declared.to_owned()))
+            .chain(env.iter().map(|(k, v)| (k.clone(), v.clone())))
+            .collect(),
+    }
+}
+
+fn sensor_worker(s: &SensorDecl, esgm: &Path, base: &Path) -> anyhow::Result<Worker> {
+    let process = sensor_process(&s.name);
+    let serves = Serves::Sensor(s.name.clone());
+    let spec = match (&s.camera, &s.exec) {
+        (Some(_), Some(_)) => {
+            anyhow::bail!("sensor `{}`: give either camera or exec, not both", s.name)
+        }
+        (None, None) => anyhow::bail!(
+            "sensor `{}` needs camera = \"synthetic\" (or a frame directory) or exec = \"path\"",
+            s.name
+        ),
+        (None, Some(exec)) => {
+            for (set, what) in [
+                (s.seed.is_some(), "seed"),
+                (s.blobs.is_some(), "blobs"),
+                (s.width.is_some(), "width"),
+                (s.height.is_some(), "height"),
+                (s.frame_period.is_some(), "frame_period"),
+            ] {
+                if set {
+                    anyhow::bail!("sensor `{}`: `{what}` is only for built-in cameras", s.name);
+                }
+            }
+            user_program(process, &s.name, exec, &s.args, &s.env, base)
+        }
+        (Some(camera), None) => {
+            let mut args = vec!["worker".into(), "camera".into(), "--name".into(), s.name.clone()];
+            let mut push = |flag: &str, v: Option<String>| {
+                if let Some(v) = v {
+                    args.extend([flag.to_owned(), v]);
+                }
+            };
+            if camera == "synthetic" {
+                if s.frame_period.is_some() {
+                    anyhow::bail!("sensor `{}`: frame_period is for directory cameras", s.name);
+                }
+                push("--seed", s.seed.map(|v| v.to_string()));
+                push("--blobs", s.blobs.map(|v| v.to_string()));
+                push("--width", s.width.map(|v| v.to_string()));
+                push("--height", s.height.map(|v| v.to_string()));
+            } else {
+                let dir = base.join(camera);
+                if !dir.is_dir() {
+                    anyhow::bail!(
+                        "sensor `{}`: camera = \"{camera}\" is neither \"synthetic\" nor a directory ({} does not exist)",
+                        s.name,
+                        dir.display()
+                    );
+                }
+                push("--dir", Some(dir.display().to_string()));
+                if let Some(p) = &s.frame_period {
+                    crate::policy_args::duration(p).context("frame_period")?;
+                    push("--frame-period", Some(p.clone()));
+                }
+            }
+            if !s.args.is_empty() || !s.env.is_empty() {
+                anyhow::bail!("sensor `{}`: args and env are for exec sensors", s.name);
+            }
+            spec(process, esgm, args)
+        }
+    };
+    Ok(Worker { spec, serves })
+}
+
+fn unit_worker(u: &UnitDecl, esgm: &Path, base: &Path) -> anyhow::Result<Worker> {
+    let process = unit_process(&u.name);
+    let serves = Serves::Unit(u.name.clone());
+    if let Some(exec) = &u.exec {
+        if u.builtin.is_some() || u.type_name.is_some() || u.window.is_some() {
+            anyhow::bail!("unit `{}`: builtin, type and window are for built-in units", u.name);
+        }
+        return Ok(Worker {
+            spec: user_program(process, &u.name, exec, &u.args, &u.env, base),
+            serves,
+        });
+    }
+    let builtin = u.builtin.clone().unwrap_or_else(|| u.name.clone());
+    if !BUILTIN_UNITS.contains(&builtin.as_str()) {
+        anyhow::bail!(
+            "unknown built-in unit `{builtin}`; built in: {}; or give exec = \"path\"",
+            BUILTIN_UNITS.join(", ")
+        );
+    }
+    let mut args =
+        vec!["worker".into(), "unit".into(), u.name.clone(), "--builtin".into(), builtin.clone()];
+    if builtin == "MovingAverage" {
+        let t = u.type_name.clone().with_context(|| {
+            format!("unit `{}`: MovingAverage needs the type it averages: type = \"Blob\"", u.name)
+        })?;
+        let window = u.window.unwrap_or(5);
+        if window == 0 {
+            anyhow::bail!("unit `{}`: window must be at least 1", u.name);
+        }
+        args.extend(["--type".into(), t, "--window".into(), window.to_string()]);
+    } else if u.type_name.is_some() || u.window.is_some() {
+        anyhow::bail!("unit `{}`: type and window are for MovingAverage", u.name);
+    }
+    if !u.args.is_empty() || !u.env.is_empty() {
+        anyhow::bail!("unit `{}`: args and env are for exec units", u.name);
+    }
+    Ok(Worker { spec: spec(process, esgm, args), serves })
+}
+
+fn robot_worker(r: &RobotDecl, esgm: &Path) -> anyhow::Result<Worker> {
+    let period =
+        crate::policy_args::duration(r.period.as_deref().unwrap_or("100ms")).context("period")?;
+    let period_ms = (period / 1_000_000).max(1);
+    let args = vec![
+        "worker".into(),
+        "robot".into(),
+        "--trajectory".into(),
+        r.trajectory.clone(),
+        "--follow".into(),
+        r.follow.clone(),
+        "--period-ms".into(),
+        period_ms.to_string(),
+    ];
+    Ok(Worker {
+        spec: spec(robot_process(&r.trajectory), esgm, args),
+        serves: Serves::Pushes(r.trajectory.clone()),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+
+    /// The shipped example is the demo's own system; it must always parse.
+    #[test]
+    fn the_tutorial_file_parses() {
+        let plan =
+            parse("tutorial.toml", include_str!("../../tutorial.toml"), Path::new(".")).unwrap();
+        assert_eq!(plan.workers.len(), 5);
+        assert_eq!(plan.trajectories.len(), 5);
+        let robot_state =
+            plan.trajectories.iter().find(|t| t.what.spec.name == "robot_state").unwrap();
+        assert_eq!(robot_state.what.writer.as_deref(), Some("robot-robot_state"));
+    }
+
+    #[test]
+    fn errors_point_at_the_line() {
+        let text = "[[trajectory]]\nname = \"a\"\nprimitive = \"Blob\"\n\n[[trajectory]]\nname = \"b\"\nprimitive = \"Blob\"\npolicy = { cahce = 3 }\n";
+        let e = parse("f.toml", text, Path::new(".")).unwrap_err();
+        assert_eq!(e.line, 8, "{e}");
+        assert!(e.to_string().contains("cahce"), "{e}");
+
+        let text = "[[trajectory]]\nname = \"a\"\nprimitive = \"Blob\"\n\n[[trajectory]]\nname = \"b\"\nprimitive = \"Blob\"\npolicy = { order = \"sorted\" }\n";
+        let e = parse("f.toml", text, Path::new(".")).unwrap_err();
+        assert!(e.line >= 5 && e.line <= 8, "{e}");
+        assert!(e.to_string().starts_with("f.toml:"), "{e}");
+        assert!(e.to_string().contains("order"), "{e}");
+
+        let text = "[[unit]]\nname = \"Blobby\"\n";
+        let e = parse("f.toml", text, Path::new(".")).unwrap_err();
+        assert!(e.to_string().contains("unknown built-in unit `Blobby`"), "{e}");
+
+        let text = "[[type]]\nname = \"P\"\nattributes = [\"x: Double\"]\n[[type]]\nname = \"P\"\nattributes = [\"y: Double\"]\n";
+        let e = parse("f.toml", text, Path::new(".")).unwrap_err();
+        assert!(e.to_string().contains("declared twice (first at line 1)"), "{e}");
+    }
+}
