@@ -45,51 +45,50 @@ struct System {
     control: ControlClient,
 }
 
+/// Picks the expected answer out of a response.
+macro_rules! answer {
+    ($variant:path) => {
+        |r| match r {
+            $variant(x) => Some(x),
+            _ => None,
+        }
+    };
+}
+
 impl System {
     fn call(&self, request: &Request) -> anyhow::Result<Response> {
         Ok(self.control.call(request)?)
     }
 
+    /// `request`'s answer of the expected kind.
+    fn ask<T>(&self, request: &Request, pick: fn(Response) -> Option<T>) -> anyhow::Result<T> {
+        pick(self.call(request)?)
+            .with_context(|| format!("unexpected answer from the coordinator to {request:?}"))
+    }
+
     fn types(&self) -> anyhow::Result<Vec<String>> {
-        match self.call(&Request::ListEntityStructureTypes)? {
-            Response::Names(n) => Ok(n),
-            other => bail!("unexpected answer: {other:?}"),
-        }
+        self.ask(&Request::ListEntityStructureTypes, answer!(Response::Names))
     }
 
     fn get_type(&self, name: &str) -> anyhow::Result<EntityStructureType> {
-        match self.call(&Request::GetEntityStructureType { type_name: name.to_owned() })? {
-            Response::Type(t) => Ok(t),
-            other => bail!("unexpected answer: {other:?}"),
-        }
+        let request = Request::GetEntityStructureType { type_name: name.to_owned() };
+        self.ask(&request, answer!(Response::Type))
     }
 
     fn sensors(&self) -> anyhow::Result<Vec<SensorRecord>> {
-        match self.call(&Request::ListSensors)? {
-            Response::Sensors(s) => Ok(s),
-            other => bail!("unexpected answer: {other:?}"),
-        }
+        self.ask(&Request::ListSensors, answer!(Response::Sensors))
     }
 
     fn units(&self) -> anyhow::Result<Vec<UnitRecord>> {
-        match self.call(&Request::ListCompUnits)? {
-            Response::CompUnits(u) => Ok(u),
-            other => bail!("unexpected answer: {other:?}"),
-        }
+        self.ask(&Request::ListCompUnits, answer!(Response::CompUnits))
     }
 
     fn trajectories(&self) -> anyhow::Result<Vec<TrajectoryInfo>> {
-        match self.call(&Request::ListTrajectories)? {
-            Response::Trajectories(t) => Ok(t),
-            other => bail!("unexpected answer: {other:?}"),
-        }
+        self.ask(&Request::ListTrajectories, answer!(Response::Trajectories))
     }
 
     fn processes(&self) -> anyhow::Result<Vec<ProcessRecord>> {
-        match self.call(&Request::ListProcesses)? {
-            Response::Processes(p) => Ok(p),
-            other => bail!("unexpected answer: {other:?}"),
-        }
+        self.ask(&Request::ListProcesses, answer!(Response::Processes))
     }
 }
 
