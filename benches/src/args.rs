@@ -26,6 +26,10 @@ pub struct Args {
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
 
+    /// Also draw PNG charts (latency vs payload size, latency CDFs) into DIR.
+    #[arg(long, value_name = "DIR")]
+    pub plots: Option<PathBuf>,
+
     /// Pin the measuring thread to the first core and its peers (echo threads, unit
     /// and sampler workers, peer processes) to the second.
     #[arg(long)]
@@ -97,6 +101,7 @@ impl Args {
         Ok(RunConfig {
             quick: self.quick,
             json: self.json,
+            plots: self.plots,
             pin,
             only,
             samples: self.samples,

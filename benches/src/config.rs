@@ -12,6 +12,8 @@ pub struct RunConfig {
     pub quick: bool,
     /// Where to write the JSON report, if anywhere.
     pub json: Option<PathBuf>,
+    /// Where to draw the PNG charts, if anywhere.
+    pub plots: Option<PathBuf>,
     /// The cores to pin to, if pinning.
     pub pin: Option<Pinning>,
     /// Only scenarios whose name contains this.

@@ -11,6 +11,23 @@ use crate::report::{Measurement, Method, Wait};
 /// would be a broken run anyway).
 const HIGHEST_NS: u64 = 60_000_000_000;
 
+/// The quantiles kept for CDF plots: every percent, then the tail.
+const CDF_POINTS: [f64; 106] = {
+    let mut q = [0.0; 106];
+    let mut i = 0;
+    while i < 100 {
+        q[i] = i as f64 / 100.0;
+        i += 1;
+    }
+    q[100] = 0.995;
+    q[101] = 0.999;
+    q[102] = 0.9995;
+    q[103] = 0.9999;
+    q[104] = 0.99999;
+    q[105] = 1.0;
+    q
+};
+
 /// Latency samples in nanoseconds, to three significant digits.
 #[derive(Debug, Clone)]
 pub struct Latency {
@@ -55,8 +72,11 @@ impl Latency {
             .collect()
     }
 
-    /// The value at each of `points` quantiles, for a CDF plot.
+    /// The value at each of `points` quantiles, for a CDF plot (none when empty).
     pub fn cdf(&self, points: &[f64]) -> Vec<(f64, u64)> {
+        if self.is_empty() {
+            return Vec::new();
+        }
         points.iter().map(|&q| (q, self.quantile(q))).collect()
     }
 
@@ -94,6 +114,7 @@ impl Latency {
             msgs_per_s: None,
             lost: None,
             notes: Vec::new(),
+            cdf: self.cdf(&CDF_POINTS),
         }
     }
 }

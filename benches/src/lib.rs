@@ -53,6 +53,7 @@ pub mod patience;
 pub mod peer_process;
 pub mod peer_role;
 pub mod pin;
+pub mod plots;
 pub mod report;
 pub mod runner;
 pub mod scenario;

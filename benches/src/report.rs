@@ -127,6 +127,9 @@ pub struct Measurement {
     /// Facts worth printing under the table (missed periods, whether data was shared).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub notes: Vec<String>,
+    /// (quantile, ns) points of the distribution, for `--plots` (not in the JSON).
+    #[serde(skip)]
+    pub cdf: Vec<(f64, u64)>,
 }
 
 impl Measurement {
@@ -242,6 +245,7 @@ mod tests {
             msgs_per_s: None,
             lost: None,
             notes: Vec::new(),
+            cdf: Vec::new(),
         }
     }
 

@@ -8,7 +8,7 @@ use crate::report::{Measurement, Method, Report, Wait};
 use crate::scenario::EVENT_GAP;
 use crate::target::ratio_label;
 
-const HEADER: [&str; 12] = [
+const HEADER: [&str; 13] = [
     "name",
     "payload B",
     "wait",
@@ -21,14 +21,18 @@ const HEADER: [&str; 12] = [
     "baseline (same wait)",
     "p50 vs baseline",
     "p99 vs baseline",
+    "p50 vs floor",
 ];
 /// Columns whose cells are right-aligned (numbers).
-const RIGHT: [bool; 12] =
-    [false, true, false, false, true, true, true, true, true, false, true, true];
+const RIGHT: [bool; 13] =
+    [false, true, false, false, true, true, true, true, true, false, true, true, true];
+
+/// The scenario every latency row is also compared with: raw iceoryx2, same wait.
+pub const FLOOR: &str = "floor-iceoryx2";
 
 /// The report as a table, with a legend and the notes.
 pub fn render(report: &Report, config: &RunConfig) -> String {
-    let mut rows: Vec<[String; 12]> = vec![HEADER.map(str::to_owned)];
+    let mut rows: Vec<[String; 13]> = vec![HEADER.map(str::to_owned)];
     for m in &report.scenarios {
         let base = report.baseline_of(m);
         let (baseline, p50_vs, p99_vs) = match (&m.baseline, base) {
@@ -51,10 +55,11 @@ pub fn render(report: &Report, config: &RunConfig) -> String {
             baseline,
             p50_vs,
             p99_vs,
+            vs_floor(report, m),
         ]);
     }
 
-    let mut widths = [0usize; 12];
+    let mut widths = [0usize; 13];
     for row in &rows {
         for (w, cell) in widths.iter_mut().zip(row) {
             *w = (*w).max(cell.chars().count());
@@ -104,6 +109,11 @@ pub fn render(report: &Report, config: &RunConfig) -> String {
         }
     }
     let _ = writeln!(out, "{:>8}: ratio to the baseline row (and the difference)", "vs");
+    let _ = writeln!(
+        out,
+        "{:>8}: p50 / p50 of {FLOOR} with the same wait (raw iceoryx2, 64 bytes), this run",
+        "floor"
+    );
 
     out.push_str(&targets(report));
     out.push_str(&memory(report));
@@ -174,6 +184,18 @@ fn targets(report: &Report) -> String {
         let _ = writeln!(out, "{}", text.trim_end());
     }
     out
+}
+
+/// `×1.32`: a latency row's p50 over the floor's (same wait); `-` for rows that are
+/// not hops (queries, compute calls, lateness) or without a floor in the run.
+fn vs_floor(report: &Report, m: &Measurement) -> String {
+    if matches!(m.method, Method::Call | Method::Lateness) {
+        return "-".to_owned();
+    }
+    match report.scenarios.iter().find(|f| f.name == FLOOR && f.wait == m.wait) {
+        Some(f) if f.p50_ns > 0 => format!("×{}", ratio_label(m.p50_ns as f64 / f.p50_ns as f64)),
+        _ => "-".to_owned(),
+    }
 }
 
 /// The memory section: one line per figure.

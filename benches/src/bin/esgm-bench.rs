@@ -6,7 +6,7 @@ use std::process::ExitCode;
 
 use clap::Parser;
 use esgm_benches::args::Args;
-use esgm_benches::{json, runner, scenarios, table};
+use esgm_benches::{json, plots, runner, scenarios, table};
 
 fn main() -> ExitCode {
     match run(Args::parse()) {
@@ -39,6 +39,11 @@ fn run(args: Args) -> anyhow::Result<()> {
     if let Some(path) = &config.json {
         json::write(path, &report)?;
         eprintln!("wrote {}", path.display());
+    }
+    if let Some(dir) = &config.plots {
+        for file in plots::draw(&report, dir)? {
+            eprintln!("wrote {}", file.display());
+        }
     }
     Ok(())
 }

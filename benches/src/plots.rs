@@ -1,0 +1,254 @@
+//! `--plots DIR`: PNG charts of a run, drawn by the bench itself with `plotters`.
+//!
+//! - `latency_vs_payload_<wait>.png`: median one-way latency against payload size,
+//!   one line per transport (esgm, raw iceoryx2, Unix socket, and Zenoh and ROS 1 when
+//!   they ran), for busy-polling (`spin`) and blocking (`event`) receivers;
+//! - `cdf_<wait>.png`: the latency distribution of every cross-process hop row.
+//!
+//! Text is rasterised by `ab_glyph` from DejaVu Sans, bundled in `benches/assets`
+//! (Bitstream Vera licence beside it), so no system font library is needed to build
+//! or to draw.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context as _, anyhow};
+use plotters::prelude::*;
+use plotters::style::{FontStyle, register_font};
+
+use crate::report::{Measurement, Report, Wait};
+
+/// The font every chart uses.
+const FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
+const SIZE: (u32, u32) = (1000, 650);
+
+/// The transport a cross-process hop row measures, for the legend; `None` for rows
+/// that are not such hops.
+pub fn transport(m: &Measurement) -> Option<&'static str> {
+    let name = m.name.as_str();
+    let t = if name == "floor-iceoryx2" {
+        "iceoryx2 raw"
+    } else if name.starts_with("esgm-") && name.ends_with("-default") {
+        "esgm, default wait"
+    } else if name.starts_with("esgm-") {
+        "esgm"
+    } else if name.starts_with("uds-") {
+        "Unix socket"
+    } else if name.starts_with("zenoh-") {
+        "Zenoh (shared memory)"
+    } else if name.starts_with("ros1-") {
+        "ROS 1 (roscpp)"
+    } else {
+        return None;
+    };
+    Some(t)
+}
+
+/// Draws every chart of `report` into `dir`; returns the files written.
+pub fn draw(report: &Report, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    register_font("sans-serif", FontStyle::Normal, FONT)
+        .map_err(|_| anyhow!("the bundled font could not be read"))?;
+    let mut written = Vec::new();
+    for wait in Wait::BOTH {
+        let rows: Vec<&Measurement> =
+            report.scenarios.iter().filter(|m| m.wait == wait && transport(m).is_some()).collect();
+        if rows.is_empty() {
+            continue;
+        }
+        let path = dir.join(format!("latency_vs_payload_{}.png", wait.as_str()));
+        latency_vs_payload(&rows, wait, &path)
+            .with_context(|| format!("drawing {}", path.display()))?;
+        written.push(path);
+        let path = dir.join(format!("cdf_{}.png", wait.as_str()));
+        cdf(&rows, wait, &path).with_context(|| format!("drawing {}", path.display()))?;
+        written.push(path);
+    }
+    Ok(written)
+}
+
+fn color(i: usize) -> RGBColor {
+    const COLORS: [RGBColor; 8] = [
+        RGBColor(31, 119, 180),
+        RGBColor(255, 127, 14),
+        RGBColor(44, 160, 44),
+        RGBColor(214, 39, 40),
+        RGBColor(148, 103, 189),
+        RGBColor(140, 86, 75),
+        RGBColor(227, 119, 194),
+        RGBColor(23, 190, 207),
+    ];
+    COLORS[i % COLORS.len()]
+}
+
+/// `64 B`, `1 kB`, `922 kB`.
+fn bytes_label(v: f64) -> String {
+    if v >= 1e6 {
+        format!("{:.1} MB", v / 1e6)
+    } else if v >= 1e3 {
+        format!("{:.0} kB", v / 1e3)
+    } else {
+        format!("{v:.0} B")
+    }
+}
+
+/// `0.5`, `2`, `150`: no trailing zeros.
+fn number_label(v: f64) -> String {
+    if v >= 10.0 {
+        format!("{v:.0}")
+    } else if v >= 1.0 {
+        format!("{v:.1}").trim_end_matches(".0").to_owned()
+    } else {
+        format!("{v:.2}")
+    }
+}
+
+fn us(ns: u64) -> f64 {
+    (ns.max(1)) as f64 / 1000.0
+}
+
+/// Bounds of a log axis around `values`, with some room.
+fn log_range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
+    let (lo, hi) = values.fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    if lo > hi {
+        return 0.1..10.0;
+    }
+    (lo / 2.0).max(1e-3)..hi * 2.0
+}
+
+fn latency_vs_payload(rows: &[&Measurement], wait: Wait, path: &Path) -> anyhow::Result<()> {
+    let mut transports: Vec<&str> = Vec::new();
+    for m in rows {
+        if let Some(t) = transport(m) {
+            if !transports.contains(&t) {
+                transports.push(t);
+            }
+        }
+    }
+    // Always from the 64-byte floor to past the image, so runs compare.
+    let x = 16.0..4e6;
+    let y = log_range(rows.iter().map(|m| us(m.p50_ns)));
+    let root = BitMapBackend::new(path, SIZE).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!("median one-way latency vs payload size ({} receivers)", wait.as_str()),
+            ("sans-serif", 24),
+        )
+        .margin(20)
+        .x_label_area_size(55)
+        .y_label_area_size(75)
+        .build_cartesian_2d(x.log_scale(), y.log_scale())
+        .map_err(|e| anyhow!("{e}"))?;
+    chart
+        .configure_mesh()
+        .x_desc("payload (bytes, log scale)")
+        .y_desc("p50 latency (µs, log scale)")
+        .x_label_formatter(&|v| bytes_label(*v))
+        .y_label_formatter(&|v| number_label(*v))
+        .light_line_style(RGBColor(238, 238, 238))
+        .label_style(("sans-serif", 15))
+        .axis_desc_style(("sans-serif", 17))
+        .draw()
+        .map_err(|e| anyhow!("{e}"))?;
+    for (i, t) in transports.iter().enumerate() {
+        let c = color(i);
+        let mut points: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|m| transport(m) == Some(t))
+            .map(|m| (m.payload_bytes.max(1) as f64, us(m.p50_ns)))
+            .collect();
+        points.sort_by(|a, b| a.0.total_cmp(&b.0));
+        chart
+            .draw_series(LineSeries::new(points.clone(), c.stroke_width(2)))
+            .map_err(|e| anyhow!("{e}"))?
+            .label(*t)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+        chart
+            .draw_series(points.into_iter().map(|p| Circle::new(p, 5, c.filled())))
+            .map_err(|e| anyhow!("{e}"))?;
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .label_font(("sans-serif", 15))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| anyhow!("{e}"))?;
+    root.present().map_err(|e| anyhow!("{e}"))?;
+    Ok(())
+}
+
+fn cdf(rows: &[&Measurement], wait: Wait, path: &Path) -> anyhow::Result<()> {
+    let x = log_range(rows.iter().flat_map(|m| m.cdf.iter().map(|&(_, ns)| us(ns))));
+    let root = BitMapBackend::new(path, SIZE).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!("one-way latency CDF, process to process ({} receivers)", wait.as_str()),
+            ("sans-serif", 24),
+        )
+        .margin(20)
+        .x_label_area_size(55)
+        .y_label_area_size(75)
+        .build_cartesian_2d(x.log_scale(), 0f64..1f64)
+        .map_err(|e| anyhow!("{e}"))?;
+    chart
+        .configure_mesh()
+        .x_desc("latency (µs, log scale)")
+        .y_desc("fraction of hops at or below")
+        .x_label_formatter(&|v| number_label(*v))
+        .light_line_style(RGBColor(238, 238, 238))
+        .label_style(("sans-serif", 15))
+        .axis_desc_style(("sans-serif", 17))
+        .draw()
+        .map_err(|e| anyhow!("{e}"))?;
+    for (i, m) in rows.iter().filter(|m| !m.cdf.is_empty()).enumerate() {
+        let c = color(i);
+        let points: Vec<(f64, f64)> = m.cdf.iter().map(|&(q, ns)| (us(ns), q)).collect();
+        let label = format!("{} ({} B)", m.name, m.payload_bytes);
+        chart
+            .draw_series(LineSeries::new(points, c.stroke_width(2)))
+            .map_err(|e| anyhow!("{e}"))?
+            .label(label)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .label_font(("sans-serif", 15))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .draw()
+        .map_err(|e| anyhow!("{e}"))?;
+    root.present().map_err(|e| anyhow!("{e}"))?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::latency::Latency;
+
+    #[test]
+    fn charts_are_drawn_without_system_fonts() {
+        let mut rows = Vec::new();
+        for (name, bytes, ns) in
+            [("floor-iceoryx2", 64, 900), ("esgm-small", 240, 1300), ("esgm-image", 921_920, 1500)]
+        {
+            let mut l = Latency::new().unwrap();
+            for k in 0..100 {
+                l.record_ns(ns + k * 10);
+            }
+            rows.push(l.measurement(name, Wait::Spin).payload_bytes(bytes));
+        }
+        let report = Report { scenarios: rows, ..Report::default() };
+        let dir = tempfile::tempdir().unwrap();
+        let files = draw(&report, dir.path()).unwrap();
+        assert_eq!(files.len(), 2);
+        for f in files {
+            let bytes = std::fs::read(&f).unwrap();
+            assert!(bytes.starts_with(b"\x89PNG"), "{} is not a PNG", f.display());
+        }
+    }
+}
