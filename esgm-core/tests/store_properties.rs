@@ -229,6 +229,9 @@ impl Harness {
                         assert_eq!(seen, None, "an ill-typed structure was also delivered");
                         self.fates.insert(tag, Fate::Dropped(DropCause::InvalidType));
                     }
+                    Ok(AddOutcome::Forwarded) => {
+                        panic!("a store without a writer elsewhere forwarded")
+                    }
                     Err(e) => panic!("unexpected error {e}"),
                 }
                 if ill.is_some() {

@@ -17,8 +17,8 @@ use esgm_core::esgm::{
     ComputeError, CreateError, InputType, LookupError, SensorError, TrajectorySpec,
 };
 use esgm_core::{
-    AddError, EntityStructure, EntityTrajectoryStructure, Esgm, FluentStreamPolicy, Sample,
-    SubscribeOptions, Time, TypeRegistry, ValueApproximation, millis,
+    AddError, AddOutcome, EntityStructure, EntityTrajectoryStructure, Esgm, FluentStreamPolicy,
+    Sample, SubscribeOptions, Time, TypeRegistry, ValueApproximation, millis,
 };
 use esgm_shm::control::{Coordinator, CoordinatorThread, Registry};
 use esgm_shm::{ShmEsgm, unique_domain};
@@ -80,9 +80,6 @@ fn a_primitive_written_here_is_read_there_with_history_violations_and_reset() {
     let approx = there.get_at_approximating(25, &ValueApproximation::MostRecent).unwrap();
     assert_eq!(x(&approx), 2.0);
 
-    // Only the writer adds.
-    assert!(matches!(there.add(state(99, 9.0)), Err(AddError::OperationNotSupported { .. })));
-
     // New samples and violations arrive in order; the writer's gate decided them.
     let sub = there.subscribe(SubscribeOptions::default()).unwrap();
     let violations = there.subscribe_violations(16).unwrap();
@@ -98,6 +95,21 @@ fn a_primitive_written_here_is_read_there_with_history_violations_and_reset() {
     robot.add(state(60, 6.0)).unwrap();
     assert!(wait_for(|| there.get_latest().map(|s| x(&s)) == Ok(6.0)));
     assert_eq!(there.stats().unwrap().stored, 1);
+
+    // Another process pushes too: its adds go to the writer's gate (which orders,
+    // checks and counts everyone's) and come back through replication.
+    assert_eq!(there.add(state(70, 7.0)), Ok(AddOutcome::Forwarded));
+    assert!(wait_for(|| robot.get_latest().map(|s| x(&s)) == Ok(7.0)));
+    assert!(wait_for(|| there.get_latest().map(|s| x(&s)) == Ok(7.0)));
+    assert_eq!(there.add(state(65, 6.5)), Ok(AddOutcome::Forwarded)); // out of order
+    assert_eq!(there.add(state(80, 8.0)), Ok(AddOutcome::Forwarded));
+    assert!(wait_for(|| there.get_latest().map(|s| x(&s)) == Ok(8.0)));
+    let xs: Vec<f64> = robot.get_between(0, 100).unwrap().iter().map(x).collect();
+    assert_eq!(xs, [6.0, 7.0, 8.0], "the writer's gate dropped the out-of-order add");
+    assert_eq!(violations.recv_timeout(TIMEOUT).unwrap().valid_time, 65);
+    // A structure of another type is refused here, at once, and nothing is sent.
+    let wrong = EntityStructure::new("robot1", 90, 90).with("z", 1.0);
+    assert!(matches!(there.add(wrong), Err(AddError::InvalidType { .. })));
 }
 
 #[test]

@@ -218,7 +218,7 @@ impl<T: EntityTrajectoryStructure + 'static> RobotPublisherBuilder<T> {
             *shared.state.lock() = state;
 
             match self.robot_state.create_at_now(&self.entity_name, state.to_attributes().into()) {
-                Ok(AddOutcome::Added | AddOutcome::Held { .. }) => {
+                Ok(AddOutcome::Added | AddOutcome::Held { .. } | AddOutcome::Forwarded) => {
                     Counters::bump(&counters.published, 1);
                     if publish_failing {
                         tracing::info!(%trajectory, "publishing robot states again");

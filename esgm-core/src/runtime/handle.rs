@@ -58,13 +58,15 @@ impl InProcessTrajectory {
         f: impl FnOnce(&mut TrajectoryStore) -> Result<AddOutcome, AddError>,
     ) -> Result<AddOutcome, AddError> {
         let cell = self.cell().ok_or_else(|| self.gone_a())?;
-        if !cell.external_adds {
+        let mut store = cell.store.lock();
+        if !cell.external_adds && !store.forwards_adds() {
             return Err(AddError::OperationNotSupported {
                 trajectory: self.descriptor.name.clone(),
                 operation: operation.into(),
             });
         }
-        let outcome = f(&mut cell.store.lock());
+        let outcome = f(&mut store);
+        drop(store);
         if let Ok(AddOutcome::Held { .. }) = outcome {
             cell.kick_releaser();
         }

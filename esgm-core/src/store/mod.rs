@@ -53,7 +53,7 @@ pub use stats::TrajectoryStats;
 pub use subscription::{
     CallbackHandle, FanIn, RecvError, SubscribeOptions, Subscription, SubscriptionId,
 };
-pub use violation::{AddError, AddOutcome, DropCause, PolicyViolation};
+pub use violation::{AddError, AddForwarder, AddOutcome, DropCause, PolicyViolation};
 
 /// A sample waiting in the reorder buffer, ordered by (valid time, add sequence).
 #[derive(Debug)]
@@ -150,6 +150,7 @@ impl TrajectoryStoreBuilder {
             stats: StatsRecorder::default(),
             resets: Arc::default(),
             tap: None,
+            forward: None,
         })
     }
 }
@@ -179,6 +180,8 @@ pub struct TrajectoryStore {
     /// Everything that happens to the stream, in order, for one observer (a bridge
     /// that mirrors the stream into another process).
     tap: Option<crossbeam_channel::Sender<StoreEvent>>,
+    /// A replica's adds go to the trajectory's writer elsewhere.
+    forward: Option<Arc<dyn AddForwarder>>,
 }
 
 /// One thing that happened to a stream, as a [`TrajectoryStore::tap`] reports it.
@@ -407,6 +410,18 @@ impl TrajectoryStore {
         }
     }
 
+    /// Makes this store (a replica of a trajectory written elsewhere) send what is added
+    /// to it to `forwarder` after the type check, instead of admitting it: the writer's
+    /// gate decides and the structure comes back through replication.
+    pub fn forward_adds(&mut self, forwarder: Arc<dyn AddForwarder>) {
+        self.forward = Some(forwarder);
+    }
+
+    /// True if adds are forwarded to a writer elsewhere.
+    pub fn forwards_adds(&self) -> bool {
+        self.forward.is_some()
+    }
+
     /// A snapshot of the statistics.
     pub fn stats(&self) -> TrajectoryStats {
         self.stats.snapshot(self.history.len(), self.held.len(), self.subscribers.len())
@@ -419,6 +434,9 @@ impl TrajectoryStore {
             self.stats.record_dropped(DropCause::InvalidType);
             tracing::debug!(trajectory = %self.name, error = %source, "structure refused");
             return Err(AddError::InvalidType { trajectory: self.name.clone(), source });
+        }
+        if let Some(f) = &self.forward {
+            return f.forward(es);
         }
         if let Some((constraint, detail)) = self.arrival_violation(&es, now) {
             return self.violated(&es, now, constraint, detail, blocking);

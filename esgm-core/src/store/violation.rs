@@ -3,6 +3,9 @@
 
 use std::fmt;
 
+use std::sync::Arc;
+
+use crate::frame::EntityStructure;
 use crate::policy::Constraint;
 use crate::time::Time;
 use crate::type_check::InvalidType;
@@ -76,6 +79,11 @@ pub enum AddOutcome {
     /// The structure broke a constraint, was dropped and counted (non-blocking forms
     /// only; the blocking forms return [`AddError::PolicyViolation`]).
     Dropped(PolicyViolation),
+    /// The trajectory is written by another process: the structure (checked against
+    /// the type here) was sent to it, and its policy gate decides; a violation there
+    /// is counted in the trajectory's stats and reported to violation subscribers
+    /// everywhere.
+    Forwarded,
 }
 
 /// Errors of the add operations (T4).
@@ -110,4 +118,20 @@ pub enum AddError {
         /// The refused operation.
         operation: String,
     },
+    /// The trajectory's writer is in another process and the structure could not be
+    /// sent to it (see the reason); nothing was added.
+    #[error("trajectory `{trajectory}`: cannot reach its writer: {reason}")]
+    Unavailable {
+        /// The trajectory.
+        trajectory: String,
+        /// Why.
+        reason: String,
+    },
+}
+
+/// Sends structures added to a replica to the process that writes the trajectory
+/// (set with [`crate::TrajectoryStore::forward_adds`]); the transport implements it.
+pub trait AddForwarder: Send + Sync + std::fmt::Debug {
+    /// Sends `es`, already checked against the trajectory's type.
+    fn forward(&self, es: Arc<EntityStructure>) -> Result<AddOutcome, AddError>;
 }

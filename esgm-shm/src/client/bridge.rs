@@ -8,13 +8,22 @@
 //!   replica ([`esgm_core::InProcessEsgm::create_replica`]), so local units, syncs,
 //!   queries and subscriptions read it like a local trajectory.
 //!
+//! - Adding to a primitive trajectory another process writes goes through its
+//!   *inbox*: the replica forwards the structure (after the type check) to the location
+//!   thread, which publishes it on the inbox service (`<domain>:inbox`); the writer's
+//!   export takes it from there and adds it through its policy gate, so every process
+//!   can push into one trajectory and the one gate orders, checks and counts them all.
+//!
 //! Both live on the location thread, which owns every iceoryx2 port of the process.
 
 use std::sync::Arc;
 
-use crossbeam_channel::Receiver;
+use crossbeam_channel::{Receiver, Sender, TrySendError};
 use esgm_core::policy::FluentStreamPolicy;
-use esgm_core::{InProcessTrajectory, StoreEvent};
+use esgm_core::{
+    AddError, AddForwarder, AddOutcome, EntityStructure, EntityTrajectoryStructure,
+    InProcessTrajectory, StoreEvent,
+};
 
 use crate::history::{DEFAULT_MAX_HISTORY, history_bound, history_qos};
 use crate::publisher::TrajectoryPublisher;
@@ -44,6 +53,44 @@ pub(crate) fn bridge_qos(policy: &FluentStreamPolicy) -> TrajectoryQos {
     history_qos(history_bound(policy.cache, DEFAULT_MAX_HISTORY), TrajectoryQos::default())
 }
 
+/// The domain of inbox services: other processes' adds to a primitive trajectory.
+fn inbox_domain(domain: &str) -> String {
+    format!("{domain}:inbox")
+}
+
+/// Inbox services keep nothing for late subscribers (an add is delivered once) and
+/// queue generously: a full queue loses adds.
+fn inbox_qos() -> TrajectoryQos {
+    TrajectoryQos {
+        history_size: 0,
+        subscriber_buffer_size: 1024,
+        max_publishers: 16,
+        max_nodes: 32,
+        ..TrajectoryQos::default()
+    }
+}
+
+/// Adds forwarded to the location thread that have not been published yet.
+const OUTBOX_CAPACITY: usize = 4096;
+
+/// A replica's side of forwarding: hands structures to the location thread.
+#[derive(Debug)]
+struct Outbox {
+    trajectory: String,
+    sender: Sender<Arc<EntityStructure>>,
+}
+
+impl AddForwarder for Outbox {
+    fn forward(&self, es: Arc<EntityStructure>) -> Result<AddOutcome, AddError> {
+        let reason = match self.sender.try_send(es) {
+            Ok(()) => return Ok(AddOutcome::Forwarded),
+            Err(TrySendError::Full(_)) => "the outbox is full (the writer is not keeping up)",
+            Err(TrySendError::Disconnected(_)) => "this process has left the system",
+        };
+        Err(AddError::Unavailable { trajectory: self.trajectory.clone(), reason: reason.into() })
+    }
+}
+
 /// A local trajectory published for other processes.
 #[derive(Debug)]
 pub(crate) struct Export {
@@ -52,6 +99,8 @@ pub(crate) struct Export {
     pub events: Receiver<StoreEvent>,
     /// Events that could not be published (logged once each kind).
     pub failures: u64,
+    /// Primitive trajectories: other processes' adds, and the handle they go to.
+    inbox: Option<(TrajectorySubscriber, InProcessTrajectory)>,
 }
 
 impl Export {
@@ -63,6 +112,7 @@ impl Export {
         handle: &InProcessTrajectory,
         type_name: &str,
         policy: &FluentStreamPolicy,
+        primitive: bool,
     ) -> Result<Self, BridgeError> {
         let name = esgm_core::EntityTrajectoryStructure::name(handle).to_owned();
         let publisher = TrajectoryPublisher::builder(&name, type_name)
@@ -74,16 +124,54 @@ impl Export {
         let (backlog, events) = handle
             .with_store(|s| (s.samples(), s.tap(TAP_CAPACITY)))
             .map_err(|_| BridgeError::Gone { trajectory: name.clone() })?;
-        let mut export = Self { publisher, violations, events, failures: 0 };
+        let inbox = match primitive {
+            true => Some((
+                TrajectorySubscriber::builder(&name, type_name)
+                    .domain(inbox_domain(domain))
+                    .qos(inbox_qos())
+                    .create(node)?,
+                handle.clone(),
+            )),
+            false => None,
+        };
+        let mut export = Self { publisher, violations, events, failures: 0, inbox };
         for sample in backlog {
             export.publish(StoreEvent::Entered(sample));
         }
         Ok(export)
     }
 
-    /// Publishes every queued event; returns how many there were.
+    /// Adds what other processes sent to the inbox, then publishes every queued
+    /// event; returns how many there were.
     pub fn pump(&mut self) -> usize {
         let mut n = 0;
+        if let Some((inbox, handle)) = &mut self.inbox {
+            loop {
+                match inbox.receive() {
+                    Ok(Some(sample)) => {
+                        n += 1;
+                        // Through the gate: type, policy and order are checked here,
+                        // and whatever is refused is counted in this trajectory's stats.
+                        match sample.to_owned() {
+                            Ok(es) => {
+                                let _ = handle.add(es);
+                            }
+                            Err(e) => {
+                                tracing::warn!(error = %e, "malformed add from another process")
+                            }
+                        }
+                    }
+                    Ok(None) => break,
+                    Err(e) => {
+                        n += 1;
+                        tracing::warn!(error = %e, "add from another process refused");
+                        if matches!(e, ReceiveError::Connection(_) | ReceiveError::TooManyHeld) {
+                            break;
+                        }
+                    }
+                }
+            }
+        }
         while let Ok(event) = self.events.try_recv() {
             self.publish(event);
             n += 1;
@@ -118,6 +206,12 @@ pub(crate) struct Import {
     pub replica: InProcessTrajectory,
     /// Samples that could not be taken (already counted by the subscriber).
     pub rejected: u64,
+    /// Primitive trajectories: adds made here, on their way to the writer.
+    pub outbox: Option<Receiver<Arc<EntityStructure>>>,
+    /// The inbox publisher, opened at the first add.
+    inbox: Option<TrajectoryPublisher>,
+    domain: String,
+    type_name: String,
 }
 
 impl Import {
@@ -128,6 +222,7 @@ impl Import {
         replica: InProcessTrajectory,
         type_name: &str,
         policy: &FluentStreamPolicy,
+        primitive: bool,
     ) -> Result<Self, OpenError> {
         let name = esgm_core::EntityTrajectoryStructure::name(&replica).to_owned();
         let subscriber = TrajectorySubscriber::builder(&name, type_name)
@@ -135,13 +230,57 @@ impl Import {
             .qos(bridge_qos(policy))
             .create(node)?;
         let violations = ViolationSubscriber::builder(&name).domain(domain).create(node)?;
-        Ok(Self { subscriber, violations, replica, rejected: 0 })
+        let outbox = primitive.then(|| {
+            let (sender, receiver) = crossbeam_channel::bounded(OUTBOX_CAPACITY);
+            let outbox = Outbox { trajectory: name.clone(), sender };
+            let _ = replica.with_store(|s| s.forward_adds(Arc::new(outbox)));
+            receiver
+        });
+        Ok(Self {
+            subscriber,
+            violations,
+            replica,
+            rejected: 0,
+            outbox,
+            inbox: None,
+            domain: domain.to_owned(),
+            type_name: type_name.to_owned(),
+        })
     }
 
-    /// Feeds every waiting sample, reset and violation into the replica; returns how
-    /// many there were.
-    pub fn pump(&mut self) -> usize {
+    /// Publishes the adds made here to the writer's inbox; returns how many.
+    fn send_outbox(&mut self, node: &ShmNode) -> usize {
+        let Some(outbox) = &self.outbox else { return 0 };
         let mut n = 0;
+        while let Ok(es) = outbox.try_recv() {
+            n += 1;
+            if self.inbox.is_none() {
+                let name = self.replica.name().to_owned();
+                match TrajectoryPublisher::builder(&name, &self.type_name)
+                    .domain(inbox_domain(&self.domain))
+                    .qos(inbox_qos())
+                    .create(node)
+                {
+                    Ok(p) => self.inbox = Some(p),
+                    Err(e) => {
+                        tracing::warn!(trajectory = %name, error = %e, "cannot open the writer's inbox; add lost");
+                        continue;
+                    }
+                }
+            }
+            if let Some(inbox) = &self.inbox {
+                if let Err(e) = inbox.publish(&es) {
+                    tracing::warn!(trajectory = %inbox.trajectory(), error = %e, "add not sent to the writer");
+                }
+            }
+        }
+        n
+    }
+
+    /// Sends the adds made here to the writer, then feeds every waiting sample, reset
+    /// and violation into the replica; returns how many there were.
+    pub fn pump(&mut self, node: &ShmNode) -> usize {
+        let mut n = self.send_outbox(node);
         loop {
             match self.subscriber.receive() {
                 Ok(Some(sample)) => {

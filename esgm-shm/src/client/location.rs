@@ -10,7 +10,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, Select, Sender, TryRecvError};
-use esgm_core::esgm::{CreateError, Esgm, LookupError, TrajectorySpec};
+use esgm_core::esgm::{CreateError, Esgm, LookupError, TrajectoryKind, TrajectorySpec};
 use esgm_core::{EntityStructureType, InProcessEsgm, InProcessTrajectory};
 
 use super::bridge::{Export, Import};
@@ -97,7 +97,7 @@ impl Location {
                 work += e.pump();
             }
             for i in self.imports.values_mut() {
-                work += i.pump();
+                work += i.pump(&self.node);
             }
             if Instant::now() >= next_maintenance {
                 self.maintain();
@@ -116,6 +116,9 @@ impl Location {
             sel.recv(commands);
             for e in self.exports.values() {
                 sel.recv(&e.events);
+            }
+            for outbox in self.imports.values().filter_map(|i| i.outbox.as_ref()) {
+                sel.recv(outbox);
             }
             let _ = sel.ready_timeout(idle);
             idle = (idle * 2).min(MAX_IDLE);
@@ -201,6 +204,7 @@ impl Location {
                 &handle,
                 &record.info.type_name,
                 &record.info.policy,
+                record.info.kind == TrajectoryKind::Primitive,
             )
             .map_err(|e| CreateError::Unavailable { reason: e.to_string() })?;
             self.exports.insert(spec.name.clone(), export);
@@ -243,6 +247,7 @@ impl Location {
             handle.clone(),
             &record.info.type_name,
             &record.info.policy,
+            record.info.kind == TrajectoryKind::Primitive,
         ) {
             Ok(import) => {
                 self.imports.insert(name.clone(), import);

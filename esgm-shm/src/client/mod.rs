@@ -23,9 +23,13 @@
 //! process's structures (images), read the trajectory with an
 //! [`crate::ShmTrajectoryReader`] or [`crate::TrajectorySubscriber`] instead.
 //!
-//! Left out: adding to a primitive trajectory another process writes (only its writer
-//! adds; the handle refuses with `OperationNotSupported`); re-pointing a name is seen
-//! by the process that re-points it, not by replicas elsewhere.
+//! - Any process may add to a primitive trajectory: where it is a replica, the
+//!   structure is type-checked, forwarded to the writer's inbox
+//!   ([`esgm_core::AddOutcome::Forwarded`]) and admitted by the writer's policy gate,
+//!   which orders, checks and counts every process's adds alike.
+//!
+//! Left out: re-pointing a name is seen by the process that re-points it, not by
+//! replicas elsewhere.
 
 mod bridge;
 mod location;
