@@ -20,7 +20,9 @@
 //! (bound 1024, 8 readers, 4 KiB samples) maps a 73 MB segment in `/dev/shm` but
 //! commits 0.1 MB at start; with one reader holding 1024 samples, 9 MB (the samples and
 //! that reader's 1024-deep queue). Image trajectories want an `Elements(n)` cache and
-//! fewer `max_subscribers`.
+//! fewer `max_subscribers`; through `connect`, a trajectory of octets without an
+//! element cache keeps only the last 16 for other processes (with a warning), since
+//! 1024 camera frames would reserve gigabytes.
 //!
 //! # Lookups by header times
 //! Queries are by valid time, but the history is in add order. When the two agree (any

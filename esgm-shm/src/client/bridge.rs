@@ -20,9 +20,10 @@ use std::sync::Arc;
 
 use crossbeam_channel::{Receiver, Sender, TrySendError};
 use esgm_core::policy::FluentStreamPolicy;
+use esgm_core::value::ValueSort;
 use esgm_core::{
-    AddError, AddForwarder, AddOutcome, EntityStructure, EntityTrajectoryStructure,
-    InProcessTrajectory, StoreEvent,
+    AddError, AddForwarder, AddOutcome, CacheConstraint, EntityStructure, EntityStructureType,
+    EntityTrajectoryStructure, InProcessTrajectory, StoreEvent,
 };
 
 use crate::history::{DEFAULT_MAX_HISTORY, history_bound, history_qos};
@@ -47,10 +48,41 @@ pub(crate) enum BridgeError {
 /// are counted as overflow in the trajectory's stats).
 pub(crate) const TAP_CAPACITY: usize = 4096;
 
+/// The most samples of a trajectory carrying octets (images, blobs of bytes) kept in
+/// shared memory for late readers when its cache has no element bound: every kept
+/// sample reserves its full size in every reader's segment, so `All` with the default
+/// 1024 would map gigabytes for a camera.
+pub(crate) const MAX_OCTET_HISTORY: usize = 16;
+
 /// The service settings both ends of a bridged trajectory use: the publisher keeps
 /// the cache's bound of samples, so a replica made late starts with the writer's view.
-pub(crate) fn bridge_qos(policy: &FluentStreamPolicy) -> TrajectoryQos {
-    history_qos(history_bound(policy.cache, DEFAULT_MAX_HISTORY), TrajectoryQos::default())
+/// A trajectory of `entity_type` with octets and no element bound keeps
+/// [`MAX_OCTET_HISTORY`] (both ends derive the same bound from the same inputs).
+pub(crate) fn bridge_qos(
+    policy: &FluentStreamPolicy,
+    entity_type: &EntityStructureType,
+) -> TrajectoryQos {
+    let octets = entity_type.attributes.iter().any(|a| a.sort == ValueSort::OctetSeq);
+    let bound = match policy.cache {
+        CacheConstraint::Elements(n) if n > 0 => n,
+        _ if octets => MAX_OCTET_HISTORY,
+        _ => history_bound(policy.cache, DEFAULT_MAX_HISTORY),
+    };
+    history_qos(bound, TrajectoryQos::default())
+}
+
+/// The bridged history of `handle`'s trajectory, warning once where a cache without
+/// an element bound is cut to [`MAX_OCTET_HISTORY`] for other processes.
+fn handle_qos(handle: &InProcessTrajectory, policy: &FluentStreamPolicy) -> TrajectoryQos {
+    let entity_type = handle.entity_type().unwrap_or_else(|_| EntityStructureType::new(""));
+    let qos = bridge_qos(policy, &entity_type);
+    let unbounded = !matches!(policy.cache, CacheConstraint::Elements(n) if n > 0);
+    if unbounded && qos.history_size == MAX_OCTET_HISTORY {
+        tracing::warn!(trajectory = %handle.name(), kept = MAX_OCTET_HISTORY,
+            "a trajectory of octets (images) without an element cache: other processes \
+             receive the last {MAX_OCTET_HISTORY} of its history; set `cache = N`");
+    }
+    qos
 }
 
 /// The domain of inbox services: other processes' adds to a primitive trajectory.
@@ -117,7 +149,7 @@ impl Export {
         let name = esgm_core::EntityTrajectoryStructure::name(handle).to_owned();
         let publisher = TrajectoryPublisher::builder(&name, type_name)
             .domain(domain)
-            .qos(bridge_qos(policy))
+            .qos(handle_qos(handle, policy))
             .create(node)?;
         let violations = ViolationPublisher::create(node, domain, &name)?;
         // Content and tap under one lock: nothing falls between the two.
@@ -225,9 +257,10 @@ impl Import {
         primitive: bool,
     ) -> Result<Self, OpenError> {
         let name = esgm_core::EntityTrajectoryStructure::name(&replica).to_owned();
+        let entity_type = replica.entity_type().unwrap_or_else(|_| EntityStructureType::new(""));
         let subscriber = TrajectorySubscriber::builder(&name, type_name)
             .domain(domain)
-            .qos(bridge_qos(policy))
+            .qos(bridge_qos(policy, &entity_type))
             .create(node)?;
         let violations = ViolationSubscriber::builder(&name).domain(domain).create(node)?;
         let outbox = primitive.then(|| {
@@ -321,5 +354,21 @@ impl Import {
             tracing::warn!(trajectory = %self.subscriber.trajectory(), error = %e,
                 "sample from another process rejected (later ones are only counted)");
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn octet_trajectories_without_an_element_cache_keep_a_short_history() {
+        let image = EntityStructureType::new("Image").attr("image_data", ValueSort::OctetSeq);
+        let reading = EntityStructureType::new("Reading").attr("x", ValueSort::Double);
+        let all = FluentStreamPolicy::default();
+        assert_eq!(bridge_qos(&all, &image).history_size, MAX_OCTET_HISTORY);
+        assert_eq!(bridge_qos(&all, &reading).history_size, DEFAULT_MAX_HISTORY);
+        let hundred = FluentStreamPolicy::default().cache(CacheConstraint::Elements(100));
+        assert_eq!(bridge_qos(&hundred, &image).history_size, 100, "an explicit bound is kept");
     }
 }
