@@ -248,3 +248,26 @@ fn a_child_process_serves_a_sensor_and_a_unit() {
     }
     assert!(status.success(), "child failed ({status}):\n{output}");
 }
+
+#[test]
+fn re_pointing_a_name_is_seen_by_readers_in_other_processes() {
+    let c = coordinator("loc-repoint");
+    let a = location(&c, "a");
+    let b = location(&c, "b");
+    let first = a.create_trajectory(TrajectorySpec::primitive("track", "RobotState")).unwrap();
+    for i in 1..=3 {
+        first.add(state(i * 10, i as f64)).unwrap();
+    }
+    let there = b.get_entity_trajectory_structure("track").unwrap();
+    assert!(wait_for(|| there.stats().map(|s| s.stored) == Ok(3)), "{:?}", there.stats());
+    let sub = there.subscribe(SubscribeOptions::default()).unwrap();
+
+    // E5: the name now denotes a new trajectory; readers elsewhere follow it and see
+    // the new stream from then on, not the old one's history.
+    let second =
+        a.create_trajectory(TrajectorySpec::primitive("track", "RobotState").replace()).unwrap();
+    second.add(state(5, 100.0)).unwrap();
+    assert_eq!(x(&sub.recv_timeout(TIMEOUT).unwrap()), 100.0);
+    assert!(wait_for(|| there.stats().map(|s| s.stored) == Ok(1)), "{:?}", there.stats());
+    assert_eq!(x(&there.get_latest().unwrap()), 100.0);
+}

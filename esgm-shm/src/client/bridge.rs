@@ -137,7 +137,8 @@ pub(crate) struct Export {
 
 impl Export {
     /// Publishes `handle`'s stream from now on (and its current content, so readers
-    /// that connect later receive the history).
+    /// that connect later receive the history). A `repointed` name starts with a reset
+    /// marker: readers elsewhere forget the stream the name denoted before.
     pub fn start(
         node: &ShmNode,
         domain: &str,
@@ -145,6 +146,7 @@ impl Export {
         type_name: &str,
         policy: &FluentStreamPolicy,
         primitive: bool,
+        repointed: bool,
     ) -> Result<Self, BridgeError> {
         let name = esgm_core::EntityTrajectoryStructure::name(handle).to_owned();
         let publisher = TrajectoryPublisher::builder(&name, type_name)
@@ -167,6 +169,9 @@ impl Export {
             false => None,
         };
         let mut export = Self { publisher, violations, events, failures: 0, inbox };
+        if repointed {
+            export.publish(StoreEvent::Reset);
+        }
         for sample in backlog {
             export.publish(StoreEvent::Entered(sample));
         }

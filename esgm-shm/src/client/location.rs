@@ -197,6 +197,9 @@ impl Location {
             self.ensure_available(&input)?;
         }
         let handle = self.local.create_trajectory(spec.clone())?;
+        // Re-pointed here (E5): the export follows the new trajectory, and readers
+        // elsewhere forget the old stream (a reset marker) before the new one's history.
+        let repointed = spec.replace && self.exports.remove(&spec.name).is_some();
         if !self.exports.contains_key(&spec.name) {
             let export = Export::start(
                 &self.node,
@@ -205,6 +208,7 @@ impl Location {
                 &record.info.type_name,
                 &record.info.policy,
                 record.info.kind == TrajectoryKind::Primitive,
+                repointed,
             )
             .map_err(|e| CreateError::Unavailable { reason: e.to_string() })?;
             self.exports.insert(spec.name.clone(), export);

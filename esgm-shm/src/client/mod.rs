@@ -28,8 +28,9 @@
 //!   ([`esgm_core::AddOutcome::Forwarded`]) and admitted by the writer's policy gate,
 //!   which orders, checks and counts every process's adds alike.
 //!
-//! Left out: re-pointing a name is seen by the process that re-points it, not by
-//! replicas elsewhere.
+//! - Re-pointing a name (E5) in its writer resets readers elsewhere (a reset marker in
+//!   stream order) and publishes the new trajectory from then on, so subscribers in
+//!   every process move over. A re-pointed name keeps its type.
 
 mod bridge;
 mod location;
