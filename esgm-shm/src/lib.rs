@@ -128,7 +128,7 @@ pub use reader::{
 };
 pub use received::ReceivedSample;
 pub use service::{OpenError, ShmNode};
-pub use service_name::{NameError, TrajectoryServiceNames, unique_domain};
+pub use service_name::{NameError, TrajectoryServiceNames, node_name, nodes_of, unique_domain};
 pub use subscriber::{ReceiveError, SubscriberStats, TrajectorySubscriber, Validation};
 pub use type_id::type_id;
 pub use violations::{ViolationPublisher, ViolationRecord, ViolationSubscriber};

@@ -135,6 +135,44 @@ fn service_name(name: &str) -> Result<ServiceName, NameError> {
         .map_err(|_| NameError::TooLong { service: name.to_owned(), max: ServiceName::max_len() })
 }
 
+/// The name a process's iceoryx2 node carries: `esgm/<domain>/<role>` (at most
+/// iceoryx2's 128 characters), so `iox2 node list`, dead-node cleanup and `esgm down`
+/// can tell which system a node belonged to.
+pub fn node_name(domain: &str, role: &str) -> iceoryx2::prelude::NodeName {
+    let mut name = format!("{SERVICE_PREFIX}/{domain}/{role}");
+    while name.len() > iceoryx2::prelude::NodeName::max_len() {
+        name.pop();
+    }
+    iceoryx2::prelude::NodeName::new(&name)
+        .or_else(|_| iceoryx2::prelude::NodeName::new(SERVICE_PREFIX))
+        .unwrap_or_default()
+}
+
+/// The nodes of `domain` on this host, alive or not: `(name, alive)`. After a clean
+/// stop (and cleanup of crashed processes) there are none.
+pub fn nodes_of(domain: &str) -> Vec<(String, bool)> {
+    use iceoryx2::node::{Node, NodeState, NodeView};
+    let prefix = format!("{SERVICE_PREFIX}/{domain}/");
+    let mut out = Vec::new();
+    let _ = Node::<iceoryx2::prelude::ipc::Service>::list(
+        iceoryx2::config::Config::global_config(),
+        |state| {
+            let (details, alive) = match &state {
+                NodeState::Alive(v) => (v.details().clone(), true),
+                NodeState::Dead(v) => (v.details().clone(), false),
+                _ => (None, false),
+            };
+            if let Some(d) = details {
+                if d.name().as_str().starts_with(&prefix) {
+                    out.push((d.name().as_str().to_owned(), alive));
+                }
+            }
+            iceoryx2::prelude::CallbackProgression::Continue
+        },
+    );
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

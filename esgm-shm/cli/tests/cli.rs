@@ -70,6 +70,13 @@ fn coordinator_is_gone(domain: &str) -> bool {
     ControlClient::connect(domain, Duration::from_millis(200)).is_err()
 }
 
+/// Nothing of the system is left in shared memory: no node of its domain, alive or
+/// dead (crashed processes' resources were cleaned).
+fn assert_nothing_left(domain: &str) {
+    let nodes = esgm_shm::nodes_of(domain);
+    assert!(nodes.is_empty(), "nodes of `{domain}` left behind: {nodes:?}");
+}
+
 #[test]
 fn demo_follows_the_largest_blob_and_leaves_nothing_behind() {
     let _one = one_system();
@@ -87,6 +94,7 @@ fn demo_follows_the_largest_blob_and_leaves_nothing_behind() {
         assert!(o.stdout.contains(expected), "missing `{expected}` in:\n{}", o.stdout);
     }
     assert!(coordinator_is_gone(&d));
+    assert_nothing_left(&d);
 }
 
 #[test]
@@ -262,6 +270,7 @@ fn a_killed_unit_worker_is_restarted_and_the_trajectory_resumes() {
         .unwrap_or(0);
     assert!(blobs >= 20, "blobs did not resume after the restart ({blobs}):\n{text}");
     assert!(coordinator_is_gone(&d));
+    assert_nothing_left(&d);
 }
 
 /// Pids of the system's processes, as `esgm ps --json` reports them.
@@ -517,4 +526,5 @@ merge = ["large_blob", "smooth_blob"]
         let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
         assert!(stat.is_empty() || stat.contains(") Z"), "worker {pid} still runs: {stat}");
     }
+    assert_nothing_left(&d);
 }

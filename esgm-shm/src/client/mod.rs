@@ -150,6 +150,7 @@ impl ShmEsgmBuilder {
             .name(format!("esgm-location-{host}"))
             .spawn(move || {
                 let setup = NodeBuilder::new()
+                    .name(&crate::service_name::node_name(&d, &h))
                     .create::<ipc::Service>()
                     .map_err(ControlClientError::Node)
                     .and_then(|node| Ok((ControlClient::connect(&d, timeout)?, node)));

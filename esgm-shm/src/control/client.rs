@@ -89,7 +89,10 @@ impl ControlClient {
     /// Connects to the coordinator of `domain`; calls wait up to `timeout` for answers.
     pub fn connect(domain: &str, timeout: Duration) -> Result<Self, ControlClientError> {
         let name = control_service(domain)?;
-        let node = NodeBuilder::new().create::<ipc::Service>().map_err(ControlClientError::Node)?;
+        let node = NodeBuilder::new()
+            .name(&crate::service_name::node_name(domain, "control-client"))
+            .create::<ipc::Service>()
+            .map_err(ControlClientError::Node)?;
         let service = node
             .service_builder(&name)
             .request_response::<[u8], [u8]>()

@@ -77,7 +77,10 @@ impl Coordinator {
     /// processes are cleaned first.
     pub fn create(domain: &str, registry: Registry) -> Result<Self, CoordinatorError> {
         let name = control_service(domain)?;
-        let node = NodeBuilder::new().create::<ipc::Service>().map_err(CoordinatorError::Node)?;
+        let node = NodeBuilder::new()
+            .name(&crate::service_name::node_name(domain, "coordinator"))
+            .create::<ipc::Service>()
+            .map_err(CoordinatorError::Node)?;
         cleanup_dead_nodes();
         let service = node
             .service_builder(&name)

@@ -46,6 +46,14 @@ pub fn run(domain: &str) -> anyhow::Result<()> {
     }
     cleanup_dead_nodes();
     println!("stopped `{domain}`");
+    // Programs esgm did not start (a user's own) may still hold the domain's services.
+    let others: Vec<String> = esgm_shm::nodes_of(domain).into_iter().map(|(n, _)| n).collect();
+    if !others.is_empty() {
+        eprintln!(
+            "esgm: note: processes esgm did not start are still connected to `{domain}`: {}",
+            others.join(", ")
+        );
+    }
     Ok(())
 }
 
