@@ -309,6 +309,12 @@ impl Location {
             }
             match self.build(&spec, &record, false) {
                 Ok(_) => tracing::info!(trajectory = %spec.name, "writing trajectory"),
+                // A transient failure (the coordinator slow to answer under load) is
+                // retried at the next poll; anything else would fail again.
+                Err(e @ CreateError::Unavailable { .. }) => {
+                    tracing::info!(trajectory = %spec.name, error = %e,
+                        "cannot build an assigned trajectory yet; retrying");
+                }
                 Err(e) => {
                     tracing::warn!(trajectory = %spec.name, error = %e,
                         "cannot build an assigned trajectory");

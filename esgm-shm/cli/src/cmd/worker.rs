@@ -95,8 +95,9 @@ pub fn run(domain: &str, role: &Role) -> anyhow::Result<()> {
     let esgm = ShmEsgm::builder()
         .domain(domain)
         .host(role.process_name())
-        // Short: a worker notices quickly that its coordinator is gone.
-        .timeout(Duration::from_secs(2))
+        // A gone coordinator is noticed at once (no server); the deadline is only for a
+        // slow one, which a loaded machine makes common.
+        .timeout(Duration::from_secs(5))
         .connect()
         .with_context(|| format!("cannot reach the system `{domain}`"))?;
     let _robot = match role {
