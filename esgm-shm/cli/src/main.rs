@@ -34,7 +34,7 @@ struct Cli {
 enum Command {
     /// Start the coordinator of a domain (foreground unless --detach).
     Up(cmd::up::Args),
-    /// Stop the coordinator; the processes of the system leave with it.
+    /// Stop the coordinator and every process it started.
     Down,
     /// Declare types, sensors, units and trajectories from a configuration file.
     Apply(cmd::apply::Args),

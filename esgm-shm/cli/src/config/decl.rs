@@ -180,8 +180,9 @@ pub struct TrajectoryDecl {
     /// Sync: items held per input (default 10).
     #[arg(long)]
     pub queue: Option<usize>,
-    /// Primitive: the process that pushes into it (default: the coordinator's own
-    /// process; name a worker, e.g. `robot-robot_state`, to let it add).
+    /// Primitive: the process that writes it, whose policy gate admits every add
+    /// (default: the coordinator's own process; other processes' adds are forwarded
+    /// there). Name the main pusher, e.g. `robot-robot_state`, to save it a hop.
     #[arg(long)]
     pub writer: Option<String>,
     /// If the name exists, re-point it to the new trajectory (subscribers move over).
