@@ -202,6 +202,15 @@ pub struct MemoryRow {
     pub note: String,
 }
 
+/// A scenario that could not run here, and what to do about it.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Skipped {
+    /// The row it would have written (`zenoh-small`, `ros1-image`, …).
+    pub name: String,
+    /// Why, and how to run it.
+    pub reason: String,
+}
+
 /// Everything a run measured, in run order.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Report {
@@ -210,6 +219,10 @@ pub struct Report {
     /// Memory figures (the `memory` scenario), beside the latency rows.
     #[serde(default)]
     pub memory: Vec<MemoryRow>,
+    /// Scenarios that could not run on this build or machine (peers not built or not
+    /// installed), each with the way to run it.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub skipped: Vec<Skipped>,
     /// The goals the run's scenarios set, for the table; not part of the JSON.
     #[serde(skip)]
     pub targets: Vec<Target>,

@@ -47,6 +47,7 @@ pub fn run(
         let _ = writeln!(progress, "{:>6.1} s", started.elapsed().as_secs_f64());
         report.scenarios.extend(rows);
         report.memory.extend(ctx.take_memory());
+        report.skipped.extend(ctx.take_skipped());
         report.targets.extend(scenario.targets());
     }
     Ok(report)

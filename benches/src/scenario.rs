@@ -11,7 +11,7 @@ use crate::config::RunConfig;
 use crate::peer_process::PeerProcess;
 use crate::peer_role::PeerRole;
 use crate::pin::Pinning;
-use crate::report::{Measurement, MemoryRow, Wait};
+use crate::report::{Measurement, MemoryRow, Skipped, Wait};
 use crate::target::Target;
 use crate::wait_mode::WaitMode;
 
@@ -60,6 +60,7 @@ pub struct Context {
     samples: Option<u64>,
     pin: Option<Pinning>,
     memory: Arc<Mutex<Vec<MemoryRow>>>,
+    skipped: Arc<Mutex<Vec<Skipped>>>,
 }
 
 impl Context {
@@ -70,6 +71,7 @@ impl Context {
             samples: config.samples,
             pin: config.pin,
             memory: Arc::default(),
+            skipped: Arc::default(),
         }
     }
 
@@ -78,6 +80,18 @@ impl Context {
         if let Ok(mut rows) = self.memory.lock() {
             rows.push(row);
         }
+    }
+
+    /// Records that row `name` could not be measured here, and why.
+    pub fn skip(&self, name: &str, reason: impl Into<String>) {
+        if let Ok(mut rows) = self.skipped.lock() {
+            rows.push(Skipped { name: name.to_owned(), reason: reason.into() });
+        }
+    }
+
+    /// The skipped rows recorded so far, taken out.
+    pub fn take_skipped(&self) -> Vec<Skipped> {
+        self.skipped.lock().map(|mut rows| std::mem::take(&mut *rows)).unwrap_or_default()
     }
 
     /// The memory figures recorded so far, taken out.

@@ -117,6 +117,9 @@ pub fn render(report: &Report, config: &RunConfig) -> String {
 
     out.push_str(&targets(report));
     out.push_str(&memory(report));
+    for s in &report.skipped {
+        let _ = writeln!(out, "{}: skipped — {}", s.name, s.reason);
+    }
 
     let notes: Vec<String> = report.scenarios.iter().flat_map(notes_of).collect();
     if !notes.is_empty() {
@@ -336,6 +339,7 @@ mod tests {
                 Target::at_most("hop", "floor", Wait::Event, 3.0),
             ],
             memory: Vec::new(),
+            skipped: Vec::new(),
         };
         let text = render(&report, &RunConfig::default());
         let target = "hop / floor (spin)   ×2.50  (p99 ×2.50)  target ≤ ×3.00  met";

@@ -46,6 +46,10 @@ pub mod ipc_uds_echo;
 pub mod ipc_uds_frames;
 pub mod ipc_uds_image;
 pub mod ipc_uds_small;
+pub mod ros1_peer;
+#[cfg(feature = "zenoh")]
+pub mod zenoh_echo;
+pub mod zenoh_peer;
 
 use crate::scenario::Scenario;
 
@@ -62,6 +66,10 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(ipc_esgm_small::EsgmSmall),
         Box::new(ipc_esgm_image::EsgmImage),
         Box::new(ipc_uds_image::UdsImage),
+        Box::new(zenoh_peer::Zenoh::SMALL),
+        Box::new(zenoh_peer::Zenoh::IMAGE),
+        Box::new(ros1_peer::Ros1::SMALL),
+        Box::new(ros1_peer::Ros1::IMAGE),
         Box::new(ipc_throughput::Throughput::ONE),
         Box::new(ipc_throughput::Throughput::FOUR),
         Box::new(ipc_query::Query::THOUSAND),

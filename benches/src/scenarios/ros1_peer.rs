@@ -1,0 +1,220 @@
+//! `ros1-small` and `ros1-image`: the payload sizes of `esgm-small` and `esgm-image`
+//! through ROS 1 (roscpp) publish-subscribe, process to process.
+//!
+//! The peer is a small C++ program, `benches/ros1/ros1_pingpong.cpp`, built from
+//! Debian's ROS 1 packages by `benches/ros1/build.sh`; without the built binary both
+//! rows are reported as skipped with that instruction. When it is there, esgm-bench
+//! starts a private `rosmaster` on a free loopback port, the program's `pong` role and
+//! its `ping` role, which measures (see the program's header: a `std_msgs/
+//! UInt8MultiArray` of the structure's encoded size over TCPROS with TCP_NODELAY, half
+//! the round trip, one line per hop) and prints its figures for this process to
+//! collect. The C++ side cannot run esgm's codec, so it reads the bytes' sequence number
+//! and last byte instead of validating an archive: a lower bound for ROS 1 doing
+//! esgm's work.
+
+use std::io::Read;
+use std::net::TcpListener;
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context as _, bail};
+
+use super::ipc_esgm_image;
+use super::ipc_esgm_small;
+use super::ipc_payload::Kind;
+use crate::latency::Latency;
+use crate::report::{Measurement, Method, Wait};
+use crate::scenario::{Context, Scenario};
+use crate::target::Target;
+use crate::wait_mode::WaitMode;
+
+/// What to run to measure ROS 1.
+pub const HOW: &str = "run benches/ros1/build.sh (needs Debian's ROS 1 packages)";
+/// How long one ping run may take.
+const RUN_TIMEOUT: Duration = Duration::from_secs(300);
+
+/// One payload through ROS 1 (see the module docs).
+#[derive(Debug, Clone, Copy)]
+pub struct Ros1 {
+    name: &'static str,
+    kind: Kind,
+}
+
+impl Ros1 {
+    /// The small structure's size.
+    pub const SMALL: Ros1 = Ros1 { name: "ros1-small", kind: Kind::Small };
+    /// The image's size.
+    pub const IMAGE: Ros1 = Ros1 { name: "ros1-image", kind: Kind::Image };
+
+    fn esgm_row(&self) -> &'static str {
+        match self.kind {
+            Kind::Small => ipc_esgm_small::NAME,
+            Kind::Image => ipc_esgm_image::NAME,
+        }
+    }
+}
+
+/// The built peer program, if there is one: `ESGM_ROS1_PINGPONG`, else the place
+/// `build.sh` puts it.
+pub fn program() -> Option<PathBuf> {
+    let path = std::env::var_os("ESGM_ROS1_PINGPONG").map(PathBuf::from).unwrap_or_else(|| {
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("ros1/build/ros1_pingpong")
+    });
+    path.is_file().then_some(path)
+}
+
+impl Scenario for Ros1 {
+    fn name(&self) -> &'static str {
+        self.name
+    }
+
+    fn summary(&self) -> &'static str {
+        match self.kind {
+            Kind::Small => {
+                "~240 bytes through ROS 1 roscpp pub/sub (TCPROS), process -> process \
+                 (benches/ros1/build.sh)"
+            }
+            Kind::Image => {
+                "921,920 bytes through ROS 1 roscpp pub/sub (TCPROS), process -> process \
+                 (benches/ros1/build.sh)"
+            }
+        }
+    }
+
+    fn run(&self, ctx: &Context) -> anyhow::Result<Vec<Measurement>> {
+        let Some(program) = program() else {
+            ctx.skip(self.name, HOW);
+            return Ok(Vec::new());
+        };
+        if which("rosmaster").is_none() {
+            ctx.skip(self.name, format!("rosmaster is not installed; {HOW}"));
+            return Ok(Vec::new());
+        }
+        let bytes = esgm_core::codec::encoded_len(&self.kind.make(0)).context("sizing")?;
+        let (full, quick) = self.kind.samples();
+        let samples = ctx.samples(full, quick);
+        let warmup = ctx.warmup(samples);
+        WaitMode::SPIN_AND_BLOCK
+            .iter()
+            .map(|&mode| {
+                let latency = run_pair(&program, mode, bytes, samples, warmup)?;
+                Ok(latency
+                    .measurement(self.name, mode.wait())
+                    .payload_bytes(bytes as u64)
+                    .method(Method::HalfRoundTrip)
+                    .wait_strategy(mode.label())
+                    .baseline(self.esgm_row())
+                    .note("std_msgs/UInt8MultiArray over TCPROS (TCP_NODELAY, loopback); the C++ reader checks sequence and last byte, it cannot validate an esgm archive"))
+            })
+            .collect()
+    }
+
+    /// esgm is to be faster than ROS 1 at every size: ROS 1's row over esgm's ≥ 1.
+    fn targets(&self) -> Vec<Target> {
+        Wait::BOTH.iter().map(|&w| Target::at_least(self.name, self.esgm_row(), w, 1.0)).collect()
+    }
+}
+
+fn which(program: &str) -> Option<PathBuf> {
+    std::env::var_os("PATH")?
+        .to_str()?
+        .split(':')
+        .map(|dir| PathBuf::from(dir).join(program))
+        .find(|p| p.is_file())
+}
+
+/// A child that is killed if dropped before it exits.
+struct Guard(Child);
+
+impl Drop for Guard {
+    fn drop(&mut self) {
+        if let Ok(None) = self.0.try_wait() {
+            let _ = self.0.kill();
+        }
+        let _ = self.0.wait();
+    }
+}
+
+fn run_pair(
+    program: &PathBuf,
+    mode: WaitMode,
+    bytes: usize,
+    samples: u64,
+    warmup: u64,
+) -> anyhow::Result<Latency> {
+    let port = TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .context("finding a free loopback port")?
+        .port();
+    let home = std::env::temp_dir().join(format!("esgm-bench-ros-{}-{port}", std::process::id()));
+    std::fs::create_dir_all(&home).context("creating ROS_HOME")?;
+    let env = |c: &mut Command| {
+        c.env("ROS_MASTER_URI", format!("http://127.0.0.1:{port}"))
+            .env("ROS_IP", "127.0.0.1")
+            .env("ROS_HOME", &home)
+            .env("ROS_LOG_DIR", home.join("log"))
+            .stdin(Stdio::null());
+    };
+    let mut master = Command::new("rosmaster");
+    master.args(["--core", "-p", &port.to_string()]).stdout(Stdio::null()).stderr(Stdio::null());
+    env(&mut master);
+    let _master = Guard(master.spawn().context("starting rosmaster")?);
+    let prefix = format!("/esgm_bench_{}_{port}", std::process::id());
+    let wait = if mode == WaitMode::Spin { "spin" } else { "block" };
+    let mut pong = Command::new(program);
+    pong.args(["pong", &prefix, wait]).stdout(Stdio::null()).stderr(Stdio::null());
+    env(&mut pong);
+    let _pong = Guard(pong.spawn().context("starting the ROS 1 pong process")?);
+    let mut ping = Command::new(program);
+    ping.args([
+        "ping",
+        &prefix,
+        wait,
+        &bytes.to_string(),
+        &samples.to_string(),
+        &warmup.to_string(),
+    ])
+    .stdout(Stdio::piped())
+    .stderr(Stdio::piped());
+    env(&mut ping);
+    let mut ping = Guard(ping.spawn().context("starting the ROS 1 ping process")?);
+    let mut out = ping.0.stdout.take().context("ping stdout")?;
+    let mut err = ping.0.stderr.take().context("ping stderr")?;
+    let reader = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = out.read_to_string(&mut s);
+        s
+    });
+    let err_reader = std::thread::spawn(move || {
+        let mut s = String::new();
+        let _ = err.read_to_string(&mut s);
+        s
+    });
+    let started = Instant::now();
+    let status = loop {
+        if let Some(status) = ping.0.try_wait().context("waiting for ping")? {
+            break status;
+        }
+        if started.elapsed() > RUN_TIMEOUT {
+            bail!("the ROS 1 ping process did not finish within {RUN_TIMEOUT:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let stdout = reader.join().unwrap_or_default();
+    let stderr = err_reader.join().unwrap_or_default();
+    let _ = std::fs::remove_dir_all(&home);
+    if !status.success() {
+        bail!("the ROS 1 ping process failed ({status}): {}", stderr.trim());
+    }
+    let mut latency = Latency::new()?;
+    for line in stdout.lines() {
+        if let Some(ns) = line.strip_prefix("r ").and_then(|v| v.trim().parse::<u64>().ok()) {
+            latency.record_ns(ns);
+        }
+    }
+    if latency.is_empty() {
+        bail!("the ROS 1 ping process printed no figures");
+    }
+    Ok(latency)
+}
