@@ -32,6 +32,9 @@ pub struct Args {
     /// Apply this configuration once serving (see `esgm apply`).
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
+    /// Print nothing but warnings (for a coordinator another command started).
+    #[arg(long, hide = true)]
+    pub quiet: bool,
 }
 
 /// How often the supervisor looks at the declared processes.
@@ -52,11 +55,11 @@ pub fn run(domain: &str, args: &Args) -> anyhow::Result<()> {
         }
         return Ok(());
     }
-    serve(domain, plan)
+    serve(domain, plan, args.quiet)
 }
 
 /// The foreground coordinator: serves until asked to stop.
-fn serve(domain: &str, plan: Option<Plan>) -> anyhow::Result<()> {
+fn serve(domain: &str, plan: Option<Plan>, quiet: bool) -> anyhow::Result<()> {
     let coordinator = Coordinator::spawn(domain, Registry::new(TypeRegistry::with_library()))
         .with_context(|| {
             format!("cannot serve `{domain}`; is a coordinator already running for it?")
@@ -67,7 +70,9 @@ fn serve(domain: &str, plan: Option<Plan>) -> anyhow::Result<()> {
         .connect()
         .context("cannot start the system's own location")?;
     system.serve_assignments();
-    eprintln!("coordinator of `{domain}` serving; stop it with `esgm down --domain {domain}`");
+    if !quiet {
+        eprintln!("coordinator of `{domain}` serving; stop it with `esgm down --domain {domain}`");
+    }
 
     let applying = plan.map(|plan| {
         let d = domain.to_owned();
@@ -116,7 +121,7 @@ pub fn shutdown(domain: &str) {
 pub fn spawn_detached(domain: &str, stderr: Stdio) -> anyhow::Result<std::process::Child> {
     let exe = std::env::current_exe().context("cannot find the esgm executable")?;
     let mut child = Command::new(exe)
-        .args(["up", "--domain", domain])
+        .args(["up", "--quiet", "--domain", domain])
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(stderr)
