@@ -70,6 +70,20 @@ fn coordinator_is_gone(domain: &str) -> bool {
     ControlClient::connect(domain, Duration::from_millis(200)).is_err()
 }
 
+/// Stops a test's system when the test ends, also when it fails (a detached
+/// coordinator and its workers would otherwise outlive the test).
+struct StopOnDrop(String);
+
+impl Drop for StopOnDrop {
+    fn drop(&mut self) {
+        let _ = Command::new(ESGM)
+            .args(["--domain", &self.0, "down"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .status();
+    }
+}
+
 /// Nothing of the system is left in shared memory: no node of its domain, alive or
 /// dead (crashed processes' resources were cleaned).
 fn assert_nothing_left(domain: &str) {
@@ -398,6 +412,7 @@ merge = ["large_blob", "smooth_blob"]
     let file = file.to_str().unwrap();
 
     ok(&["--domain", &d, "up", "--detach"]);
+    let _stop = StopOnDrop(d.clone());
     let applied = ok(&["--domain", &d, "apply", file]);
     for expected in [
         "type       Waypoint",
