@@ -46,7 +46,11 @@ const CACHE: usize = 1_000;
 const IMAGE_CACHE: usize = 5;
 const IMAGES_ADDED: u64 = 50;
 /// How long any peer may take.
-const PATIENCE: Duration = Duration::from_secs(600);
+const PATIENCE: Duration = Duration::from_secs(300);
+/// How long the reader's replica may stand still before it is reported as stalled.
+const STALLED: Duration = Duration::from_secs(5);
+/// How long the writer waits for the reader to see its last structure.
+const READER_PATIENCE: Duration = Duration::from_secs(120);
 
 /// See the module docs.
 #[derive(Debug, Clone, Copy, Default)]
@@ -174,7 +178,20 @@ fn write(domain: &str, coordinator: u32, total: u64) -> anyhow::Result<Vec<Strin
         images.add(es).with_context(|| format!("adding image {i}"))?;
     }
     lines.push(shm_line(&format!("shm-image-cache{IMAGE_CACHE}"), IMAGES_ADDED, &before)?);
+    // Stay (and keep publishing) until the reader has seen the last structure: a
+    // writer that leaves takes its unread samples with it.
+    let done = reader_done(domain);
+    let waiting = Instant::now();
+    while !done.exists() && waiting.elapsed() < READER_PATIENCE {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let _ = std::fs::remove_file(&done);
     Ok(lines)
+}
+
+/// The file the reader creates once it has seen every structure.
+fn reader_done(domain: &str) -> std::path::PathBuf {
+    std::env::temp_dir().join(format!("{domain}.reader-done"))
 }
 
 fn read(domain: &str, total: u64) -> anyhow::Result<Vec<String>> {
@@ -191,19 +208,35 @@ fn read(domain: &str, total: u64) -> anyhow::Result<Vec<String>> {
     };
     let mut lines = Vec::new();
     let mut marks = checkpoints(total).into_iter().peekable();
+    let (mut seen, mut changed) = (0i64, Instant::now());
     while let Some(&mark) = marks.peek() {
         // The replica is fed on a thread of the connection; ask it what it holds.
         let latest = small.get_latest().map(|s| s.structure.valid_time).unwrap_or(0);
+        if latest != seen {
+            (seen, changed) = (latest, Instant::now());
+        }
         if latest as u64 >= mark {
             lines.push(rss_line("reader-rss", mark, std::process::id())?);
             marks.next();
             continue;
+        }
+        // A replica that stopped short (it lost the last samples) is reported as far as
+        // it got, and says so.
+        if seen > 0 && changed.elapsed() > STALLED {
+            let line = rss_line("reader-rss", latest as u64, std::process::id())?;
+            lines.push(format!(
+                "{line}; STALLED: the replica's latest structure stayed {latest} of {mark} for {} s",
+                STALLED.as_secs()
+            ));
+            break;
         }
         if started.elapsed() > PATIENCE {
             bail!("the reader saw only up to {latest} of {total}");
         }
         std::thread::sleep(Duration::from_millis(2));
     }
+    let done = reader_done(domain);
+    std::fs::write(&done, b"done").with_context(|| format!("writing {}", done.display()))?;
     Ok(lines)
 }
 
