@@ -34,6 +34,12 @@
 //! ([`peer_process::PeerProcess`]). A peer whose measuring process vanished gives up on
 //! its own after 10 s.
 //!
+//! Scenarios with several peers (a coordinator, a camera, unit workers, four
+//! subscribers) tell each which it is with a hidden `--peer-arg`. Besides the latency
+//! rows, a run collects memory figures (the JSON's `memory` array) and rows that could
+//! not run here (`skipped`, e.g. Zenoh without the `zenoh` feature), and `--plots DIR`
+//! draws PNG charts ([`plots`]).
+//!
 //! Rows keep the two waits of the JSON contract (`spin`, `event`); esgm's default
 //! spin-then-block strategy, an `event` row too, is told apart by a `-default` name
 //! suffix and the `wait_strategy` field ([`wait_mode`]).

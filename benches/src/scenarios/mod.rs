@@ -25,6 +25,18 @@
 //!
 //! Order: the floor, then `uds-small` (the baseline of `esgm-small-default`), then the
 //! esgm scenarios, then `uds-image` (compared with `esgm-image`).
+//!
+//! The benchmarks issue (6) adds, after them:
+//! - the peers [`zenoh_peer`] (`zenoh-small`, `zenoh-image`; cargo feature `zenoh`,
+//!   measured in `zenoh_echo`) and [`ros1_peer`] (`ros1-small`, `ros1-image`; a roscpp
+//!   program built by `benches/ros1/build.sh`), each skipped with the way to run it
+//!   when not built;
+//! - [`ipc_throughput`]: `throughput-1x1`, `throughput-1x4`, lossless, losses counted;
+//! - [`ipc_query`]: `query-<op>-<n>` on a reader's history of 10^3 and 10^6;
+//! - [`ipc_pipeline`]: `pipeline-<stage>`, the tutorial across six processes;
+//! - [`ipc_memory`]: resident and shared memory, into the report's `memory` section.
+//!
+//! `BENCHMARKS.md` at the repository root has a run's results and what they mean.
 
 pub mod inproc_chain3;
 pub mod inproc_echo;

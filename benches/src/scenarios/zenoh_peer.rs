@@ -6,7 +6,7 @@
 //! several minutes to build on a two-core machine, so it is behind the cargo feature
 //! `zenoh` of `esgm-benches`, off by default: without it both scenarios are reported
 //! as skipped, with the command that runs them. What is measured is in
-//! [`super::zenoh_echo`] (built with the feature only).
+//! `zenoh_echo` (built with the feature only).
 
 use super::ipc_esgm_image;
 use super::ipc_esgm_small;
