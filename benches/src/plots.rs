@@ -169,16 +169,7 @@ fn latency_vs_payload(rows: &[&Measurement], wait: Wait, path: &Path) -> anyhow:
             .draw_series(points.into_iter().map(|p| Circle::new(p, 5, c.filled())))
             .map_err(|e| anyhow!("{e}"))?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .label_font(("sans-serif", 15))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|e| anyhow!("{e}"))?;
-    root.present().map_err(|e| anyhow!("{e}"))?;
-    Ok(())
+    finish(&mut chart, &root, SeriesLabelPosition::UpperLeft)
 }
 
 fn cdf(rows: &[&Measurement], wait: Wait, path: &Path) -> anyhow::Result<()> {
@@ -215,16 +206,24 @@ fn cdf(rows: &[&Measurement], wait: Wait, path: &Path) -> anyhow::Result<()> {
             .label(label)
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
     }
+    finish(&mut chart, &root, SeriesLabelPosition::LowerRight)
+}
+
+/// Draws the legend at `position` and writes the picture: how every chart ends.
+fn finish<'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, BitMapBackend<'a>, CT>,
+    root: &DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>,
+    position: SeriesLabelPosition,
+) -> anyhow::Result<()> {
     chart
         .configure_series_labels()
-        .position(SeriesLabelPosition::LowerRight)
+        .position(position)
         .label_font(("sans-serif", 15))
         .background_style(WHITE.mix(0.85))
         .border_style(BLACK)
         .draw()
         .map_err(|e| anyhow!("{e}"))?;
-    root.present().map_err(|e| anyhow!("{e}"))?;
-    Ok(())
+    root.present().map_err(|e| anyhow!("{e}"))
 }
 
 #[cfg(test)]
