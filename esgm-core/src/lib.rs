@@ -38,6 +38,7 @@ pub mod filter;
 pub mod frame;
 pub mod generator;
 pub mod library;
+pub mod octets;
 pub mod operators;
 pub mod policy;
 pub mod runtime;

@@ -6,17 +6,16 @@
 //! and [`ValueSort::NoValue`] names the sort of the special value [`Value::NoValue`] so
 //! that type errors can say "expected Long, found NoValue".
 //!
-//! Octet sequences (images) are held in an [`Octets`], a reference-counted byte buffer:
-//! cloning a value, a frame or a structure never copies pixels in process, and the
-//! archived form (see [`crate::codec`]) is a plain byte vector read in place.
+//! Octet sequences (images) are held in an [`Octets`] (see [`crate::octets`]), a shared
+//! byte buffer: cloning a value, a frame or a structure never copies pixels in process,
+//! and the archived form (see [`crate::codec`]) is a plain byte vector read in place.
 
 use std::fmt;
-use std::ops::Deref;
-use std::sync::Arc;
 
 use rkyv::{Archive, Deserialize, Serialize};
 
 use crate::frame::EntityFrame;
+pub use crate::octets::{ArchivedOctets, Octets, OctetsHolder};
 use crate::time::Time;
 
 /// The sort (type) of a [`Value`], as in the seed's `ValueSort` enum.
@@ -338,73 +337,6 @@ pub struct PositionAltitudeRotation {
     pub rotation: Rotation,
 }
 
-/// An immutable, reference-counted byte buffer: the payload of an octet sequence.
-///
-/// Cloning shares the bytes. In the archived form it is a plain byte vector, so a
-/// reader in another process reads the pixels in place.
-#[derive(Clone, PartialEq, Eq, Default, Archive, Serialize, Deserialize)]
-#[rkyv(derive(Debug))]
-pub struct Octets(#[rkyv(with = crate::codec::SharedBytes)] Arc<[u8]>);
-
-impl Octets {
-    /// Wraps bytes without copying them again.
-    pub fn new(bytes: impl Into<Arc<[u8]>>) -> Self {
-        Octets(bytes.into())
-    }
-
-    /// True if both handles share one buffer (no copy was made between them).
-    pub fn ptr_eq(&self, other: &Octets) -> bool {
-        Arc::ptr_eq(&self.0, &other.0)
-    }
-}
-
-/// Octets cross the control plane and JSON output as a byte sequence; images travel on
-/// the data plane, not here.
-impl serde::Serialize for Octets {
-    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        s.serialize_bytes(&self.0)
-    }
-}
-
-impl<'de> serde::Deserialize<'de> for Octets {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        Ok(Octets::from(Vec::<u8>::deserialize(d)?))
-    }
-}
-
-impl ArchivedOctets {
-    /// The bytes, read in place (in shared memory for a cross-process reader).
-    pub fn as_slice(&self) -> &[u8] {
-        self.0.as_slice()
-    }
-}
-
-impl Deref for Octets {
-    type Target = [u8];
-    fn deref(&self) -> &[u8] {
-        &self.0
-    }
-}
-
-impl From<Vec<u8>> for Octets {
-    fn from(v: Vec<u8>) -> Self {
-        Octets(v.into())
-    }
-}
-
-impl From<&[u8]> for Octets {
-    fn from(v: &[u8]) -> Self {
-        Octets(v.into())
-    }
-}
-
-impl fmt::Debug for Octets {
-    // Never dump a megabyte of pixels into a log line.
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "Octets({} bytes)", self.0.len())
-    }
-}
-
 /// A value of an attribute: the seed's `Value` union plus `NoValue`.
 #[derive(
     Debug,
@@ -654,14 +586,6 @@ mod tests {
         assert_eq!(ValueSort::parse("entity_frame_seq"), Some(ValueSort::EntityFrameSeq));
         assert_eq!(ValueSort::parse("f64"), Some(ValueSort::Double));
         assert_eq!(ValueSort::parse("lnog"), None);
-    }
-
-    #[test]
-    fn octets_clone_shares_bytes() {
-        let a = Octets::from(vec![1u8; 1024]);
-        let b = a.clone();
-        assert!(a.ptr_eq(&b));
-        assert_eq!(format!("{a:?}"), "Octets(1024 bytes)");
     }
 
     #[test]

@@ -96,9 +96,20 @@
 //! configured maximum ([`DEFAULT_MAX_HISTORY`], 1024) — see [`history`]. Readers are
 //! single-threaded like the ports they hold; [`HostedTrajectoryReader`] puts one on a
 //! thread of its own for queries from anywhere (answers then are owned copies).
+//!
+//! Through [`connect`], the reader is the process's replica of the trajectory: an
+//! ordinary esgm-core store fed from the subscriber, so units, syncs, subscriptions and
+//! queries run there as in one process. Its small fields are decoded (cheaper than
+//! bookkeeping); its images are not: each octet sequence of a large sample stays in
+//! the writer's chunk, which the location thread keeps borrowed until the last value
+//! reading it — in the cache, a unit's input, a subscriber's queue, a query answer —
+//! is dropped ([`holdings`]). A process that keeps more images than its subscriber may
+//! borrow (cache bound + a slack of 8) gets copies of the later ones, counted in
+//! [`ShmEsgm::holding_stats`].
 #![deny(missing_docs)]
 
 pub mod history;
+pub mod holdings;
 pub mod hosted_reader;
 pub mod image_layout;
 pub mod image_loan;
@@ -117,6 +128,7 @@ pub mod wait;
 pub mod writer;
 
 pub use history::{DEFAULT_MAX_HISTORY, history_bound, history_qos};
+pub use holdings::HoldingStats;
 pub use hosted_reader::{HostError, HostedTrajectoryReader};
 pub use image_layout::ImageError;
 pub use image_loan::ImageLoan;

@@ -271,3 +271,91 @@ fn re_pointing_a_name_is_seen_by_readers_in_other_processes() {
     assert!(wait_for(|| there.stats().map(|s| s.stored) == Ok(1)), "{:?}", there.stats());
     assert_eq!(x(&there.get_latest().unwrap()), 100.0);
 }
+
+fn image(vt: Time, fill: u8) -> EntityStructure {
+    EntityStructure::new("cam", vt, vt)
+        .with("width", 256i64)
+        .with("height", 256i64)
+        .with("format", 0i64)
+        .with("image_data", esgm_core::value::Octets::from(vec![fill; 256 * 256]))
+}
+
+fn pixels(s: &Sample) -> &esgm_core::value::Octets {
+    s.structure.get("image_data").and_then(|v| v.as_octets()).unwrap()
+}
+
+#[test]
+fn images_from_another_process_are_read_in_shared_memory_by_cache_units_and_subscribers() {
+    let c = coordinator("loc-images");
+    let camera = location(&c, "camera");
+    let reader = location(&c, "reader");
+    let policy = FluentStreamPolicy::default().cache(esgm_core::CacheConstraint::Elements(3));
+    let frames = camera
+        .create_trajectory(TrajectorySpec::primitive("frames", "Image").policy(policy))
+        .unwrap();
+
+    // A unit in `reader` reports whether the pixels it was given were copied.
+    let unit_saw_copies = Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let copies = Arc::clone(&unit_saw_copies);
+    let unit = move |inputs: &[Sample], _q: Time| -> Result<EntityStructure, ComputeError> {
+        let px = pixels(&inputs[0]);
+        if !px.is_held() {
+            copies.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        }
+        let vt = inputs[0].structure.valid_time;
+        Ok(EntityStructure::new("px", vt, vt)
+            .with("x", i64::from(px[0]))
+            .with("y", i64::from(px[px.len() - 1]))
+            .with("size", px.len() as i64))
+    };
+    let input = vec![InputType::Type("Image".into())];
+    reader.add_comp_unit("measure", "Blob", input, Arc::new(unit)).unwrap();
+    let measured = reader
+        .create_computed_entity_trajectory_structure("measured", "measure", &["frames"])
+        .unwrap();
+    let there = reader.get_entity_trajectory_structure("frames").unwrap();
+    let sub = there.subscribe(SubscribeOptions::default()).unwrap();
+
+    // One at a time, each dropped once seen: every image arrives held, never copied.
+    for i in 1..=20u8 {
+        frames.add(image(Time::from(i) * 10, i)).unwrap();
+        let s = sub.recv_timeout(TIMEOUT).unwrap();
+        assert!(pixels(&s).is_held(), "image {i} was copied");
+        assert!(pixels(&s).iter().all(|p| *p == i), "image {i}'s pixels");
+    }
+    assert!(wait_for(|| measured.get_latest().map(|s| s.structure.valid_time) == Ok(200)));
+    let last = measured.get_latest().unwrap();
+    assert_eq!(last.structure.get("y").and_then(|v| v.as_long()), Some(20));
+    assert_eq!(unit_saw_copies.load(std::sync::atomic::Ordering::Relaxed), 0);
+    // The replica's cache (bound 3) answers queries with the chunks in place.
+    let cached = there.get_between(0, 1000).unwrap();
+    assert_eq!(cached.len(), 3);
+    assert!(cached.iter().all(|s| pixels(s).is_held()));
+    drop(cached);
+    let stats = reader.holding_stats().unwrap();
+    assert!(stats.held_total >= 20, "{stats:?}");
+    assert_eq!(stats.copied_over_budget, 0, "{stats:?}");
+
+    // A reader that keeps every image spends its borrow budget: later images are
+    // copied and counted, and still correct.
+    let kept: Vec<Sample> = (21..=40u8)
+        .map(|i| {
+            frames.add(image(Time::from(i) * 10, i)).unwrap();
+            sub.recv_timeout(TIMEOUT).unwrap()
+        })
+        .collect();
+    for (s, i) in kept.iter().zip(21..=40u8) {
+        assert!(pixels(s).iter().all(|p| *p == i), "image {i}'s pixels");
+    }
+    assert!(kept.iter().any(|s| !pixels(s).is_held()));
+    let stats = reader.holding_stats().unwrap();
+    assert!(stats.copied_over_budget > 0, "{stats:?}");
+
+    // Dropping them returns the chunks: the next images are held again.
+    drop(kept);
+    frames.add(image(410, 41)).unwrap();
+    let s = sub.recv_timeout(TIMEOUT).unwrap();
+    assert!(pixels(&s).is_held());
+    let held = reader.holding_stats().unwrap().held_now;
+    assert!(held <= 3 + 3, "cache, unit input, subscription: {held} held");
+}

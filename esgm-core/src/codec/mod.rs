@@ -29,6 +29,7 @@ mod octets;
 mod writer;
 
 use std::mem::MaybeUninit;
+use std::sync::Arc;
 
 use rkyv::Portable;
 use rkyv::rancor::BoxedError;
@@ -37,12 +38,13 @@ use rkyv::util::AlignedVec;
 
 use crate::frame::EntityStructure;
 pub use crate::frame::{ArchivedAttributeValuePair, ArchivedEntityFrame, ArchivedEntityStructure};
+use crate::octets::{Octets, OctetsHolder};
 pub use crate::value::{ArchivedOctets, ArchivedValue, ArchivedValueSort};
 pub use image::{
     IMAGE_NAME_MAX, IMAGE_OVERHEAD_MAX, IMAGE_PIXELS_MAX, IMAGE_PIXELS_OFFSET, encode_image_into,
 };
 pub use nesting::{ArchivedNest, MAX_NESTING, Nest, NestingContext};
-pub use octets::{PlaceOctets, SharedBytes, SharedBytesResolver};
+pub use octets::{HoldOctets, PlaceOctets, SharedBytes, SharedBytesResolver};
 use writer::CountingWriter;
 
 /// Alignment the archived form needs from its buffer. Shared-memory payloads are laid
@@ -249,6 +251,34 @@ pub fn decode(archived: &ArchivedEntityStructure) -> Result<EntityStructure, Cod
         .map_err(|e| CodecError::Malformed { len: 0, reason: e.to_string() })
 }
 
+/// Like [`decode`], but an octet sequence whose bytes lie in `holder`'s bytes is kept
+/// there ([`Octets::held`]) instead of copied: an image received in shared memory
+/// stays in shared memory, borrowed until the last value pointing into it is dropped.
+///
+/// `archived` must be inside `holder.bytes()` for anything to be held (octets outside
+/// it are copied, so a wrong holder costs a copy, never a dangling value).
+pub fn decode_holding(
+    archived: &ArchivedEntityStructure,
+    holder: &Arc<dyn OctetsHolder>,
+) -> Result<EntityStructure, CodecError> {
+    let mut holding = Holding { holder };
+    rkyv::api::deserialize_using::<EntityStructure, _, BoxedError>(archived, &mut holding)
+        .map_err(|e| CodecError::Malformed { len: 0, reason: e.to_string() })
+}
+
+/// [`decode_holding`]'s deserializer: holds octets that lie in its holder's bytes.
+struct Holding<'a> {
+    holder: &'a Arc<dyn OctetsHolder>,
+}
+
+impl HoldOctets for Holding<'_> {
+    fn hold(&mut self, bytes: &[u8]) -> Option<Octets> {
+        let base = self.holder.bytes().as_ptr() as usize;
+        let start = (bytes.as_ptr() as usize).checked_sub(base)?;
+        Octets::held(Arc::clone(self.holder), start..start + bytes.len())
+    }
+}
+
 // The archived forms are plain data; make sure of it at compile time.
 const _: fn() = || {
     fn portable<T: Portable>() {}
@@ -284,6 +314,34 @@ mod tests {
             other => panic!("unexpected {other:?}"),
         }
         assert_eq!(decode(archived).unwrap(), es);
+    }
+
+    #[test]
+    fn decode_holding_keeps_octets_in_the_holders_buffer() {
+        struct Buffer(AlignedVec<ARCHIVE_ALIGNMENT>);
+        impl OctetsHolder for Buffer {
+            fn bytes(&self) -> &[u8] {
+                &self.0
+            }
+        }
+        let es = sample();
+        let holder: Arc<dyn OctetsHolder> = Arc::new(Buffer(encode(&es).unwrap()));
+        let decoded = decode_holding(access(holder.bytes()).unwrap(), &holder).unwrap();
+        assert_eq!(decoded, es);
+        let pixels = decoded.get("image_data").and_then(Value::as_octets).unwrap();
+        assert!(pixels.is_held(), "the image stays in the archive's buffer");
+        let inside = holder.bytes().as_ptr_range();
+        assert!(inside.contains(&pixels.as_ptr()));
+        assert_eq!(Arc::strong_count(&holder), 2, "held by the decoded image");
+        drop(decoded);
+        assert_eq!(Arc::strong_count(&holder), 1, "released with it");
+
+        // Octets outside the holder's bytes are copied, never pointed at.
+        let elsewhere: Arc<dyn OctetsHolder> = Arc::new(Buffer(AlignedVec::new()));
+        let archive = encode(&es).unwrap();
+        let copied = decode_holding(access(&archive).unwrap(), &elsewhere).unwrap();
+        assert!(!copied.get("image_data").and_then(Value::as_octets).unwrap().is_held());
+        assert_eq!(copied, es);
     }
 
     #[test]

@@ -1,6 +1,8 @@
 //! How an octet sequence ([`crate::Octets`]) is archived: as a plain byte vector, whose
 //! bytes are normally copied into the archive, or — for an image whose pixels are
-//! already in the output buffer — pointed at where they lie.
+//! already in the output buffer — pointed at where they lie. And how it is decoded: by
+//! copying the bytes, or — for a deserializer that can keep the archive's buffer alive
+//! ([`HoldOctets`]) — by pointing at them where they lie.
 //!
 //! The second case is why this is not rkyv's own `Arc` support. [`super::image`] needs
 //! the archived `image_data` vector to point at bytes it never writes. The only hook
@@ -10,16 +12,17 @@
 //! through [`PlaceOctets`], whether an *empty* octet sequence stands for bytes already
 //! in place. Every ordinary writer says no; only the image writer says yes, once.
 
-use std::sync::Arc;
-
 use rkyv::Place;
-use rkyv::rancor::{Fallible, Source};
+use rkyv::de::Pool;
+use rkyv::rancor::{Fallible, Source, Strategy};
 use rkyv::ser::{Allocator, Writer};
 use rkyv::vec::{ArchivedVec, VecResolver};
 use rkyv::with::{ArchiveWith, DeserializeWith, SerializeWith};
 
-/// Archives an `Arc<[u8]>` as a plain byte vector: the archived form has no shared
-/// pointer bookkeeping, and readers see a `&[u8]` in place.
+use crate::octets::{OctetBytes, Octets};
+
+/// Archives an octet sequence's bytes as a plain byte vector: the archived form has no
+/// shared pointer bookkeeping, and readers see a `&[u8]` in place.
 #[derive(Debug)]
 pub struct SharedBytes;
 
@@ -63,24 +66,25 @@ pub(crate) const MAX_ARCHIVE_LEN: usize = i32::MAX as usize;
 #[error("archive would exceed {MAX_ARCHIVE_LEN} bytes (32-bit relative pointers)")]
 pub(crate) struct ArchiveTooLarge;
 
-impl ArchiveWith<Arc<[u8]>> for SharedBytes {
+impl ArchiveWith<OctetBytes> for SharedBytes {
     type Archived = ArchivedVec<u8>;
     type Resolver = SharedBytesResolver;
 
-    fn resolve_with(_: &Arc<[u8]>, resolver: Self::Resolver, out: Place<Self::Archived>) {
+    fn resolve_with(_: &OctetBytes, resolver: Self::Resolver, out: Place<Self::Archived>) {
         ArchivedVec::resolve_from_len(resolver.len, resolver.at, out);
     }
 }
 
-impl<S> SerializeWith<Arc<[u8]>, S> for SharedBytes
+impl<S> SerializeWith<OctetBytes, S> for SharedBytes
 where
     S: Fallible + Allocator + Writer + PlaceOctets<S::Error> + ?Sized,
     S::Error: Source,
 {
     fn serialize_with(
-        field: &Arc<[u8]>,
+        field: &OctetBytes,
         serializer: &mut S,
     ) -> Result<SharedBytesResolver, S::Error> {
+        let field = field.as_slice();
         if field.is_empty() {
             if let Some((pos, len)) = serializer.octets_in_place()? {
                 return Ok(SharedBytesResolver { at: VecResolver::from_pos(pos), len });
@@ -96,8 +100,35 @@ where
     }
 }
 
-impl<D: Fallible + ?Sized> DeserializeWith<ArchivedVec<u8>, Arc<[u8]>, D> for SharedBytes {
-    fn deserialize_with(field: &ArchivedVec<u8>, _: &mut D) -> Result<Arc<[u8]>, D::Error> {
-        Ok(Arc::from(field.as_slice()))
+/// A deserializer's say in where decoded octet sequences live: keep them where they
+/// lie in the archive's buffer (which it must be able to keep alive), or copy them.
+///
+/// rkyv's own [`Pool`] copies; [`super::decode_holding`]'s deserializer holds.
+pub trait HoldOctets {
+    /// `Some` to keep `bytes` (a slice of the archive being decoded) where they are;
+    /// `None` to copy them onto the heap.
+    fn hold(&mut self, bytes: &[u8]) -> Option<Octets>;
+}
+
+impl HoldOctets for Pool {
+    fn hold(&mut self, _: &[u8]) -> Option<Octets> {
+        None
+    }
+}
+
+impl<T: HoldOctets, E> HoldOctets for Strategy<T, E> {
+    fn hold(&mut self, bytes: &[u8]) -> Option<Octets> {
+        T::hold(self, bytes)
+    }
+}
+
+impl<D: Fallible + HoldOctets + ?Sized> DeserializeWith<ArchivedVec<u8>, OctetBytes, D>
+    for SharedBytes
+{
+    fn deserialize_with(field: &ArchivedVec<u8>, d: &mut D) -> Result<OctetBytes, D::Error> {
+        Ok(match d.hold(field.as_slice()) {
+            Some(held) => held.0,
+            None => OctetBytes::Heap(field.as_slice().into()),
+        })
     }
 }

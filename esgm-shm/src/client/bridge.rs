@@ -27,6 +27,7 @@ use esgm_core::{
 };
 
 use crate::history::{DEFAULT_MAX_HISTORY, history_bound, history_qos};
+use crate::holdings::{Holdings, OwnerId};
 use crate::publisher::TrajectoryPublisher;
 use crate::qos::TrajectoryQos;
 use crate::service::{OpenError, ShmNode};
@@ -54,10 +55,16 @@ pub(crate) const TAP_CAPACITY: usize = 4096;
 /// 1024 would map gigabytes for a camera.
 pub(crate) const MAX_OCTET_HISTORY: usize = 16;
 
+/// Samples a replica may keep borrowed beyond its cache's bound: images that units,
+/// subscriptions and query answers still read after the cache evicted them (see
+/// [`crate::holdings`]). Past it, images are copied (and counted).
+pub(crate) const HOLD_SLACK: usize = 8;
+
 /// The service settings both ends of a bridged trajectory use: the publisher keeps
-/// the cache's bound of samples, so a replica made late starts with the writer's view.
-/// A trajectory of `entity_type` with octets and no element bound keeps
-/// [`MAX_OCTET_HISTORY`] (both ends derive the same bound from the same inputs).
+/// the cache's bound of samples, so a replica made late starts with the writer's view,
+/// and a replica may borrow that many plus [`HOLD_SLACK`], so the images it holds stay
+/// in shared memory. A trajectory of `entity_type` with octets and no element bound
+/// keeps [`MAX_OCTET_HISTORY`] (both ends derive the same bound from the same inputs).
 pub(crate) fn bridge_qos(
     policy: &FluentStreamPolicy,
     entity_type: &EntityStructureType,
@@ -68,7 +75,8 @@ pub(crate) fn bridge_qos(
         _ if octets => MAX_OCTET_HISTORY,
         _ => history_bound(policy.cache, DEFAULT_MAX_HISTORY),
     };
-    history_qos(bound, TrajectoryQos::default())
+    let qos = history_qos(bound, TrajectoryQos::default());
+    TrajectoryQos { max_borrowed_samples: qos.max_borrowed_samples + HOLD_SLACK, ..qos }
 }
 
 /// The bridged history of `handle`'s trajectory, warning once where a cache without
@@ -249,10 +257,15 @@ pub(crate) struct Import {
     inbox: Option<TrajectoryPublisher>,
     domain: String,
     type_name: String,
+    /// Whose samples this import's held images count as, and how many it may hold.
+    owner: OwnerId,
+    budget: usize,
 }
 
 impl Import {
     /// Subscribes to `replica`'s trajectory, receiving the writer's history first.
+    /// Images it receives stay in shared memory, borrowed in `holdings`.
+    #[allow(clippy::too_many_arguments)]
     pub fn start(
         node: &ShmNode,
         domain: &str,
@@ -260,13 +273,13 @@ impl Import {
         type_name: &str,
         policy: &FluentStreamPolicy,
         primitive: bool,
+        holdings: &mut Holdings,
     ) -> Result<Self, OpenError> {
         let name = esgm_core::EntityTrajectoryStructure::name(&replica).to_owned();
         let entity_type = replica.entity_type().unwrap_or_else(|_| EntityStructureType::new(""));
-        let subscriber = TrajectorySubscriber::builder(&name, type_name)
-            .domain(domain)
-            .qos(bridge_qos(policy, &entity_type))
-            .create(node)?;
+        let qos = bridge_qos(policy, &entity_type);
+        let subscriber =
+            TrajectorySubscriber::builder(&name, type_name).domain(domain).qos(qos).create(node)?;
         let violations = ViolationSubscriber::builder(&name).domain(domain).create(node)?;
         let outbox = primitive.then(|| {
             let (sender, receiver) = crossbeam_channel::bounded(OUTBOX_CAPACITY);
@@ -283,6 +296,9 @@ impl Import {
             inbox: None,
             domain: domain.to_owned(),
             type_name: type_name.to_owned(),
+            owner: holdings.new_owner(),
+            // One borrow stays free to receive into.
+            budget: qos.max_borrowed_samples.saturating_sub(1),
         })
     }
 
@@ -317,14 +333,14 @@ impl Import {
 
     /// Sends the adds made here to the writer, then feeds every waiting sample, reset
     /// and violation into the replica; returns how many there were.
-    pub fn pump(&mut self, node: &ShmNode) -> usize {
+    pub fn pump(&mut self, node: &ShmNode, holdings: &mut Holdings) -> usize {
         let mut n = self.send_outbox(node);
         loop {
             match self.subscriber.receive() {
                 Ok(Some(sample)) => {
                     n += 1;
                     let add_time = sample.header().add_time;
-                    match sample.to_owned() {
+                    match holdings.decode(self.owner, self.budget, sample) {
                         Ok(es) => {
                             let es = Arc::new(es);
                             let _ = self.replica.with_store(|s| s.replicate(es, add_time));

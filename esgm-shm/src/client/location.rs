@@ -16,6 +16,7 @@ use esgm_core::{EntityStructureType, InProcessEsgm, InProcessTrajectory};
 use super::bridge::{Export, Import};
 use crate::control::protocol::{Assignment, ControlError, Request, Response, TrajectoryRecord};
 use crate::control::{ControlClient, ControlClientError};
+use crate::holdings::{HoldingStats, Holdings};
 use crate::service::ShmNode;
 
 /// How often publishers hand late readers their history.
@@ -42,6 +43,8 @@ pub(crate) enum Command {
     Destroy(String, Sender<Result<(), LookupError>>),
     /// This process now serves sensors or units: poll for assignments.
     Serving,
+    /// What this process holds in shared memory for its values.
+    Holdings(Sender<Option<HoldingStats>>),
 }
 
 /// The seed's lookup error if the coordinator gave one, else `Unavailable`.
@@ -70,6 +73,8 @@ pub(crate) struct Location {
     pub control: ControlClient,
     pub exports: BTreeMap<String, Export>,
     pub imports: BTreeMap<String, Import>,
+    /// Received samples whose images values in this process still read in place.
+    pub holdings: Holdings,
     /// Assignments that failed to build (reported once each).
     pub failed: BTreeSet<String>,
     pub serving: bool,
@@ -96,8 +101,9 @@ impl Location {
             for e in self.exports.values_mut() {
                 work += e.pump();
             }
+            work += self.holdings.collect();
             for i in self.imports.values_mut() {
-                work += i.pump(&self.node);
+                work += i.pump(&self.node, &mut self.holdings);
             }
             if Instant::now() >= next_maintenance {
                 self.maintain();
@@ -143,6 +149,10 @@ impl Location {
             Command::Serving => {
                 self.serving = true;
                 self.poll_assignments();
+            }
+            Command::Holdings(reply) => {
+                self.holdings.collect();
+                let _ = reply.send(Some(self.holdings.stats()));
             }
         }
     }
@@ -252,6 +262,7 @@ impl Location {
             &record.info.type_name,
             &record.info.policy,
             record.info.kind == TrajectoryKind::Primitive,
+            &mut self.holdings,
         ) {
             Ok(import) => {
                 self.imports.insert(name.clone(), import);

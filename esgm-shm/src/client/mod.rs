@@ -49,6 +49,7 @@ use iceoryx2::prelude::{NodeBuilder, ipc};
 
 use crate::control::protocol::{ControlError, Request, Response};
 use crate::control::{ControlClient, ControlClientError};
+use crate::holdings::HoldingStats;
 use location::{Command, Location, install};
 
 /// How long a control call may take by default (the coordinator answers in
@@ -170,6 +171,7 @@ impl ShmEsgmBuilder {
                     control,
                     exports: Default::default(),
                     imports: Default::default(),
+                    holdings: Default::default(),
                     failed: Default::default(),
                     serving: false,
                 };
@@ -267,6 +269,15 @@ impl ShmEsgm {
     /// location in `esgm up`, which writes what the command line creates.
     pub fn serve_assignments(&self) {
         let _ = self.inner.commands.send(Command::Serving);
+    }
+
+    /// Images (octet sequences) received from other processes that this process reads
+    /// in shared memory, and those it had to copy: a replica's cache, its units, its
+    /// subscribers and query answers share the writer's chunk, borrowed until the last
+    /// value reading it is dropped (see [`crate::holdings`]). `None` if this
+    /// process's location thread has stopped.
+    pub fn holding_stats(&self) -> Option<HoldingStats> {
+        self.ask(Command::Holdings, |_| None)
     }
 
     /// Blocks while the coordinator answers; returns once it has been gone for
