@@ -235,7 +235,7 @@ mod tests {
     fn charts_are_drawn_without_system_fonts() {
         let mut rows = Vec::new();
         for (name, bytes, ns) in
-            [("floor-iceoryx2", 64, 900), ("esgm-small", 240, 1300), ("esgm-image", 921_920, 1500)]
+            [("floor-iceoryx2", 64, 900), ("esgm-small", 120, 1300), ("esgm-image", 921_760, 1500)]
         {
             let mut l = Latency::new().unwrap();
             for k in 0..100 {

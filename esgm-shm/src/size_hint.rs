@@ -18,23 +18,28 @@
 //! costs time, never correctness.
 //!
 //! The per-node constants are upper bounds of rkyv 0.8's archived sizes: a string or
-//! vector header is 8 bytes, an archived `Value` at most 64 (its largest variant, a
-//! 6-DoF pose, is 56 bytes plus the tag), and every out-of-line object may need up to
-//! 15 bytes of alignment padding.
+//! vector header is 8 bytes (a string of up to 8 bytes lives inside it), an archived
+//! `Value` 16 (variants larger than 8 bytes, the geometric ones, are boxed out of
+//! line), and every out-of-line object may need up to 7 bytes of alignment padding
+//! (nothing in the archive is aligned to more than 8). The hint is kept tight because
+//! its excess is zeroed in shared memory on every publish: bytes the reader's core
+//! must give up its copy of.
 
 use esgm_core::codec::ENVELOPE_LEN;
 use esgm_core::{AttributeValuePair, EntityFrame, EntityStructure, Value};
 
 /// Root object of a structure (name, two times, attribute vector) plus padding.
-const STRUCTURE_ROOT: usize = 48;
-/// An attribute/value pair in the pair array (name header + value + padding).
-const PAIR: usize = 96;
+const STRUCTURE_ROOT: usize = 40;
+/// An attribute/value pair in the pair array (name header + value).
+const PAIR: usize = 24;
 /// A value inside an `Agg` or `Collection` array.
-const NESTED_VALUE: usize = 80;
-/// A frame inside a frame sequence (name header + attribute vector + padding).
-const NESTED_FRAME: usize = 32;
-/// Alignment padding and header slack for one out-of-line object.
-const SLACK: usize = 16;
+const NESTED_VALUE: usize = 16;
+/// A frame inside a frame sequence (name header + attribute vector).
+const NESTED_FRAME: usize = 16;
+/// Alignment padding for one out-of-line object.
+const SLACK: usize = 8;
+/// Strings this long or shorter are stored inside their header.
+const INLINE_STRING: usize = 8;
 
 /// An upper bound (in practice) of the bytes `codec::encode_into_uninit` writes for `es`,
 /// envelope included.
@@ -43,7 +48,7 @@ pub fn archived_size_hint(es: &EntityStructure) -> usize {
 }
 
 fn string(s: &str) -> usize {
-    s.len() + SLACK
+    if s.len() <= INLINE_STRING { 0 } else { s.len() + SLACK }
 }
 
 fn pairs(attributes: &[AttributeValuePair]) -> usize {
@@ -71,8 +76,17 @@ fn value(v: &Value) -> usize {
         Value::EntityFrameSeq(v) => {
             SLACK + v.iter().map(|f| NESTED_FRAME + frame(f)).sum::<usize>()
         }
-        // Fixed-size values live inside the archived `Value` itself.
-        _ => 0,
+        // Boxed out of line: 16 to 48 bytes of doubles.
+        Value::Vec(_) | Value::Rotation(_) | Value::PositionAltitude(_) => 24 + SLACK,
+        Value::Pos2(_) | Value::Position(_) => 16 + SLACK,
+        Value::PositionAltitudeRotation(_) => 48 + SLACK,
+        // Up to 8 bytes: inside the archived `Value` itself.
+        Value::NoValue
+        | Value::Long(_)
+        | Value::Double(_)
+        | Value::Bool(_)
+        | Value::Time(_)
+        | Value::Altitude(_) => 0,
     }
 }
 
@@ -80,6 +94,7 @@ fn value(v: &Value) -> usize {
 mod tests {
     use super::*;
     use esgm_core::codec::encoded_len;
+    use esgm_core::value::{Position, PositionAltitude, Rotation};
     use esgm_core::{Octets, Pos2, PositionAltitudeRotation, Vec3};
 
     fn every_sort() -> Vec<Value> {
@@ -102,6 +117,9 @@ mod tests {
             Value::Pos2(Pos2::default()),
             Value::Pos2Seq(vec![Pos2::default(); 5]),
             Value::Altitude(3.0),
+            Value::Position(Position::default()),
+            Value::Rotation(Rotation::default()),
+            Value::PositionAltitude(PositionAltitude::default()),
             Value::PositionAltitudeRotation(PositionAltitudeRotation::default()),
             Value::Agg(vec![Value::Long(1), Value::String("nested string value".into())]),
             Value::Collection(vec![Value::Agg(vec![Value::Bool(false)])]),
@@ -123,6 +141,15 @@ mod tests {
         let hint = archived_size_hint(&all);
         let actual = encoded_len(&all).unwrap();
         assert!(hint >= actual, "hint {hint} < actual {actual}");
+    }
+
+    #[test]
+    fn hint_stays_close_for_a_robot_state() {
+        let robot =
+            EntityStructure::new("robot1", 1, 2).with("x", 1.0).with("y", 2.0).with("dir", 0.5);
+        let hint = archived_size_hint(&robot);
+        let actual = encoded_len(&robot).unwrap();
+        assert!(hint >= actual && hint - actual <= 32, "hint {hint}, actual {actual}");
     }
 
     #[test]

@@ -1,6 +1,6 @@
 //! `esgm-small`: one hop of a small structure between two processes through esgm-shm.
 //!
-//! A `RobotState` (about 240 bytes archived) published on a trajectory
+//! A `RobotState` (about 120 bytes archived) published on a trajectory
 //! ([`esgm_shm::TrajectoryPublisher::publish`]: encoded straight into the loaned
 //! shared memory) and received by a subscriber in another process, validated in place
 //! ([`esgm_shm::ReceivedSample::structure`]); see [`super::ipc_esgm_echo`] for the
@@ -54,7 +54,7 @@ impl Scenario for EsgmSmall {
     }
 
     fn summary(&self) -> &'static str {
-        "~240-byte RobotState, process -> process through esgm-shm (validated in place); \
+        "~120-byte RobotState, process -> process through esgm-shm (validated in place); \
          busy, blocking and default waits"
     }
 

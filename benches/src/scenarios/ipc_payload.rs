@@ -28,7 +28,7 @@ pub const IMAGE_NAME: &str = "camera";
 /// The two payloads of the cross-process scenarios.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Kind {
-    /// A `RobotState`: three doubles, about 240 bytes archived.
+    /// A `RobotState`: three doubles, about 120 bytes archived.
     Small,
     /// A 640×480 RGB `Image`: 921,600 bytes of pixels.
     Image,

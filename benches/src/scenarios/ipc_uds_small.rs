@@ -26,7 +26,7 @@ impl Scenario for UdsSmall {
     }
 
     fn summary(&self) -> &'static str {
-        "the ~240-byte RobotState's codec bytes over a Unix socket, process -> process \
+        "the ~120-byte RobotState's codec bytes over a Unix socket, process -> process \
          (validated on receipt): the baseline"
     }
 

@@ -72,11 +72,11 @@ impl Scenario for Ros1 {
     fn summary(&self) -> &'static str {
         match self.kind {
             Kind::Small => {
-                "~240 bytes through ROS 1 roscpp pub/sub (TCPROS), process -> process \
+                "~120 bytes through ROS 1 roscpp pub/sub (TCPROS), process -> process \
                  (benches/ros1/build.sh)"
             }
             Kind::Image => {
-                "921,920 bytes through ROS 1 roscpp pub/sub (TCPROS), process -> process \
+                "~921,760 bytes through ROS 1 roscpp pub/sub (TCPROS), process -> process \
                  (benches/ros1/build.sh)"
             }
         }

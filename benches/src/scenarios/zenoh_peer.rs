@@ -49,7 +49,7 @@ impl Scenario for Zenoh {
     fn summary(&self) -> &'static str {
         match self.kind {
             Kind::Small => {
-                "the ~240-byte RobotState through Zenoh pub/sub with shared memory, process -> \
+                "the ~120-byte RobotState through Zenoh pub/sub with shared memory, process -> \
                  process (feature `zenoh`)"
             }
             Kind::Image => {

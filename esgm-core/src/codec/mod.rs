@@ -104,7 +104,7 @@ pub enum CodecError {
 pub const ENVELOPE_LEN: usize = 16;
 const MAGIC: [u8; 4] = *b"ESGM";
 /// The archived format's version; bump it with any change to the archived types.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 fn envelope(archive_len: usize) -> [u8; ENVELOPE_LEN] {
     let mut e = [0u8; ENVELOPE_LEN];
