@@ -358,4 +358,14 @@ fn images_from_another_process_are_read_in_shared_memory_by_cache_units_and_subs
     assert!(pixels(&s).is_held());
     let held = reader.holding_stats().unwrap().held_now;
     assert!(held <= 3 + 3, "cache, unit input, subscription: {held} held");
+
+    // An image kept past its process's connection stays readable: the chunk is never
+    // given back while a value reads it.
+    drop((sub, there, measured));
+    drop(reader);
+    for i in 42..=60u8 {
+        frames.add(image(Time::from(i) * 10, i)).unwrap(); // the writer goes on
+    }
+    assert!(pixels(&s).is_held());
+    assert!(pixels(&s).iter().all(|p| *p == 41), "kept image changed under its reader");
 }
