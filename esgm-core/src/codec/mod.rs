@@ -247,7 +247,15 @@ pub unsafe fn access_unchecked(bytes: &[u8]) -> Result<&ArchivedEntityStructure,
 /// Turns an archived structure back into an owned one (copies every field, including
 /// image bytes: use it only where an owned copy is wanted).
 pub fn decode(archived: &ArchivedEntityStructure) -> Result<EntityStructure, CodecError> {
-    rkyv::deserialize::<EntityStructure, BoxedError>(archived)
+    deserialize(archived, &mut rkyv::de::Pool::new())
+}
+
+/// Deserializes with `octets` deciding where octet sequences go ([`HoldOctets`]).
+fn deserialize<D: HoldOctets>(
+    archived: &ArchivedEntityStructure,
+    octets: &mut D,
+) -> Result<EntityStructure, CodecError> {
+    rkyv::api::deserialize_using::<EntityStructure, _, BoxedError>(archived, octets)
         .map_err(|e| CodecError::Malformed { len: 0, reason: e.to_string() })
 }
 
@@ -261,9 +269,7 @@ pub fn decode_holding(
     archived: &ArchivedEntityStructure,
     holder: &Arc<dyn OctetsHolder>,
 ) -> Result<EntityStructure, CodecError> {
-    let mut holding = Holding { holder };
-    rkyv::api::deserialize_using::<EntityStructure, _, BoxedError>(archived, &mut holding)
-        .map_err(|e| CodecError::Malformed { len: 0, reason: e.to_string() })
+    deserialize(archived, &mut Holding { holder })
 }
 
 /// [`decode_holding`]'s deserializer: holds octets that lie in its holder's bytes.
