@@ -202,6 +202,7 @@ impl<'p> ImageLoan<'p> {
             archive_len,
             (valid_time, create_time),
             SampleHeader::FLAG_IMAGE_IN_PLACE,
+            None,
         )
     }
 

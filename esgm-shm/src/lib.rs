@@ -121,6 +121,7 @@ pub mod received;
 pub mod service;
 pub mod service_name;
 pub mod size_hint;
+pub mod structure_loan;
 pub mod subscriber;
 pub mod type_id;
 pub mod violations;
@@ -141,6 +142,7 @@ pub use reader::{
 pub use received::ReceivedSample;
 pub use service::{OpenError, ShmNode};
 pub use service_name::{NameError, TrajectoryServiceNames, node_name, nodes_of, unique_domain};
+pub use structure_loan::StructureLoan;
 pub use subscriber::{ReceiveError, SubscriberStats, TrajectorySubscriber, Validation};
 pub use type_id::type_id;
 pub use violations::{ViolationPublisher, ViolationRecord, ViolationSubscriber};

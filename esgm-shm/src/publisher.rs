@@ -19,6 +19,9 @@
 //! must not grow the segment, or fail a [`SampleSizing::Fixed`] loan, for a structure
 //! that actually fits.
 //!
+//! [`TrajectoryPublisher::loan_structure`] splits `publish` in two: encode into the
+//! loan now, send later ([`crate::structure_loan`]).
+//!
 //! Images written by a camera go through [`TrajectoryPublisher::loan_image`] instead,
 //! which lets the camera fill the pixels in place (see [`crate::image_loan`]).
 //!
@@ -48,6 +51,7 @@ use crate::qos::{Delivery, TrajectoryQos};
 use crate::service::{DataService, OpenError, ShmNode, open_data_service, open_wake_service};
 use crate::service_name::{DEFAULT_DOMAIN, TrajectoryServiceNames};
 use crate::size_hint::archived_size_hint;
+use crate::structure_loan::StructureLoan;
 use crate::type_id::type_id;
 
 /// Default initial size of a publisher's samples: small structures fit without growth.
@@ -322,6 +326,17 @@ impl TrajectoryPublisher {
         es: &EntityStructure,
         add_time: Option<Time>,
     ) -> Result<Published, PublishError> {
+        let loan = self.loan_structure(es)?;
+        match add_time {
+            Some(add_time) => loan.send_added(add_time),
+            None => loan.send(),
+        }
+    }
+
+    /// Encodes `es` into loaned shared memory now, for sending later with
+    /// [`StructureLoan::send`] (see [`crate::structure_loan`]): the encoding is done
+    /// before the moment the structure has to go.
+    pub fn loan_structure(&self, es: &EntityStructure) -> Result<StructureLoan<'_>, PublishError> {
         let mut want = archived_size_hint(es);
         if want > self.max_len {
             want = codec::encoded_len(es).map_err(PublishError::Encode)?;
@@ -337,13 +352,12 @@ impl TrajectoryPublisher {
                     // SAFETY: the encoder initialised `..len` (it promises every byte it
                     // reports) and `zero_fill` the rest of the payload.
                     let sample = unsafe { sample.assume_init() };
-                    return self.send_kind(
+                    return Ok(StructureLoan::new(
+                        self,
                         sample,
                         len,
                         (es.valid_time, es.create_time),
-                        (0, SampleHeader::KIND_STRUCTURE),
-                        add_time,
-                    );
+                    ));
                 }
                 Err(CodecError::BufferTooSmall { needed, .. }) if !retried => {
                     tracing::debug!(trajectory = %self.trajectory, hint = want, needed,
@@ -373,21 +387,17 @@ impl TrajectoryPublisher {
         Ok(ImageLoan::new(self, sample, (width, height, format), pixel_len))
     }
 
-    /// Fills the header, sends, and wakes sleeping readers.
+    /// Fills the header, sends, and wakes sleeping readers; the add time is `add_time`,
+    /// or the time of sending.
     pub(crate) fn send(
         &self,
         sample: LoanedSample,
         archive_len: usize,
-        (valid_time, create_time): (Time, Time),
+        times: (Time, Time),
         flags: u32,
+        add_time: Option<Time>,
     ) -> Result<Published, PublishError> {
-        self.send_kind(
-            sample,
-            archive_len,
-            (valid_time, create_time),
-            (flags, SampleHeader::KIND_STRUCTURE),
-            None,
-        )
+        self.send_kind(sample, archive_len, times, (flags, SampleHeader::KIND_STRUCTURE), add_time)
     }
 
     /// Tells every reader that the trajectory was reset (T5): a marker sample

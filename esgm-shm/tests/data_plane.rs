@@ -76,6 +76,38 @@ fn small_structures_round_trip_between_two_nodes() {
 }
 
 #[test]
+fn a_structure_loan_is_encoded_now_and_sent_later_with_new_times() {
+    let domain = unique_domain("structure_loan");
+    let (pub_node, sub_node) = (node(), node());
+    let p = publisher(&domain, "robot", "RobotState").create(&pub_node).unwrap();
+    let s = subscriber(&domain, "robot", "RobotState").create(&sub_node).unwrap();
+
+    // Encoded, not sent: nothing arrives, and a dropped loan sends nothing.
+    let mut first = p.loan_structure(&robot(0)).unwrap();
+    assert_eq!((first.valid_time(), first.create_time()), (1_000, 2_000));
+    assert_eq!(first.archive_len(), codec::encoded_len(&robot(0)).unwrap());
+    drop(p.loan_structure(&robot(9)).unwrap());
+    assert!(s.receive().unwrap().is_none(), "a loan is not a send");
+
+    // Re-stamped: the archive and the header both carry the new times.
+    first.set_times(5, 6).unwrap();
+    assert_eq!((first.valid_time(), first.create_time()), (5, 6));
+    assert_eq!(first.send().unwrap().sequence, 0, "the dropped loan used no number");
+    let sample = s.wait_for_sample(TIMEOUT).unwrap().expect("sample within timeout");
+    assert_eq!((sample.header().valid_time, sample.header().create_time), (5, 6));
+    let mut expected = robot(0);
+    (expected.valid_time, expected.create_time) = (5, 6);
+    assert_eq!(sample.to_owned().unwrap(), expected, "validated, with the new times");
+
+    // The gate's add time travels as given.
+    p.loan_structure(&robot(1)).unwrap().send_added(77).unwrap();
+    let sample = s.wait_for_sample(TIMEOUT).unwrap().expect("sample within timeout");
+    assert_eq!(sample.header().add_time, 77);
+    assert_eq!(sample.to_owned().unwrap(), robot(1));
+    assert_eq!(s.stats(), SubscriberStats { received: 2, malformed: 0, type_mismatch: 0 });
+}
+
+#[test]
 fn every_value_sort_round_trips() {
     let domain = unique_domain("every_sort");
     let (pub_node, sub_node) = (node(), node());

@@ -4,8 +4,8 @@
 //! [`ArchivedEntityStructure`] in place, without deserializing, so an image in shared
 //! memory is read where its producer wrote it. Nobody outside this module names rkyv's
 //! functions; everything goes through [`encode`], [`encode_into`],
-//! [`encode_into_uninit`], [`encoded_len`], [`encode_image_into`], [`access`],
-//! [`access_unchecked`] and [`decode`].
+//! [`encode_into_uninit`], [`encoded_len`], [`encode_image_into`], [`restamp`],
+//! [`access`], [`access_unchecked`], [`decode`] and [`decode_holding`].
 //!
 //! Bytes that come from another process must go through [`access`], which validates
 //! them (bounds, alignment, enum tags, UTF-8) before any field is read. The unchecked
@@ -21,11 +21,12 @@
 //! # Files
 //! `octets.rs` archives octet sequences (and lets the image writer point one at pixels
 //! already in place), `writer.rs` holds the counting writer, `image.rs` the in-place
-//! image layout.
+//! image layout, `restamp.rs` the in-place change of an archive's times.
 
 mod image;
 mod nesting;
 mod octets;
+mod restamp;
 mod writer;
 
 use std::mem::MaybeUninit;
@@ -45,6 +46,7 @@ pub use image::{
 };
 pub use nesting::{ArchivedNest, MAX_NESTING, Nest, NestingContext};
 pub use octets::{HoldOctets, PlaceOctets, SharedBytes, SharedBytesResolver};
+pub use restamp::restamp;
 use writer::CountingWriter;
 
 /// Alignment the archived form needs from its buffer. Shared-memory payloads are laid
