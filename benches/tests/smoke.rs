@@ -99,11 +99,16 @@ fn quick_floor_iceoryx2_runs_against_a_peer_process() {
 }
 
 #[test]
-fn quick_esgm_small_reports_three_waits_and_idle_cpu() {
+fn quick_esgm_small_reports_three_waits_idle_cpu_and_the_encode() {
     let (stdout, report) = run_quick("esgm-small");
     assert_eq!(
         rows(&report),
-        [key("esgm-small", "event"), key("esgm-small", "spin"), key("esgm-small-default", "event"),]
+        [
+            key("esgm-small", "event"),
+            key("esgm-small", "spin"),
+            key("esgm-small-default", "event"),
+            key("esgm-small-publish", "spin"),
+        ]
     );
     let strategies: Vec<&str> = report["scenarios"]
         .as_array()
@@ -111,7 +116,12 @@ fn quick_esgm_small_reports_three_waits_and_idle_cpu() {
         .iter()
         .map(|row| row["wait_strategy"].as_str().expect("a wait_strategy"))
         .collect();
-    assert_eq!(strategies, ["busy-spin", "block", "spin-then-block"]);
+    assert_eq!(strategies, ["busy-spin", "block", "spin-then-block", "busy-spin"]);
+    // The encode is outside the target rows' hops and reported beside them.
+    assert!(stdout.contains("encoded into the loan before the hop"), "{stdout}");
+    for row in &report["scenarios"].as_array().unwrap()[..3] {
+        assert!(row["producer_write_p50_ns"].as_u64().is_some_and(|ns| ns > 0), "{row}");
+    }
     assert!(stdout.contains("idle: a subscriber with this default wait used"), "{stdout}");
     // Its baselines did not run: the targets say so instead of failing.
     assert!(stdout.contains("esgm-small / floor-iceoryx2 (spin)"), "{stdout}");

@@ -21,6 +21,9 @@
 //! pixels are zeroed at send, before the codec writes the archive over them, so the
 //! slack after the archive never carries an earlier sample's bytes.
 //!
+//! [`ImageLoan::into_structure`] completes the archive without sending: the frame
+//! becomes a [`StructureLoan`], sent when the moment comes.
+//!
 //! Dropping a loan without sending returns the memory to the publisher.
 //!
 //! # Measured
@@ -44,6 +47,7 @@ use iceoryx2::sample_mut_uninit::SampleMutUninit;
 use crate::image_layout::{IMAGE_NAME_MAX, IMAGE_PIXELS_OFFSET, ImageError};
 use crate::payload::{Block16, SampleHeader, as_uninit_bytes, copy_into, zero_fill};
 use crate::publisher::{PublishError, Published, TrajectoryPublisher};
+use crate::structure_loan::StructureLoan;
 
 type UninitSample = SampleMutUninit<ipc::Service, [MaybeUninit<Block16>], SampleHeader>;
 
@@ -157,22 +161,38 @@ impl<'p> ImageLoan<'p> {
     }
 
     /// Completes the image as entity `name` with the given times and sends it, the
-    /// pixels staying where they were written.
+    /// pixels staying where they were written: [`Self::into_structure`], then
+    /// [`StructureLoan::send`].
     ///
     /// Any name of up to [`IMAGE_NAME_MAX`] bytes is sent in place, a different one
     /// every frame if need be. A longer name does not fit the layout: that frame is
     /// copied once into an ordinary structure instead (correct, but not zero-copy).
     pub fn send(
-        mut self,
+        self,
         name: &str,
         valid_time: Time,
         create_time: Time,
     ) -> Result<Published, PublishError> {
+        self.into_structure(name, valid_time, create_time)?.send()
+    }
+
+    /// Completes the image as entity `name` with the given times — the codec writes the
+    /// archive around the pixels — without sending it yet: a camera that captures ahead
+    /// of the moment a frame must go does all of its writing before that moment, then
+    /// only sends (after [`StructureLoan::set_times`] if the times are known late).
+    ///
+    /// Names longer than [`IMAGE_NAME_MAX`] are copied, as for [`Self::send`].
+    pub fn into_structure(
+        mut self,
+        name: &str,
+        valid_time: Time,
+        create_time: Time,
+    ) -> Result<StructureLoan<'p>, PublishError> {
         if !self.pixels_init {
             self.pixels_mut();
         }
         if name.len() > IMAGE_NAME_MAX {
-            return self.send_copied(name, valid_time, create_time);
+            return self.into_copied(name, valid_time, create_time);
         }
         let pixels = self.pixel_range();
         let bytes = as_uninit_bytes(self.sample.payload_mut());
@@ -197,21 +217,21 @@ impl<'p> ImageLoan<'p> {
             bytes,
         )
         .map_err(PublishError::Encode)?;
-        self.publisher.send(
+        Ok(StructureLoan::new(
+            self.publisher,
             sample,
             archive_len,
             (valid_time, create_time),
             SampleHeader::FLAG_IMAGE_IN_PLACE,
-            None,
-        )
+        ))
     }
 
-    fn send_copied(
+    fn into_copied(
         mut self,
         name: &str,
         valid_time: Time,
         create_time: Time,
-    ) -> Result<Published, PublishError> {
+    ) -> Result<StructureLoan<'p>, PublishError> {
         tracing::debug!(trajectory = %self.publisher.trajectory(), name_len = name.len(),
             max = IMAGE_NAME_MAX, "image name too long to send in place: copying this frame");
         let pixels = Octets::from(&*self.pixels_mut());
@@ -224,6 +244,6 @@ impl<'p> ImageLoan<'p> {
         let publisher = self.publisher;
         // Return the loan before loaning again for the copy.
         drop(self);
-        publisher.publish(&image.to_structure(name, valid_time, create_time))
+        publisher.loan_structure(&image.to_structure(name, valid_time, create_time))
     }
 }

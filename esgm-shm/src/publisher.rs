@@ -357,6 +357,7 @@ impl TrajectoryPublisher {
                         sample,
                         len,
                         (es.valid_time, es.create_time),
+                        0,
                     ));
                 }
                 Err(CodecError::BufferTooSmall { needed, .. }) if !retried => {

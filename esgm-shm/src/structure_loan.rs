@@ -8,6 +8,9 @@
 //! times are known only at sending, [`StructureLoan::set_times`] rewrites them in the
 //! archive in place (two 8-byte writes, [`esgm_core::codec::restamp`]).
 //!
+//! An image written in place ([`crate::ImageLoan::into_structure`]) becomes a
+//! structure loan too.
+//!
 //! Dropping a loan without sending it returns the shared memory to the publisher;
 //! nothing is sent. `publish` is exactly `loan_structure` followed by `send`.
 
@@ -24,6 +27,7 @@ pub struct StructureLoan<'p> {
     archive_len: usize,
     valid_time: Time,
     create_time: Time,
+    flags: u32,
 }
 
 impl std::fmt::Debug for StructureLoan<'_> {
@@ -38,14 +42,22 @@ impl std::fmt::Debug for StructureLoan<'_> {
 
 impl<'p> StructureLoan<'p> {
     /// A loan whose first `archive_len` payload bytes hold the archive of a structure
-    /// with these times, and whose other bytes are zeroed.
+    /// with these times, and whose other bytes are zeroed; `flags` go into the header
+    /// ([`crate::SampleHeader::FLAG_IMAGE_IN_PLACE`]).
     pub(crate) fn new(
         publisher: &'p TrajectoryPublisher,
         sample: LoanedSample,
         archive_len: usize,
         (valid_time, create_time): (Time, Time),
+        flags: u32,
     ) -> Self {
-        Self { publisher, sample, archive_len, valid_time, create_time }
+        Self { publisher, sample, archive_len, valid_time, create_time, flags }
+    }
+
+    /// True if the structure is an image whose pixels were written in place
+    /// ([`crate::ImageLoan`]).
+    pub fn is_image_in_place(&self) -> bool {
+        self.flags & crate::SampleHeader::FLAG_IMAGE_IN_PLACE != 0
     }
 
     /// Bytes of the archive (codec envelope included), as the header will say.
@@ -90,7 +102,7 @@ impl<'p> StructureLoan<'p> {
             self.sample,
             self.archive_len,
             (self.valid_time, self.create_time),
-            0,
+            self.flags,
             add_time,
         )
     }

@@ -185,14 +185,23 @@ fn pixels_written_into_an_image_loan_are_read_in_place() {
     let p = publisher(&domain, "cam", "Image").image_name("cam0").create(&pub_node).unwrap();
     let s = subscriber(&domain, "cam", "Image").create(&sub_node).unwrap();
 
-    // Full VGA frames, the second reusing the first's layout.
+    // Full VGA frames, the second reusing the first's layout; the second is completed
+    // ahead of sending and gets its times only when it goes.
     for frame in 0..2u64 {
         let mut loan = p.loan_image(640, 480, RGB8).unwrap();
         assert_eq!((loan.width(), loan.height(), loan.format()), (640, 480, RGB8));
         assert_eq!(loan.pixel_len(), 921_600);
         fill(loan.pixels_mut(), frame);
         let t = 100 + frame as i64;
-        let sent = loan.send("cam0", t, t + 1).unwrap();
+        let sent = if frame == 0 {
+            loan.send("cam0", t, t + 1).unwrap()
+        } else {
+            let mut ready = loan.into_structure("cam0", 0, 0).unwrap();
+            assert!(ready.is_image_in_place());
+            assert!(s.receive().unwrap().is_none(), "completed, not sent");
+            ready.set_times(t, t + 1).unwrap();
+            ready.send().unwrap()
+        };
         assert_eq!(sent.sequence, frame);
 
         let sample = s.wait_for_sample(TIMEOUT).unwrap().expect("image");

@@ -8,12 +8,19 @@
 //! the round trip is one hop, timed on the measuring process's clock.
 //!
 //! What is inside a hop:
-//! - a small structure: `publish`, which encodes it straight into the loaned slice and
-//!   sends (the publisher has no separate "encode now, send later"), so each leg
-//!   includes its encode (~0.2 µs);
-//! - an image: only `ImageLoan::send` (times, header, send). The pixels were written
-//!   into the loan before the timer started: by the measuring process just before,
-//!   timed apart as the producer's write, and by the peer after its previous reply.
+//! - a small structure ([`Encode::Before`], the rows the targets are stated for): only
+//!   [`esgm_shm::StructureLoan::send`] after `set_times` (the sequence number, two
+//!   8-byte writes into the archive). The structure was encoded into its loan before
+//!   the timer started ([`TrajectoryPublisher::loan_structure`]), by the measuring
+//!   process just before (timed apart as the producer's write) and by the peer while it
+//!   waited — the hop is timed from the moment the structure is complete in the loaned
+//!   slice, as for an image and for the floor's message;
+//! - a small structure with [`Encode::InHop`] (the `esgm-small-publish` row): the whole
+//!   `publish` — loan, encode into the loan (~0.2 µs) and send — on both legs;
+//! - an image: likewise only `set_times` + `send`. The pixels were written into the
+//!   loan and the archive completed around them ([`esgm_shm::ImageLoan::into_structure`]) before
+//!   the timer started: by the measuring process just before, timed apart as the
+//!   producer's write, and by the peer after its previous reply.
 //!   Before each image ping the measuring process waits (untimed) until the peer says,
 //!   on a third trajectory, `ready`, that its reply frame is written and it is waiting.
 //!   So every image hop starts from the state a small one starts from — the peer idle,
@@ -32,8 +39,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use esgm_shm::{
-    ImageLoan, ReceivedSample, ShmNode, TrajectoryPublisher, TrajectoryQos, TrajectorySubscriber,
-    WaitStrategy, unique_domain,
+    ReceivedSample, ShmNode, StructureLoan, TrajectoryPublisher, TrajectoryQos,
+    TrajectorySubscriber, WaitStrategy, unique_domain,
 };
 
 use super::ipc_node::ipc_node;
@@ -74,6 +81,36 @@ pub struct EsgmRun {
     pub peer_notes: Vec<String>,
 }
 
+/// When a small structure is encoded into its loan (images are always written before).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Encode {
+    /// Before the hop: loaned and encoded, then only sent when the hop starts.
+    Before,
+    /// Inside the hop: `publish` loans, encodes and sends.
+    InHop,
+}
+
+impl Encode {
+    /// The peer argument that asks for [`Encode::InHop`].
+    const IN_HOP_ARG: &'static str = "encode-in-hop";
+
+    /// What the peer of `role` was told.
+    fn of(role: &PeerRole) -> Self {
+        match role.arg.as_deref() {
+            Some(Self::IN_HOP_ARG) => Encode::InHop,
+            _ => Encode::Before,
+        }
+    }
+
+    /// The peer argument that tells the peer this.
+    fn arg(self) -> Option<&'static str> {
+        match self {
+            Encode::Before => None,
+            Encode::InHop => Some(Self::IN_HOP_ARG),
+        }
+    }
+}
+
 /// The esgm wait strategy of a mode.
 pub fn strategy(mode: WaitMode) -> WaitStrategy {
     match mode {
@@ -83,11 +120,12 @@ pub fn strategy(mode: WaitMode) -> WaitStrategy {
     }
 }
 
-/// Runs the measuring side of scenario `scenario` with `mode` in both processes.
+/// Runs the measuring side of scenario `scenario` with `mode` in both processes, small
+/// structures encoded as `encode` says.
 pub fn ping_pong(
     ctx: &Context,
     scenario: &str,
-    kind: Kind,
+    (kind, encode): (Kind, Encode),
     mode: WaitMode,
 ) -> anyhow::Result<EsgmRun> {
     let (full, quick) = kind.samples();
@@ -104,12 +142,12 @@ pub fn ping_pong(
         Kind::Small => None,
         Kind::Image => Some(subscriber(&node, &domain, READY, Kind::Small, mode)?),
     };
-    let mut peer = ctx.spawn_peer_process(scenario, mode, &domain)?;
+    let mut peer = ctx.spawn_peer_process_as(scenario, mode, &domain, encode.arg())?;
     let mut patience = Patience::for_peer(&mut peer);
 
     let started = Instant::now();
     loop {
-        send(prepare(kind, &ping, 0)?, &ping, HELLO)?;
+        send(prepare(kind, encode, &ping, 0)?, &ping, HELLO)?;
         if pong
             .wait_for_sample(HELLO_EVERY)
             .context("waiting for the peer's first answer")?
@@ -141,7 +179,7 @@ pub fn ping_pong(
     for i in 1..=warmup + samples {
         let seq = i as i64;
         let making = Instant::now();
-        let next = prepare(kind, &ping, i)?;
+        let next = prepare(kind, encode, &ping, i)?;
         let made = making.elapsed();
         if let Some(ready) = &ready {
             // Ready after answering the previous ping (or the start-up ones).
@@ -167,7 +205,7 @@ pub fn ping_pong(
             run.in_place += u64::from(back.is_image_in_place());
         }
     }
-    send(prepare(kind, &ping, 0)?, &ping, STOP)?;
+    send(prepare(kind, encode, &ping, 0)?, &ping, STOP)?;
     run.peer_notes = peer.finish(FINISH_TIMEOUT)?;
     Ok(run)
 }
@@ -181,14 +219,15 @@ pub fn echo(role: &PeerRole, kind: Kind) -> anyhow::Result<Vec<String>> {
         Kind::Small => None,
         Kind::Image => Some(publisher(&node, &role.domain, READY, Kind::Small)?),
     };
+    let encode = Encode::of(role);
     let mut patience = Patience::alone();
     let (mut pings, mut early, mut last) = (0u64, 0u64, HELLO);
     loop {
-        let next = prepare(kind, &pong, pings)?;
+        let next = prepare(kind, encode, &pong, pings)?;
         // A ping already here came while the reply was being prepared.
         let early_ping = ping.receive().context("receiving a ping")?;
         if let Some(ready) = &ready {
-            send(prepare(Kind::Small, ready, pings)?, ready, last)?;
+            send(prepare(Kind::Small, Encode::Before, ready, pings)?, ready, last)?;
         }
         let (sample, waiting) = match early_ping {
             Some(sample) => (sample, true),
@@ -264,18 +303,27 @@ fn subscriber(
 
 /// A structure made and ready to send.
 enum Ready<'p> {
-    /// A small structure, encoded into the loan when sent.
+    /// A structure encoded into its loan (a small one, or an image completed around
+    /// the pixels written in place), waiting for its times.
+    Loaned(StructureLoan<'p>),
+    /// A small structure, encoded into a loan when sent.
     Structure(esgm_core::EntityStructure),
-    /// An image whose pixels are in the loan already.
-    Image(ImageLoan<'p>),
 }
 
 /// Makes the `i`-th structure: for an image, loans shared memory and writes every
-/// pixel into it, as a camera would.
-fn prepare(kind: Kind, publisher: &TrajectoryPublisher, i: u64) -> anyhow::Result<Ready<'_>> {
-    match kind {
-        Kind::Small => Ok(Ready::Structure(kind.make(i))),
-        Kind::Image => {
+/// pixel into it, as a camera would, then completes the archive around them.
+fn prepare(
+    kind: Kind,
+    encode: Encode,
+    publisher: &TrajectoryPublisher,
+    i: u64,
+) -> anyhow::Result<Ready<'_>> {
+    match (kind, encode) {
+        (Kind::Small, Encode::Before) => Ok(Ready::Loaned(
+            publisher.loan_structure(&kind.make(i)).context("could not loan a structure")?,
+        )),
+        (Kind::Small, Encode::InHop) => Ok(Ready::Structure(kind.make(i))),
+        (Kind::Image, _) => {
             let mut loan = publisher
                 .loan_image(IMAGE_WIDTH, IMAGE_HEIGHT, IMAGE_FORMAT)
                 .context("could not loan an image")?;
@@ -286,7 +334,8 @@ fn prepare(kind: Kind, publisher: &TrajectoryPublisher, i: u64) -> anyhow::Resul
             }
             // SAFETY: the loop above wrote every byte of the pixel range.
             unsafe { loan.assume_pixels_init() };
-            Ok(Ready::Image(loan))
+            let ready = loan.into_structure(IMAGE_NAME, 0, 0).context("could not complete")?;
+            Ok(Ready::Loaned(ready))
         }
     }
 }
@@ -294,14 +343,14 @@ fn prepare(kind: Kind, publisher: &TrajectoryPublisher, i: u64) -> anyhow::Resul
 /// Sends a prepared structure with sequence `seq` (as its valid and create time).
 fn send(ready: Ready<'_>, publisher: &TrajectoryPublisher, seq: i64) -> anyhow::Result<()> {
     match ready {
+        Ready::Loaned(mut loan) => {
+            loan.set_times(seq, seq).with_context(|| format!("could not stamp {seq}"))?;
+            loan.send().with_context(|| format!("could not send {seq}"))?;
+        }
         Ready::Structure(mut es) => {
             es.valid_time = seq;
             es.create_time = seq;
             publisher.publish(&es).with_context(|| format!("could not publish {seq}"))?;
-        }
-        Ready::Image(loan) => {
-            loan.send(IMAGE_NAME, seq, seq)
-                .with_context(|| format!("could not send image {seq}"))?;
         }
     }
     Ok(())

@@ -2,14 +2,16 @@
 //!
 //! The producer loans shared memory for the image
 //! ([`esgm_shm::TrajectoryPublisher::loan_image`]) and writes every pixel into it, as a
-//! camera would; that write is timed apart and reported beside the hop. The hop starts
-//! when the structure is complete in the loaned slice, and ends when the other process
+//! camera would, then completes the archive around the pixels
+//! ([`esgm_shm::ImageLoan::into_structure`]); that write is timed apart and reported
+//! beside the hop. The hop starts when the structure is complete in the loaned slice
+//! (it is only re-stamped with the sequence number and sent), and ends when the other process
 //! holds the validated structure (in place, in shared memory) and has read one pixel at
 //! each end. Same ping-pong and rows as `esgm-small` ([`super::ipc_esgm_echo`]), each
 //! compared with `esgm-small` at the same wait: the target is ≤ 1.2×, i.e. the hop
 //! does not grow with the image.
 
-use super::ipc_esgm_echo::{echo, ping_pong};
+use super::ipc_esgm_echo::{Encode, echo, ping_pong};
 use super::ipc_esgm_small::{self, default_note, esgm_row};
 use super::ipc_payload::Kind;
 use crate::peer_role::PeerRole;
@@ -38,13 +40,13 @@ impl Scenario for EsgmImage {
     fn run(&self, ctx: &Context) -> anyhow::Result<Vec<Measurement>> {
         let mut rows = Vec::new();
         for mode in WaitMode::ESGM {
-            let run = ping_pong(ctx, NAME, Kind::Image, mode)?;
+            let run = ping_pong(ctx, NAME, (Kind::Image, Encode::Before), mode)?;
             let n = run.one_way.len();
             let mut row = esgm_row(NAME, mode, &run)
                 .baseline(&mode.row_name(ipc_esgm_small::NAME))
                 .producer_write_p50_ns(run.write.quantile(0.5));
             row = row.note(if run.in_place == n {
-                "pixels written in place in shared memory (loan + one write of every pixel), \
+                "pixels written in place in shared memory (loan + one write of every pixel + the archive around them), \
                  read there by the other process: never copied"
                     .to_owned()
             } else {

@@ -1,10 +1,13 @@
 //! `esgm-small`: one hop of a small structure between two processes through esgm-shm.
 //!
-//! A `RobotState` (about 120 bytes archived) published on a trajectory
-//! ([`esgm_shm::TrajectoryPublisher::publish`]: encoded straight into the loaned
-//! shared memory) and received by a subscriber in another process, validated in place
-//! ([`esgm_shm::ReceivedSample::structure`]); see [`super::ipc_esgm_echo`] for the
-//! ping-pong. Three rows, one per wait of esgm's subscribers ([`WaitMode`]):
+//! A `RobotState` (about 120 bytes archived) encoded straight into loaned shared
+//! memory ([`esgm_shm::TrajectoryPublisher::loan_structure`]), sent
+//! ([`esgm_shm::StructureLoan::send`]) and received by a subscriber in another process,
+//! validated in place ([`esgm_shm::ReceivedSample::structure`]); see
+//! [`super::ipc_esgm_echo`] for the ping-pong. The hop starts when the structure is
+//! complete in the loan, as the floor's starts when its message is written; the encode
+//! is timed apart and reported beside. Three rows, one per wait of esgm's subscribers
+//! ([`WaitMode`]):
 //! - `esgm-small` / `spin`: [`esgm_shm::WaitStrategy::BusySpin`], against the raw
 //!   iceoryx2 floor (target ≤ 1.5×);
 //! - `esgm-small` / `event`: [`esgm_shm::WaitStrategy::Block`] on the trajectory's
@@ -13,6 +16,11 @@
 //!   the blocking Unix socket (target ≤ 1×). Each hop starts after the event gap, so the
 //!   peer has stopped spinning and sleeps when the ping comes: its wake-up is in every
 //!   round trip; the reply, coming within the measuring side's spin, is not.
+//!
+//! - `esgm-small-publish` / `spin`: as `esgm-small` / `spin`, but every leg is a whole
+//!   [`esgm_shm::TrajectoryPublisher::publish`] (loan, encode, send): what a producer
+//!   that encodes at the moment of sending pays. No target; it shows the encode's
+//!   share.
 //!
 //! The default row also reports what that strategy costs when nothing comes: the CPU
 //! time of a thread waiting one second on an idle trajectory, in `wait_for_sample`
@@ -24,7 +32,7 @@ use anyhow::{Context as _, bail};
 use esgm_shm::wait::DEFAULT_SPIN;
 use esgm_shm::{TrajectoryPublisher, TrajectorySubscriber, WaitStrategy, unique_domain};
 
-use super::ipc_esgm_echo::{EsgmRun, echo, ping_pong};
+use super::ipc_esgm_echo::{Encode, EsgmRun, echo, ping_pong};
 use super::ipc_floor_iceoryx2;
 use super::ipc_node::ipc_node;
 use super::ipc_payload::Kind;
@@ -38,6 +46,13 @@ use crate::wait_mode::WaitMode;
 
 /// The scenario's name.
 pub const NAME: &str = "esgm-small";
+
+/// The row whose hops include the encode.
+pub const PUBLISH_ROW: &str = "esgm-small-publish";
+
+/// What the hop of the target rows starts from.
+const ENCODED_BEFORE: &str = "encoded into the loan before the hop (loan_structure; the \
+    producer write column); the hop is set_times + send + receive + validate + read";
 
 /// How long the idle subscriber waits.
 const IDLE_WINDOW: Duration = Duration::from_secs(1);
@@ -61,8 +76,10 @@ impl Scenario for EsgmSmall {
     fn run(&self, ctx: &Context) -> anyhow::Result<Vec<Measurement>> {
         let mut rows = Vec::new();
         for mode in WaitMode::ESGM {
-            let run = ping_pong(ctx, NAME, Kind::Small, mode)?;
-            let mut row = esgm_row(NAME, mode, &run);
+            let run = ping_pong(ctx, NAME, (Kind::Small, Encode::Before), mode)?;
+            let mut row = esgm_row(NAME, mode, &run)
+                .producer_write_p50_ns(run.write.quantile(0.5))
+                .note(ENCODED_BEFORE);
             if mode == WaitMode::SpinThenBlock {
                 row = row.baseline(ipc_uds_small::NAME).note(default_note());
                 let idle = idle_cpu()?;
@@ -79,6 +96,12 @@ impl Scenario for EsgmSmall {
             }
             rows.push(row);
         }
+        let run = ping_pong(ctx, NAME, (Kind::Small, Encode::InHop), WaitMode::Spin)?;
+        rows.push(
+            esgm_row(PUBLISH_ROW, WaitMode::Spin, &run)
+                .baseline(ipc_floor_iceoryx2::NAME)
+                .note("each leg a whole publish: loan, encode into the loan, send"),
+        );
         Ok(rows)
     }
 
