@@ -33,7 +33,7 @@ use std::mem::MaybeUninit;
 use std::sync::Arc;
 
 use rkyv::Portable;
-use rkyv::rancor::BoxedError;
+use rkyv::rancor::{BoxedError, Failure};
 use rkyv::ser::writer::Buffer;
 use rkyv::util::AlignedVec;
 
@@ -225,13 +225,26 @@ fn archive_body(bytes: &[u8]) -> Result<&[u8], CodecError> {
 /// them, read in place.
 ///
 /// Use this for every buffer written by another process.
+///
+/// Validation runs with rkyv's cheapest error type, which says only *that* a check
+/// failed (it costs nothing on the way, where a descriptive error's trace costs a
+/// tenth of the validation); a buffer that fails is validated a second time to say
+/// *what* failed. Malformed bytes are the rare case, and their cost is the one paid
+/// twice.
 pub fn access(bytes: &[u8]) -> Result<&ArchivedEntityStructure, CodecError> {
     let body = archive_body(bytes)?;
-    rkyv::api::access_with_context::<ArchivedEntityStructure, _, BoxedError>(
+    if let Ok(archived) = validate::<Failure>(body) {
+        return Ok(archived);
+    }
+    validate::<BoxedError>(body).map_err(|e| malformed(bytes, e.to_string()))
+}
+
+/// Validates an archive (no envelope) with errors of type `E`.
+fn validate<E: rkyv::rancor::Source>(body: &[u8]) -> Result<&ArchivedEntityStructure, E> {
+    rkyv::api::access_with_context::<ArchivedEntityStructure, _, E>(
         body,
         &mut nesting::Validator::new(body),
     )
-    .map_err(|e| malformed(bytes, e.to_string()))
 }
 
 /// Returns the archived structure in `bytes` checking only the envelope.
