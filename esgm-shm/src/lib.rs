@@ -6,7 +6,8 @@
 //!
 //! This is the data plane: [`TrajectoryPublisher`], [`TrajectorySubscriber`], the
 //! sample layout ([`payload`]), service naming ([`service_name`]), waiting
-//! ([`wait`]) and in-place images ([`image_loan`]); and on top of it trajectories with
+//! ([`wait`]), structures encoded ahead of sending ([`structure_loan`]) and in-place
+//! images ([`image_loan`]); and on top of it trajectories with
 //! policy and history: [`ShmTrajectoryWriter`], [`ShmTrajectoryReader`],
 //! [`violations`]. The control plane (coordinator, registry, `connect`) builds on it.
 //!
@@ -44,8 +45,10 @@
 //!   one is rejected by comparison, never undefined behaviour.
 //! - **Encode once, into the loan.** The publisher sizes the loan with a cheap walk of
 //!   the structure ([`size_hint`]) instead of a trial encode, and the codec writes
-//!   straight into shared memory. Images go further: the camera writes the pixels into
-//!   the loan and only times and header are added at send ([`image_loan`]).
+//!   straight into shared memory. A producer that knows its structure early encodes it
+//!   into a loan beforehand and only re-stamps its times and sends when the moment
+//!   comes ([`structure_loan`]). Images go further: the camera writes the pixels into
+//!   the loan and the codec completes the archive around them ([`image_loan`]).
 //! - **Validate where bytes cross a process boundary.** Every received archive is
 //!   validated before it is handed out ([`Validation::InPlace`]); a trusted setup may
 //!   defer or skip it, explicitly and unsafely. Bad samples are typed errors and
