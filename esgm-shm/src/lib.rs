@@ -15,10 +15,10 @@
 //! use std::time::Duration;
 //! use esgm_core::EntityStructure;
 //! use esgm_shm::{TrajectoryPublisher, TrajectorySubscriber};
-//! use iceoryx2::prelude::{NodeBuilder, ipc};
+//! use esgm_shm::{ShmService, node_builder};
 //!
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
-//! let node = NodeBuilder::new().create::<ipc::Service>()?;
+//! let node = node_builder().create::<ShmService>()?;
 //! let publisher = TrajectoryPublisher::builder("robot_state", "RobotState")
 //!     .domain("lab")
 //!     .create(&node)?;
@@ -123,6 +123,7 @@ pub mod reader;
 pub mod received;
 pub mod service;
 pub mod service_name;
+pub mod service_type;
 pub mod size_hint;
 pub mod structure_loan;
 pub mod subscriber;
@@ -145,6 +146,7 @@ pub use reader::{
 pub use received::ReceivedSample;
 pub use service::{OpenError, ShmNode};
 pub use service_name::{NameError, TrajectoryServiceNames, node_name, nodes_of, unique_domain};
+pub use service_type::{ShmService, node_builder, shm_config};
 pub use structure_loan::StructureLoan;
 pub use subscriber::{ReceiveError, SubscriberStats, TrajectorySubscriber, Validation};
 pub use type_id::type_id;

@@ -5,7 +5,9 @@ use std::time::{Duration, Instant};
 use iceoryx2::node::NodeCreationFailure;
 use iceoryx2::port::client::{Client, RequestSendError};
 use iceoryx2::port::{LoanError, ReceiveError};
-use iceoryx2::prelude::{AllocationStrategy, NodeBuilder, ipc};
+use iceoryx2::prelude::AllocationStrategy;
+
+use crate::service_type::{ShmService, node_builder};
 use iceoryx2::service::builder::request_response::RequestResponseOpenError;
 use iceoryx2::service::port_factory::client::ClientCreateError;
 use iceoryx2::service::port_factory::request_response::PortFactory;
@@ -79,8 +81,8 @@ pub enum ControlClientError {
 #[derive(Debug)]
 pub struct ControlClient {
     domain: String,
-    client: Client<ipc::Service, [u8], (), [u8], ()>,
-    _service: PortFactory<ipc::Service, [u8], (), [u8], ()>,
+    client: Client<ShmService, [u8], (), [u8], ()>,
+    _service: PortFactory<ShmService, [u8], (), [u8], ()>,
     _node: ShmNode,
     timeout: Duration,
 }
@@ -89,9 +91,9 @@ impl ControlClient {
     /// Connects to the coordinator of `domain`; calls wait up to `timeout` for answers.
     pub fn connect(domain: &str, timeout: Duration) -> Result<Self, ControlClientError> {
         let name = control_service(domain)?;
-        let node = NodeBuilder::new()
+        let node = node_builder()
             .name(&crate::service_name::node_name(domain, "control-client"))
-            .create::<ipc::Service>()
+            .create::<ShmService>()
             .map_err(ControlClientError::Node)?;
         let service = node
             .service_builder(&name)
