@@ -17,9 +17,9 @@ use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use crate::service_type::{ShmService, node_builder};
 use esgm_core::{Sample, Time, ValueApproximation};
 use iceoryx2::node::NodeCreationFailure;
+use iceoryx2::prelude::{NodeBuilder, ipc};
 
 use crate::reader::{
     CachedSample, HistoryError, ReaderCreateError, ReaderStats, ShmTrajectoryReader,
@@ -101,7 +101,7 @@ impl HostedTrajectoryReader {
         let thread = std::thread::Builder::new()
             .name(format!("esgm-reader-{trajectory}"))
             .spawn(move || {
-                let node = match node_builder().create::<ShmService>() {
+                let node = match NodeBuilder::new().create::<ipc::Service>() {
                     Ok(node) => node,
                     Err(e) => {
                         let _ = ready.send(Err(HostError::Node(e)));

@@ -15,10 +15,10 @@
 //! use std::time::Duration;
 //! use esgm_core::EntityStructure;
 //! use esgm_shm::{TrajectoryPublisher, TrajectorySubscriber};
-//! use esgm_shm::{ShmService, node_builder};
+//! use iceoryx2::prelude::{NodeBuilder, ipc};
 //!
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
-//! let node = node_builder().create::<ShmService>()?;
+//! let node = NodeBuilder::new().create::<ipc::Service>()?;
 //! let publisher = TrajectoryPublisher::builder("robot_state", "RobotState")
 //!     .domain("lab")
 //!     .create(&node)?;
@@ -123,7 +123,6 @@ pub mod reader;
 pub mod received;
 pub mod service;
 pub mod service_name;
-pub mod service_type;
 pub mod size_hint;
 pub mod structure_loan;
 pub mod subscriber;
@@ -146,7 +145,6 @@ pub use reader::{
 pub use received::ReceivedSample;
 pub use service::{OpenError, ShmNode};
 pub use service_name::{NameError, TrajectoryServiceNames, node_name, nodes_of, unique_domain};
-pub use service_type::{ShmService, node_builder, shm_config};
 pub use structure_loan::StructureLoan;
 pub use subscriber::{ReceiveError, SubscriberStats, TrajectorySubscriber, Validation};
 pub use type_id::type_id;

@@ -40,9 +40,7 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::update_connections::{ConnectionFailure, UpdateConnections};
 use iceoryx2::port::{BackpressureAction, LoanError, SendError};
-use iceoryx2::prelude::{AllocationStrategy, BackpressureStrategy};
-
-use crate::service_type::ShmService;
+use iceoryx2::prelude::{AllocationStrategy, BackpressureStrategy, ipc};
 use iceoryx2::sample_mut::SampleMut;
 use iceoryx2::service::port_factory::PortFactory;
 
@@ -247,8 +245,8 @@ pub struct TrajectoryPublisher {
     type_name: String,
     type_id: u64,
     service: DataService,
-    port: Publisher<ShmService, [Block16], SampleHeader>,
-    notifier: Notifier<ShmService>,
+    port: Publisher<ipc::Service, [Block16], SampleHeader>,
+    notifier: Notifier<ipc::Service>,
     clock: SharedClock,
     lossless_timeout: Duration,
     sequence: Cell<u64>,
@@ -258,7 +256,7 @@ pub struct TrajectoryPublisher {
 }
 
 /// A sample whose payload is written, waiting for its header.
-pub(crate) type LoanedSample = SampleMut<ShmService, [Block16], SampleHeader>;
+pub(crate) type LoanedSample = SampleMut<ipc::Service, [Block16], SampleHeader>;
 
 impl TrajectoryPublisher {
     /// A builder for a publisher of `trajectory`, whose structures are of the entity

@@ -4,15 +4,15 @@ use std::cell::Cell;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-use crate::service_type::ShmService;
 use esgm_core::EntityStructure;
 use esgm_core::codec::{self, ArchivedEntityStructure, CodecError};
+use iceoryx2::prelude::ipc;
 use iceoryx2::sample::Sample;
 
 use crate::payload::{Block16, SampleHeader, as_bytes};
 
 /// The iceoryx2 sample type of a trajectory.
-pub(crate) type RawSample = Sample<ShmService, [Block16], SampleHeader>;
+pub(crate) type RawSample = Sample<ipc::Service, [Block16], SampleHeader>;
 
 /// Counters shared by a subscriber and, when validation is deferred, its samples.
 #[derive(Debug, Default)]

@@ -1,12 +1,12 @@
 //! Opening a trajectory's two iceoryx2 services (data and wake-up), shared by
 //! publishers and subscribers, and the error of doing so.
 
-use crate::service_type::ShmService;
 use iceoryx2::node::Node;
 use iceoryx2::port::listener::ListenerCreateError;
 use iceoryx2::port::notifier::NotifierCreateError;
 use iceoryx2::port::publisher::PublisherCreateError;
 use iceoryx2::port::subscriber::SubscriberCreateError;
+use iceoryx2::prelude::ipc;
 use iceoryx2::service::builder::event::EventOpenOrCreateError;
 use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
 use iceoryx2::service::port_factory::{event, publish_subscribe};
@@ -16,13 +16,13 @@ use crate::qos::{Delivery, TrajectoryQos};
 use crate::service_name::{NameError, TrajectoryServiceNames};
 
 /// The iceoryx2 node type esgm uses: inter-process services.
-pub type ShmNode = Node<ShmService>;
+pub type ShmNode = Node<ipc::Service>;
 
 /// A trajectory's data service.
-pub(crate) type DataService = publish_subscribe::PortFactory<ShmService, [Block16], SampleHeader>;
+pub(crate) type DataService = publish_subscribe::PortFactory<ipc::Service, [Block16], SampleHeader>;
 
 /// A trajectory's wake-up service.
-pub(crate) type WakeService = event::PortFactory<ShmService>;
+pub(crate) type WakeService = event::PortFactory<ipc::Service>;
 
 /// A publisher or subscriber could not be opened.
 #[derive(Debug, thiserror::Error)]

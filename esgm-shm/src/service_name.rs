@@ -154,19 +154,22 @@ pub fn nodes_of(domain: &str) -> Vec<(String, bool)> {
     use iceoryx2::node::{Node, NodeState, NodeView};
     let prefix = format!("{SERVICE_PREFIX}/{domain}/");
     let mut out = Vec::new();
-    let _ = Node::<crate::ShmService>::list(crate::service_type::shm_config(), |state| {
-        let (details, alive) = match &state {
-            NodeState::Alive(v) => (v.details().clone(), true),
-            NodeState::Dead(v) => (v.details().clone(), false),
-            _ => (None, false),
-        };
-        if let Some(d) = details {
-            if d.name().as_str().starts_with(&prefix) {
-                out.push((d.name().as_str().to_owned(), alive));
+    let _ = Node::<iceoryx2::prelude::ipc::Service>::list(
+        iceoryx2::config::Config::global_config(),
+        |state| {
+            let (details, alive) = match &state {
+                NodeState::Alive(v) => (v.details().clone(), true),
+                NodeState::Dead(v) => (v.details().clone(), false),
+                _ => (None, false),
+            };
+            if let Some(d) = details {
+                if d.name().as_str().starts_with(&prefix) {
+                    out.push((d.name().as_str().to_owned(), alive));
+                }
             }
-        }
-        iceoryx2::prelude::CallbackProgression::Continue
-    });
+            iceoryx2::prelude::CallbackProgression::Continue
+        },
+    );
     out
 }
 

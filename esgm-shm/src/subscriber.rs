@@ -15,10 +15,10 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
-use crate::service_type::ShmService;
 use esgm_core::codec::{CodecError, ENVELOPE_LEN};
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::ipc;
 use iceoryx2::service::port_factory::PortFactory;
 
 use crate::payload::{Block16, SampleHeader, as_bytes};
@@ -190,7 +190,7 @@ pub struct TrajectorySubscriber {
     type_name: String,
     expected_type_id: u64,
     service: DataService,
-    port: Subscriber<ShmService, [Block16], SampleHeader>,
+    port: Subscriber<ipc::Service, [Block16], SampleHeader>,
     waiter: Waiter,
     validation: Validation,
     counters: Arc<Counters>,

@@ -29,9 +29,7 @@ use esgm_core::{Constraint, PolicyViolation, Time};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::{ServiceName, ZeroCopySend};
-
-use crate::service_type::ShmService;
+use iceoryx2::prelude::{ServiceName, ZeroCopySend, ipc};
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
 use crate::publisher::PublishError;
@@ -119,11 +117,11 @@ impl ViolationRecord {
     }
 }
 
-type ViolationService = publish_subscribe::PortFactory<ShmService, ViolationRecord, ()>;
+type ViolationService = publish_subscribe::PortFactory<ipc::Service, ViolationRecord, ()>;
 
 struct ViolationServices {
     data: ViolationService,
-    wake: event::PortFactory<ShmService>,
+    wake: event::PortFactory<ipc::Service>,
 }
 
 fn open_services(
@@ -159,8 +157,8 @@ fn open_services(
 /// Publishes a trajectory's violations; used by [`crate::ShmTrajectoryWriter`].
 #[derive(Debug)]
 pub struct ViolationPublisher {
-    port: Publisher<ShmService, ViolationRecord, ()>,
-    notifier: Notifier<ShmService>,
+    port: Publisher<ipc::Service, ViolationRecord, ()>,
+    notifier: Notifier<ipc::Service>,
     sequence: Cell<u64>,
 }
 
@@ -240,7 +238,7 @@ impl ViolationSubscriberBuilder {
 #[derive(Debug)]
 pub struct ViolationSubscriber {
     trajectory: String,
-    port: Subscriber<ShmService, ViolationRecord, ()>,
+    port: Subscriber<ipc::Service, ViolationRecord, ()>,
     waiter: Waiter,
     stats: Cell<ViolationSubscriberStats>,
     next_sequence: Cell<Option<u64>>,

@@ -28,7 +28,7 @@
 //! use std::time::Duration;
 //! use esgm_core::{EntityStructure, FluentStreamPolicy, TypeChecker, TypeRegistry};
 //! use esgm_shm::{ShmTrajectoryReader, ShmTrajectoryWriter};
-//! use esgm_shm::{ShmService, node_builder};
+//! use iceoryx2::prelude::{NodeBuilder, ipc};
 //!
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! let registry = TypeRegistry::with_library();
@@ -37,7 +37,7 @@
 //! let policy = FluentStreamPolicy::reasonable(50_000_000, 100)?;
 //!
 //! // In the producing process:
-//! let node = node_builder().create::<ShmService>()?;
+//! let node = NodeBuilder::new().create::<ipc::Service>()?;
 //! let mut writer = ShmTrajectoryWriter::builder("robot_state", checker.clone())
 //!     .domain("lab")
 //!     .policy(policy.clone())
@@ -47,7 +47,7 @@
 //! writer.release_due()?;
 //!
 //! // In any other process, with the same policy:
-//! let node = node_builder().create::<ShmService>()?;
+//! let node = NodeBuilder::new().create::<ipc::Service>()?;
 //! let mut reader = ShmTrajectoryReader::builder("robot_state", checker)
 //!     .domain("lab")
 //!     .policy(policy)
@@ -73,8 +73,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicI64, Ordering};
 use std::time::Duration;
 
-use crate::service_type::ShmService;
 use iceoryx2::port::notifier::Notifier;
+use iceoryx2::prelude::ipc;
 use iceoryx2::service::port_factory::PortFactory;
 
 use esgm_core::{
@@ -361,7 +361,7 @@ pub struct ShmTrajectoryWriter {
     publisher: TrajectoryPublisher,
     violations: ViolationPublisher,
     /// Wakes readers that received the history in [`Self::update_connections`].
-    wake: Notifier<ShmService>,
+    wake: Notifier<ipc::Service>,
     wake_service: WakeService,
     /// Readers and wake-up listeners at the last [`Self::update_connections`].
     readers_seen: Cell<(usize, usize)>,

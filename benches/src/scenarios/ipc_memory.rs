@@ -12,8 +12,8 @@
 //! `memory` section, not to the latency rows.
 //!
 //! Shared memory per trajectory: iceoryx2 0.10 keeps every segment of a service as a
-//! file under `/dev/shm` (`esgm_…` in esgm's iceoryx2 namespace; its static configs
-//! are small files under `/tmp/iceoryx2/esgm`). The writer lists `/dev/shm` just before creating the trajectory
+//! file under `/dev/shm` (`iox2_…`; its static configs are small files under
+//! `/tmp/iceoryx2`). The writer lists `/dev/shm` just before creating the trajectory
 //! and again after adding to it; the files that appeared are the trajectory's data,
 //! wake-up and violations services, its writer's and readers' ports and the
 //! connections between them. Reported are their sizes (mapped) and the tmpfs blocks

@@ -1,31 +1,19 @@
-//! The iceoryx2 nodes of a benchmark process (measuring or peer): esgm's, and the raw
-//! `ipc::Service` one of the floor.
+//! The iceoryx2 node of a benchmark process (measuring or peer).
 
 use anyhow::Context as _;
-use esgm_shm::{ShmNode, ShmService, node_builder, shm_config};
+use esgm_shm::ShmNode;
 use iceoryx2::prelude::{
     CallbackProgression, Config, LogLevel, Node, NodeBuilder, NodeState, SignalHandlingMode, ipc,
     set_log_level,
 };
 
-/// A node for this process's esgm services (esgm's service type, in esgm's iceoryx2
-/// namespace: see [`esgm_shm::service_type`]).
+/// A node for this process's services.
 ///
 /// Signal handling is off: by default an iceoryx2 node takes over SIGINT and SIGTERM
 /// (to let a program shut down cleanly), which would make Ctrl-C do nothing while a
 /// benchmark runs. iceoryx2's own log is cut to errors: its warnings (no config file,
 /// the defaults used) are not news for a benchmark and would clutter the table.
 pub fn ipc_node() -> anyhow::Result<ShmNode> {
-    set_log_level(LogLevel::Error);
-    node_builder()
-        .signal_handling_mode(SignalHandlingMode::Disabled)
-        .create::<ShmService>()
-        .context("could not create an iceoryx2 node")
-}
-
-/// A node of iceoryx2's default inter-process service type, in its default namespace:
-/// raw iceoryx2, for the floor.
-pub fn floor_node() -> anyhow::Result<Node<ipc::Service>> {
     set_log_level(LogLevel::Error);
     NodeBuilder::new()
         .signal_handling_mode(SignalHandlingMode::Disabled)
@@ -34,17 +22,11 @@ pub fn floor_node() -> anyhow::Result<Node<ipc::Service>> {
 }
 
 /// Removes what iceoryx2 nodes of dead processes left behind (shared memory, service
-/// entries), esgm's and the floor's: called after killing a peer process, which had no
-/// chance to clean up. iceoryx2 does the same whenever a node is created; this just does
-/// not wait for that. Best effort: a failure leaves the files to that next cleanup.
+/// entries): called after killing a peer process, which had no chance to clean up.
+/// iceoryx2 does the same whenever a node is created; this just does not wait for that.
+/// Best effort: a failure leaves the files to that next cleanup.
 pub fn remove_dead_nodes() {
     set_log_level(LogLevel::Error);
-    let _ = Node::<ShmService>::list(shm_config(), |state| {
-        if let NodeState::Dead(node) = state {
-            let _ = node.try_remove_stale_resources();
-        }
-        CallbackProgression::Continue
-    });
     let _ = Node::<ipc::Service>::list(Config::global_config(), |state| {
         if let NodeState::Dead(node) = state {
             let _ = node.try_remove_stale_resources();

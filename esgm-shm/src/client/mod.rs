@@ -38,7 +38,6 @@ mod location;
 use std::sync::Arc;
 use std::time::Duration;
 
-use crate::service_type::{ShmService, node_builder};
 use crossbeam_channel::Sender;
 use esgm_core::clock::SharedClock;
 use esgm_core::esgm::{
@@ -46,6 +45,7 @@ use esgm_core::esgm::{
     RegistrationError, SensorInterface, TrajectoryInfo, TrajectorySpec,
 };
 use esgm_core::{EntityStructureType, InProcessEsgm, InProcessTrajectory, TypeRegistryError};
+use iceoryx2::prelude::{NodeBuilder, ipc};
 
 use crate::control::protocol::{ControlError, Request, Response};
 use crate::control::{ControlClient, ControlClientError};
@@ -150,9 +150,9 @@ impl ShmEsgmBuilder {
         let thread = std::thread::Builder::new()
             .name(format!("esgm-location-{host}"))
             .spawn(move || {
-                let setup = node_builder()
+                let setup = NodeBuilder::new()
                     .name(&crate::service_name::node_name(&d, &h))
-                    .create::<ShmService>()
+                    .create::<ipc::Service>()
                     .map_err(ControlClientError::Node)
                     .and_then(|node| Ok((ControlClient::connect(&d, timeout)?, node)));
                 let (control, node) = match setup {

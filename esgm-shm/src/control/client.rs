@@ -5,9 +5,7 @@ use std::time::{Duration, Instant};
 use iceoryx2::node::NodeCreationFailure;
 use iceoryx2::port::client::{Client, RequestSendError};
 use iceoryx2::port::{LoanError, ReceiveError};
-use iceoryx2::prelude::AllocationStrategy;
-
-use crate::service_type::{ShmService, node_builder};
+use iceoryx2::prelude::{AllocationStrategy, NodeBuilder, ipc};
 use iceoryx2::service::builder::request_response::RequestResponseOpenError;
 use iceoryx2::service::port_factory::client::ClientCreateError;
 use iceoryx2::service::port_factory::request_response::PortFactory;
@@ -81,8 +79,8 @@ pub enum ControlClientError {
 #[derive(Debug)]
 pub struct ControlClient {
     domain: String,
-    client: Client<ShmService, [u8], (), [u8], ()>,
-    _service: PortFactory<ShmService, [u8], (), [u8], ()>,
+    client: Client<ipc::Service, [u8], (), [u8], ()>,
+    _service: PortFactory<ipc::Service, [u8], (), [u8], ()>,
     _node: ShmNode,
     timeout: Duration,
 }
@@ -91,9 +89,9 @@ impl ControlClient {
     /// Connects to the coordinator of `domain`; calls wait up to `timeout` for answers.
     pub fn connect(domain: &str, timeout: Duration) -> Result<Self, ControlClientError> {
         let name = control_service(domain)?;
-        let node = node_builder()
+        let node = NodeBuilder::new()
             .name(&crate::service_name::node_name(domain, "control-client"))
-            .create::<ShmService>()
+            .create::<ipc::Service>()
             .map_err(ControlClientError::Node)?;
         let service = node
             .service_builder(&name)

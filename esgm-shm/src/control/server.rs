@@ -8,9 +8,7 @@ use std::time::{Duration, Instant};
 use iceoryx2::node::{NodeCreationFailure, NodeState};
 use iceoryx2::port::server::Server;
 use iceoryx2::port::{LoanError, ReceiveError, SendError};
-use iceoryx2::prelude::AllocationStrategy;
-
-use crate::service_type::{ShmService, node_builder};
+use iceoryx2::prelude::{AllocationStrategy, NodeBuilder, ipc};
 use iceoryx2::service::builder::request_response::RequestResponseCreateError;
 use iceoryx2::service::port_factory::request_response::PortFactory;
 use iceoryx2::service::port_factory::server::ServerCreateError;
@@ -66,8 +64,8 @@ pub enum CoordinatorError {
 pub struct Coordinator {
     domain: String,
     registry: Registry,
-    server: Server<ShmService, [u8], (), [u8], ()>,
-    _service: PortFactory<ShmService, [u8], (), [u8], ()>,
+    server: Server<ipc::Service, [u8], (), [u8], ()>,
+    _service: PortFactory<ipc::Service, [u8], (), [u8], ()>,
     node: ShmNode,
     served: u64,
     failures: u64,
@@ -79,9 +77,9 @@ impl Coordinator {
     /// processes are cleaned first.
     pub fn create(domain: &str, registry: Registry) -> Result<Self, CoordinatorError> {
         let name = control_service(domain)?;
-        let node = node_builder()
+        let node = NodeBuilder::new()
             .name(&crate::service_name::node_name(domain, "coordinator"))
-            .create::<ShmService>()
+            .create::<ipc::Service>()
             .map_err(CoordinatorError::Node)?;
         cleanup_dead_nodes();
         let service = node
@@ -301,15 +299,17 @@ impl Drop for CoordinatorThread {
 /// returns how many dead nodes were cleaned.
 pub fn cleanup_dead_nodes() -> usize {
     let mut removed = 0;
-    let result =
-        iceoryx2::node::Node::<ShmService>::list(crate::service_type::shm_config(), |state| {
+    let result = iceoryx2::node::Node::<ipc::Service>::list(
+        iceoryx2::config::Config::global_config(),
+        |state| {
             if let NodeState::Dead(view) = state {
                 if view.try_remove_stale_resources().is_ok() {
                     removed += 1;
                 }
             }
             iceoryx2::prelude::CallbackProgression::Continue
-        });
+        },
+    );
     if let Err(e) = result {
         tracing::warn!(error = %e, "cannot list nodes for cleanup");
     }

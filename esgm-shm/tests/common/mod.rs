@@ -6,8 +6,8 @@ use std::time::Duration;
 use esgm_core::codec::{ArchivedEntityStructure, ArchivedValue};
 use esgm_core::library::{Image, RobotState};
 use esgm_core::{Entity, EntityStructure};
-use esgm_shm::{ShmNode, ShmService, node_builder};
-use iceoryx2::prelude::{LogLevel, set_log_level};
+use esgm_shm::ShmNode;
+use iceoryx2::prelude::{LogLevel, NodeBuilder, ipc, set_log_level};
 
 /// Every wait in the tests: long enough for a loaded CI machine, short enough that a
 /// lost sample fails the test instead of hanging it.
@@ -16,7 +16,7 @@ pub const TIMEOUT: Duration = Duration::from_secs(10);
 pub fn node() -> ShmNode {
     // iceoryx2 warns that no config file exists; the defaults are what the tests want.
     set_log_level(LogLevel::Error);
-    node_builder().create::<ShmService>().expect("iceoryx2 node")
+    NodeBuilder::new().create::<ipc::Service>().expect("iceoryx2 node")
 }
 
 pub fn robot(i: i64) -> EntityStructure {
