@@ -121,6 +121,7 @@ pub mod publisher;
 pub mod qos;
 pub mod reader;
 pub mod received;
+mod sequence_gaps;
 pub mod service;
 pub mod service_name;
 pub mod size_hint;

@@ -35,6 +35,7 @@ use crate::history::{DEFAULT_MAX_HISTORY, Entry, History, history_bound, history
 use crate::payload::SampleHeader;
 use crate::qos::TrajectoryQos;
 use crate::received::ReceivedSample;
+use crate::sequence_gaps::SequenceGaps;
 use crate::service::{OpenError, ShmNode};
 use crate::service_name::DEFAULT_DOMAIN;
 use crate::subscriber::{ReceiveError, SubscriberStats, TrajectorySubscriber};
@@ -197,7 +198,7 @@ impl ShmTrajectoryReaderBuilder {
             subscriber,
             history: History::default(),
             counts: Counts::default(),
-            next_sequence: None,
+            gaps: SequenceGaps::default(),
         })
     }
 }
@@ -311,8 +312,8 @@ pub struct ShmTrajectoryReader {
     subscriber: TrajectorySubscriber,
     history: History<ReceivedSample>,
     counts: Counts,
-    /// The sequence number the writer's next sample should carry.
-    next_sequence: Option<u64>,
+    /// The sequence number each publisher's next sample should carry.
+    gaps: SequenceGaps,
 }
 
 impl ShmTrajectoryReader {
@@ -432,10 +433,10 @@ impl ShmTrajectoryReader {
     /// are skipped, a full hand makes room; anything else is the caller's.
     fn handle(&mut self, e: ReceiveError) -> Result<(), ReceiveError> {
         match e {
-            ReceiveError::Reset { sequence } => {
+            ReceiveError::Reset { sequence, publisher } => {
                 // T5 across processes: what came before the marker is gone.
                 while self.history.pop_oldest().is_some() {}
-                self.next_sequence = Some(sequence.wrapping_add(1));
+                self.gaps.expect_after(publisher, sequence);
                 self.counts.resets += 1;
                 Ok(())
             }
@@ -456,11 +457,8 @@ impl ShmTrajectoryReader {
     /// Stores `sample` and evicts; false if the cache evicted it at once.
     fn insert(&mut self, sample: ReceivedSample) -> bool {
         let h = *sample.header();
-        if let Some(expected) = self.next_sequence {
-            // A smaller number is a restarted writer, not a loss.
-            self.counts.lost = self.counts.lost.saturating_add(h.sequence.saturating_sub(expected));
-        }
-        self.next_sequence = Some(h.sequence.wrapping_add(1));
+        let lost = self.gaps.observe(sample.publisher_id(), h.sequence);
+        self.counts.lost = self.counts.lost.saturating_add(lost);
         self.history.push(h.valid_time, sample);
         let stored = self.history.nth_latest(0).map(|e| e.seq);
         self.counts.added += 1;

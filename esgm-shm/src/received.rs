@@ -70,6 +70,12 @@ impl ReceivedSample {
         self.sample.user_header()
     }
 
+    /// The iceoryx2 publisher port that sent the sample: sequence numbers
+    /// ([`SampleHeader::sequence`]) count per publisher.
+    pub fn publisher_id(&self) -> iceoryx2::identifiers::UniquePublisherId {
+        self.sample.header().publisher_id()
+    }
+
     /// The codec bytes (envelope + archive) in shared memory.
     pub fn archive_bytes(&self) -> &[u8] {
         // The subscriber checked `archive_len <= payload length` before building us.

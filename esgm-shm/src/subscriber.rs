@@ -16,6 +16,7 @@ use std::sync::atomic::Ordering;
 use std::time::Duration;
 
 use esgm_core::codec::{CodecError, ENVELOPE_LEN};
+use iceoryx2::identifiers::UniquePublisherId;
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::ipc;
@@ -71,6 +72,8 @@ pub enum ReceiveError {
     Reset {
         /// The marker's sequence number.
         sequence: u64,
+        /// The publisher that sent the marker (sequence numbers are per publisher).
+        publisher: UniquePublisherId,
     },
     /// The header names a payload kind this build does not know (a newer or foreign
     /// writer). The sample was dropped.
@@ -270,7 +273,10 @@ impl TrajectorySubscriber {
             Err(e)
         };
         if header.kind == SampleHeader::KIND_RESET {
-            return Err(ReceiveError::Reset { sequence: header.sequence });
+            return Err(ReceiveError::Reset {
+                sequence: header.sequence,
+                publisher: sample.header().publisher_id(),
+            });
         }
         if header.kind != SampleHeader::KIND_STRUCTURE {
             return rejected(ReceiveError::UnknownKind { kind: header.kind });

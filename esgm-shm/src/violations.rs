@@ -21,7 +21,7 @@
 //! oldest ones rather than stall the writer; the record's sequence number shows the gap
 //! ([`ViolationSubscriberStats::lost`]).
 
-use std::cell::Cell;
+use std::cell::{Cell, RefCell};
 use std::time::Duration;
 
 use bytemuck::{Pod, Zeroable};
@@ -33,6 +33,7 @@ use iceoryx2::prelude::{ServiceName, ZeroCopySend, ipc};
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
 use crate::publisher::PublishError;
+use crate::sequence_gaps::SequenceGaps;
 use crate::service::{OpenError, ShmNode};
 use crate::service_name::{DEFAULT_DOMAIN, NameError, SERVICE_PREFIX, TrajectoryServiceNames};
 use crate::subscriber::ReceiveError;
@@ -229,7 +230,7 @@ impl ViolationSubscriberBuilder {
             port,
             waiter: Waiter::new(self.wait, listener),
             stats: Cell::new(ViolationSubscriberStats::default()),
-            next_sequence: Cell::new(None),
+            gaps: RefCell::new(SequenceGaps::default()),
         })
     }
 }
@@ -241,7 +242,7 @@ pub struct ViolationSubscriber {
     port: Subscriber<ipc::Service, ViolationRecord, ()>,
     waiter: Waiter,
     stats: Cell<ViolationSubscriberStats>,
-    next_sequence: Cell<Option<u64>>,
+    gaps: RefCell<SequenceGaps>,
 }
 
 impl ViolationSubscriber {
@@ -267,8 +268,8 @@ impl ViolationSubscriber {
     /// The next violation if one is queued; never blocks. A record with an unknown
     /// constraint code is counted and returned as [`ReceiveError::UnknownKind`].
     pub fn receive(&self) -> Result<Option<PolicyViolation>, ReceiveError> {
-        let record = match self.port.receive() {
-            Ok(Some(sample)) => *sample.payload(),
+        let (record, publisher) = match self.port.receive() {
+            Ok(Some(sample)) => (*sample.payload(), sample.header().publisher_id()),
             Ok(None) => return Ok(None),
             Err(iceoryx2::port::ReceiveError::ExceedsMaxBorrows) => {
                 return Err(ReceiveError::TooManyHeld);
@@ -277,11 +278,8 @@ impl ViolationSubscriber {
         };
         let mut stats = self.stats.get();
         stats.received += 1;
-        if let Some(expected) = self.next_sequence.get() {
-            // A smaller sequence is a restarted writer, not a loss.
-            stats.lost = stats.lost.saturating_add(record.sequence.saturating_sub(expected));
-        }
-        self.next_sequence.set(Some(record.sequence.wrapping_add(1)));
+        let lost = self.gaps.borrow_mut().observe(publisher, record.sequence);
+        stats.lost = stats.lost.saturating_add(lost);
         let violation = record.to_violation(&self.trajectory);
         if violation.is_none() {
             stats.malformed += 1;

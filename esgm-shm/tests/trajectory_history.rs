@@ -414,6 +414,47 @@ fn extreme_times_from_a_foreign_publisher_do_not_break_queries() {
 }
 
 #[test]
+fn losses_are_counted_per_publisher_when_two_publishers_interleave() {
+    let setup = Setup::new("two_publishers", FluentStreamPolicy::default(), 0);
+    let reader_node = node();
+    let mut reader = setup.reader(SimClock::shared(0)).create(&reader_node).unwrap();
+    let (node_a, node_b) = (node(), node());
+    let (a, b) =
+        (RawPublisher::new(&node_a, &setup.domain), RawPublisher::new(&node_b, &setup.domain));
+    let send = |p: &RawPublisher, vt: Time, sequence: u64| {
+        let bytes = codec::encode(&reading(vt, 1.0)).unwrap();
+        p.send(
+            &bytes,
+            SampleHeader {
+                valid_time: vt,
+                create_time: vt,
+                archive_len: bytes.len() as u64,
+                type_id: type_id("Reading"),
+                sequence,
+                kind: SampleHeader::KIND_STRUCTURE,
+                ..SampleHeader::default()
+            },
+        );
+    };
+    // Each numbers its own samples from 0: interleaved, nothing is missing.
+    send(&a, 1, 0);
+    send(&b, 2, 0);
+    send(&a, 3, 1);
+    send(&b, 4, 1);
+    send(&a, 5, 2);
+    // Then b skips two of its numbers: two lost, whatever a did meanwhile.
+    send(&b, 6, 4);
+    send(&a, 7, 3);
+    let deadline = Instant::now() + TIMEOUT;
+    while reader.len() < 7 && Instant::now() < deadline {
+        reader.update().unwrap();
+        thread::sleep(Duration::from_millis(1));
+    }
+    assert_eq!(reader.len(), 7);
+    assert_eq!(reader.stats().lost, 2, "b's gap only; interleaving is not a loss");
+}
+
+#[test]
 fn a_second_writer_is_refused() {
     let setup = Setup::new("second_writer", FluentStreamPolicy::default(), 0);
     let n = node();
