@@ -31,8 +31,11 @@ use crate::holdings::{Holdings, OwnerId};
 use crate::publisher::TrajectoryPublisher;
 use crate::qos::TrajectoryQos;
 use crate::service::{OpenError, ShmNode};
+use crate::service_name::{NameError, TrajectoryServiceNames};
 use crate::subscriber::{ReceiveError, TrajectorySubscriber};
-use crate::violations::{ViolationPublisher, ViolationSubscriber};
+use crate::violations::{ViolationPublisher, ViolationSubscriber, violation_service_name};
+use crate::wait::WaitStrategy;
+use iceoryx2::prelude::ServiceName;
 
 /// A bridge could not be set up.
 #[derive(Debug, thiserror::Error)]
@@ -141,9 +144,16 @@ pub(crate) struct Export {
     pub failures: u64,
     /// Primitive trajectories: other processes' adds, and the handle they go to.
     inbox: Option<(TrajectorySubscriber, InProcessTrajectory)>,
+    /// The inbox's wake-up service, for the location's waker.
+    inbox_wake: Option<ServiceName>,
 }
 
 impl Export {
+    /// The wake-up services other processes' adds to this trajectory notify (its inbox).
+    pub fn wake_services(&self) -> Vec<ServiceName> {
+        self.inbox_wake.iter().cloned().collect()
+    }
+
     /// Publishes `handle`'s stream from now on (and its current content, so readers
     /// that connect later receive the history). A `repointed` name starts with a reset
     /// marker: readers elsewhere forget the stream the name denoted before.
@@ -171,12 +181,22 @@ impl Export {
                 TrajectorySubscriber::builder(&name, type_name)
                     .domain(inbox_domain(domain))
                     .qos(inbox_qos())
+                    // The location never waits on it: its waker does (see `waker`).
+                    .wait_strategy(WaitStrategy::BusySpin)
                     .create(node)?,
                 handle.clone(),
             )),
             false => None,
         };
-        let mut export = Self { publisher, violations, events, failures: 0, inbox };
+        let inbox_wake = match primitive {
+            true => Some(
+                *TrajectoryServiceNames::new(&inbox_domain(domain), &name)
+                    .map_err(OpenError::from)?
+                    .wake(),
+            ),
+            false => None,
+        };
+        let mut export = Self { publisher, violations, events, failures: 0, inbox, inbox_wake };
         if repointed {
             export.publish(StoreEvent::Reset);
         }
@@ -260,9 +280,16 @@ pub(crate) struct Import {
     /// Whose samples this import's held images count as, and how many it may hold.
     owner: OwnerId,
     budget: usize,
+    /// The wake-up services of the samples and the violations, for the location's waker.
+    wakes: Vec<ServiceName>,
 }
 
 impl Import {
+    /// The wake-up services a publish on this import's trajectory notifies.
+    pub fn wake_services(&self) -> Vec<ServiceName> {
+        self.wakes.clone()
+    }
+
     /// Subscribes to `replica`'s trajectory, receiving the writer's history first.
     /// Images it receives stay in shared memory, borrowed in `holdings`.
     #[allow(clippy::too_many_arguments)]
@@ -278,9 +305,25 @@ impl Import {
         let name = esgm_core::EntityTrajectoryStructure::name(&replica).to_owned();
         let entity_type = replica.entity_type().unwrap_or_else(|_| EntityStructureType::new(""));
         let qos = bridge_qos(policy, &entity_type);
-        let subscriber =
-            TrajectorySubscriber::builder(&name, type_name).domain(domain).qos(qos).create(node)?;
-        let violations = ViolationSubscriber::builder(&name).domain(domain).create(node)?;
+        // The location never waits on these: its waker does (see `waker`), so they
+        // need no listeners of their own.
+        let subscriber = TrajectorySubscriber::builder(&name, type_name)
+            .domain(domain)
+            .qos(qos)
+            .wait_strategy(WaitStrategy::BusySpin)
+            .create(node)?;
+        let violations = ViolationSubscriber::builder(&name)
+            .domain(domain)
+            .wait_strategy(WaitStrategy::BusySpin)
+            .create(node)?;
+        let violations_wake = violation_service_name(domain, &name);
+        let wakes = vec![
+            *TrajectoryServiceNames::new(domain, &name)?.wake(),
+            ServiceName::new(&violations_wake).map_err(|_| NameError::TooLong {
+                service: violations_wake.clone(),
+                max: ServiceName::max_len(),
+            })?,
+        ];
         let outbox = primitive.then(|| {
             let (sender, receiver) = crossbeam_channel::bounded(OUTBOX_CAPACITY);
             let outbox = Outbox { trajectory: name.clone(), sender };
@@ -299,6 +342,7 @@ impl Import {
             owner: holdings.new_owner(),
             // One borrow stays free to receive into.
             budget: qos.max_borrowed_samples.saturating_sub(1),
+            wakes,
         })
     }
 

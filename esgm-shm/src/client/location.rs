@@ -14,6 +14,7 @@ use esgm_core::esgm::{CreateError, Esgm, LookupError, TrajectoryKind, Trajectory
 use esgm_core::{EntityStructureType, InProcessEsgm, InProcessTrajectory};
 
 use super::bridge::{Export, Import};
+use super::waker::Waker;
 use crate::control::protocol::{Assignment, ControlError, Request, Response, TrajectoryRecord};
 use crate::control::{ControlClient, ControlClientError};
 use crate::holdings::{HoldingStats, Holdings};
@@ -78,6 +79,8 @@ pub(crate) struct Location {
     /// Assignments that failed to build (reported once each).
     pub failed: BTreeSet<String>,
     pub serving: bool,
+    /// Pokes this thread when a service it reads from another process is notified.
+    pub waker: Waker,
 }
 
 impl Location {
@@ -88,6 +91,8 @@ impl Location {
         let mut next_assignments = Instant::now();
         loop {
             let mut work = 0;
+            // A poke only ends a sleep: the imports are read below whatever it said.
+            while self.waker.pokes.try_recv().is_ok() {}
             loop {
                 match commands.try_recv() {
                     Ok(c) => {
@@ -120,6 +125,7 @@ impl Location {
             // Wake at once for a command or a local event; imports are polled.
             let mut sel = Select::new();
             sel.recv(commands);
+            sel.recv(&self.waker.pokes);
             for e in self.exports.values() {
                 sel.recv(&e.events);
             }
@@ -129,6 +135,18 @@ impl Location {
             let _ = sel.ready_timeout(idle);
             idle = (idle * 2).min(MAX_IDLE);
         }
+    }
+
+    /// Tells the waker every service this location reads from other processes: each
+    /// import's samples and violations, each primitive export's inbox.
+    fn rewatch(&self) {
+        let names = self
+            .imports
+            .values()
+            .flat_map(Import::wake_services)
+            .chain(self.exports.values().flat_map(Export::wake_services))
+            .collect();
+        self.waker.watch(names);
     }
 
     fn handle(&mut self, command: Command) {
@@ -222,6 +240,7 @@ impl Location {
             )
             .map_err(|e| CreateError::Unavailable { reason: e.to_string() })?;
             self.exports.insert(spec.name.clone(), export);
+            self.rewatch();
         }
         Ok(handle)
     }
@@ -266,6 +285,7 @@ impl Location {
         ) {
             Ok(import) => {
                 self.imports.insert(name.clone(), import);
+                self.rewatch();
                 Ok(handle)
             }
             Err(e) => {
@@ -298,6 +318,7 @@ impl Location {
         self.control.call(&request).map_err(lookup_error)?;
         self.exports.remove(name);
         self.imports.remove(name);
+        self.rewatch();
         let _ = self.local.destroy_entity_trajectory_structure(name);
         self.failed.remove(name);
         Ok(())

@@ -34,6 +34,7 @@
 
 mod bridge;
 mod location;
+mod waker;
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -51,6 +52,7 @@ use crate::control::protocol::{ControlError, Request, Response};
 use crate::control::{ControlClient, ControlClientError};
 use crate::holdings::HoldingStats;
 use location::{Command, Location, install};
+use waker::Waker;
 
 /// How long a control call may take by default (the coordinator answers in
 /// milliseconds; a longer wait means it is gone or stuck).
@@ -163,6 +165,7 @@ impl ShmEsgmBuilder {
                     }
                 };
                 let _ = ready.send(Ok(()));
+                let waker = Waker::start(crate::service_name::node_name(&d, &format!("{h}/waker")));
                 let location = Location {
                     domain: d,
                     host: h,
@@ -174,6 +177,7 @@ impl ShmEsgmBuilder {
                     holdings: Default::default(),
                     failed: Default::default(),
                     serving: false,
+                    waker,
                 };
                 location.run(&inbox);
             })
