@@ -9,8 +9,13 @@
 //! one iceoryx2 listener per watched wake-up service (the trajectory's, its violations',
 //! a primitive's inbox), sleeps on all of them in an iceoryx2 `WaitSet`, and on any
 //! event sends a poke that the location's `Select` waits on. A publish in another
-//! process then reaches the location in two wake-ups (tens of µs) instead of a poll
-//! period.
+//! process then reaches the location in two wake-ups instead of a poll period.
+//!
+//! Measured with `examples/connect_hop.rs` (two locations, a structure every 5 ms, add
+//! in one until a subscriber of the other holds it; release, this 2-core VM): p50
+//! 0.25–0.30 ms and p99 0.6 ms with the waker, 1.0–1.07 ms p50 without it. What remains
+//! is the wake-ups of the threads on the way (the writer's location, the waker, the
+//! reader's location, the subscriber), each tens of µs on this VM.
 //!
 //! iceoryx2 ports cannot move between threads, so the waker has its own node and
 //! builds its listeners itself from the service names the location sends whenever its
@@ -36,6 +41,9 @@ pub(crate) struct Waker {
     watch: Option<Sender<Vec<ServiceName>>>,
     /// A value arrives here when a watched service was notified (at most one waits).
     pub pokes: Receiver<()>,
+    /// Keeps `pokes` connected whatever happens to the thread: a disconnected channel
+    /// would be ready forever, and the location's `Select` would spin.
+    _poke: Sender<()>,
     thread: Option<JoinHandle<()>>,
 }
 
@@ -46,12 +54,13 @@ impl Waker {
     pub fn start(node_name: iceoryx2::prelude::NodeName) -> Self {
         let (watch, watched) = crossbeam_channel::unbounded();
         let (poke, pokes) = crossbeam_channel::bounded(1);
+        let sender = poke.clone();
         let thread = std::thread::Builder::new()
             .name("esgm-waker".to_owned())
-            .spawn(move || run(&node_name, &watched, &poke))
+            .spawn(move || run(&node_name, &watched, &sender))
             .map_err(|e| tracing::warn!(error = %e, "cannot start the waker; imports are polled"))
             .ok();
-        Self { watch: Some(watch), pokes, thread }
+        Self { watch: Some(watch), _poke: poke, pokes, thread }
     }
 
     /// Watches exactly `services` from now on.
