@@ -28,8 +28,9 @@ pub(crate) const MAINTENANCE_PERIOD: Duration = Duration::from_millis(20);
 /// serving process polls, so this bounds the coordinator's load.
 pub(crate) const ASSIGNMENT_PERIOD: Duration = Duration::from_millis(200);
 
-/// The longest the thread sleeps when nothing happens: bounds the delay of a sample
-/// arriving from another process at an idle moment.
+/// The longest the thread sleeps when nothing happens: bounds the delay of what does
+/// not wake it (a service its waker could not listen to, images released by values
+/// dropped in other threads). Samples from other processes wake it through the waker.
 const MAX_IDLE: Duration = Duration::from_millis(1);
 
 /// What the API asks the location thread.
@@ -122,7 +123,9 @@ impl Location {
                 idle = Duration::from_micros(20);
                 continue;
             }
-            // Wake at once for a command or a local event; imports are polled.
+            // Wake at once for a command, a local event or a poke from the waker (a
+            // service read from another process was notified); polling the imports
+            // with the idle backoff remains the fallback.
             let mut sel = Select::new();
             sel.recv(commands);
             sel.recv(&self.waker.pokes);
