@@ -321,6 +321,23 @@ impl RawPublisher {
         Self { port }
     }
 
+    /// Sends a valid `Reading` at `vt` under sequence number `sequence`.
+    fn send_reading(&self, vt: Time, sequence: u64) {
+        let bytes = codec::encode(&reading(vt, 1.0)).unwrap();
+        self.send(
+            &bytes,
+            SampleHeader {
+                valid_time: vt,
+                create_time: vt,
+                archive_len: bytes.len() as u64,
+                type_id: type_id("Reading"),
+                sequence,
+                kind: SampleHeader::KIND_STRUCTURE,
+                ..SampleHeader::default()
+            },
+        );
+    }
+
     fn send(&self, payload: &[u8], header: SampleHeader) {
         let mut blocks = vec![Block16::default(); blocks_for(payload.len()).max(1)];
         bytemuck::cast_slice_mut::<Block16, u8>(&mut blocks)[..payload.len()]
@@ -330,6 +347,16 @@ impl RawPublisher {
         *sample.user_header_mut() = header;
         sample.send().unwrap();
     }
+}
+
+/// Updates `reader` until it stores `n` samples (or the timeout), then checks it does.
+fn update_until_stored(reader: &mut ShmTrajectoryReader, n: usize) {
+    let deadline = Instant::now() + TIMEOUT;
+    while reader.len() < n && Instant::now() < deadline {
+        reader.update().unwrap();
+        thread::sleep(Duration::from_millis(1));
+    }
+    assert_eq!(reader.len(), n);
 }
 
 #[test]
@@ -384,26 +411,9 @@ fn extreme_times_from_a_foreign_publisher_do_not_break_queries() {
     let raw = RawPublisher::new(&raw_node, &setup.domain);
     // Valid archives at the ends of the timeline, with sequence numbers that jump.
     for (vt, sequence) in [(Time::MIN, u64::MAX - 1), (Time::MAX, 3), (Time::MIN, u64::MAX)] {
-        let bytes = codec::encode(&reading(vt, 1.0)).unwrap();
-        raw.send(
-            &bytes,
-            SampleHeader {
-                valid_time: vt,
-                create_time: vt,
-                archive_len: bytes.len() as u64,
-                type_id: type_id("Reading"),
-                sequence,
-                kind: SampleHeader::KIND_STRUCTURE,
-                ..SampleHeader::default()
-            },
-        );
+        raw.send_reading(vt, sequence);
     }
-    let deadline = Instant::now() + TIMEOUT;
-    while reader.len() < 3 && Instant::now() < deadline {
-        reader.update().unwrap();
-        thread::sleep(Duration::from_millis(1));
-    }
-    assert_eq!(reader.len(), 3);
+    update_until_stored(&mut reader, 3);
     let closest = reader.get_at_approximating(0, &ValueApproximation::Closest).unwrap();
     assert_eq!(closest.valid_time(), Time::MAX, "0 is one closer to the end than to the start");
     let linear = reader.get_at_approximating(0, &ValueApproximation::Linear).unwrap();
@@ -421,21 +431,7 @@ fn losses_are_counted_per_publisher_when_two_publishers_interleave() {
     let (node_a, node_b) = (node(), node());
     let (a, b) =
         (RawPublisher::new(&node_a, &setup.domain), RawPublisher::new(&node_b, &setup.domain));
-    let send = |p: &RawPublisher, vt: Time, sequence: u64| {
-        let bytes = codec::encode(&reading(vt, 1.0)).unwrap();
-        p.send(
-            &bytes,
-            SampleHeader {
-                valid_time: vt,
-                create_time: vt,
-                archive_len: bytes.len() as u64,
-                type_id: type_id("Reading"),
-                sequence,
-                kind: SampleHeader::KIND_STRUCTURE,
-                ..SampleHeader::default()
-            },
-        );
-    };
+    let send = |p: &RawPublisher, vt: Time, sequence: u64| p.send_reading(vt, sequence);
     // Each numbers its own samples from 0: interleaved, nothing is missing.
     send(&a, 1, 0);
     send(&b, 2, 0);
@@ -445,12 +441,7 @@ fn losses_are_counted_per_publisher_when_two_publishers_interleave() {
     // Then b skips two of its numbers: two lost, whatever a did meanwhile.
     send(&b, 6, 4);
     send(&a, 7, 3);
-    let deadline = Instant::now() + TIMEOUT;
-    while reader.len() < 7 && Instant::now() < deadline {
-        reader.update().unwrap();
-        thread::sleep(Duration::from_millis(1));
-    }
-    assert_eq!(reader.len(), 7);
+    update_until_stored(&mut reader, 7);
     assert_eq!(reader.stats().lost, 2, "b's gap only; interleaving is not a loss");
 }
 
