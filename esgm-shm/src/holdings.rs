@@ -11,6 +11,13 @@
 //! `Holdings`, and the values carry a `SharedChunk` whose drop sends the sample's
 //! key back; `Holdings::collect` then returns the sample to its publisher.
 //!
+//! Values may outlive the connection that received them (a user keeps an image after
+//! dropping its `ShmEsgm`). Their samples are then never returned, and the location
+//! keeps their subscribers and its node rather than dropping them — iceoryx2 gives a
+//! publisher back every chunk a subscriber held once that subscriber's port or node is
+//! gone — until the process exits; the coordinator's dead-node cleanup reclaims them
+//! after that.
+//!
 //! A subscriber may borrow only so many samples at once
 //! ([`crate::TrajectoryQos::max_borrowed_samples`]): an owner past its budget, or a
 //! sample too small to be worth holding, is copied instead, and the copy is counted.
@@ -179,7 +186,8 @@ impl Drop for Holdings {
         // Values still point into these samples (a user kept an image past the
         // connection): returning the samples would let the publisher overwrite, and
         // dropping the subscriber unmap, bytes they read. Keep them borrowed and mapped
-        // until the process exits; the coordinator's dead-node cleanup reclaims them.
+        // until the process exits (the location keeps their subscribers and node too,
+        // see the module docs); the coordinator's dead-node cleanup reclaims them.
         let still_held = self.held.len();
         if still_held > 0 {
             tracing::debug!(still_held, "shared-memory samples still read by values; kept");

@@ -101,7 +101,7 @@ impl Location {
                         work += 1;
                     }
                     Err(TryRecvError::Empty) => break,
-                    Err(TryRecvError::Disconnected) => return,
+                    Err(TryRecvError::Disconnected) => return self.close(),
                 }
             }
             for e in self.exports.values_mut() {
@@ -137,6 +137,27 @@ impl Location {
             }
             let _ = sel.ready_timeout(idle);
             idle = (idle * 2).min(MAX_IDLE);
+        }
+    }
+
+    /// Shuts the location down when its API side is gone.
+    ///
+    /// Values may still read images in samples this location received (a user kept one
+    /// past the connection). Those samples must stay borrowed: iceoryx2 gives a
+    /// publisher back every chunk a subscriber held as soon as the subscriber's port,
+    /// or its node, is gone, and the publisher would then write new images over bytes
+    /// the values read. So then the subscribers and the node are kept, not dropped,
+    /// until the process exits (the coordinator's dead-node cleanup reclaims them
+    /// after that). Their queues cost nothing meanwhile: readers overwrite, they never
+    /// hold a writer back.
+    fn close(self) {
+        let Location { node, imports, mut holdings, .. } = self;
+        holdings.collect();
+        let held = holdings.stats().held_now;
+        if held > 0 {
+            tracing::debug!(held, "values still read received images; their subscribers stay");
+            std::mem::forget(imports);
+            std::mem::forget(node);
         }
     }
 
