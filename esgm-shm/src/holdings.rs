@@ -115,6 +115,12 @@ impl Holdings {
 
     /// Returns to their publishers the samples no value points into any more; returns
     /// how many.
+    /// Where released keys arrive: a thread that sleeps until something happens waits on
+    /// it too, so that a chunk goes back as soon as its last value is dropped.
+    pub fn releases(&self) -> &Receiver<u64> {
+        &self.released
+    }
+
     pub fn collect(&mut self) -> usize {
         let mut n = 0;
         while let Ok(key) = self.released.try_recv() {

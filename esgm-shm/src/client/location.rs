@@ -28,10 +28,13 @@ pub(crate) const MAINTENANCE_PERIOD: Duration = Duration::from_millis(20);
 /// serving process polls, so this bounds the coordinator's load.
 pub(crate) const ASSIGNMENT_PERIOD: Duration = Duration::from_millis(200);
 
-/// The longest the thread sleeps when nothing happens: bounds the delay of what does
-/// not wake it (a service its waker could not listen to, images released by values
-/// dropped in other threads). Samples from other processes wake it through the waker.
-const MAX_IDLE: Duration = Duration::from_millis(1);
+/// The longest the thread sleeps when nothing happens. Everything that needs it wakes
+/// it at once — API commands, local store events, outboxes, released images, and
+/// samples from other processes through the waker — so this only bounds the delay of
+/// what cannot (a service the waker could not listen to, a notify sent before the
+/// waker listened). It was 1 ms while imports were polled: an idle connected process
+/// then woke a thousand times a second.
+const MAX_IDLE: Duration = MAINTENANCE_PERIOD;
 
 /// What the API asks the location thread.
 pub(crate) enum Command {
@@ -123,8 +126,8 @@ impl Location {
                 idle = Duration::from_micros(20);
                 continue;
             }
-            // Wake at once for a command, a local event or a poke from the waker (a
-            // service read from another process was notified); polling the imports
+            // Wake at once for a command, a local event, a released image or a poke from
+            // the waker (a service read from another process was notified); polling
             // with the idle backoff remains the fallback.
             let mut sel = Select::new();
             sel.recv(commands);
@@ -135,7 +138,13 @@ impl Location {
             for outbox in self.imports.values().filter_map(|i| i.outbox.as_ref()) {
                 sel.recv(outbox);
             }
-            let _ = sel.ready_timeout(idle);
+            sel.recv(self.holdings.releases());
+            // Not past the next periodic duty.
+            let mut due = next_maintenance;
+            if self.serving {
+                due = due.min(next_assignments);
+            }
+            let _ = sel.ready_timeout(idle.min(due.saturating_duration_since(Instant::now())));
             idle = (idle * 2).min(MAX_IDLE);
         }
     }
