@@ -68,7 +68,8 @@ pub use runtime::{InProcessEsgm, InProcessTrajectory};
 pub use sample::Sample;
 pub use store::{
     AddError, AddForwarder, AddOutcome, DropCause, PolicyViolation, QueryError, StoreEvent,
-    SubscribeOptions, Subscription, SubscriptionId, TrajectoryStats, TrajectoryStore,
+    StoreTap, SubscribeOptions, Subscription, SubscriptionId, TapId, TrajectoryStats,
+    TrajectoryStore,
 };
 pub use time::{TIMEUNITS_PER_MILLI_SECOND, TIMEUNITS_PER_SECOND, Time, micros, millis, secs};
 pub use type_check::{InvalidType, TypeChecker};

@@ -12,6 +12,7 @@
 //! arrives in one interval. The default, [`DEFAULT_POLL`] = 1 ms, covers 8 kHz with
 //! the default queue of 8 and costs about a thousand short wake-ups a second while idle.
 
+use crate::service::ShmService;
 use std::sync::Arc;
 use std::sync::mpsc::{self, Receiver, RecvTimeoutError, Sender};
 use std::thread::JoinHandle;
@@ -19,7 +20,7 @@ use std::time::Duration;
 
 use esgm_core::{Sample, Time, ValueApproximation};
 use iceoryx2::node::NodeCreationFailure;
-use iceoryx2::prelude::{NodeBuilder, ipc};
+use iceoryx2::prelude::NodeBuilder;
 
 use crate::reader::{
     CachedSample, HistoryError, ReaderCreateError, ReaderStats, ShmTrajectoryReader,
@@ -101,7 +102,7 @@ impl HostedTrajectoryReader {
         let thread = std::thread::Builder::new()
             .name(format!("esgm-reader-{trajectory}"))
             .spawn(move || {
-                let node = match NodeBuilder::new().create::<ipc::Service>() {
+                let node = match NodeBuilder::new().create::<ShmService>() {
                     Ok(node) => node,
                     Err(e) => {
                         let _ = ready.send(Err(HostError::Node(e)));

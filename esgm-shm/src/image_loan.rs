@@ -35,13 +35,13 @@
 //! `pixels_uninit_mut` avoids. (Measured with the earlier template layout; sending
 //! now encodes the few hundred bytes around the pixels instead of copying a template.)
 
+use crate::service::ShmService;
 use std::mem::MaybeUninit;
 use std::ops::Range;
 
 use esgm_core::codec;
 use esgm_core::library::Image;
 use esgm_core::{Entity, Octets, Time};
-use iceoryx2::prelude::ipc;
 use iceoryx2::sample_mut_uninit::SampleMutUninit;
 
 use crate::image_layout::{IMAGE_NAME_MAX, IMAGE_PIXELS_OFFSET, ImageError};
@@ -49,7 +49,7 @@ use crate::payload::{Block16, SampleHeader, as_uninit_bytes, copy_into, zero_fil
 use crate::publisher::{PublishError, Published, TrajectoryPublisher};
 use crate::structure_loan::StructureLoan;
 
-type UninitSample = SampleMutUninit<ipc::Service, [MaybeUninit<Block16>], SampleHeader>;
+type UninitSample = SampleMutUninit<ShmService, [MaybeUninit<Block16>], SampleHeader>;
 
 /// Shared memory holding an image under construction; see the module docs.
 pub struct ImageLoan<'p> {

@@ -15,10 +15,11 @@
 //! use std::time::Duration;
 //! use esgm_core::EntityStructure;
 //! use esgm_shm::{TrajectoryPublisher, TrajectorySubscriber};
-//! use iceoryx2::prelude::{NodeBuilder, ipc};
+//! use esgm_shm::ShmService;
+//! use iceoryx2::prelude::NodeBuilder;
 //!
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
-//! let node = NodeBuilder::new().create::<ipc::Service>()?;
+//! let node = NodeBuilder::new().create::<ShmService>()?;
 //! let publisher = TrajectoryPublisher::builder("robot_state", "RobotState")
 //!     .domain("lab")
 //!     .create(&node)?;
@@ -144,7 +145,7 @@ pub use reader::{
     Approximated, CachedSample, HistoryError, ReaderCreateError, ReaderStats, ShmTrajectoryReader,
 };
 pub use received::ReceivedSample;
-pub use service::{OpenError, ShmNode};
+pub use service::{OpenError, ShmNode, ShmService};
 pub use service_name::{NameError, TrajectoryServiceNames, node_name, nodes_of, unique_domain};
 pub use structure_loan::StructureLoan;
 pub use subscriber::{ReceiveError, SubscriberStats, TrajectorySubscriber, Validation};

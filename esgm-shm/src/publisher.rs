@@ -31,6 +31,7 @@
 //! when [`TrajectoryPublisher::update_connections`] is called. A producer that publishes
 //! rarely should call it periodically so that new subscribers get the history at once.
 
+use crate::service::ShmService;
 use std::cell::Cell;
 use std::time::Duration;
 
@@ -40,7 +41,7 @@ use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::update_connections::{ConnectionFailure, UpdateConnections};
 use iceoryx2::port::{BackpressureAction, LoanError, SendError};
-use iceoryx2::prelude::{AllocationStrategy, BackpressureStrategy, ipc};
+use iceoryx2::prelude::{AllocationStrategy, BackpressureStrategy};
 use iceoryx2::sample_mut::SampleMut;
 use iceoryx2::service::port_factory::PortFactory;
 
@@ -245,8 +246,8 @@ pub struct TrajectoryPublisher {
     type_name: String,
     type_id: u64,
     service: DataService,
-    port: Publisher<ipc::Service, [Block16], SampleHeader>,
-    notifier: Notifier<ipc::Service>,
+    port: Publisher<ShmService, [Block16], SampleHeader>,
+    notifier: Notifier<ShmService>,
     clock: SharedClock,
     lossless_timeout: Duration,
     sequence: Cell<u64>,
@@ -256,7 +257,7 @@ pub struct TrajectoryPublisher {
 }
 
 /// A sample whose payload is written, waiting for its header.
-pub(crate) type LoanedSample = SampleMut<ipc::Service, [Block16], SampleHeader>;
+pub(crate) type LoanedSample = SampleMut<ShmService, [Block16], SampleHeader>;
 
 impl TrajectoryPublisher {
     /// A builder for a publisher of `trajectory`, whose structures are of the entity

@@ -1,18 +1,22 @@
 //! A sample a subscriber took from shared memory, read in place.
 
+use crate::service::ShmService;
 use std::cell::Cell;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use esgm_core::EntityStructure;
 use esgm_core::codec::{self, ArchivedEntityStructure, CodecError};
-use iceoryx2::prelude::ipc;
+use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::sample::Sample;
 
 use crate::payload::{Block16, SampleHeader, as_bytes};
 
 /// The iceoryx2 sample type of a trajectory.
-pub(crate) type RawSample = Sample<ipc::Service, [Block16], SampleHeader>;
+pub(crate) type RawSample = Sample<ShmService, [Block16], SampleHeader>;
+
+/// The iceoryx2 subscriber port of a trajectory.
+pub(crate) type SubscriberPort = Subscriber<ShmService, [Block16], SampleHeader>;
 
 /// Counters shared by a subscriber and, when validation is deferred, its samples.
 #[derive(Debug, Default)]
@@ -45,9 +49,18 @@ pub(crate) enum Checked {
 /// Holding it keeps the shared-memory chunk borrowed: the publisher cannot reuse it,
 /// and a subscriber may hold only `max_borrowed_samples` at once
 /// ([`crate::TrajectoryQos`]). Drop samples you are done with.
+///
+/// A sample owns what keeps its bytes valid: the chunk, and a share of the subscriber
+/// port it came through (iceoryx2 hands a publisher back every chunk of a port that is
+/// gone), which keeps the port's node and segment mapped too. So a sample stays valid
+/// and unchanged after its subscriber is dropped, on any thread, whatever ended the
+/// subscriber (a destroyed trajectory, a closed connection, a panic): no path has to
+/// remember to keep anything alive.
 #[derive(Debug)]
 pub struct ReceivedSample {
+    // Dropped in this order: the chunk goes back through the port before the port goes.
     sample: RawSample,
+    _port: Arc<SubscriberPort>,
     archive_len: usize,
     checked: Cell<Checked>,
     /// Present only when validation is deferred, to count failures found later.
@@ -57,11 +70,12 @@ pub struct ReceivedSample {
 impl ReceivedSample {
     pub(crate) fn new(
         sample: RawSample,
+        port: &Arc<SubscriberPort>,
         archive_len: usize,
         checked: Checked,
         counters: Option<Arc<Counters>>,
     ) -> Self {
-        Self { sample, archive_len, checked: Cell::new(checked), counters }
+        Self { sample, _port: Arc::clone(port), archive_len, checked: Cell::new(checked), counters }
     }
 
     /// The header: times, type id, sequence, archive length. Reading it never touches

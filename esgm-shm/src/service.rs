@@ -6,7 +6,6 @@ use iceoryx2::port::listener::ListenerCreateError;
 use iceoryx2::port::notifier::NotifierCreateError;
 use iceoryx2::port::publisher::PublisherCreateError;
 use iceoryx2::port::subscriber::SubscriberCreateError;
-use iceoryx2::prelude::ipc;
 use iceoryx2::service::builder::event::EventOpenOrCreateError;
 use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
 use iceoryx2::service::port_factory::{event, publish_subscribe};
@@ -15,14 +14,26 @@ use crate::payload::{Block16, SampleHeader};
 use crate::qos::{Delivery, TrajectoryQos};
 use crate::service_name::{NameError, TrajectoryServiceNames};
 
+/// The iceoryx2 service type of every esgm port: inter-process services whose ports
+/// are `Send + Sync`.
+///
+/// Why the thread-safe variant: a sample must be able to go where its reader goes. A
+/// structure added on any thread is published by that thread, inline, under the
+/// trajectory's own lock (no hand-off to a port-owning thread); a sample received on
+/// one thread is read, and finally released, on whichever thread drops the last value
+/// that borrows it. The shared memory is the same as `ipc::Service`'s (the two differ
+/// only in the in-process lock around a port), so processes built either way meet on
+/// the same services; the lock costs an uncontended mutex per port call.
+pub type ShmService = iceoryx2::prelude::ipc_threadsafe::Service;
+
 /// The iceoryx2 node type esgm uses: inter-process services.
-pub type ShmNode = Node<ipc::Service>;
+pub type ShmNode = Node<ShmService>;
 
 /// A trajectory's data service.
-pub(crate) type DataService = publish_subscribe::PortFactory<ipc::Service, [Block16], SampleHeader>;
+pub(crate) type DataService = publish_subscribe::PortFactory<ShmService, [Block16], SampleHeader>;
 
 /// A trajectory's wake-up service.
-pub(crate) type WakeService = event::PortFactory<ipc::Service>;
+pub(crate) type WakeService = event::PortFactory<ShmService>;
 
 /// A publisher or subscriber could not be opened.
 #[derive(Debug, thiserror::Error)]

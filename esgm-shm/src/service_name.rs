@@ -16,6 +16,7 @@
 //! and `:` — no `/`, so that the mapping stays one-to-one and reversible (a discovery
 //! tool can read a trajectory name back from a service name).
 
+use crate::service::ShmService;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use iceoryx2::prelude::ServiceName;
@@ -103,6 +104,14 @@ pub fn control_service(domain: &str) -> Result<ServiceName, NameError> {
     service_name(&format!("{SERVICE_PREFIX}/{domain}/control"))
 }
 
+/// The doorbell of one connection's receiver thread, `esgm/<domain>/bell/<host>`: an
+/// event service its location rings when the set of trajectories it mirrors changes.
+pub fn doorbell_service(domain: &str, host: &str) -> Result<ServiceName, NameError> {
+    check("domain", domain)?;
+    check("host", host)?;
+    service_name(&format!("{SERVICE_PREFIX}/{domain}/bell/{host}"))
+}
+
 /// A domain no other process or test on this host uses: `<prefix>-<pid>-<n>`, with `n`
 /// counting calls in this process. Characters of `prefix` that names may not contain
 /// become `_`, so a test can pass its own name (`module::test`).
@@ -154,22 +163,19 @@ pub fn nodes_of(domain: &str) -> Vec<(String, bool)> {
     use iceoryx2::node::{Node, NodeState, NodeView};
     let prefix = format!("{SERVICE_PREFIX}/{domain}/");
     let mut out = Vec::new();
-    let _ = Node::<iceoryx2::prelude::ipc::Service>::list(
-        iceoryx2::config::Config::global_config(),
-        |state| {
-            let (details, alive) = match &state {
-                NodeState::Alive(v) => (v.details().clone(), true),
-                NodeState::Dead(v) => (v.details().clone(), false),
-                _ => (None, false),
-            };
-            if let Some(d) = details {
-                if d.name().as_str().starts_with(&prefix) {
-                    out.push((d.name().as_str().to_owned(), alive));
-                }
+    let _ = Node::<ShmService>::list(iceoryx2::config::Config::global_config(), |state| {
+        let (details, alive) = match &state {
+            NodeState::Alive(v) => (v.details().clone(), true),
+            NodeState::Dead(v) => (v.details().clone(), false),
+            _ => (None, false),
+        };
+        if let Some(d) = details {
+            if d.name().as_str().starts_with(&prefix) {
+                out.push((d.name().as_str().to_owned(), alive));
             }
-            iceoryx2::prelude::CallbackProgression::Continue
-        },
-    );
+        }
+        iceoryx2::prelude::CallbackProgression::Continue
+    });
     out
 }
 

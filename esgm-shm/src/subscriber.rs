@@ -18,12 +18,11 @@ use std::time::Duration;
 use esgm_core::codec::{CodecError, ENVELOPE_LEN};
 use iceoryx2::identifiers::UniquePublisherId;
 use iceoryx2::port::listener::ListenerWaitError;
-use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::ipc;
 use iceoryx2::service::port_factory::PortFactory;
 
-use crate::payload::{Block16, SampleHeader, as_bytes};
+use crate::payload::{SampleHeader, as_bytes};
 use crate::qos::TrajectoryQos;
+use crate::received::SubscriberPort;
 use crate::received::{Checked, Counters, ReceivedSample, validate};
 use crate::service::{DataService, OpenError, ShmNode, open_data_service, open_wake_service};
 use crate::service_name::{DEFAULT_DOMAIN, TrajectoryServiceNames};
@@ -178,7 +177,7 @@ impl TrajectorySubscriberBuilder {
             trajectory: self.trajectory,
             type_name: self.type_name,
             service,
-            port,
+            port: Arc::new(port),
             waiter: Waiter::new(self.wait, listener),
             validation: self.validation,
             counters: Arc::default(),
@@ -193,7 +192,10 @@ pub struct TrajectorySubscriber {
     type_name: String,
     expected_type_id: u64,
     service: DataService,
-    port: Subscriber<ipc::Service, [Block16], SampleHeader>,
+    /// Shared with every sample taken from it (see [`ReceivedSample`]): iceoryx2 gives a
+    /// publisher back every chunk of a subscriber port that is gone, so the port lives
+    /// as long as the last sample that reads one.
+    port: Arc<SubscriberPort>,
     waiter: Waiter,
     validation: Validation,
     counters: Arc<Counters>,
@@ -298,10 +300,11 @@ impl TrajectorySubscriber {
                 if let Err(e) = validate(bytes, &header) {
                     return rejected(ReceiveError::Malformed(e));
                 }
-                Ok(Some(ReceivedSample::new(sample, archive_len, Checked::Valid, None)))
+                Ok(Some(ReceivedSample::new(sample, &self.port, archive_len, Checked::Valid, None)))
             }
             Validation::OnAccess => Ok(Some(ReceivedSample::new(
                 sample,
+                &self.port,
                 archive_len,
                 Checked::No,
                 Some(Arc::clone(&self.counters)),

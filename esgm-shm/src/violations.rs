@@ -21,6 +21,7 @@
 //! oldest ones rather than stall the writer; the record's sequence number shows the gap
 //! ([`ViolationSubscriberStats::lost`]).
 
+use crate::service::ShmService;
 use std::cell::{Cell, RefCell};
 use std::time::Duration;
 
@@ -29,7 +30,7 @@ use esgm_core::{Constraint, PolicyViolation, Time};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::{ServiceName, ZeroCopySend, ipc};
+use iceoryx2::prelude::{ServiceName, ZeroCopySend};
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
 use crate::publisher::PublishError;
@@ -118,11 +119,11 @@ impl ViolationRecord {
     }
 }
 
-type ViolationService = publish_subscribe::PortFactory<ipc::Service, ViolationRecord, ()>;
+type ViolationService = publish_subscribe::PortFactory<ShmService, ViolationRecord, ()>;
 
 struct ViolationServices {
     data: ViolationService,
-    wake: event::PortFactory<ipc::Service>,
+    wake: event::PortFactory<ShmService>,
 }
 
 fn open_services(
@@ -158,8 +159,8 @@ fn open_services(
 /// Publishes a trajectory's violations; used by [`crate::ShmTrajectoryWriter`].
 #[derive(Debug)]
 pub struct ViolationPublisher {
-    port: Publisher<ipc::Service, ViolationRecord, ()>,
-    notifier: Notifier<ipc::Service>,
+    port: Publisher<ShmService, ViolationRecord, ()>,
+    notifier: Notifier<ShmService>,
     sequence: Cell<u64>,
 }
 
@@ -239,7 +240,7 @@ impl ViolationSubscriberBuilder {
 #[derive(Debug)]
 pub struct ViolationSubscriber {
     trajectory: String,
-    port: Subscriber<ipc::Service, ViolationRecord, ()>,
+    port: Subscriber<ShmService, ViolationRecord, ()>,
     waiter: Waiter,
     stats: Cell<ViolationSubscriberStats>,
     gaps: RefCell<SequenceGaps>,

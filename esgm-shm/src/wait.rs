@@ -51,10 +51,10 @@
 //! Every wait takes a timeout: a publisher that dies is not signalled to a waiting
 //! reader, so without a deadline a reader could wait forever.
 
+use crate::service::ShmService;
 use std::time::{Duration, Instant};
 
 use iceoryx2::port::listener::{Listener, ListenerWaitError};
-use iceoryx2::prelude::ipc;
 
 /// How long [`WaitStrategy::default`] spins before blocking (see the module docs).
 pub const DEFAULT_SPIN: Duration = Duration::from_micros(25);
@@ -97,13 +97,13 @@ impl WaitStrategy {
 #[derive(Debug)]
 pub(crate) enum Waiter {
     Spin,
-    SpinThenBlock { spin: Duration, listener: Listener<ipc::Service> },
-    Block { listener: Listener<ipc::Service> },
+    SpinThenBlock { spin: Duration, listener: Listener<ShmService> },
+    Block { listener: Listener<ShmService> },
 }
 
 impl Waiter {
     /// The waiter for `strategy`; `listener` is used only if the strategy blocks.
-    pub(crate) fn new(strategy: WaitStrategy, listener: Option<Listener<ipc::Service>>) -> Self {
+    pub(crate) fn new(strategy: WaitStrategy, listener: Option<Listener<ShmService>>) -> Self {
         match (strategy, listener) {
             (WaitStrategy::SpinThenBlock { spin }, Some(listener)) => {
                 Waiter::SpinThenBlock { spin, listener }

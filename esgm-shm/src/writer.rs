@@ -28,7 +28,8 @@
 //! use std::time::Duration;
 //! use esgm_core::{EntityStructure, FluentStreamPolicy, TypeChecker, TypeRegistry};
 //! use esgm_shm::{ShmTrajectoryReader, ShmTrajectoryWriter};
-//! use iceoryx2::prelude::{NodeBuilder, ipc};
+//! use esgm_shm::ShmService;
+//! use iceoryx2::prelude::NodeBuilder;
 //!
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
 //! let registry = TypeRegistry::with_library();
@@ -37,7 +38,7 @@
 //! let policy = FluentStreamPolicy::reasonable(50_000_000, 100)?;
 //!
 //! // In the producing process:
-//! let node = NodeBuilder::new().create::<ipc::Service>()?;
+//! let node = NodeBuilder::new().create::<ShmService>()?;
 //! let mut writer = ShmTrajectoryWriter::builder("robot_state", checker.clone())
 //!     .domain("lab")
 //!     .policy(policy.clone())
@@ -47,7 +48,7 @@
 //! writer.release_due()?;
 //!
 //! // In any other process, with the same policy:
-//! let node = NodeBuilder::new().create::<ipc::Service>()?;
+//! let node = NodeBuilder::new().create::<ShmService>()?;
 //! let mut reader = ShmTrajectoryReader::builder("robot_state", checker)
 //!     .domain("lab")
 //!     .policy(policy)
@@ -68,13 +69,13 @@
 //! like any structure (one encode into the loan): the in-place image loans of
 //! [`crate::ImageLoan`] bypass the gate and suit trajectories without a policy.
 
+use crate::service::ShmService;
 use std::cell::Cell;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicI64, Ordering};
 use std::time::Duration;
 
 use iceoryx2::port::notifier::Notifier;
-use iceoryx2::prelude::ipc;
 use iceoryx2::service::port_factory::PortFactory;
 
 use esgm_core::{
@@ -361,7 +362,7 @@ pub struct ShmTrajectoryWriter {
     publisher: TrajectoryPublisher,
     violations: ViolationPublisher,
     /// Wakes readers that received the history in [`Self::update_connections`].
-    wake: Notifier<ipc::Service>,
+    wake: Notifier<ShmService>,
     wake_service: WakeService,
     /// Readers and wake-up listeners at the last [`Self::update_connections`].
     readers_seen: Cell<(usize, usize)>,

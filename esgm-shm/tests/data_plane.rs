@@ -369,11 +369,7 @@ fn a_structure_of_another_type_is_rejected_and_counted() {
 
 /// Raw iceoryx2 access to a trajectory's data service, to write what esgm never would.
 struct RawPublisher {
-    port: iceoryx2::port::publisher::Publisher<
-        iceoryx2::prelude::ipc::Service,
-        [Block16],
-        SampleHeader,
-    >,
+    port: iceoryx2::port::publisher::Publisher<esgm_shm::ShmService, [Block16], SampleHeader>,
 }
 
 impl RawPublisher {

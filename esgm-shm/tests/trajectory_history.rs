@@ -301,11 +301,7 @@ fn an_all_cache_is_bounded_by_the_configured_maximum() {
 
 /// Raw iceoryx2 access to a trajectory's data service, to write what esgm never would.
 struct RawPublisher {
-    port: iceoryx2::port::publisher::Publisher<
-        iceoryx2::prelude::ipc::Service,
-        [Block16],
-        SampleHeader,
-    >,
+    port: iceoryx2::port::publisher::Publisher<esgm_shm::ShmService, [Block16], SampleHeader>,
 }
 
 impl RawPublisher {

@@ -12,15 +12,15 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, anyhow};
-use esgm_shm::{ShmNode, unique_domain};
+use esgm_shm::unique_domain;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::{ServiceName, ZeroCopySend, ipc};
+use iceoryx2::prelude::{Node, ServiceName, ZeroCopySend, ipc};
 use iceoryx2::sample_mut::SampleMut;
 
-use super::ipc_node::ipc_node;
+use super::ipc_node::raw_ipc_node;
 use crate::latency::Latency;
 use crate::patience::Patience;
 use crate::peer_process::FINISH_TIMEOUT;
@@ -67,7 +67,7 @@ impl Scenario for FloorIceoryx2 {
     }
 
     fn run_peer(&self, role: &PeerRole) -> anyhow::Result<Vec<String>> {
-        let node = ipc_node()?;
+        let node = raw_ipc_node()?;
         let ends = Ends::open(&node, &role.domain, "pong", "ping", role.wait)?;
         let mut patience = Patience::alone();
         loop {
@@ -84,7 +84,7 @@ fn measure(ctx: &Context, mode: WaitMode) -> anyhow::Result<Measurement> {
     let samples = ctx.samples(100_000, 10_000);
     let warmup = ctx.warmup(samples);
     let domain = unique_domain("esgm-bench");
-    let node = ipc_node()?;
+    let node = raw_ipc_node()?;
     let ends = Ends::open(&node, &domain, "ping", "pong", mode)?;
     let mut peer = ctx.spawn_peer_process(NAME, mode, &domain)?;
     let mut patience = Patience::for_peer(&mut peer);
@@ -139,7 +139,7 @@ struct Ends {
 
 impl Ends {
     fn open(
-        node: &ShmNode,
+        node: &Node<ipc::Service>,
         domain: &str,
         send_on: &str,
         receive_on: &str,

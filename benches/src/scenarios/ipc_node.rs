@@ -17,6 +17,17 @@ pub fn ipc_node() -> anyhow::Result<ShmNode> {
     set_log_level(LogLevel::Error);
     NodeBuilder::new()
         .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<esgm_shm::ShmService>()
+        .context("could not create an iceoryx2 node")
+}
+
+/// A node of iceoryx2's single-threaded service type, for the raw floor: esgm's ports
+/// are the thread-safe variant ([`esgm_shm::ShmService`]), whose lock the floor does
+/// not pay, so a ratio to the floor includes it.
+pub fn raw_ipc_node() -> anyhow::Result<Node<ipc::Service>> {
+    set_log_level(LogLevel::Error);
+    NodeBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
         .context("could not create an iceoryx2 node")
 }
@@ -27,7 +38,7 @@ pub fn ipc_node() -> anyhow::Result<ShmNode> {
 /// Best effort: a failure leaves the files to that next cleanup.
 pub fn remove_dead_nodes() {
     set_log_level(LogLevel::Error);
-    let _ = Node::<ipc::Service>::list(Config::global_config(), |state| {
+    let _ = Node::<esgm_shm::ShmService>::list(Config::global_config(), |state| {
         if let NodeState::Dead(node) = state {
             let _ = node.try_remove_stale_resources();
         }

@@ -178,8 +178,8 @@ pub struct TrajectoryStore {
     /// know to forget them.
     resets: Arc<std::sync::atomic::AtomicU64>,
     /// Everything that happens to the stream, in order, for one observer (a bridge
-    /// that mirrors the stream into another process).
-    tap: Option<crossbeam_channel::Sender<StoreEvent>>,
+    /// that mirrors the stream into another process), told inline.
+    tap: Option<(TapId, Box<dyn StoreTap>)>,
     /// A replica's adds go to the trajectory's writer elsewhere.
     forward: Option<Arc<dyn AddForwarder>>,
 }
@@ -194,6 +194,37 @@ pub enum StoreEvent {
     Violation(PolicyViolation),
     /// The stream was emptied (T5).
     Reset,
+}
+
+/// An observer of everything that happens to one stream, told synchronously, in stream
+/// order, by the thread that made it happen, while the store is locked.
+///
+/// Why inline and not a channel: a bridge that mirrors the stream into other
+/// processes publishes each event from the adding thread itself, so a structure
+/// reaches shared memory without waking another thread first (a wake-up costs tens of
+/// microseconds, more than the publish). Whatever a tap does delays the add that
+/// caused it, so it must be short and must never block: count and report failures,
+/// never wait for a reader.
+pub trait StoreTap: Send + 'static {
+    /// One event of the stream, in order.
+    fn observe(&mut self, event: &StoreEvent);
+}
+
+impl<F: FnMut(&StoreEvent) + Send + 'static> StoreTap for F {
+    fn observe(&mut self, event: &StoreEvent) {
+        self(event);
+    }
+}
+
+/// Names the tap [`TrajectoryStore::set_tap`] installed, so that its owner removes
+/// its own tap and never a successor's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct TapId(u64);
+
+impl std::fmt::Debug for dyn StoreTap {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("StoreTap")
+    }
 }
 
 impl TrajectoryStore {
@@ -617,23 +648,30 @@ impl TrajectoryStore {
         self.stats.record_overflow(overflow);
     }
 
-    /// Everything that happens to the stream from now on — entries, violations,
-    /// resets — in order, on one channel of `capacity` (events that find it full are
-    /// counted as overflow). One tap per store; a new tap replaces the old one. This is
-    /// how a stream is mirrored elsewhere: subscribers see entries only, and a reset
-    /// seen on a second channel could not be ordered against them.
-    pub fn tap(&mut self, capacity: usize) -> crossbeam_channel::Receiver<StoreEvent> {
-        let (tx, rx) = crossbeam_channel::bounded(capacity.max(1));
-        self.tap = Some(tx);
-        rx
+    /// Tells `tap` everything that happens to the stream from now on — entries,
+    /// violations, resets — in order, inline (see [`StoreTap`]). One tap per store; a
+    /// new tap replaces the old one. This is how a stream is mirrored elsewhere:
+    /// subscribers see entries only, and a reset seen on a second channel could not be
+    /// ordered against them. Returns the stored samples at this moment, oldest first,
+    /// so that the mirror starts from the same content with nothing in between.
+    pub fn set_tap(&mut self, tap: Box<dyn StoreTap>) -> (TapId, Vec<Sample>) {
+        static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+        let id = TapId(NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed));
+        self.tap = Some((id, tap));
+        (id, self.samples())
+    }
+
+    /// Stops telling the tap `id`, if it is still this store's (a re-pointed name's
+    /// new store adopts the old one's tap; see [`TrajectoryStore::adopt`]).
+    pub fn clear_tap(&mut self, id: TapId) {
+        if self.tap.as_ref().is_some_and(|(current, _)| *current == id) {
+            self.tap = None;
+        }
     }
 
     fn tell_tap(&mut self, event: StoreEvent) {
-        let Some(tap) = &self.tap else { return };
-        match tap.try_send(event) {
-            Ok(()) => {}
-            Err(crossbeam_channel::TrySendError::Full(_)) => self.stats.record_overflow(1),
-            Err(crossbeam_channel::TrySendError::Disconnected(_)) => self.tap = None,
+        if let Some((_, tap)) = &mut self.tap {
+            tap.observe(&event);
         }
     }
 

@@ -1,24 +1,29 @@
-//! The location thread: the one thread of a process that owns its iceoryx2 ports (the
-//! control client, and every export and import), as the seed's "location" is the
-//! process-side end of the ESGM. API calls reach it as [`Command`]s.
+//! The location thread: the control plane of a connection, as the seed's "location"
+//! is the process-side end of the ESGM. API calls that change which trajectories this
+//! process writes or mirrors reach it as [`Command`]s and run here, one at a time, so a
+//! create asked by a user and the same trajectory assigned by the coordinator can
+//! never be built twice. It also polls for assignments and hands late readers their
+//! history.
 //!
-//! Everything that changes which trajectories this process writes or mirrors runs
-//! here, one command at a time, so a create asked by a user and the same trajectory
-//! assigned by the coordinator can never be built twice.
+//! No sample goes through this thread: writers publish inline ([`super::export`]) and
+//! the receiver thread feeds replicas ([`super::receiver`]).
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeSet;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use crossbeam_channel::{Receiver, Select, Sender, TryRecvError};
+use crossbeam_channel::{Receiver, RecvTimeoutError, Sender};
 use esgm_core::esgm::{CreateError, Esgm, LookupError, TrajectoryKind, TrajectorySpec};
 use esgm_core::{EntityStructureType, InProcessEsgm, InProcessTrajectory};
 
-use super::bridge::{Export, Import};
-use super::waker::Waker;
+use super::export::Export;
+use super::import::Import;
+use super::mirrors::SharedMirrors;
+use super::receiver::Receiver as SampleReceiver;
+use super::shared_node::SharedNode;
 use crate::control::protocol::{Assignment, ControlError, Request, Response, TrajectoryRecord};
 use crate::control::{ControlClient, ControlClientError};
-use crate::holdings::{HoldingStats, Holdings};
-use crate::service::ShmNode;
+use crate::holdings::Holdings;
 
 /// How often publishers hand late readers their history.
 pub(crate) const MAINTENANCE_PERIOD: Duration = Duration::from_millis(20);
@@ -27,14 +32,6 @@ pub(crate) const MAINTENANCE_PERIOD: Duration = Duration::from_millis(20);
 /// trajectories it must write (creations it asks for itself are built at once). Every
 /// serving process polls, so this bounds the coordinator's load.
 pub(crate) const ASSIGNMENT_PERIOD: Duration = Duration::from_millis(200);
-
-/// The longest the thread sleeps when nothing happens. Everything that needs it wakes
-/// it at once — API commands, local store events, outboxes, released images, and
-/// samples from other processes through the waker — so this only bounds the delay of
-/// what cannot (a service the waker could not listen to, a notify sent before the
-/// waker listened). It was 1 ms while imports were polled: an idle connected process
-/// then woke a thousand times a second.
-const MAX_IDLE: Duration = MAINTENANCE_PERIOD;
 
 /// What the API asks the location thread.
 pub(crate) enum Command {
@@ -48,8 +45,6 @@ pub(crate) enum Command {
     Destroy(String, Sender<Result<(), LookupError>>),
     /// This process now serves sensors or units: poll for assignments.
     Serving,
-    /// What this process holds in shared memory for its values.
-    Holdings(Sender<Option<HoldingStats>>),
 }
 
 /// The seed's lookup error if the coordinator gave one, else `Unavailable`.
@@ -74,45 +69,31 @@ pub(crate) struct Location {
     pub domain: String,
     pub host: String,
     pub local: InProcessEsgm,
-    pub node: ShmNode,
+    pub node: SharedNode,
     pub control: ControlClient,
-    pub exports: BTreeMap<String, Export>,
-    pub imports: BTreeMap<String, Import>,
-    /// Received samples whose images values in this process still read in place.
-    pub holdings: Holdings,
+    pub mirrors: Arc<SharedMirrors>,
+    pub holdings: Arc<Holdings>,
     /// Assignments that failed to build (reported once each).
     pub failed: BTreeSet<String>,
     pub serving: bool,
-    /// Pokes this thread when a service it reads from another process is notified.
-    pub waker: Waker,
+    /// Stopped and joined when the location ends.
+    pub _receiver: SampleReceiver,
 }
 
 impl Location {
-    /// Serves commands and pumps bridges until the API side is gone.
+    /// Serves commands until the API side is gone.
     pub fn run(mut self, commands: &Receiver<Command>) {
-        let mut idle = Duration::from_micros(20);
         let mut next_maintenance = Instant::now();
         let mut next_assignments = Instant::now();
         loop {
-            let mut work = 0;
-            // A poke only ends a sleep: the imports are read below whatever it said.
-            while self.waker.pokes.try_recv().is_ok() {}
-            loop {
-                match commands.try_recv() {
-                    Ok(c) => {
-                        self.handle(c);
-                        work += 1;
-                    }
-                    Err(TryRecvError::Empty) => break,
-                    Err(TryRecvError::Disconnected) => return self.close(),
-                }
+            let mut due = next_maintenance;
+            if self.serving {
+                due = due.min(next_assignments);
             }
-            for e in self.exports.values_mut() {
-                work += e.pump();
-            }
-            work += self.holdings.collect();
-            for i in self.imports.values_mut() {
-                work += i.pump(&self.node, &mut self.holdings);
+            match commands.recv_timeout(due.saturating_duration_since(Instant::now())) {
+                Ok(c) => self.handle(c),
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => return,
             }
             if Instant::now() >= next_maintenance {
                 self.maintain();
@@ -122,64 +103,7 @@ impl Location {
                 self.poll_assignments();
                 next_assignments = Instant::now() + ASSIGNMENT_PERIOD;
             }
-            if work > 0 {
-                idle = Duration::from_micros(20);
-                continue;
-            }
-            // Wake at once for a command, a local event, a released image or a poke from
-            // the waker (a service read from another process was notified); polling
-            // with the idle backoff remains the fallback.
-            let mut sel = Select::new();
-            sel.recv(commands);
-            sel.recv(&self.waker.pokes);
-            for e in self.exports.values() {
-                sel.recv(&e.events);
-            }
-            for outbox in self.imports.values().filter_map(|i| i.outbox.as_ref()) {
-                sel.recv(outbox);
-            }
-            sel.recv(self.holdings.releases());
-            // Not past the next periodic duty.
-            let mut due = next_maintenance;
-            if self.serving {
-                due = due.min(next_assignments);
-            }
-            let _ = sel.ready_timeout(idle.min(due.saturating_duration_since(Instant::now())));
-            idle = (idle * 2).min(MAX_IDLE);
         }
-    }
-
-    /// Shuts the location down when its API side is gone.
-    ///
-    /// Values may still read images in samples this location received (a user kept one
-    /// past the connection). Those samples must stay borrowed: iceoryx2 gives a
-    /// publisher back every chunk a subscriber held as soon as the subscriber's port,
-    /// or its node, is gone, and the publisher would then write new images over bytes
-    /// the values read. So then the subscribers and the node are kept, not dropped,
-    /// until the process exits (the coordinator's dead-node cleanup reclaims them
-    /// after that). Their queues cost nothing meanwhile: readers overwrite, they never
-    /// hold a writer back.
-    fn close(self) {
-        let Location { node, imports, mut holdings, .. } = self;
-        holdings.collect();
-        let held = holdings.stats().held_now;
-        if held > 0 {
-            tracing::debug!(held, "values still read received images; their subscribers stay");
-            std::mem::forget(imports);
-            std::mem::forget(node);
-        }
-    }
-
-    /// Tells the waker every service this location reads from other processes: each
-    /// import's samples and violations, each primitive export's inbox.
-    fn rewatch(&self) {
-        let names = self
-            .imports
-            .values()
-            .flat_map(Import::wake_services)
-            .chain(self.exports.values().flat_map(Export::wake_services))
-            .collect();
-        self.waker.watch(names);
     }
 
     fn handle(&mut self, command: Command) {
@@ -201,19 +125,17 @@ impl Location {
                 self.serving = true;
                 self.poll_assignments();
             }
-            Command::Holdings(reply) => {
-                self.holdings.collect();
-                let _ = reply.send(Some(self.holdings.stats()));
-            }
         }
     }
 
     fn maintain(&mut self) {
-        for e in self.exports.values() {
-            // Readers that connected since the last send receive the history now,
-            // not only at the next sample.
-            let _ = e.publisher.update_connections();
+        for e in self.mirrors.lock().exports.values() {
+            e.update_connections();
         }
+    }
+
+    fn exports(&self, name: &str) -> bool {
+        self.mirrors.lock().exports.contains_key(name)
     }
 
     fn create(&mut self, spec: &TrajectorySpec) -> Result<InProcessTrajectory, CreateError> {
@@ -260,8 +182,9 @@ impl Location {
         let handle = self.local.create_trajectory(spec.clone())?;
         // Re-pointed here (E5): the export follows the new trajectory, and readers
         // elsewhere forget the old stream (a reset marker) before the new one's history.
-        let repointed = spec.replace && self.exports.remove(&spec.name).is_some();
-        if !self.exports.contains_key(&spec.name) {
+        let repointed =
+            spec.replace && self.mirrors.change(|m| m.exports.remove(&spec.name)).is_some();
+        if !self.exports(&spec.name) {
             let export = Export::start(
                 &self.node,
                 &self.domain,
@@ -272,8 +195,7 @@ impl Location {
                 repointed,
             )
             .map_err(|e| CreateError::Unavailable { reason: e.to_string() })?;
-            self.exports.insert(spec.name.clone(), export);
-            self.rewatch();
+            self.mirrors.change(|m| m.exports.insert(spec.name.clone(), export));
         }
         Ok(handle)
     }
@@ -314,15 +236,19 @@ impl Location {
             &record.info.type_name,
             &record.info.policy,
             record.info.kind == TrajectoryKind::Primitive,
-            &mut self.holdings,
+            &self.holdings,
         ) {
-            Ok(import) => {
-                self.imports.insert(name.clone(), import);
-                self.rewatch();
+            Ok(mut import) => {
+                // The history the writer already handed over, at once.
+                import.pump();
+                self.mirrors.change(|m| m.imports.insert(name.clone(), import));
                 Ok(handle)
             }
             Err(e) => {
-                let _ = self.local.destroy_entity_trajectory_structure(name);
+                if let Err(undo) = self.local.destroy_entity_trajectory_structure(name) {
+                    tracing::warn!(trajectory = %name, error = %undo,
+                        "cannot remove a replica that failed to start");
+                }
                 Err(CreateError::Unavailable { reason: e.to_string() })
             }
         }
@@ -349,10 +275,15 @@ impl Location {
     fn destroy(&mut self, name: &str) -> Result<(), LookupError> {
         let request = Request::DestroyEntityTrajectoryStructure { name: name.to_owned() };
         self.control.call(&request).map_err(lookup_error)?;
-        self.exports.remove(name);
-        self.imports.remove(name);
-        self.rewatch();
-        let _ = self.local.destroy_entity_trajectory_structure(name);
+        // Values that still read this trajectory's images own their samples: dropping
+        // the ports here cannot pull memory from under them.
+        let (export, import) =
+            self.mirrors.change(|m| (m.exports.remove(name), m.imports.remove(name)));
+        drop((export, import));
+        if let Err(e) = self.local.destroy_entity_trajectory_structure(name) {
+            // Known to the coordinator, never built here: nothing to remove.
+            tracing::debug!(trajectory = %name, error = %e, "no local trajectory to destroy");
+        }
         self.failed.remove(name);
         Ok(())
     }
@@ -369,7 +300,7 @@ impl Location {
             }
         };
         for Assignment { spec, record } in list {
-            if self.exports.contains_key(&spec.name) || self.failed.contains(&spec.name) {
+            if self.exports(&spec.name) || self.failed.contains(&spec.name) {
                 continue;
             }
             match self.build(&spec, &record, false) {

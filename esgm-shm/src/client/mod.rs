@@ -32,10 +32,15 @@
 //!   stream order) and publishes the new trajectory from then on, so subscribers in
 //!   every process move over. A re-pointed name keeps its type.
 
-mod bridge;
+mod export;
+mod import;
 mod location;
-mod waker;
+mod mirrors;
+mod receiver;
+mod settings;
+mod shared_node;
 
+use crate::service::ShmService;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -46,13 +51,16 @@ use esgm_core::esgm::{
     RegistrationError, SensorInterface, TrajectoryInfo, TrajectorySpec,
 };
 use esgm_core::{EntityStructureType, InProcessEsgm, InProcessTrajectory, TypeRegistryError};
-use iceoryx2::prelude::{NodeBuilder, ipc};
+use iceoryx2::prelude::NodeBuilder;
 
 use crate::control::protocol::{ControlError, Request, Response};
 use crate::control::{ControlClient, ControlClientError};
-use crate::holdings::HoldingStats;
+use crate::holdings::{HoldingStats, Holdings};
 use location::{Command, Location, install};
-use waker::Waker;
+use mirrors::SharedMirrors;
+use receiver::Receiver as SampleReceiver;
+pub use receiver::ReceiverError;
+use shared_node::SharedNode;
 
 /// How long a control call may take by default (the coordinator answers in
 /// milliseconds; a longer wait means it is gone or stuck).
@@ -68,6 +76,13 @@ pub enum ConnectError {
     /// The location thread could not be started.
     #[error("cannot start the location thread: {0}")]
     Spawn(#[source] std::io::Error),
+    /// The receiver thread, which takes samples from other processes, could not be
+    /// started.
+    #[error(transparent)]
+    Receiver(#[from] ReceiverError),
+    /// The domain or host cannot name an iceoryx2 service; rename it.
+    #[error(transparent)]
+    Name(#[from] crate::service_name::NameError),
 }
 
 /// Connects to the coordinator of `domain` with the default settings.
@@ -146,49 +161,42 @@ impl ShmEsgmBuilder {
             local = local.clock(c);
         }
         let local = local.create();
+        let node = NodeBuilder::new()
+            .name(&crate::service_name::node_name(&domain, &host))
+            .create::<ShmService>()
+            .map_err(ControlClientError::Node)?;
+        let control = ControlClient::connect(&domain, timeout)?;
+        let node = SharedNode::new(node);
+        let mirrors = Arc::new(SharedMirrors::default());
+        let holdings = Arc::new(Holdings::default());
+        let receiver = SampleReceiver::start(
+            &node,
+            crate::service_name::node_name(&domain, &format!("{host}/receiver")),
+            crate::service_name::doorbell_service(&domain, &host)?,
+            Arc::clone(&mirrors),
+        )?;
         let (commands, inbox) = crossbeam_channel::unbounded();
-        let (ready, started) = crossbeam_channel::bounded(1);
-        let (d, h, l) = (domain.clone(), host.clone(), local.clone());
+        let location = Location {
+            domain: domain.clone(),
+            host: host.clone(),
+            local: local.clone(),
+            node,
+            control,
+            mirrors,
+            holdings: Arc::clone(&holdings),
+            failed: Default::default(),
+            serving: false,
+            _receiver: receiver,
+        };
         let thread = std::thread::Builder::new()
             .name(format!("esgm-location-{host}"))
-            .spawn(move || {
-                let setup = NodeBuilder::new()
-                    .name(&crate::service_name::node_name(&d, &h))
-                    .create::<ipc::Service>()
-                    .map_err(ControlClientError::Node)
-                    .and_then(|node| Ok((ControlClient::connect(&d, timeout)?, node)));
-                let (control, node) = match setup {
-                    Ok(ok) => ok,
-                    Err(e) => {
-                        let _ = ready.send(Err(e));
-                        return;
-                    }
-                };
-                let _ = ready.send(Ok(()));
-                let waker = Waker::start(crate::service_name::node_name(&d, &format!("{h}/waker")));
-                let location = Location {
-                    domain: d,
-                    host: h,
-                    local: l,
-                    node,
-                    control,
-                    exports: Default::default(),
-                    imports: Default::default(),
-                    holdings: Default::default(),
-                    failed: Default::default(),
-                    serving: false,
-                    waker,
-                };
-                location.run(&inbox);
-            })
+            .spawn(move || location.run(&inbox))
             .map_err(ConnectError::Spawn)?;
-        // The thread reports right after connecting (or dies trying, disconnecting).
-        started.recv().map_err(|_| {
-            ConnectError::Control(ControlClientError::Timeout { domain: domain.clone(), timeout })
-        })??;
         tracing::info!(%domain, %host, "connected");
         let thread = parking_lot::Mutex::new(Some(thread));
-        Ok(ShmEsgm { inner: Arc::new(Inner { domain, host, local, commands, timeout, thread }) })
+        Ok(ShmEsgm {
+            inner: Arc::new(Inner { domain, host, local, commands, timeout, holdings, thread }),
+        })
     }
 }
 
@@ -215,6 +223,7 @@ struct Inner {
     local: InProcessEsgm,
     commands: Sender<Command>,
     timeout: Duration,
+    holdings: Arc<Holdings>,
     thread: parking_lot::Mutex<Option<std::thread::JoinHandle<()>>>,
 }
 
@@ -279,9 +288,10 @@ impl ShmEsgm {
     /// in shared memory, and those it had to copy: a replica's cache, its units, its
     /// subscribers and query answers share the writer's chunk, borrowed until the last
     /// value reading it is dropped (see [`crate::holdings`]). `None` if this
-    /// process's location thread has stopped.
+    /// process's location thread has stopped (never, since values own what they
+    /// hold; kept for callers that match on it).
     pub fn holding_stats(&self) -> Option<HoldingStats> {
-        self.ask(Command::Holdings, |_| None)
+        Some(self.inner.holdings.stats())
     }
 
     /// Blocks while the coordinator answers; returns once it has been gone for

@@ -1,11 +1,12 @@
 //! The client side of the control plane: asks the coordinator, with a deadline.
 
+use crate::service::ShmService;
 use std::time::{Duration, Instant};
 
 use iceoryx2::node::NodeCreationFailure;
 use iceoryx2::port::client::{Client, RequestSendError};
 use iceoryx2::port::{LoanError, ReceiveError};
-use iceoryx2::prelude::{AllocationStrategy, NodeBuilder, ipc};
+use iceoryx2::prelude::{AllocationStrategy, NodeBuilder};
 use iceoryx2::service::builder::request_response::RequestResponseOpenError;
 use iceoryx2::service::port_factory::client::ClientCreateError;
 use iceoryx2::service::port_factory::request_response::PortFactory;
@@ -79,8 +80,8 @@ pub enum ControlClientError {
 #[derive(Debug)]
 pub struct ControlClient {
     domain: String,
-    client: Client<ipc::Service, [u8], (), [u8], ()>,
-    _service: PortFactory<ipc::Service, [u8], (), [u8], ()>,
+    client: Client<ShmService, [u8], (), [u8], ()>,
+    _service: PortFactory<ShmService, [u8], (), [u8], ()>,
     _node: ShmNode,
     timeout: Duration,
 }
@@ -91,7 +92,7 @@ impl ControlClient {
         let name = control_service(domain)?;
         let node = NodeBuilder::new()
             .name(&crate::service_name::node_name(domain, "control-client"))
-            .create::<ipc::Service>()
+            .create::<ShmService>()
             .map_err(ControlClientError::Node)?;
         let service = node
             .service_builder(&name)

@@ -1,6 +1,7 @@
 //! The coordinator: serves the [`Registry`] on `esgm/<domain>/control`, and cleans up
 //! after processes that died.
 
+use crate::service::ShmService;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -8,7 +9,7 @@ use std::time::{Duration, Instant};
 use iceoryx2::node::{NodeCreationFailure, NodeState};
 use iceoryx2::port::server::Server;
 use iceoryx2::port::{LoanError, ReceiveError, SendError};
-use iceoryx2::prelude::{AllocationStrategy, NodeBuilder, ipc};
+use iceoryx2::prelude::{AllocationStrategy, NodeBuilder};
 use iceoryx2::service::builder::request_response::RequestResponseCreateError;
 use iceoryx2::service::port_factory::request_response::PortFactory;
 use iceoryx2::service::port_factory::server::ServerCreateError;
@@ -64,8 +65,8 @@ pub enum CoordinatorError {
 pub struct Coordinator {
     domain: String,
     registry: Registry,
-    server: Server<ipc::Service, [u8], (), [u8], ()>,
-    _service: PortFactory<ipc::Service, [u8], (), [u8], ()>,
+    server: Server<ShmService, [u8], (), [u8], ()>,
+    _service: PortFactory<ShmService, [u8], (), [u8], ()>,
     node: ShmNode,
     served: u64,
     failures: u64,
@@ -79,7 +80,7 @@ impl Coordinator {
         let name = control_service(domain)?;
         let node = NodeBuilder::new()
             .name(&crate::service_name::node_name(domain, "coordinator"))
-            .create::<ipc::Service>()
+            .create::<ShmService>()
             .map_err(CoordinatorError::Node)?;
         cleanup_dead_nodes();
         let service = node
@@ -299,7 +300,7 @@ impl Drop for CoordinatorThread {
 /// returns how many dead nodes were cleaned.
 pub fn cleanup_dead_nodes() -> usize {
     let mut removed = 0;
-    let result = iceoryx2::node::Node::<ipc::Service>::list(
+    let result = iceoryx2::node::Node::<ShmService>::list(
         iceoryx2::config::Config::global_config(),
         |state| {
             if let NodeState::Dead(view) = state {

@@ -7,7 +7,7 @@ use esgm_core::codec::{ArchivedEntityStructure, ArchivedValue};
 use esgm_core::library::{Image, RobotState};
 use esgm_core::{Entity, EntityStructure};
 use esgm_shm::ShmNode;
-use iceoryx2::prelude::{LogLevel, NodeBuilder, ipc, set_log_level};
+use iceoryx2::prelude::{LogLevel, NodeBuilder, set_log_level};
 
 /// Every wait in the tests: long enough for a loaded CI machine, short enough that a
 /// lost sample fails the test instead of hanging it.
@@ -16,7 +16,7 @@ pub const TIMEOUT: Duration = Duration::from_secs(10);
 pub fn node() -> ShmNode {
     // iceoryx2 warns that no config file exists; the defaults are what the tests want.
     set_log_level(LogLevel::Error);
-    NodeBuilder::new().create::<ipc::Service>().expect("iceoryx2 node")
+    NodeBuilder::new().create::<esgm_shm::ShmService>().expect("iceoryx2 node")
 }
 
 pub fn robot(i: i64) -> EntityStructure {

@@ -1,0 +1,215 @@
+//! The writer's half of mirroring a trajectory: an [`Export`] publishes everything
+//! that happens to a trajectory this process writes, from the thread that made it
+//! happen.
+//!
+//! The local store's tap ([`esgm_core::StoreTap`]) is told each event — an entry, a
+//! violation, a reset — inline, in stream order, while the store is locked, and
+//! publishes it on the trajectory's services at once, stamped with the gate's add
+//! time. So a structure added on a user's thread (or emitted by a unit's worker, or
+//! sampled by a periodic worker) is in shared memory when `add` returns, and the
+//! readers' wake-up is the only one on its way out of this process.
+//!
+//! A primitive trajectory also has an *inbox* (`<domain>:inbox`): other processes add
+//! to it there (see [`super::import`]), and the connection's receiver thread takes
+//! their structures and adds them through this process's gate, so one gate orders,
+//! checks and counts every process's adds.
+
+use std::sync::Arc;
+
+use esgm_core::policy::FluentStreamPolicy;
+use esgm_core::{EntityTrajectoryStructure, InProcessTrajectory, StoreEvent, TapId};
+use iceoryx2::prelude::ServiceName;
+use parking_lot::Mutex;
+
+use super::settings::{handle_qos, inbox_domain, inbox_qos};
+use super::shared_node::SharedNode;
+use crate::publisher::TrajectoryPublisher;
+use crate::service::OpenError;
+use crate::service_name::TrajectoryServiceNames;
+use crate::subscriber::{ReceiveError, TrajectorySubscriber};
+use crate::violations::ViolationPublisher;
+use crate::wait::WaitStrategy;
+
+/// An export could not be set up.
+#[derive(Debug, thiserror::Error)]
+pub(crate) enum ExportError {
+    /// The services could not be opened.
+    #[error(transparent)]
+    Open(#[from] OpenError),
+    /// The local trajectory was destroyed meanwhile.
+    #[error("trajectory `{trajectory}` was destroyed meanwhile")]
+    Gone { trajectory: String },
+}
+
+/// The ports an export publishes on, shared by the store's tap (any adding thread)
+/// and the location thread (which hands late readers their history).
+#[derive(Debug)]
+struct Outlet {
+    publisher: TrajectoryPublisher,
+    violations: ViolationPublisher,
+    /// Events that could not be published (the first is logged, all are counted).
+    failures: u64,
+}
+
+impl Outlet {
+    fn publish(&mut self, event: &StoreEvent) {
+        let result = match event {
+            StoreEvent::Entered(s) => {
+                self.publisher.publish_added(&s.structure, s.add_time).map(|_| ())
+            }
+            StoreEvent::Violation(v) => self.violations.publish(v),
+            StoreEvent::Reset => self.publisher.publish_reset().map(|_| ()),
+            _ => Ok(()),
+        };
+        if let Err(e) = result {
+            self.failures += 1;
+            if self.failures == 1 {
+                tracing::warn!(trajectory = %self.publisher.trajectory(), error = %e,
+                    "cannot publish to other processes (later failures are only counted)");
+            }
+        }
+    }
+}
+
+/// A local trajectory published for other processes.
+#[derive(Debug)]
+pub(crate) struct Export {
+    outlet: Arc<Mutex<Outlet>>,
+    handle: InProcessTrajectory,
+    tap: TapId,
+    /// Primitive trajectories: other processes' adds.
+    inbox: Option<TrajectorySubscriber>,
+    /// The inbox's wake-up service, for the receiver thread.
+    inbox_wake: Option<ServiceName>,
+}
+
+impl Drop for Export {
+    fn drop(&mut self) {
+        // The store outlives the export when the name is re-pointed or only this
+        // process's bridge goes: stop publishing from it.
+        let tap = self.tap;
+        // A destroyed store has no tap to remove.
+        let _destroyed = self.handle.with_store(|s| s.clear_tap(tap));
+    }
+}
+
+impl Export {
+    /// Publishes `handle`'s stream from now on (and its current content, so readers
+    /// that connect later receive the history). A `repointed` name starts with a reset
+    /// marker: readers elsewhere forget the stream the name denoted before.
+    pub fn start(
+        node: &SharedNode,
+        domain: &str,
+        handle: &InProcessTrajectory,
+        type_name: &str,
+        policy: &FluentStreamPolicy,
+        primitive: bool,
+        repointed: bool,
+    ) -> Result<Self, ExportError> {
+        let name = handle.name().to_owned();
+        let (publisher, violations, inbox) = node.with(|node| {
+            let publisher = TrajectoryPublisher::builder(&name, type_name)
+                .domain(domain)
+                .qos(handle_qos(handle, policy))
+                .create(node)?;
+            let violations = ViolationPublisher::create(node, domain, &name)?;
+            let inbox = match primitive {
+                true => Some(
+                    TrajectorySubscriber::builder(&name, type_name)
+                        .domain(inbox_domain(domain))
+                        .qos(inbox_qos())
+                        // Nobody waits on it: the receiver thread does (see `receiver`).
+                        .wait_strategy(WaitStrategy::BusySpin)
+                        .create(node)?,
+                ),
+                false => None,
+            };
+            Ok::<_, OpenError>((publisher, violations, inbox))
+        })?;
+        let inbox_wake = match primitive {
+            true => Some(
+                *TrajectoryServiceNames::new(&inbox_domain(domain), &name)
+                    .map_err(OpenError::from)?
+                    .wake(),
+            ),
+            false => None,
+        };
+        let outlet = Arc::new(Mutex::new(Outlet { publisher, violations, failures: 0 }));
+        // Content and tap under one lock: nothing falls between the two, and the
+        // backlog is published before any later event.
+        let tap = Arc::clone(&outlet);
+        let tap = handle
+            .with_store(|s| {
+                let (id, backlog) = s.set_tap(Box::new(OutletTap(tap)));
+                let mut out = outlet.lock();
+                if repointed {
+                    out.publish(&StoreEvent::Reset);
+                }
+                for sample in backlog {
+                    out.publish(&StoreEvent::Entered(sample));
+                }
+                id
+            })
+            .map_err(|_| ExportError::Gone { trajectory: name.clone() })?;
+        Ok(Self { outlet, handle: handle.clone(), tap, inbox, inbox_wake })
+    }
+
+    /// The wake-up services other processes' adds to this trajectory notify (its inbox).
+    pub fn wake_services(&self) -> Vec<ServiceName> {
+        self.inbox_wake.iter().cloned().collect()
+    }
+
+    /// Hands readers that connected since the last send the history now, not only at
+    /// the next sample.
+    pub fn update_connections(&self) {
+        let outlet = self.outlet.lock();
+        if let Err(e) = outlet.publisher.update_connections() {
+            tracing::debug!(trajectory = %outlet.publisher.trajectory(), error = %e,
+                "cannot update the connections of a trajectory's publisher");
+        }
+    }
+
+    /// Adds what other processes sent to the inbox through this process's gate;
+    /// returns how many there were. Whatever the gate refuses is counted in the
+    /// trajectory's stats (and published as a violation).
+    pub fn take_inbox(&self) -> usize {
+        let Some(inbox) = &self.inbox else { return 0 };
+        let mut n = 0;
+        loop {
+            match inbox.receive() {
+                Ok(Some(sample)) => {
+                    n += 1;
+                    match sample.to_owned() {
+                        Ok(es) => {
+                            if let Err(e) = self.handle.add(es) {
+                                tracing::debug!(trajectory = %self.handle.name(), error = %e,
+                                    "add from another process refused");
+                            }
+                        }
+                        Err(e) => tracing::warn!(trajectory = %self.handle.name(), error = %e,
+                            "malformed add from another process"),
+                    }
+                }
+                Ok(None) => break,
+                Err(e) => {
+                    n += 1;
+                    tracing::warn!(trajectory = %self.handle.name(), error = %e,
+                        "add from another process refused");
+                    if matches!(e, ReceiveError::Connection(_) | ReceiveError::TooManyHeld) {
+                        break;
+                    }
+                }
+            }
+        }
+        n
+    }
+}
+
+/// The store's tap: publishes each event through the shared outlet.
+struct OutletTap(Arc<Mutex<Outlet>>);
+
+impl esgm_core::StoreTap for OutletTap {
+    fn observe(&mut self, event: &StoreEvent) {
+        self.0.lock().publish(event);
+    }
+}

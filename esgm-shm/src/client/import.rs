@@ -1,0 +1,209 @@
+//! The reader's half of mirroring a trajectory: an [`Import`] receives a trajectory
+//! another process writes and feeds a local replica
+//! ([`esgm_core::InProcessEsgm::create_replica`]), so local units, syncs, queries and
+//! subscriptions read it like a local trajectory.
+//!
+//! The connection's receiver thread, woken by the writer's notify, takes each sample
+//! and enters it into the replica itself: the replica's subscribers and units are
+//! told from there, with no other thread in between. Images stay in the writer's
+//! chunk, owned by the values that read them ([`crate::holdings`]).
+//!
+//! Adding to a replica of a primitive trajectory forwards the structure, after the
+//! type check, to the writer's *inbox* (`<domain>:inbox`), published inline by the
+//! adding thread; the writer's gate decides, and the structure comes back through
+//! replication.
+
+use std::sync::Arc;
+
+use esgm_core::policy::FluentStreamPolicy;
+use esgm_core::{
+    AddError, AddForwarder, AddOutcome, EntityStructure, EntityStructureType,
+    EntityTrajectoryStructure, InProcessTrajectory,
+};
+use iceoryx2::prelude::ServiceName;
+use parking_lot::Mutex;
+
+use super::settings::{bridge_qos, inbox_domain, inbox_qos};
+use super::shared_node::SharedNode;
+use crate::holdings::{HoldingOwner, Holdings};
+use crate::publisher::TrajectoryPublisher;
+use crate::service::OpenError;
+use crate::service_name::{NameError, TrajectoryServiceNames};
+use crate::subscriber::{ReceiveError, TrajectorySubscriber};
+use crate::violations::{ViolationSubscriber, violation_service_name};
+use crate::wait::WaitStrategy;
+
+/// A trajectory of another process, mirrored into a local replica.
+#[derive(Debug)]
+pub(crate) struct Import {
+    subscriber: TrajectorySubscriber,
+    violations: ViolationSubscriber,
+    replica: InProcessTrajectory,
+    /// Samples that could not be taken (already counted by the subscriber).
+    rejected: u64,
+    /// Whose samples this import's held images count as, and how many it may hold.
+    owner: HoldingOwner,
+    /// The wake-up services of the samples and the violations, for the receiver.
+    wakes: Vec<ServiceName>,
+}
+
+impl Import {
+    /// Subscribes to `replica`'s trajectory, receiving the writer's history first.
+    pub fn start(
+        node: &SharedNode,
+        domain: &str,
+        replica: InProcessTrajectory,
+        type_name: &str,
+        policy: &FluentStreamPolicy,
+        primitive: bool,
+        holdings: &Arc<Holdings>,
+    ) -> Result<Self, OpenError> {
+        let name = replica.name().to_owned();
+        let entity_type = replica.entity_type().unwrap_or_else(|_| EntityStructureType::new(""));
+        let qos = bridge_qos(policy, &entity_type);
+        // Nobody waits on these ports: the receiver thread waits on their wake-up
+        // services, so they need no listeners of their own.
+        let (subscriber, violations) = node.with(|node| {
+            let subscriber = TrajectorySubscriber::builder(&name, type_name)
+                .domain(domain)
+                .qos(qos)
+                .wait_strategy(WaitStrategy::BusySpin)
+                .create(node)?;
+            let violations = ViolationSubscriber::builder(&name)
+                .domain(domain)
+                .wait_strategy(WaitStrategy::BusySpin)
+                .create(node)?;
+            Ok::<_, OpenError>((subscriber, violations))
+        })?;
+        let violations_wake = violation_service_name(domain, &name);
+        let wakes = vec![
+            *TrajectoryServiceNames::new(domain, &name)?.wake(),
+            ServiceName::new(&violations_wake).map_err(|_| NameError::TooLong {
+                service: violations_wake.clone(),
+                max: ServiceName::max_len(),
+            })?,
+        ];
+        if primitive {
+            let outbox = Outbox {
+                trajectory: name.clone(),
+                type_name: type_name.to_owned(),
+                domain: domain.to_owned(),
+                node: node.clone(),
+                inbox: Mutex::new(None),
+            };
+            // A replica destroyed meanwhile forwards nothing.
+            let _destroyed = replica.with_store(|s| s.forward_adds(Arc::new(outbox)));
+        }
+        Ok(Self {
+            subscriber,
+            violations,
+            replica,
+            rejected: 0,
+            // One borrow stays free to receive into.
+            owner: holdings.owner(qos.max_borrowed_samples.saturating_sub(1)),
+            wakes,
+        })
+    }
+
+    /// The wake-up services a publish on this import's trajectory notifies.
+    pub fn wake_services(&self) -> &[ServiceName] {
+        &self.wakes
+    }
+
+    /// Enters every waiting sample, reset and violation into the replica; returns how
+    /// many there were.
+    pub fn pump(&mut self) -> usize {
+        let mut n = 0;
+        loop {
+            match self.subscriber.receive() {
+                Ok(Some(sample)) => {
+                    n += 1;
+                    let add_time = sample.header().add_time;
+                    match self.owner.decode(sample) {
+                        Ok(es) => {
+                            let es = Arc::new(es);
+                            // A replica destroyed meanwhile needs nothing more.
+                            let _destroyed = self.replica.with_store(|s| s.replicate(es, add_time));
+                        }
+                        Err(e) => self.reject(&ReceiveError::Malformed(e)),
+                    }
+                }
+                Ok(None) => break,
+                Err(ReceiveError::Reset { .. }) => {
+                    n += 1;
+                    let _destroyed = self.replica.with_store(|s| s.reset());
+                }
+                Err(e) => {
+                    n += 1;
+                    self.reject(&e);
+                    if matches!(e, ReceiveError::Connection(_) | ReceiveError::TooManyHeld) {
+                        break;
+                    }
+                }
+            }
+        }
+        loop {
+            match self.violations.receive() {
+                Ok(Some(v)) => {
+                    n += 1;
+                    let _destroyed = self.replica.with_store(|s| s.replicate_violation(v));
+                }
+                Ok(None) => break,
+                Err(e) => {
+                    n += 1;
+                    self.reject(&e);
+                    if matches!(e, ReceiveError::Connection(_) | ReceiveError::TooManyHeld) {
+                        break;
+                    }
+                }
+            }
+        }
+        n
+    }
+
+    fn reject(&mut self, e: &ReceiveError) {
+        self.rejected += 1;
+        if self.rejected == 1 {
+            tracing::warn!(trajectory = %self.subscriber.trajectory(), error = %e,
+                "sample from another process rejected (later ones are only counted)");
+        }
+    }
+}
+
+/// A replica's side of forwarding: publishes each add on the writer's inbox, from the
+/// adding thread.
+#[derive(Debug)]
+struct Outbox {
+    trajectory: String,
+    type_name: String,
+    domain: String,
+    node: SharedNode,
+    /// Opened at the first add: most replicas of a primitive trajectory only read.
+    inbox: Mutex<Option<TrajectoryPublisher>>,
+}
+
+impl AddForwarder for Outbox {
+    fn forward(&self, es: Arc<EntityStructure>) -> Result<AddOutcome, AddError> {
+        let unavailable =
+            |reason: String| AddError::Unavailable { trajectory: self.trajectory.clone(), reason };
+        let mut inbox = self.inbox.lock();
+        if inbox.is_none() {
+            let opened = self.node.with(|node| {
+                TrajectoryPublisher::builder(&self.trajectory, &self.type_name)
+                    .domain(inbox_domain(&self.domain))
+                    .qos(inbox_qos())
+                    .create(node)
+            });
+            *inbox = Some(
+                opened.map_err(|e| unavailable(format!("cannot open the writer's inbox: {e}")))?,
+            );
+        }
+        let Some(publisher) = inbox.as_ref() else {
+            return Err(unavailable("the writer's inbox is not open".into()));
+        };
+        publisher
+            .publish(&es)
+            .map_err(|e| unavailable(format!("cannot send to the writer's inbox: {e}")))?;
+        Ok(AddOutcome::Forwarded)
+    }
+}

@@ -1,0 +1,101 @@
+//! What a connection mirrors through shared memory — the trajectories it exports and
+//! imports — shared by the location thread, which changes the set, and the receiver
+//! thread, which feeds it from other processes.
+
+use std::collections::BTreeMap;
+use std::sync::OnceLock;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+
+use iceoryx2::port::notifier::Notifier;
+
+use iceoryx2::prelude::ServiceName;
+use parking_lot::{Mutex, MutexGuard};
+
+use super::export::Export;
+use super::import::Import;
+use crate::service::ShmService;
+
+/// The exports and imports of one connection.
+#[derive(Debug, Default)]
+pub(crate) struct Mirrors {
+    pub exports: BTreeMap<String, Export>,
+    pub imports: BTreeMap<String, Import>,
+}
+
+impl Mirrors {
+    /// Every wake-up service that other processes notify for this connection: each
+    /// import's samples and violations, each primitive export's inbox.
+    pub fn wake_services(&self) -> Vec<ServiceName> {
+        self.imports
+            .values()
+            .flat_map(|i| i.wake_services().iter().copied())
+            .chain(self.exports.values().flat_map(Export::wake_services))
+            .collect()
+    }
+
+    /// Takes everything other processes sent: adds to the inboxes of the exports,
+    /// samples, resets and violations of the imports; returns how many there were.
+    pub fn pump(&mut self) -> usize {
+        let inboxes: usize = self.exports.values().map(Export::take_inbox).sum();
+        inboxes + self.imports.values_mut().map(Import::pump).sum::<usize>()
+    }
+}
+
+/// [`Mirrors`] behind a lock, with a generation the receiver thread compares to know
+/// when to listen to another set of services, and its stop flag.
+#[derive(Debug, Default)]
+pub(crate) struct SharedMirrors {
+    mirrors: Mutex<Mirrors>,
+    generation: AtomicU64,
+    stop: AtomicBool,
+    /// Wakes the receiver thread at once when the set changes (its doorbell service).
+    doorbell: OnceLock<Notifier<ShmService>>,
+}
+
+impl SharedMirrors {
+    /// The mirrors, to read or pump. Never held across a control call: the receiver
+    /// thread pumps under it.
+    pub fn lock(&self) -> MutexGuard<'_, Mirrors> {
+        self.mirrors.lock()
+    }
+
+    /// Changes the set of mirrors with `f` and tells the receiver to listen again.
+    pub fn change<R>(&self, f: impl FnOnce(&mut Mirrors) -> R) -> R {
+        let r = f(&mut self.mirrors.lock());
+        self.generation.fetch_add(1, Ordering::Release);
+        self.ring();
+        r
+    }
+
+    /// Installs the receiver's doorbell (once).
+    pub fn set_doorbell(&self, notifier: Notifier<ShmService>) {
+        if self.doorbell.set(notifier).is_err() {
+            tracing::debug!("the receiver's doorbell was already set");
+        }
+    }
+
+    /// Wakes the receiver thread (it then looks at the generation and its stop).
+    pub fn ring(&self) {
+        if let Some(bell) = self.doorbell.get() {
+            if let Err(e) = bell.notify() {
+                tracing::debug!(error = ?e, "cannot ring the receiver's doorbell");
+            }
+        }
+    }
+
+    /// Bumped by every [`SharedMirrors::change`].
+    pub fn generation(&self) -> u64 {
+        self.generation.load(Ordering::Acquire)
+    }
+
+    /// Asks the receiver thread to end.
+    pub fn stop(&self) {
+        self.stop.store(true, Ordering::Release);
+        self.ring();
+    }
+
+    /// True once [`SharedMirrors::stop`] was called.
+    pub fn stopped(&self) -> bool {
+        self.stop.load(Ordering::Acquire)
+    }
+}

@@ -1,0 +1,91 @@
+//! The iceoryx2 service settings both ends of a mirrored trajectory derive from its
+//! policy and type, and those of its inbox (other processes' adds to a primitive).
+
+use esgm_core::policy::FluentStreamPolicy;
+use esgm_core::value::ValueSort;
+use esgm_core::{
+    CacheConstraint, EntityStructureType, EntityTrajectoryStructure, InProcessTrajectory,
+};
+
+use crate::history::{DEFAULT_MAX_HISTORY, history_bound, history_qos};
+use crate::qos::TrajectoryQos;
+
+/// The most samples of a trajectory carrying octets (images, blobs of bytes) kept in
+/// shared memory for late readers when its cache has no element bound: every kept
+/// sample reserves its full size in every reader's segment, so `All` with the default
+/// 1024 would map gigabytes for a camera.
+pub(crate) const MAX_OCTET_HISTORY: usize = 16;
+
+/// Samples a replica may keep borrowed beyond its cache's bound: images that units,
+/// subscriptions and query answers still read after the cache evicted them (see
+/// [`crate::holdings`]). Past it, images are copied (and counted).
+pub(crate) const HOLD_SLACK: usize = 8;
+
+/// The service settings both ends of a bridged trajectory use: the publisher keeps
+/// the cache's bound of samples, so a replica made late starts with the writer's view,
+/// and a replica may borrow that many plus [`HOLD_SLACK`], so the images it holds stay
+/// in shared memory. A trajectory of `entity_type` with octets and no element bound
+/// keeps [`MAX_OCTET_HISTORY`] (both ends derive the same bound from the same inputs).
+pub(crate) fn bridge_qos(
+    policy: &FluentStreamPolicy,
+    entity_type: &EntityStructureType,
+) -> TrajectoryQos {
+    let octets = entity_type.attributes.iter().any(|a| a.sort == ValueSort::OctetSeq);
+    let bound = match policy.cache {
+        CacheConstraint::Elements(n) if n > 0 => n,
+        _ if octets => MAX_OCTET_HISTORY,
+        _ => history_bound(policy.cache, DEFAULT_MAX_HISTORY),
+    };
+    let qos = history_qos(bound, TrajectoryQos::default());
+    TrajectoryQos { max_borrowed_samples: qos.max_borrowed_samples + HOLD_SLACK, ..qos }
+}
+
+/// The bridged history of `handle`'s trajectory, warning once where a cache without
+/// an element bound is cut to [`MAX_OCTET_HISTORY`] for other processes.
+pub(crate) fn handle_qos(
+    handle: &InProcessTrajectory,
+    policy: &FluentStreamPolicy,
+) -> TrajectoryQos {
+    let entity_type = handle.entity_type().unwrap_or_else(|_| EntityStructureType::new(""));
+    let qos = bridge_qos(policy, &entity_type);
+    let unbounded = !matches!(policy.cache, CacheConstraint::Elements(n) if n > 0);
+    if unbounded && qos.history_size == MAX_OCTET_HISTORY {
+        tracing::warn!(trajectory = %handle.name(), kept = MAX_OCTET_HISTORY,
+            "a trajectory of octets (images) without an element cache: other processes \
+             receive the last {MAX_OCTET_HISTORY} of its history; set `cache = N`");
+    }
+    qos
+}
+
+/// The domain of inbox services: other processes' adds to a primitive trajectory.
+pub(crate) fn inbox_domain(domain: &str) -> String {
+    format!("{domain}:inbox")
+}
+
+/// Inbox services keep nothing for late subscribers (an add is delivered once) and
+/// queue generously: a full queue loses adds.
+pub(crate) fn inbox_qos() -> TrajectoryQos {
+    TrajectoryQos {
+        history_size: 0,
+        subscriber_buffer_size: 1024,
+        max_publishers: 16,
+        max_nodes: 32,
+        ..TrajectoryQos::default()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn octet_trajectories_without_an_element_cache_keep_a_short_history() {
+        let image = EntityStructureType::new("Image").attr("image_data", ValueSort::OctetSeq);
+        let reading = EntityStructureType::new("Reading").attr("x", ValueSort::Double);
+        let all = FluentStreamPolicy::default();
+        assert_eq!(bridge_qos(&all, &image).history_size, MAX_OCTET_HISTORY);
+        assert_eq!(bridge_qos(&all, &reading).history_size, DEFAULT_MAX_HISTORY);
+        let hundred = FluentStreamPolicy::default().cache(CacheConstraint::Elements(100));
+        assert_eq!(bridge_qos(&hundred, &image).history_size, 100, "an explicit bound is kept");
+    }
+}
