@@ -6,6 +6,7 @@ use iceoryx2::port::listener::ListenerCreateError;
 use iceoryx2::port::notifier::NotifierCreateError;
 use iceoryx2::port::publisher::PublisherCreateError;
 use iceoryx2::port::subscriber::SubscriberCreateError;
+use iceoryx2::prelude::ServiceName;
 use iceoryx2::service::builder::event::EventOpenOrCreateError;
 use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
 use iceoryx2::service::port_factory::{event, publish_subscribe};
@@ -107,12 +108,28 @@ pub(crate) fn open_data_service(
         })
 }
 
+/// Listeners an esgm wake-up service admits: one per reading process (its receiver
+/// thread) and one per subscription waiting on it directly, across every process.
+pub const MAX_WAKE_LISTENERS: usize = 64;
+
+/// Opens (or creates) an esgm wake-up event service. Every opener creates it with
+/// the same limits, so whichever process comes first, the others fit.
+pub(crate) fn open_event_service(
+    node: &ShmNode,
+    name: &ServiceName,
+) -> Result<WakeService, OpenError> {
+    node.service_builder(name)
+        .event()
+        .max_listeners(MAX_WAKE_LISTENERS)
+        .max_nodes(MAX_WAKE_LISTENERS + 16)
+        .open_or_create()
+        .map_err(|source| OpenError::WakeService { service: name.as_str().to_owned(), source })
+}
+
 /// Opens (or creates) the wake-up service of a trajectory.
 pub(crate) fn open_wake_service(
     node: &ShmNode,
     names: &TrajectoryServiceNames,
 ) -> Result<WakeService, OpenError> {
-    node.service_builder(names.wake()).event().open_or_create().map_err(|source| {
-        OpenError::WakeService { service: names.wake().as_str().to_owned(), source }
-    })
+    open_event_service(node, names.wake())
 }

@@ -148,11 +148,7 @@ fn open_services(
         .enable_safe_overflow(true)
         .open_or_create()
         .map_err(|source| OpenError::DataService { service: text.clone(), source })?;
-    let wake = node
-        .service_builder(&name)
-        .event()
-        .open_or_create()
-        .map_err(|source| OpenError::WakeService { service: text, source })?;
+    let wake = crate::service::open_event_service(node, &name)?;
     Ok(ViolationServices { data, wake })
 }
 

@@ -51,7 +51,8 @@ use subscription::Subscribers;
 pub use query::QueryError;
 pub use stats::TrajectoryStats;
 pub use subscription::{
-    CallbackHandle, FanIn, RecvError, SubscribeOptions, Subscription, SubscriptionId,
+    CallbackHandle, FanIn, FeedWaiter, RecvError, ReplicaFeed, SubscribeOptions, Subscription,
+    SubscriptionId,
 };
 pub use violation::{AddError, AddForwarder, AddOutcome, DropCause, PolicyViolation};
 
@@ -151,6 +152,7 @@ impl TrajectoryStoreBuilder {
             resets: Arc::default(),
             tap: None,
             forward: None,
+            feed: None,
         })
     }
 }
@@ -182,6 +184,8 @@ pub struct TrajectoryStore {
     tap: Option<(TapId, Box<dyn StoreTap>)>,
     /// A replica's adds go to the trajectory's writer elsewhere.
     forward: Option<Arc<dyn AddForwarder>>,
+    /// A replica's subscribers may wait for its writer themselves.
+    feed: Option<Arc<dyn ReplicaFeed>>,
 }
 
 /// One thing that happened to a stream, as a [`TrajectoryStore::tap`] reports it.
@@ -398,7 +402,14 @@ impl TrajectoryStore {
         // A replay longer than the buffer keeps its newest samples; the rest count as
         // overflow, like any sample a subscriber had no room for.
         self.stats.record_overflow(backlog.len().saturating_sub(options.capacity.max(1)) as u64);
-        self.subscribers.subscribe(options.capacity, backlog.into_iter())
+        let waiter = self.feed.as_ref().and_then(|f| f.waiter());
+        self.subscribers.subscribe(options.capacity, backlog.into_iter()).with_waiter(waiter)
+    }
+
+    /// Lets this store's subscribers (a replica's) wait for its writer themselves, from
+    /// the next subscription on (see [`ReplicaFeed`]).
+    pub fn set_feed(&mut self, feed: Arc<dyn ReplicaFeed>) {
+        self.feed = Some(feed);
     }
 
     /// Subscribes `fan_in` to every structure that enters the stream from now on,

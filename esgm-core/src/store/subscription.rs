@@ -9,7 +9,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
-use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, TrySendError};
+use crossbeam_channel::{Receiver, RecvTimeoutError, Sender, TryRecvError, TrySendError};
 
 /// Identifies one subscription of one trajectory.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -45,12 +45,48 @@ impl SubscribeOptions {
     }
 }
 
+/// How a store fed from elsewhere — a replica of a trajectory another process writes —
+/// lets its subscribers wait for the writer themselves.
+///
+/// Why: a sample from another process otherwise wakes a thread that feeds the replica,
+/// which then wakes the subscriber's thread: two wake-ups, each tens of microseconds.
+/// A subscriber that waits on the writer's own wake-up and feeds the replica itself
+/// is woken once.
+pub trait ReplicaFeed: Send + Sync + std::fmt::Debug + 'static {
+    /// A waiter for one subscription; `None` if none can be made now (the subscription
+    /// then waits on its channel, fed by the runtime).
+    fn waiter(&self) -> Option<Box<dyn FeedWaiter>>;
+}
+
+/// One subscription's way to wait for a replica's writer (see [`ReplicaFeed`]).
+pub trait FeedWaiter: Send + 'static {
+    /// Takes into the replica everything its writer published that nobody took yet
+    /// (so it reaches every subscriber's channel, this one's included).
+    fn feed(&mut self);
+    /// Sleeps until the writer publishes again (or did since the last wait), at most
+    /// `timeout`, then feeds. Returns false if it could not wait (the caller then
+    /// waits on its channel).
+    fn wait_and_feed(&mut self, timeout: Duration) -> bool;
+}
+
 /// The receiving end of a subscription; dropping it unsubscribes.
-#[derive(Debug)]
 pub struct Subscription<T> {
     id: SubscriptionId,
     receiver: Receiver<T>,
     overflow: Arc<AtomicU64>,
+    /// A replica's subscriber waits for the writer itself (see [`ReplicaFeed`]).
+    waiter: Option<std::sync::Mutex<Box<dyn FeedWaiter>>>,
+}
+
+impl<T> std::fmt::Debug for Subscription<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Subscription")
+            .field("id", &self.id)
+            .field("queued", &self.receiver.len())
+            .field("overflowed", &self.overflowed())
+            .field("feeds_itself", &self.waiter.is_some())
+            .finish()
+    }
 }
 
 /// The error of a timed receive.
@@ -71,22 +107,72 @@ impl<T> Subscription<T> {
         self.id
     }
 
-    /// Waits up to `timeout` for the next item.
-    pub fn recv_timeout(&self, timeout: Duration) -> Result<T, RecvError> {
-        self.receiver.recv_timeout(timeout).map_err(|e| match e {
-            RecvTimeoutError::Timeout => RecvError::Timeout,
-            RecvTimeoutError::Disconnected => RecvError::Closed,
-        })
+    /// Makes this subscription wait for a replica's writer itself.
+    pub(crate) fn with_waiter(mut self, waiter: Option<Box<dyn FeedWaiter>>) -> Self {
+        self.waiter = waiter.map(std::sync::Mutex::new);
+        self
     }
 
-    /// The next item if one is waiting.
+    /// Waits up to `timeout` for the next item.
+    pub fn recv_timeout(&self, timeout: Duration) -> Result<T, RecvError> {
+        let closed = |e| match e {
+            RecvTimeoutError::Timeout => RecvError::Timeout,
+            RecvTimeoutError::Disconnected => RecvError::Closed,
+        };
+        let Some(waiter) = &self.waiter else {
+            return self.receiver.recv_timeout(timeout).map_err(closed);
+        };
+        let deadline = std::time::Instant::now() + timeout;
+        loop {
+            // What is queued here; else what the writer published that nobody fed yet
+            // (fed before sleeping, so nothing published before the waiter listened is
+            // missed); else sleep on the writer's wake-up.
+            match self.receiver.try_recv() {
+                Ok(item) => return Ok(item),
+                Err(TryRecvError::Disconnected) => return Err(RecvError::Closed),
+                Err(TryRecvError::Empty) => {}
+            }
+            let mut waiter = match waiter.lock() {
+                Ok(w) => w,
+                // A panic while feeding left nothing half-done that matters here: the
+                // replica's lock protects its state; fall back to the channel.
+                Err(_) => return self.receiver.recv_timeout(timeout).map_err(closed),
+            };
+            waiter.feed();
+            if let Ok(item) = self.receiver.try_recv() {
+                return Ok(item);
+            }
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            if left.is_zero() {
+                return Err(RecvError::Timeout);
+            }
+            if !waiter.wait_and_feed(left) {
+                drop(waiter);
+                return self.receiver.recv_timeout(left).map_err(closed);
+            }
+        }
+    }
+
+    /// The next item if one is waiting (for a replica's subscriber: also what its
+    /// writer published that was not fed yet).
     pub fn try_recv(&self) -> Option<T> {
+        if let Ok(item) = self.receiver.try_recv() {
+            return Some(item);
+        }
+        self.feed();
         self.receiver.try_recv().ok()
     }
 
     /// Everything waiting now, without blocking.
     pub fn drain(&self) -> Vec<T> {
+        self.feed();
         self.receiver.try_iter().collect()
+    }
+
+    fn feed(&self) {
+        if let Some(Ok(mut w)) = self.waiter.as_ref().map(|w| w.lock()) {
+            w.feed();
+        }
     }
 
     /// How many items were discarded because this subscriber fell behind.
@@ -238,7 +324,7 @@ impl<T: Clone> Subscribers<T> {
             Self::deliver(&sub, item);
         }
         self.subscribers.push(sub);
-        Subscription { id, receiver, overflow }
+        Subscription { id, receiver, overflow, waiter: None }
     }
 
     /// Adds a subscriber feeding `fan_in` with items tagged `tag`.

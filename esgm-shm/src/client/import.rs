@@ -13,21 +13,23 @@
 //! adding thread; the writer's gate decides, and the structure comes back through
 //! replication.
 
-use std::sync::Arc;
+use std::sync::{Arc, Weak};
 
 use esgm_core::policy::FluentStreamPolicy;
 use esgm_core::{
     AddError, AddForwarder, AddOutcome, EntityStructure, EntityStructureType,
-    EntityTrajectoryStructure, InProcessTrajectory,
+    EntityTrajectoryStructure, FeedWaiter, InProcessTrajectory, ReplicaFeed,
 };
+use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::ServiceName;
 use parking_lot::Mutex;
 
+use super::mirrors::SharedMirrors;
 use super::settings::{bridge_qos, inbox_domain, inbox_qos};
 use super::shared_node::SharedNode;
 use crate::holdings::{HoldingOwner, Holdings};
 use crate::publisher::TrajectoryPublisher;
-use crate::service::OpenError;
+use crate::service::{OpenError, ShmService, open_event_service};
 use crate::service_name::{NameError, TrajectoryServiceNames};
 use crate::subscriber::{ReceiveError, TrajectorySubscriber};
 use crate::violations::{ViolationSubscriber, violation_service_name};
@@ -57,6 +59,7 @@ impl Import {
         policy: &FluentStreamPolicy,
         primitive: bool,
         holdings: &Arc<Holdings>,
+        mirrors: &Arc<SharedMirrors>,
     ) -> Result<Self, OpenError> {
         let name = replica.name().to_owned();
         let entity_type = replica.entity_type().unwrap_or_else(|_| EntityStructureType::new(""));
@@ -83,6 +86,14 @@ impl Import {
                 max: ServiceName::max_len(),
             })?,
         ];
+        let feed = ImportFeed {
+            trajectory: name.clone(),
+            wake: wakes[0],
+            node: node.clone(),
+            mirrors: Arc::downgrade(mirrors),
+        };
+        // A replica destroyed meanwhile has no subscribers to feed.
+        let _destroyed = replica.with_store(|s| s.set_feed(Arc::new(feed)));
         if primitive {
             let outbox = Outbox {
                 trajectory: name.clone(),
@@ -166,6 +177,70 @@ impl Import {
         if self.rejected == 1 {
             tracing::warn!(trajectory = %self.subscriber.trajectory(), error = %e,
                 "sample from another process rejected (later ones are only counted)");
+        }
+    }
+}
+
+/// Lets a subscriber of the replica wait on the writer's wake-up itself and feed the
+/// replica, instead of waiting for the receiver thread to feed it and wake it: one
+/// wake-up instead of two ([`esgm_core::ReplicaFeed`]).
+#[derive(Debug)]
+struct ImportFeed {
+    trajectory: String,
+    wake: ServiceName,
+    node: SharedNode,
+    mirrors: Weak<SharedMirrors>,
+}
+
+impl ReplicaFeed for ImportFeed {
+    fn waiter(&self) -> Option<Box<dyn FeedWaiter>> {
+        let listener = self.node.with(|node| {
+            open_event_service(node, &self.wake)?
+                .listener_builder()
+                .create()
+                .map_err(OpenError::Listener)
+        });
+        match listener {
+            Ok(listener) => Some(Box::new(ImportWaiter {
+                listener,
+                trajectory: self.trajectory.clone(),
+                mirrors: Weak::clone(&self.mirrors),
+            })),
+            Err(e) => {
+                tracing::debug!(trajectory = %self.trajectory, error = %e,
+                    "a subscriber cannot listen to its writer; the receiver thread wakes it");
+                None
+            }
+        }
+    }
+}
+
+/// One subscription's listener on the writer's wake-up service.
+struct ImportWaiter {
+    listener: Listener<ShmService>,
+    trajectory: String,
+    mirrors: Weak<SharedMirrors>,
+}
+
+impl FeedWaiter for ImportWaiter {
+    fn feed(&mut self) {
+        let Some(mirrors) = self.mirrors.upgrade() else { return };
+        if let Some(import) = mirrors.lock().imports.get_mut(&self.trajectory) {
+            import.pump();
+        }
+    }
+
+    fn wait_and_feed(&mut self, timeout: std::time::Duration) -> bool {
+        match self.listener.timed_wait(|_| {}, timeout) {
+            Ok(_) => {
+                self.feed();
+                true
+            }
+            Err(e) => {
+                tracing::warn!(trajectory = %self.trajectory, error = ?e,
+                    "cannot wait on the writer's wake-up; waiting on the channel");
+                false
+            }
         }
     }
 }

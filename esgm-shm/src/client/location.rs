@@ -237,6 +237,7 @@ impl Location {
             &record.info.policy,
             record.info.kind == TrajectoryKind::Primitive,
             &self.holdings,
+            &self.mirrors,
         ) {
             Ok(mut import) => {
                 // The history the writer already handed over, at once.

@@ -26,7 +26,7 @@ use iceoryx2::prelude::{
 
 use super::mirrors::SharedMirrors;
 use super::shared_node::SharedNode;
-use crate::service::{ShmNode, ShmService};
+use crate::service::{ShmNode, ShmService, open_event_service};
 
 /// The longest the receiver sleeps before it pumps anyway and looks for a new set of
 /// services (and for its stop).
@@ -61,10 +61,8 @@ impl Receiver {
         mirrors: Arc<SharedMirrors>,
     ) -> Result<Self, ReceiverError> {
         let notifier = node.with(|node| {
-            node.service_builder(&doorbell)
-                .event()
-                .open_or_create()
-                .map_err(|e| ReceiverError::Doorbell(format!("{e:?}")))?
+            open_event_service(node, &doorbell)
+                .map_err(|e| ReceiverError::Doorbell(e.to_string()))?
                 .notifier_builder()
                 .create()
                 .map_err(|e| ReceiverError::Doorbell(format!("{e:?}")))
@@ -127,11 +125,8 @@ fn poll(mirrors: &SharedMirrors) {
 fn listen(node: &ShmNode, services: &[ServiceName]) -> Vec<Listener<ShmService>> {
     let mut listeners = Vec::with_capacity(services.len());
     for service in services {
-        let listener = node
-            .service_builder(service)
-            .event()
-            .open_or_create()
-            .map_err(|e| format!("{e:?}"))
+        let listener = open_event_service(node, service)
+            .map_err(|e| e.to_string())
             .and_then(|s| s.listener_builder().create().map_err(|e| format!("{e:?}")));
         match listener {
             Ok(l) => listeners.push(l),
