@@ -35,6 +35,15 @@ use crate::subscriber::{ReceiveError, TrajectorySubscriber};
 use crate::violations::{ViolationSubscriber, violation_service_name};
 use crate::wait::WaitStrategy;
 
+/// Where an import is made: the connection's node, domain, holdings and mirrors.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct ImportSite<'a> {
+    pub node: &'a SharedNode,
+    pub domain: &'a str,
+    pub holdings: &'a Arc<Holdings>,
+    pub mirrors: &'a Arc<SharedMirrors>,
+}
+
 /// A trajectory of another process, mirrored into a local replica.
 #[derive(Debug)]
 pub(crate) struct Import {
@@ -52,15 +61,13 @@ pub(crate) struct Import {
 impl Import {
     /// Subscribes to `replica`'s trajectory, receiving the writer's history first.
     pub fn start(
-        node: &SharedNode,
-        domain: &str,
+        at: &ImportSite<'_>,
         replica: InProcessTrajectory,
         type_name: &str,
         policy: &FluentStreamPolicy,
         primitive: bool,
-        holdings: &Arc<Holdings>,
-        mirrors: &Arc<SharedMirrors>,
     ) -> Result<Self, OpenError> {
+        let ImportSite { node, domain, holdings, mirrors } = *at;
         let name = replica.name().to_owned();
         let entity_type = replica.entity_type().unwrap_or_else(|_| EntityStructureType::new(""));
         let qos = bridge_qos(policy, &entity_type);

@@ -17,7 +17,7 @@ use esgm_core::esgm::{CreateError, Esgm, LookupError, TrajectoryKind, Trajectory
 use esgm_core::{EntityStructureType, InProcessEsgm, InProcessTrajectory};
 
 use super::export::Export;
-use super::import::Import;
+use super::import::{Import, ImportSite};
 use super::mirrors::SharedMirrors;
 use super::receiver::Receiver as SampleReceiver;
 use super::shared_node::SharedNode;
@@ -229,15 +229,18 @@ impl Location {
             return Ok(h);
         }
         let handle = self.local.create_replica(record.info.clone(), &record.types)?;
+        let site = ImportSite {
+            node: &self.node,
+            domain: &self.domain,
+            holdings: &self.holdings,
+            mirrors: &self.mirrors,
+        };
         match Import::start(
-            &self.node,
-            &self.domain,
+            &site,
             handle.clone(),
             &record.info.type_name,
             &record.info.policy,
             record.info.kind == TrajectoryKind::Primitive,
-            &self.holdings,
-            &self.mirrors,
         ) {
             Ok(mut import) => {
                 // The history the writer already handed over, at once.
