@@ -1,16 +1,37 @@
-//! What a conformance test needs from a runtime.
+//! What a conformance test needs from a runtime: a writing side, a reading side, and
+//! control of the clock.
+//!
+//! A test creates trajectories and adds to them through [`Harness::esgm`], and reads
+//! what a user elsewhere would read — queries, subscriptions, violations, stats —
+//! through [`Harness::reader`]. On the shared-memory runtime the two are separate
+//! connections (two locations in the registry, each with its own ports and local
+//! runtime), so every such check crosses the process boundary; on the in-process
+//! runtime they are one runtime. Replication across the boundary is asynchronous: a
+//! reader-side check waits (with [`wait_for`] and a deadline) for what the writer did
+//! to arrive, and never asserts how long that took.
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use esgm_core::{Esgm, InProcessEsgm, SimClock, Time, secs};
 
-/// A runtime under test plus control of its clock.
+/// A runtime under test, seen from a writing and a reading side, plus control of its
+/// clock.
 pub trait Harness {
     /// The runtime.
     type E: Esgm;
-    /// The runtime under test.
+    /// The writing side: it registers types, sensors and units, creates trajectories
+    /// and adds to them (and, where a sensor or unit lives here, runs them).
     fn esgm(&self) -> &Self::E;
+    /// The reading side, in a second location where the runtime has more than one:
+    /// handles from its `get_entity_trajectory_structure` see the writer's
+    /// trajectories as another process does. The same runtime as [`Harness::esgm`]
+    /// where the runtime has one location.
+    fn reader(&self) -> &Self::E;
+    /// True if [`Harness::reader`] is another location than [`Harness::esgm`]: adds
+    /// through it to a primitive trajectory are forwarded to the writer
+    /// ([`esgm_core::AddOutcome::Forwarded`]) instead of being admitted on the spot.
+    fn reader_is_remote(&self) -> bool;
     /// The runtime's current time.
     fn now(&self) -> Time;
     /// Moves the runtime's time forward by `d`: a simulated clock jumps, a real one is
@@ -18,7 +39,8 @@ pub trait Harness {
     fn advance(&self, d: Time);
 }
 
-/// The in-process runtime on a simulated clock starting at 1000 s.
+/// The in-process runtime on a simulated clock starting at 1000 s; writer and reader
+/// are the same runtime.
 #[derive(Debug)]
 pub struct InProcessHarness {
     clock: Arc<SimClock>,
@@ -45,6 +67,12 @@ impl Harness for InProcessHarness {
     fn esgm(&self) -> &InProcessEsgm {
         &self.esgm
     }
+    fn reader(&self) -> &InProcessEsgm {
+        &self.esgm
+    }
+    fn reader_is_remote(&self) -> bool {
+        false
+    }
     fn now(&self) -> Time {
         self.clock.now()
     }
@@ -55,12 +83,15 @@ impl Harness for InProcessHarness {
 
 /// The shared-memory runtime ([`esgm_shm::connect`]) against a coordinator of its own
 /// (on a thread, in a unique domain so tests run in parallel), on a simulated clock
-/// starting at 1000 s.
+/// starting at 1000 s, with two connections: the writer (host `writer`) and the
+/// reader (host `reader`), two locations as two processes of one robot would be.
+/// Both share the one simulated clock, as processes share the host's timeline (M1).
 #[derive(Debug)]
 pub struct ShmHarness {
     clock: Arc<SimClock>,
-    // Dropped in this order: the client leaves before its coordinator stops.
-    esgm: esgm_shm::ShmEsgm,
+    // Dropped in this order: the clients leave before their coordinator stops.
+    writer: esgm_shm::ShmEsgm,
+    reader: esgm_shm::ShmEsgm,
     _coordinator: esgm_shm::control::CoordinatorThread,
 }
 
@@ -72,12 +103,17 @@ impl ShmHarness {
         let coordinator =
             esgm_shm::control::Coordinator::spawn(&domain, registry).expect("start a coordinator");
         let clock = SimClock::shared(secs(1_000));
-        let esgm = esgm_shm::ShmEsgm::builder()
-            .domain(&domain)
-            .clock(clock.clone())
-            .connect()
-            .expect("connect to the coordinator");
-        Self { clock, esgm, _coordinator: coordinator }
+        let connect = |host: &str| {
+            esgm_shm::ShmEsgm::builder()
+                .domain(&domain)
+                .host(host)
+                .clock(clock.clone())
+                .connect()
+                .unwrap_or_else(|e| panic!("connect `{host}` to the coordinator: {e}"))
+        };
+        let writer = connect("writer");
+        let reader = connect("reader");
+        Self { clock, writer, reader, _coordinator: coordinator }
     }
 }
 
@@ -90,7 +126,13 @@ impl Default for ShmHarness {
 impl Harness for ShmHarness {
     type E = esgm_shm::ShmEsgm;
     fn esgm(&self) -> &esgm_shm::ShmEsgm {
-        &self.esgm
+        &self.writer
+    }
+    fn reader(&self) -> &esgm_shm::ShmEsgm {
+        &self.reader
+    }
+    fn reader_is_remote(&self) -> bool {
+        true
     }
     fn now(&self) -> Time {
         self.clock.now()

@@ -1,6 +1,6 @@
 //! The conformance suite on the in-process runtime.
 
-esgm_tests::conformance_tests!(esgm_tests::InProcessHarness::new);
+esgm_tests::conformance_tests!(in_process, esgm_tests::InProcessHarness::new);
 
 /// Dropping the runtime stops its workers (they hold their trajectory, not the
 /// runtime, so nothing else would).

@@ -1,5 +1,6 @@
 //! Computed trajectories (E4, E6 units): input order, ValueNotAvailable, chains,
-//! isolation, type checks.
+//! isolation, type checks. Units live with the writer (so their worker statistics
+//! are the writer's); their outputs are read through the reader.
 
 use std::sync::Arc;
 
@@ -9,7 +10,7 @@ use esgm_core::{
     ValueSort,
 };
 
-use super::{WAIT, reading, register_reading, wait_stored, x_of};
+use super::{WAIT, read, reading, register_reading, wait_stored, wait_visible, x_of};
 use crate::{Harness, wait_for};
 
 /// A unit that outputs a Reading whose x is the inputs' x values as decimal digits
@@ -39,15 +40,18 @@ pub fn inputs_in_order_once_all_have_one<H: Harness>(h: &H) {
         .unwrap();
     let a = e.create_primitive_entity_trajectory_structure("a", "Reading").unwrap();
     let b = e.create_primitive_entity_trajectory_structure("b", "Reading").unwrap();
-    let out = e.create_computed_entity_trajectory_structure("ab", "digits", &["a", "b"]).unwrap();
+    let w = e.create_computed_entity_trajectory_structure("ab", "digits", &["a", "b"]).unwrap();
+    let out = read(h, "ab");
     let t0 = h.now();
     b.add(reading(t0, 2.0)).unwrap();
     a.add(reading(t0 + 1, 1.0)).unwrap();
     wait_stored(&out, 1);
     assert_eq!(x_of(&out.get_latest().unwrap()), Some(12.0), "inputs in declared order");
+    assert_eq!(out.get_latest().unwrap().valid_time, t0 + 1);
     b.add(reading(t0 + 2, 3.0)).unwrap();
     wait_stored(&out, 2);
     assert_eq!(x_of(&out.get_latest().unwrap()), Some(13.0));
+    wait_visible(&w, &out);
     assert_eq!(worker_stats(h, "ab").calls, 2, "no call before both inputs had a value");
 }
 
@@ -63,7 +67,8 @@ pub fn value_not_available_means_no_output<H: Harness>(h: &H) {
     };
     e.add_comp_unit("pos", "Reading", vec!["Reading".into()], Arc::new(positive_only)).unwrap();
     let a = e.create_primitive_entity_trajectory_structure("a", "Reading").unwrap();
-    let out = e.create_computed_entity_trajectory_structure("p", "pos", &["a"]).unwrap();
+    let writer = e.create_computed_entity_trajectory_structure("p", "pos", &["a"]).unwrap();
+    let out = read(h, "p");
     let t0 = h.now();
     for (k, x) in [-1.0, 5.0, 0.0].into_iter().enumerate() {
         a.add(reading(t0 + k as Time, x)).unwrap();
@@ -71,7 +76,10 @@ pub fn value_not_available_means_no_output<H: Harness>(h: &H) {
     assert!(wait_for(WAIT, || worker_stats(h, "p").calls == 3));
     let w = worker_stats(h, "p");
     assert_eq!((w.outputs, w.no_value), (1, 2));
+    assert_eq!(writer.stats().unwrap().added, 1);
+    wait_visible(&writer, &out);
     assert_eq!(out.stats().unwrap().added, 1);
+    assert_eq!(x_of(&out.get_latest().unwrap()), Some(5.0));
 }
 
 /// The tutorial's three levels: source → detection → selection → decision.
@@ -93,14 +101,20 @@ pub fn three_level_chain<H: Harness>(h: &H) {
     let other = e.create_primitive_entity_trajectory_structure("other", "Reading").unwrap();
     e.create_computed_entity_trajectory_structure("l1", "double", &["src"]).unwrap();
     e.create_computed_entity_trajectory_structure("l2", "double", &["l1"]).unwrap();
-    let l3 =
-        e.create_computed_entity_trajectory_structure("l3", "digits", &["other", "l2"]).unwrap();
+    e.create_computed_entity_trajectory_structure("l3", "digits", &["other", "l2"]).unwrap();
+    let l3 = read(h, "l3");
     let sub = l3.subscribe(SubscribeOptions::default()).unwrap();
     let t0 = h.now();
     other.add(reading(t0, 1.0)).unwrap();
     src.add(reading(t0 + 5, 2.0)).unwrap();
     let s = sub.recv_timeout(WAIT).unwrap();
     assert_eq!((x_of(&s), s.valid_time), (Some(18.0), t0 + 5), "1 then 2·2·2 = 8");
+    // Every level is readable from the reader too.
+    for (name, x) in [("l1", 4.0), ("l2", 8.0)] {
+        let level = read(h, name);
+        let got = || level.get_latest().map(|s| x_of(&s));
+        assert!(wait_for(WAIT, || got() == Ok(Some(x))), "{name}: {:?}", got());
+    }
 }
 
 /// A unit that panics is isolated and counted; the trajectory keeps working.
@@ -115,7 +129,8 @@ pub fn unit_panic_is_isolated<H: Harness>(h: &H) {
     };
     e.add_comp_unit("fragile", "Reading", vec!["Reading".into()], Arc::new(fragile)).unwrap();
     let a = e.create_primitive_entity_trajectory_structure("a", "Reading").unwrap();
-    let out = e.create_computed_entity_trajectory_structure("f", "fragile", &["a"]).unwrap();
+    e.create_computed_entity_trajectory_structure("f", "fragile", &["a"]).unwrap();
+    let out = read(h, "f");
     let t0 = h.now();
     for (k, x) in [1.0, 13.0, 2.0].into_iter().enumerate() {
         a.add(reading(t0 + k as Time, x)).unwrap();
@@ -123,6 +138,7 @@ pub fn unit_panic_is_isolated<H: Harness>(h: &H) {
     wait_stored(&out, 2);
     assert_eq!(worker_stats(h, "f").panics, 1);
     assert_eq!(x_of(&out.get_latest().unwrap()), Some(2.0));
+    assert_eq!(x_of(&out.get_nth_latest(1).unwrap()), Some(1.0));
 }
 
 /// A unit's output is type-checked against its declared type.
@@ -135,13 +151,19 @@ pub fn unit_output_is_type_checked<H: Harness>(h: &H) {
     e.add_comp_unit("wrong", "Reading", vec!["Reading".into()], Arc::new(wrong)).unwrap();
     let a = e.create_primitive_entity_trajectory_structure("a", "Reading").unwrap();
     let out = e.create_computed_entity_trajectory_structure("w", "wrong", &["a"]).unwrap();
+    let seen = read(h, "w");
     a.add(reading(h.now(), 1.0)).unwrap();
     assert!(wait_for(WAIT, || worker_stats(h, "w").invalid_outputs == 1));
     assert_eq!(out.stats().unwrap().dropped_for(esgm_core::DropCause::InvalidType), 1);
     assert!(out.get_latest().is_err());
+    // Nothing of it reaches the reader (the writer refused it before publishing).
+    wait_visible(&out, &seen);
+    assert!(seen.get_latest().is_err());
+    assert_eq!(seen.stats().unwrap().added, 0);
 }
 
-/// E6: input count and input types are checked when the trajectory is created.
+/// E6: input count and input types are checked when the trajectory is created, by
+/// whichever side creates it (the unit lives with the writer).
 pub fn inputs_are_checked_at_creation<H: Harness>(h: &H) {
     register_reading(h);
     let e = h.esgm();
@@ -149,24 +171,28 @@ pub fn inputs_are_checked_at_creation<H: Harness>(h: &H) {
         .unwrap();
     e.create_primitive_entity_trajectory_structure("a", "Reading").unwrap();
     e.create_primitive_entity_trajectory_structure("img", "Image").unwrap();
-    assert!(matches!(
-        e.create_computed_entity_trajectory_structure("x", "one", &["a", "a"]),
-        Err(CreateError::WrongInputCount { expected: 1, found: 2, .. })
-    ));
-    let err = e.create_computed_entity_trajectory_structure("x", "one", &["img"]).unwrap_err();
-    assert!(matches!(err, CreateError::InvalidInput { position: 0, .. }), "{err}");
-    assert_eq!(
-        err.to_string(),
-        "input 0 (`img`) of `one` has type `Image`, expected type `Reading`"
-    );
-    assert!(matches!(
-        e.create_computed_entity_trajectory_structure("x", "onee", &["a"]),
-        Err(CreateError::NoSuchCompUnit { suggestion: Some(_), .. })
-    ));
-    assert!(matches!(
-        e.create_computed_entity_trajectory_structure("x", "one", &["b"]),
-        Err(CreateError::NoSuchEntityStructure { .. })
-    ));
+    for side in [e, h.reader()] {
+        assert!(matches!(
+            side.create_computed_entity_trajectory_structure("x", "one", &["a", "a"]),
+            Err(CreateError::WrongInputCount { expected: 1, found: 2, .. })
+        ));
+        let err =
+            side.create_computed_entity_trajectory_structure("x", "one", &["img"]).unwrap_err();
+        assert!(matches!(err, CreateError::InvalidInput { position: 0, .. }), "{err}");
+        assert_eq!(
+            err.to_string(),
+            "input 0 (`img`) of `one` has type `Image`, expected type `Reading`"
+        );
+        assert!(matches!(
+            side.create_computed_entity_trajectory_structure("x", "onee", &["a"]),
+            Err(CreateError::NoSuchCompUnit { suggestion: Some(_), .. })
+        ));
+        assert!(matches!(
+            side.create_computed_entity_trajectory_structure("x", "one", &["b"]),
+            Err(CreateError::NoSuchEntityStructure { .. })
+        ));
+    }
+    assert!(e.get_entity_trajectory_structure("x").is_err(), "nothing was created");
 }
 
 /// The reasonable constraints on a computed trajectory: monotone order drops a unit
@@ -179,12 +205,22 @@ pub fn computed_policy_applies<H: Harness>(h: &H) {
     let policy = FluentStreamPolicy::default().order(OrderConstraint::Monotone);
     let out =
         e.create_trajectory(TrajectorySpec::computed("m", "id", ["a"]).policy(policy)).unwrap();
+    let seen = read(h, "m");
+    let violations = seen.subscribe_violations(16).unwrap();
     let t0 = h.now();
     for vt in [t0 + 10, t0 + 5, t0 + 20] {
         a.add(reading(vt, 1.0)).unwrap();
     }
     assert!(wait_for(WAIT, || out.stats().map(|s| s.added + s.dropped_total) == Ok(3)));
     assert_eq!(out.stats().unwrap().violations, 1);
+    let v = violations.recv_timeout(WAIT).unwrap();
+    assert_eq!((v.constraint, v.valid_time), (esgm_core::Constraint::Order, t0 + 5));
+    wait_visible(&out, &seen);
+    let vts: Vec<Time> =
+        seen.get_between(t0, t0 + 20).unwrap().iter().map(|s| s.valid_time).collect();
+    assert_eq!(vts, vec![t0 + 10, t0 + 20]);
+    let counted = || seen.stats().map(|s| (s.added, s.violations));
+    assert!(wait_for(WAIT, || counted() == Ok((2, 1))), "reader stats {:?}", seen.stats());
 }
 
 /// T5/E4: after an input is reset it has no latest sample, so the unit is not called
@@ -196,11 +232,14 @@ pub fn reset_inputs_are_forgotten<H: Harness>(h: &H) {
         .unwrap();
     let a = e.create_primitive_entity_trajectory_structure("a", "Reading").unwrap();
     let b = e.create_primitive_entity_trajectory_structure("b", "Reading").unwrap();
-    let out = e.create_computed_entity_trajectory_structure("ab", "digits", &["a", "b"]).unwrap();
+    e.create_computed_entity_trajectory_structure("ab", "digits", &["a", "b"]).unwrap();
+    let out = read(h, "ab");
+    let a_seen = read(h, "a");
     let t0 = h.now();
     a.add(reading(t0, 1.0)).unwrap();
     b.add(reading(t0 + 1, 2.0)).unwrap();
     wait_stored(&out, 1);
+    wait_visible(&a, &a_seen);
     a.reset_blocking().unwrap();
     b.add(reading(t0 + 2, 3.0)).unwrap();
     assert!(
@@ -210,4 +249,7 @@ pub fn reset_inputs_are_forgotten<H: Harness>(h: &H) {
     wait_stored(&out, 2);
     assert_eq!(x_of(&out.get_latest().unwrap()), Some(43.0), "a's new sample with b's latest");
     assert_eq!(worker_stats(h, "ab").calls, 2, "no call mixed a pre-reset sample in");
+    // The reader had a's first sample; after the reset it has only the new one.
+    wait_visible(&a, &a_seen);
+    assert_eq!(a_seen.get_between(Time::MIN, Time::MAX).unwrap().len(), 1);
 }

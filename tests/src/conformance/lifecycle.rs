@@ -1,4 +1,6 @@
-//! Names, handles and the whole-ESGM operations (E5–E7).
+//! Names, handles and the whole-ESGM operations (E5–E7), asked of both sides: names
+//! and registrations are system-wide, so the reader gets the same answers and errors
+//! as the writer, and sees what the writer's destroys and re-points do to the stream.
 
 use std::sync::Arc;
 
@@ -8,42 +10,58 @@ use esgm_core::{
     TrajectorySpec, esgm::LogLevel, millis,
 };
 
-use super::{WAIT, reading, register_reading, wait_stored, x_of};
-use crate::Harness;
+use super::{WAIT, read, reading, register_reading, wait_stored, wait_visible, x_of};
+use crate::{Harness, wait_for};
 
-/// Unknown names get the seed's errors, with a suggestion when one is close.
+/// A unit that copies its one input.
+fn copy(i: &[Sample], _: Time) -> Result<EntityStructure, ComputeError> {
+    Ok((*i[0].structure).clone())
+}
+
+/// Unknown names get the seed's errors, with a suggestion when one is close, on
+/// either side.
 pub fn unknown_names_get_the_seed_errors<H: Harness>(h: &H) {
     register_reading(h);
     let e = h.esgm();
     e.create_primitive_entity_trajectory_structure("blobs", "Reading").unwrap();
-    let err = e.get_entity_trajectory_structure("blobz").unwrap_err();
-    assert_eq!(err.to_string(), "no entity trajectory structure `blobz`; did you mean `blobs`?");
-    assert!(matches!(
-        e.destroy_entity_trajectory_structure("nope"),
-        Err(LookupError::NoSuchEntityStructure { .. })
-    ));
-    assert!(matches!(
-        e.create_primitive_entity_trajectory_structure("x", "Readin"),
-        Err(CreateError::NoSuchEntityStructureType { suggestion: Some(_), .. })
-    ));
-    assert!(matches!(
-        e.create_entity_trajectory_structure("x", "camera", 0, 0, millis(10), 0, 0),
-        Err(CreateError::NoSuchSensor { .. })
-    ));
-    assert!(matches!(
-        e.create_primitive_entity_trajectory_structure("blobs", "Reading"),
-        Err(CreateError::EntityStructureAlreadyExists { .. })
-    ));
-    assert!(matches!(
-        e.remove_sensor_interface("cam"),
-        Err(RegistrationError::NoSuchSensor { .. })
-    ));
-    assert!(matches!(e.remove_comp_unit("cu"), Err(RegistrationError::NoSuchCompUnit { .. })));
+    for side in [e, h.reader()] {
+        assert!(side.get_entity_trajectory_structure("blobs").is_ok());
+        let err = side.get_entity_trajectory_structure("blobz").unwrap_err();
+        assert_eq!(
+            err.to_string(),
+            "no entity trajectory structure `blobz`; did you mean `blobs`?"
+        );
+        assert!(matches!(
+            side.destroy_entity_trajectory_structure("nope"),
+            Err(LookupError::NoSuchEntityStructure { .. })
+        ));
+        assert!(matches!(
+            side.create_primitive_entity_trajectory_structure("x", "Readin"),
+            Err(CreateError::NoSuchEntityStructureType { suggestion: Some(_), .. })
+        ));
+        assert!(matches!(
+            side.create_entity_trajectory_structure("x", "camera", 0, 0, millis(10), 0, 0),
+            Err(CreateError::NoSuchSensor { .. })
+        ));
+        assert!(matches!(
+            side.create_primitive_entity_trajectory_structure("blobs", "Reading"),
+            Err(CreateError::EntityStructureAlreadyExists { .. })
+        ));
+        assert!(matches!(
+            side.remove_sensor_interface("cam"),
+            Err(RegistrationError::NoSuchSensor { .. })
+        ));
+        assert!(matches!(
+            side.remove_comp_unit("cu"),
+            Err(RegistrationError::NoSuchCompUnit { .. })
+        ));
+        let s = Arc::new(|q: Time| -> Result<EntityStructure, SensorError> { Ok(reading(q, 0.0)) });
+        assert!(matches!(
+            side.add_sensor_interface("cam", "Nope", s),
+            Err(RegistrationError::NoSuchEntityStructureType { .. })
+        ));
+    }
     let s = Arc::new(|q: Time| -> Result<EntityStructure, SensorError> { Ok(reading(q, 0.0)) });
-    assert!(matches!(
-        e.add_sensor_interface("cam", "Nope", s.clone()),
-        Err(RegistrationError::NoSuchEntityStructureType { .. })
-    ));
     e.add_sensor_interface("cam", "Reading", s.clone()).unwrap();
     assert!(matches!(
         e.add_sensor_interface("cam", "Reading", s),
@@ -51,7 +69,38 @@ pub fn unknown_names_get_the_seed_errors<H: Harness>(h: &H) {
     ));
 }
 
-/// E5: a destroyed name can be reused; old handles report the trajectory is gone.
+/// E6: a sensor or unit name is registered once, system-wide: registering it again
+/// — from the other side or from the same one — is refused, and the refusal leaves
+/// the first registration in place for everyone (its trajectories can still be made).
+pub fn duplicate_registrations_are_refused<H: Harness>(h: &H) {
+    register_reading(h);
+    let e = h.esgm();
+    let s = Arc::new(|q: Time| -> Result<EntityStructure, SensorError> { Ok(reading(q, 0.0)) });
+    e.add_sensor_interface("cam", "Reading", s.clone()).unwrap();
+    e.add_comp_unit("copy", "Reading", vec!["Reading".into()], Arc::new(copy)).unwrap();
+    for side in [h.reader(), e] {
+        let again = side.add_sensor_interface("cam", "Reading", s.clone());
+        assert!(matches!(again, Err(RegistrationError::SensorAlreadyExists { .. })), "{again:?}");
+        let again = side.add_comp_unit("copy", "Reading", vec!["Reading".into()], Arc::new(copy));
+        assert!(matches!(again, Err(RegistrationError::CompUnitAlreadyExists { .. })), "{again:?}");
+    }
+    for side in [e, h.reader()] {
+        assert_eq!(side.sensors(), vec![("cam".to_owned(), "Reading".to_owned())]);
+        assert_eq!(side.comp_units().len(), 1);
+    }
+    e.create_entity_trajectory_structure("s", "cam", 0, 0, millis(100), 0, 0).unwrap();
+    e.create_computed_entity_trajectory_structure("c", "copy", &["s"]).unwrap();
+    let (sampled, c) = (read(h, "s"), read(h, "c"));
+    // The sampler's first tick may come before the unit is attached (then it computes
+    // from the next one) or after (then from both).
+    wait_stored(&sampled, 1);
+    h.advance(millis(100));
+    assert!(wait_for(WAIT, || c.get_latest().is_ok()), "the unit never computed");
+}
+
+/// E5: a destroyed name can be reused; the destroyer's old handles report the
+/// trajectory is gone (the writer's own outcome; [`destroyed_names_are_gone_for_readers`]
+/// is the reader's side).
 pub fn destroy_and_reuse_a_name<H: Harness>(h: &H) {
     register_reading(h);
     let e = h.esgm();
@@ -68,66 +117,150 @@ pub fn destroy_and_reuse_a_name<H: Harness>(h: &H) {
     );
 }
 
+/// E5 across locations: when the writer destroys a trajectory, the reader's handles
+/// report it gone (queries and adds), the name is unknown to the reader, and once
+/// the name is reused the reader reaches the new trajectory, fresh and of its type.
+pub fn destroyed_names_are_gone_for_readers<H: Harness>(h: &H) {
+    register_reading(h);
+    let e = h.esgm();
+    let old = e.create_primitive_entity_trajectory_structure("r", "Reading").unwrap();
+    let seen = read(h, "r");
+    old.add(reading(h.now(), 1.0)).unwrap();
+    wait_visible(&old, &seen);
+    e.destroy_entity_trajectory_structure("r").unwrap();
+    let gone = || matches!(seen.get_latest(), Err(QueryError::NoSuchEntityStructure { .. }));
+    assert!(wait_for(WAIT, gone), "the reader's handle still answers: {:?}", seen.get_latest());
+    assert!(matches!(seen.add(reading(h.now(), 1.0)), Err(AddError::NoSuchEntityStructure { .. })));
+    assert!(matches!(
+        h.reader().get_entity_trajectory_structure("r"),
+        Err(LookupError::NoSuchEntityStructure { .. })
+    ));
+    let new = e.create_primitive_entity_trajectory_structure("r", "Image").unwrap();
+    let fresh = read(h, "r");
+    assert_eq!(fresh.entity_type().unwrap().name, "Image");
+    assert_eq!(h.reader().get_entity_trajectory_structure_type("r").unwrap().name, "Image");
+    wait_visible(&new, &fresh);
+    assert!(fresh.get_latest().is_err(), "fresh and empty for the reader");
+}
+
+/// E5 from the other side: the reader destroys a trajectory the writer writes; it is
+/// gone for both, and the name can be created again.
+pub fn destroy_through_the_reader<H: Harness>(h: &H) {
+    register_reading(h);
+    let e = h.esgm();
+    let w = e.create_primitive_entity_trajectory_structure("r", "Reading").unwrap();
+    let seen = read(h, "r");
+    w.add(reading(h.now(), 1.0)).unwrap();
+    wait_visible(&w, &seen);
+    h.reader().destroy_entity_trajectory_structure("r").unwrap();
+    assert!(matches!(seen.get_latest(), Err(QueryError::NoSuchEntityStructure { .. })));
+    let gone = || matches!(w.get_latest(), Err(QueryError::NoSuchEntityStructure { .. }));
+    assert!(wait_for(WAIT, gone), "the writer's handle still answers: {:?}", w.get_latest());
+    assert!(matches!(
+        e.get_entity_trajectory_structure("r"),
+        Err(LookupError::NoSuchEntityStructure { .. })
+    ));
+    let again = e.create_primitive_entity_trajectory_structure("r", "Reading").unwrap();
+    assert!(again.get_latest().is_err(), "fresh and empty");
+    again.add(reading(h.now(), 2.0)).unwrap();
+    let fresh = read(h, "r");
+    wait_visible(&again, &fresh);
+    assert_eq!(x_of(&fresh.get_latest().unwrap()), Some(2.0));
+}
+
 /// E5: re-pointing a name keeps its subscribers (they see the new stream from then
-/// on) and its handles; a computed trajectory reading the name follows it too.
+/// on) and its handles — a reader's too; a computed trajectory reading the name
+/// follows it.
 pub fn re_pointing_keeps_subscribers_and_handles<H: Harness>(h: &H) {
     register_reading(h);
     let e = h.esgm();
-    let copy = |i: &[Sample], _: Time| -> Result<EntityStructure, ComputeError> {
-        Ok((*i[0].structure).clone())
-    };
     e.add_comp_unit("copy", "Reading", vec!["Reading".into()], Arc::new(copy)).unwrap();
     let handle = e.create_primitive_entity_trajectory_structure("r", "Reading").unwrap();
-    let downstream = e.create_computed_entity_trajectory_structure("d", "copy", &["r"]).unwrap();
-    let sub = handle.subscribe(SubscribeOptions::default()).unwrap();
+    e.create_computed_entity_trajectory_structure("d", "copy", &["r"]).unwrap();
+    let seen = read(h, "r");
+    let downstream = read(h, "d");
+    let sub = seen.subscribe(SubscribeOptions::default()).unwrap();
     let t0 = h.now();
     handle.add(reading(t0, 1.0)).unwrap();
+    wait_visible(&handle, &seen);
     e.create_trajectory(TrajectorySpec::primitive("r", "Reading").replace()).unwrap();
     assert!(handle.get_latest().is_err(), "the handle now reaches the new, empty trajectory");
+    // The reader had the old stream's sample; an empty replica is the re-point arriving.
+    wait_visible(&handle, &seen);
+    assert!(seen.get_latest().is_err(), "the reader's handle reaches the new one too");
     handle.add(reading(t0 + 1, 2.0)).unwrap();
     let got: Vec<_> = (0..2).map(|_| sub.recv_timeout(WAIT).map(|s| x_of(&s))).collect();
     assert_eq!(got, vec![Ok(Some(1.0)), Ok(Some(2.0))]);
+    wait_visible(&handle, &seen);
     wait_stored(&downstream, 2);
     // Re-pointing may not change the type (readers were checked against it) nor make
-    // the name read itself.
-    assert!(matches!(
-        e.create_trajectory(TrajectorySpec::primitive("r", "Image").replace()),
-        Err(CreateError::TypeChange { .. })
-    ));
-    let looped = e.create_trajectory(TrajectorySpec::computed("r", "copy", ["d"]).replace());
-    assert!(matches!(looped, Err(CreateError::Cycle { .. })), "{looped:?}");
+    // the name read itself, whoever asks.
+    for side in [e, h.reader()] {
+        assert!(matches!(
+            side.create_trajectory(TrajectorySpec::primitive("r", "Image").replace()),
+            Err(CreateError::TypeChange { .. })
+        ));
+        let looped = side.create_trajectory(TrajectorySpec::computed("r", "copy", ["d"]).replace());
+        assert!(matches!(looped, Err(CreateError::Cycle { .. })), "{looped:?}");
+    }
 }
 
-/// T4: only primitive trajectories take structures from outside.
+/// T4: only primitive trajectories take structures from outside, on either side.
 pub fn external_adds_only_on_primitive<H: Harness>(h: &H) {
     register_reading(h);
     let e = h.esgm();
     let s = Arc::new(|q: Time| -> Result<EntityStructure, SensorError> { Ok(reading(q, 0.0)) });
     e.add_sensor_interface("cam", "Reading", s).unwrap();
+    e.add_comp_unit("copy", "Reading", vec!["Reading".into()], Arc::new(copy)).unwrap();
     let t = e.create_entity_trajectory_structure("s", "cam", 0, 0, millis(100), 0, 0).unwrap();
+    e.create_computed_entity_trajectory_structure("c", "copy", &["s"]).unwrap();
     assert!(matches!(t.add(reading(h.now(), 1.0)), Err(AddError::OperationNotSupported { .. })));
+    for name in ["s", "c"] {
+        let seen = read(h, name);
+        let out = seen.add(reading(h.now(), 1.0));
+        assert!(matches!(out, Err(AddError::OperationNotSupported { .. })), "{name}: {out:?}");
+        let out = seen.create_at_now("r", reading(0, 1.0).attributes.into());
+        assert!(matches!(out, Err(AddError::OperationNotSupported { .. })), "{name}: {out:?}");
+    }
 }
 
-/// E6: a sensor or unit in use cannot be removed; once its users are gone it can.
+/// E6: a sensor or unit in use cannot be removed, whoever asks; once its users are
+/// gone it can.
 pub fn in_use_sensors_and_units_cannot_be_removed<H: Harness>(h: &H) {
     register_reading(h);
     let e = h.esgm();
     let s = Arc::new(|q: Time| -> Result<EntityStructure, SensorError> { Ok(reading(q, 0.0)) });
     e.add_sensor_interface("cam", "Reading", s).unwrap();
+    e.add_comp_unit("copy", "Reading", vec!["Reading".into()], Arc::new(copy)).unwrap();
     e.create_entity_trajectory_structure("s", "cam", 0, 0, millis(100), 0, 0).unwrap();
-    let err = e.remove_sensor_interface("cam").unwrap_err();
-    assert_eq!(err.to_string(), "`cam` is used by s");
+    e.create_computed_entity_trajectory_structure("c", "copy", &["s"]).unwrap();
+    for side in [e, h.reader()] {
+        let err = side.remove_sensor_interface("cam").unwrap_err();
+        assert_eq!(err.to_string(), "`cam` is used by s");
+        let err = side.remove_comp_unit("copy").unwrap_err();
+        assert!(matches!(err, RegistrationError::InUse { .. }), "{err}");
+        assert_eq!(side.sensors().len(), 1);
+        assert_eq!(side.comp_units().len(), 1);
+    }
+    e.destroy_entity_trajectory_structure("c").unwrap();
+    e.remove_comp_unit("copy").unwrap();
     e.destroy_entity_trajectory_structure("s").unwrap();
     e.remove_sensor_interface("cam").unwrap();
-    assert!(e.sensors().is_empty());
+    for side in [e, h.reader()] {
+        assert!(side.sensors().is_empty());
+        assert!(side.comp_units().is_empty());
+    }
 }
 
-/// E7: stats, memory stats, ping, reset, log level.
+/// E7: stats, memory stats, ping, reset, log level. Memory and the log level are the
+/// asking location's own; the reader's statistics count what it received, and a reset
+/// of the writer's runtime empties what the reader holds of it.
 pub fn stats_memory_ping_reset_log_level<H: Harness>(h: &H) {
     register_reading(h);
     let e = h.esgm();
     let t = e.create_primitive_entity_trajectory_structure("r", "Reading").unwrap();
     let img = e.create_primitive_entity_trajectory_structure("img", "Image").unwrap();
+    let (t_seen, img_seen) = (read(h, "r"), read(h, "img"));
     for k in 0..10 {
         t.add(reading(h.now() + k, k as f64)).unwrap();
     }
@@ -145,9 +278,23 @@ pub fn stats_memory_ping_reset_log_level<H: Harness>(h: &H) {
     let m = e.memory_stats();
     assert_eq!((m.trajectories, m.stored_samples), (2, 12));
     assert!(m.approx_bytes >= 64 * 1024 && m.approx_bytes < 2 * 64 * 1024, "{}", m.approx_bytes);
+    // The reader: everything arrived, and its statistics say so.
+    wait_visible(&t, &t_seen);
+    wait_visible(&img, &img_seen);
+    assert!(h.reader().ping());
+    assert_eq!(t_seen.stats().unwrap().added, 10);
+    let stats = h.reader().stats();
+    let r = stats.trajectories.iter().find(|(i, _, _)| i.name == "r").unwrap();
+    assert_eq!(r.1.added, 10);
+    assert_eq!(h.reader().memory_stats().stored_samples, 12);
     e.reset();
     assert_eq!(e.memory_stats().stored_samples, 0);
+    wait_visible(&t, &t_seen);
+    wait_visible(&img, &img_seen);
+    assert_eq!(h.reader().memory_stats().stored_samples, 0);
     e.set_log_level(LogLevel::Debug);
     assert_eq!(e.log_level(), LogLevel::Debug);
-    assert_eq!(e.trajectories().len(), 2);
+    for side in [e, h.reader()] {
+        assert_eq!(side.trajectories().len(), 2);
+    }
 }

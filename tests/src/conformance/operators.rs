@@ -1,4 +1,5 @@
-//! Operators (G2–G4): sync, merge, generators and states.
+//! Operators (G2–G4): sync, merge, generators and states. The operators run with the
+//! writer, which creates them; their streams are read through the reader.
 
 use esgm_core::operators::sync::{ApproximateConfig, ExactConfig, SyncPolicy};
 use esgm_core::{
@@ -6,7 +7,7 @@ use esgm_core::{
     ValueApproximation, millis,
 };
 
-use super::{WAIT, reading, register_reading, wait_stored, x_of};
+use super::{WAIT, read, reading, register_reading, wait_stored, wait_visible, x_of};
 use crate::{Harness, wait_for};
 
 fn frame_x(s: &esgm_core::Sample, input: &str) -> Option<f64> {
@@ -19,13 +20,14 @@ pub fn sync_exact<H: Harness>(h: &H) {
     let e = h.esgm();
     let a = e.create_primitive_entity_trajectory_structure("a", "Reading").unwrap();
     let b = e.create_primitive_entity_trajectory_structure("b", "Reading").unwrap();
-    let s = e
+    let w = e
         .create_trajectory(TrajectorySpec::sync(
             "ab",
             ["a", "b"],
             SyncPolicy::Exact(ExactConfig::default()),
         ))
         .unwrap();
+    let s = read(h, "ab");
     let sub = s.subscribe(SubscribeOptions::default()).unwrap();
     let t0 = h.now();
     a.add(reading(t0 + 10, 1.0)).unwrap();
@@ -36,6 +38,8 @@ pub fn sync_exact<H: Harness>(h: &H) {
     assert_eq!(state.valid_time, t0 + 20);
     assert_eq!((frame_x(&state, "a"), frame_x(&state, "b")), (Some(3.0), Some(4.0)));
     assert_eq!(s.entity_type().unwrap().attributes.len(), 2);
+    assert_eq!(s.entity_type().unwrap(), w.entity_type().unwrap(), "the synthesized type");
+    wait_visible(&w, &s);
     // a@10 and b@15 never found a partner: counted, not lost silently.
     let discarded = || {
         h.esgm()
@@ -55,8 +59,8 @@ pub fn sync_approximate<H: Harness>(h: &H) {
     let a = e.create_primitive_entity_trajectory_structure("a", "Reading").unwrap();
     let b = e.create_primitive_entity_trajectory_structure("b", "Reading").unwrap();
     let policy = SyncPolicy::Approximate(ApproximateConfig::default());
-    let s = e.create_trajectory(TrajectorySpec::sync("ab", ["a", "b"], policy)).unwrap();
-    let sub = s.subscribe(SubscribeOptions::default()).unwrap();
+    e.create_trajectory(TrajectorySpec::sync("ab", ["a", "b"], policy)).unwrap();
+    let sub = read(h, "ab").subscribe(SubscribeOptions::default()).unwrap();
     let t0 = h.now();
     // a every 10, b every 10 offset by 3: pairs (0,3), (10,13), …
     for k in 0..4 {
@@ -76,7 +80,8 @@ pub fn merge_interleaves_inputs<H: Harness>(h: &H) {
     let a = e.create_primitive_entity_trajectory_structure("a", "Reading").unwrap();
     let b = e.create_primitive_entity_trajectory_structure("b", "Reading").unwrap();
     e.create_primitive_entity_trajectory_structure("img", "Image").unwrap();
-    let m = e.create_trajectory(TrajectorySpec::merge("m", ["a", "b"])).unwrap();
+    e.create_trajectory(TrajectorySpec::merge("m", ["a", "b"])).unwrap();
+    let m = read(h, "m");
     let t0 = h.now();
     a.add(reading(t0, 1.0)).unwrap();
     b.add(reading(t0 + 1, 2.0)).unwrap();
@@ -84,10 +89,12 @@ pub fn merge_interleaves_inputs<H: Harness>(h: &H) {
     wait_stored(&m, 3);
     let all: Vec<_> = m.get_between(t0, t0 + 2).unwrap().iter().map(|s| x_of(s)).collect();
     assert_eq!(all, vec![Some(1.0), Some(2.0), Some(3.0)]);
-    assert!(
-        e.create_trajectory(TrajectorySpec::merge("bad", ["a", "img"])).is_err(),
-        "types differ"
-    );
+    for side in [e, h.reader()] {
+        assert!(
+            side.create_trajectory(TrajectorySpec::merge("bad", ["a", "img"])).is_err(),
+            "types differ"
+        );
+    }
 }
 
 /// G3 under a burst: interleaved adds on two inputs reach a monotone merge in add
@@ -99,15 +106,19 @@ pub fn merge_keeps_add_order_across_inputs<H: Harness>(h: &H) {
     let b = e.create_primitive_entity_trajectory_structure("b", "Reading").unwrap();
     let policy =
         esgm_core::FluentStreamPolicy::default().order(esgm_core::OrderConstraint::StrictMonotone);
-    let m = e.create_trajectory(TrajectorySpec::merge("m", ["a", "b"]).policy(policy)).unwrap();
+    let w = e.create_trajectory(TrajectorySpec::merge("m", ["a", "b"]).policy(policy)).unwrap();
+    let m = read(h, "m");
     let t0 = h.now();
     let n = 500; // within the input buffer (1,024): nothing may be discarded
     for k in 0..n {
         let target = if k % 2 == 0 { &a } else { &b };
         target.add(reading(t0 + k, k as f64)).unwrap();
     }
-    assert!(wait_for(WAIT, || m.stats().map(|s| s.added + s.dropped_total) == Ok(n as u64)));
-    assert_eq!(m.stats().unwrap().dropped_total, 0, "every sample in add order");
+    assert!(wait_for(WAIT, || w.stats().map(|s| s.added + s.dropped_total) == Ok(n as u64)));
+    assert_eq!(w.stats().unwrap().dropped_total, 0, "every sample in add order");
+    let all = || m.stats().map(|s| (s.added, s.dropped_total));
+    assert!(wait_for(WAIT, || all() == Ok((n as u64, 0))), "reader stats {:?}", m.stats());
+    wait_visible(&w, &m);
 }
 
 /// G1/G4: a stream sampled from a generator (values at each sample time, linearly
@@ -127,18 +138,17 @@ pub fn sampled_generator_and_state<H: Harness>(h: &H) {
         approximation: ValueApproximation::MostRecent,
         merge: MergeRule::KeepLast,
     };
-    let g = e
-        .create_trajectory(
-            TrajectorySpec::sampled_generators("ga", [("a", linear.clone())], millis(25))
-                .between(t0, t0 + millis(100)),
-        )
-        .unwrap();
-    let st = e
-        .create_trajectory(
-            TrajectorySpec::sampled_generators("state", [("a", linear), ("b", recent)], millis(50))
-                .between(t0, t0 + millis(100)),
-        )
-        .unwrap();
+    e.create_trajectory(
+        TrajectorySpec::sampled_generators("ga", [("a", linear.clone())], millis(25))
+            .between(t0, t0 + millis(100)),
+    )
+    .unwrap();
+    e.create_trajectory(
+        TrajectorySpec::sampled_generators("state", [("a", linear), ("b", recent)], millis(50))
+            .between(t0, t0 + millis(100)),
+    )
+    .unwrap();
+    let (g, st) = (read(h, "ga"), read(h, "state"));
     // Both samplers tick at t0 first; advancing before they have would make them skip a
     // period (as a real late worker does).
     wait_stored(&g, 1);
@@ -197,17 +207,17 @@ pub fn sampled_temporal_function<H: Harness>(h: &H) {
         approximation: ValueApproximation::MostRecent,
         merge: MergeRule::KeepLast,
     };
-    let f = e
-        .create_trajectory(
-            TrajectorySpec::sampled_function(
-                "f",
-                "sum",
-                [("a", linear.clone()), ("b", recent.clone())],
-                millis(50),
-            )
-            .between(t0, t0 + millis(100)),
+    e.create_trajectory(
+        TrajectorySpec::sampled_function(
+            "f",
+            "sum",
+            [("a", linear.clone()), ("b", recent.clone())],
+            millis(50),
         )
-        .unwrap();
+        .between(t0, t0 + millis(100)),
+    )
+    .unwrap();
+    let f = read(h, "f");
     let g = e
         .create_trajectory(
             TrajectorySpec::sampled_function(
@@ -239,5 +249,8 @@ pub fn sampled_temporal_function<H: Harness>(h: &H) {
     let xs: Vec<_> = f.get_between(t0, t0 + millis(100)).unwrap().iter().map(|s| x_of(s)).collect();
     assert_eq!(xs, vec![Some(5.0), Some(10.0), Some(15.0)]);
     assert!(g.get_latest().is_err());
+    let g_seen = read(h, "g");
+    wait_visible(&g, &g_seen);
+    assert!(g_seen.get_latest().is_err());
     assert!(matches!(e.remove_comp_unit("sum"), Err(esgm_core::RegistrationError::InUse { .. })));
 }
