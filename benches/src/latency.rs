@@ -115,6 +115,7 @@ impl Latency {
             lost: None,
             notes: Vec::new(),
             cdf: self.cdf(&CDF_POINTS),
+            if_empty: None,
         }
     }
 }

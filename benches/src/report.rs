@@ -130,6 +130,10 @@ pub struct Measurement {
     /// (quantile, ns) points of the distribution, for `--plots` (not in the JSON).
     #[serde(skip)]
     pub cdf: Vec<(f64, u64)>,
+    /// What it means if this row has no samples, said when it is reported as failed
+    /// ([`Report::add_rows`]); not in the JSON.
+    #[serde(skip)]
+    pub if_empty: Option<String>,
 }
 
 impl Measurement {
@@ -182,6 +186,25 @@ impl Measurement {
         self.notes.push(note.into());
         self
     }
+
+    /// Says why this row would have no samples (what was not seen), for the failure
+    /// it is then reported as instead of a row of zeros.
+    #[must_use]
+    pub fn if_empty(mut self, reason: impl Into<String>) -> Self {
+        self.if_empty = Some(reason.into());
+        self
+    }
+}
+
+/// A row that ran but recorded no samples: a failed measurement, never a row of "0 ns".
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Failed {
+    /// The row's name.
+    pub name: String,
+    /// The row's wait.
+    pub wait: Wait,
+    /// Why it has no samples.
+    pub reason: String,
 }
 
 /// One memory figure: how much of something a process or a trajectory uses, after
@@ -223,12 +246,41 @@ pub struct Report {
     /// installed), each with the way to run it.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub skipped: Vec<Skipped>,
+    /// Rows that ran but recorded no samples, each with the reason: failures, kept out
+    /// of `scenarios` so that no reader takes their zeros for figures.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub failed: Vec<Failed>,
     /// The goals the run's scenarios set, for the table; not part of the JSON.
     #[serde(skip)]
     pub targets: Vec<Target>,
 }
 
 impl Report {
+    /// Adds a scenario's rows: rows with samples to `scenarios`, rows without to
+    /// `failed`, with the reason the row gave ([`Measurement::if_empty`]) and its notes.
+    pub fn add_rows(&mut self, rows: Vec<Measurement>) {
+        for row in rows {
+            if row.n > 0 {
+                self.scenarios.push(row);
+                continue;
+            }
+            let mut reason = format!(
+                "no samples: {}",
+                row.if_empty.as_deref().unwrap_or("the scenario recorded nothing")
+            );
+            for note in &row.notes {
+                reason.push_str("; ");
+                reason.push_str(note);
+            }
+            self.failed.push(Failed { name: row.name, wait: row.wait, reason });
+        }
+    }
+
+    /// True if row `name` with `wait` ran but failed.
+    pub fn has_failed(&self, name: &str, wait: Wait) -> bool {
+        self.failed.iter().any(|f| f.name == name && f.wait == wait)
+    }
+
     /// The reference row of `m`: its baseline scenario with the same wait, if that
     /// scenario ran.
     pub fn baseline_of(&self, m: &Measurement) -> Option<&Measurement> {
@@ -259,6 +311,7 @@ mod tests {
             lost: None,
             notes: Vec::new(),
             cdf: Vec::new(),
+            if_empty: None,
         }
     }
 
@@ -277,6 +330,27 @@ mod tests {
         assert!(s.get("wait_strategy").is_none());
         let back: Report = serde_json::from_value(json).unwrap();
         assert_eq!(back, report);
+    }
+
+    #[test]
+    fn rows_without_samples_are_failures_with_their_reason() {
+        let mut empty = row("e2e", Wait::Event).if_empty("no direction from a new blob");
+        empty.n = 0;
+        let mut report = Report::default();
+        report.add_rows(vec![row("a", Wait::Spin), empty.note("60 blobs")]);
+        assert_eq!(report.scenarios.len(), 1);
+        assert_eq!(
+            report.failed,
+            [Failed {
+                name: "e2e".into(),
+                wait: Wait::Event,
+                reason: "no samples: no direction from a new blob; 60 blobs".into(),
+            }]
+        );
+        assert!(report.has_failed("e2e", Wait::Event) && !report.has_failed("a", Wait::Spin));
+        let json = serde_json::to_value(&report).unwrap();
+        assert_eq!(json["failed"][0]["name"], "e2e");
+        assert_eq!(json["scenarios"].as_array().map(Vec::len), Some(1));
     }
 
     #[test]

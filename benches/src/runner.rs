@@ -45,7 +45,7 @@ pub fn run(
         let rows =
             scenario.run(&ctx).with_context(|| format!("scenario {} failed", scenario.name()))?;
         let _ = writeln!(progress, "{:>6.1} s", started.elapsed().as_secs_f64());
-        report.scenarios.extend(rows);
+        report.add_rows(rows);
         report.memory.extend(ctx.take_memory());
         report.skipped.extend(ctx.take_skipped());
         report.targets.extend(scenario.targets());

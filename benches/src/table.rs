@@ -39,6 +39,9 @@ pub fn render(report: &Report, config: &RunConfig) -> String {
             (Some(_), Some(b)) => {
                 (b.name.clone(), compare(m.p50_ns, b.p50_ns), compare(m.p99_ns, b.p99_ns))
             }
+            (Some(name), None) if report.has_failed(name, m.wait) => {
+                (format!("{name} (failed)"), "-".into(), "-".into())
+            }
             (Some(name), None) => (format!("{name} (not run)"), "-".into(), "-".into()),
             (None, _) => ("-".into(), "-".into(), "-".into()),
         };
@@ -120,6 +123,9 @@ pub fn render(report: &Report, config: &RunConfig) -> String {
     for s in &report.skipped {
         let _ = writeln!(out, "{}: skipped — {}", s.name, s.reason);
     }
+    for f in &report.failed {
+        let _ = writeln!(out, "{} ({}): FAILED — {}", f.name, f.wait.as_str(), f.reason);
+    }
 
     let notes: Vec<String> = report.scenarios.iter().flat_map(notes_of).collect();
     if !notes.is_empty() {
@@ -159,7 +165,15 @@ fn targets(report: &Report) -> String {
                     "-".to_owned(),
                     String::new(),
                     format!("target {}", t.bound_label()),
-                    format!("({} not run)", missing.join(", ")),
+                    missing
+                        .iter()
+                        .map(|row| {
+                            let how =
+                                if report.has_failed(row, t.wait) { "failed" } else { "not run" };
+                            format!("({row} {how})")
+                        })
+                        .collect::<Vec<_>>()
+                        .join(" "),
                 ],
             }
         })
@@ -340,6 +354,7 @@ mod tests {
             ],
             memory: Vec::new(),
             skipped: Vec::new(),
+            failed: Vec::new(),
         };
         let text = render(&report, &RunConfig::default());
         let target = "hop / floor (spin)   ×2.50  (p99 ×2.50)  target ≤ ×3.00  met";
@@ -349,5 +364,25 @@ mod tests {
         assert!(text.contains("floor (not run)"), "{text}");
         assert!(text.contains("hop (spin): shared"), "{text}");
         assert!(text.contains("rtt/2:"), "{text}");
+    }
+
+    #[test]
+    fn an_empty_row_prints_as_a_failure_not_as_zeros() {
+        let mut l = Latency::new().unwrap();
+        l.record_ns(100);
+        let floor = l.measurement("floor", Wait::Event);
+        let empty = Latency::new().unwrap().measurement("e2e", Wait::Event).if_empty("no blob");
+        let hop = l.measurement("hop", Wait::Event).baseline("e2e");
+        let mut report = Report {
+            targets: vec![Target::at_most("e2e", "floor", Wait::Event, 2.0)],
+            ..Report::default()
+        };
+        report.add_rows(vec![floor, empty, hop]);
+        let text = render(&report, &RunConfig::default());
+        assert!(text.contains("e2e (event): FAILED — no samples: no blob"), "{text}");
+        // No table row of zeros for it.
+        assert!(!text.lines().any(|l| l.starts_with("e2e ") && !l.contains("FAILED")), "{text}");
+        assert!(text.contains("(e2e failed)"), "{text}");
+        assert!(text.contains("e2e (failed)"), "{text}");
     }
 }

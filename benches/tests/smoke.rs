@@ -12,13 +12,22 @@ use std::time::{Duration, Instant};
 /// Generous for a debug build; only there so that a hang fails instead of blocking CI.
 const WATCHDOG: Duration = Duration::from_secs(120);
 
+/// Samples per row of [`run_quick`].
+const SAMPLES: u64 = 200;
+
 /// Runs `esgm-bench --quick --samples 200 --only <only> --json FILE` under the watchdog;
 /// returns the printed table and the JSON report.
 fn run_quick(only: &str) -> (String, serde_json::Value) {
+    run_quick_with(only, SAMPLES)
+}
+
+/// [`run_quick`] with `samples` samples per row.
+fn run_quick_with(only: &str, samples: u64) -> (String, serde_json::Value) {
     let dir = tempfile::tempdir().unwrap();
     let json = dir.path().join("report.json");
+    let samples = samples.to_string();
     let mut child = Command::new(env!("CARGO_BIN_EXE_esgm-bench"))
-        .args(["--quick", "--only", only, "--samples", "200", "--json"])
+        .args(["--quick", "--only", only, "--samples", &samples, "--json"])
         .arg(&json)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -60,6 +69,12 @@ fn run_quick(only: &str) -> (String, serde_json::Value) {
 
 /// The `(name, wait)` of every row, sorted, after checking each row's counts.
 fn rows(report: &serde_json::Value) -> Vec<(String, String)> {
+    rows_with(report, SAMPLES)
+}
+
+/// [`rows`] of a run with `samples` samples per row.
+fn rows_with(report: &serde_json::Value, samples: u64) -> Vec<(String, String)> {
+    assert!(report.get("failed").is_none(), "rows failed: {report}");
     let rows = report["scenarios"].as_array().expect("a `scenarios` array");
     let mut keys: Vec<(String, String)> = rows
         .iter()
@@ -67,7 +82,7 @@ fn rows(report: &serde_json::Value) -> Vec<(String, String)> {
             for field in ["payload_bytes", "n", "p50_ns", "p99_ns", "p999_ns", "max_ns"] {
                 assert!(row[field].is_u64(), "{field} is not a count in {row}");
             }
-            assert_eq!(row["n"], 200, "{row}");
+            assert_eq!(row["n"], samples, "{row}");
             let name = row["name"].as_str().expect("`name` is a string").to_owned();
             let wait = row["wait"].as_str().expect("`wait` is a string").to_owned();
             (name, wait)
@@ -126,6 +141,34 @@ fn quick_esgm_small_reports_three_waits_idle_cpu_and_the_encode() {
     // Its baselines did not run: the targets say so instead of failing.
     assert!(stdout.contains("esgm-small / floor-iceoryx2 (spin)"), "{stdout}");
     assert!(stdout.contains("(floor-iceoryx2 not run)"), "{stdout}");
+}
+
+#[test]
+fn quick_connect_small_measures_the_api_both_ways() {
+    let (stdout, report) = run_quick("connect-small");
+    assert_eq!(rows(&report), [key("connect-small", "event"), key("connect-small", "spin")]);
+    for row in report["scenarios"].as_array().unwrap() {
+        assert_eq!(row["baseline"], "esgm-small", "{row}");
+        assert!(row["p50_ns"].as_u64().is_some_and(|ns| ns > 0), "{row}");
+    }
+    assert!(stdout.contains("Subscription::recv_timeout"), "{stdout}");
+    // Its baselines and the peers it is held against did not run.
+    assert!(stdout.contains("connect-small / ros1-small (event)"), "{stdout}");
+    assert!(stdout.contains("(zenoh-small not run)"), "{stdout}");
+}
+
+#[test]
+fn quick_connect_image_reads_the_pixels_in_shared_memory() {
+    // Few samples: a debug build writes a frame in tens of milliseconds.
+    let (stdout, report) = run_quick_with("connect-image", 20);
+    assert_eq!(
+        rows_with(&report, 20),
+        [key("connect-image", "event"), key("connect-image", "spin")]
+    );
+    for row in report["scenarios"].as_array().unwrap() {
+        assert!(row["payload_bytes"].as_u64().is_some_and(|b| b > 921_600), "{row}");
+    }
+    assert!(stdout.contains("20 of 20 replies' pixels read in place"), "{stdout}");
 }
 
 #[test]

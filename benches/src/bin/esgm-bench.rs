@@ -45,5 +45,11 @@ fn run(args: Args) -> anyhow::Result<()> {
             eprintln!("wrote {}", file.display());
         }
     }
+    // Printed and written first: the rows that did measure are still worth having.
+    if !report.failed.is_empty() {
+        let rows: Vec<String> =
+            report.failed.iter().map(|f| format!("{} ({})", f.name, f.wait.as_str())).collect();
+        anyhow::bail!("no samples, so no figures, for {} (see FAILED above)", rows.join(", "));
+    }
     Ok(())
 }

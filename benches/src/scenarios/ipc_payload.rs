@@ -96,6 +96,35 @@ impl Kind {
     }
 }
 
+/// Reads what a consumer reads of a structure delivered as a value (an
+/// [`esgm_core::Sample`] from a subscription): the `x` of a `RobotState`, or one pixel
+/// at each end of an `Image`, checked as [`Kind::read`] checks an archive. Returns the
+/// value read and whether the pixels are held in shared memory rather than copied
+/// onto this process's heap ([`esgm_core::Octets::is_held`]; always false for a small structure).
+pub fn read_value(kind: Kind, es: &EntityStructure) -> anyhow::Result<(u64, bool)> {
+    match kind {
+        Kind::Small => match es.get("x").and_then(|v| v.as_double()) {
+            Some(x) => Ok((x.to_bits(), false)),
+            None => bail!("the RobotState has no double x"),
+        },
+        Kind::Image => {
+            let Some(pixels) = es.get("image_data").and_then(|v| v.as_octets()) else {
+                bail!("the Image has no octet sequence image_data")
+            };
+            let (Some(&first), Some(&last)) = (pixels.first(), pixels.last()) else {
+                bail!("the image has no pixels")
+            };
+            if pixels.len() != PIXEL_BYTES || last != pattern(PIXEL_BYTES - 1, first) {
+                bail!(
+                    "the image's pixels are not the frame sent ({} bytes, first {first}, last {last})",
+                    pixels.len()
+                );
+            }
+            Ok((u64::from(first) + u64::from(last), pixels.is_held()))
+        }
+    }
+}
+
 /// The byte at `index` of a frame whose first byte is `seed`: the pattern of
 /// [`Frames`], so a reader can check the far end against the near one.
 pub fn pattern(index: usize, seed: u8) -> u8 {
@@ -125,6 +154,7 @@ mod tests {
             let bytes = codec::encode(&kind.make(7)).unwrap();
             assert!(bytes.len() <= kind.max_bytes());
             kind.read(codec::access(&bytes).unwrap()).unwrap();
+            assert!(!read_value(kind, &kind.make(7)).unwrap().1, "made on the heap");
         }
         assert_eq!(Kind::Image.make(7).name, IMAGE_NAME);
         let blank = Image {
@@ -136,5 +166,7 @@ mod tests {
         .to_structure(IMAGE_NAME, 1, 1);
         let bytes = codec::encode(&blank).unwrap();
         assert!(Kind::Image.read(codec::access(&bytes).unwrap()).is_err());
+        assert!(read_value(Kind::Image, &blank).is_err());
+        assert!(read_value(Kind::Image, &Kind::Small.make(1)).is_err());
     }
 }

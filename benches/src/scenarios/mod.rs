@@ -31,6 +31,9 @@
 //!   measured in `zenoh_echo`) and [`ros1_peer`] (`ros1-small`, `ros1-image`; a roscpp
 //!   program built by `benches/ros1/build.sh`), each skipped with the way to run it
 //!   when not built;
+//! - [`ipc_connect`]: `connect-small`, `connect-image`, the same hops through the API a
+//!   user calls (`esgm_shm` `connect` on both sides, [`ipc_connect_echo`]), compared
+//!   with `esgm-small`, `ros1-small` and `zenoh-small` (so after them);
 //! - [`ipc_throughput`]: `throughput-1x1`, `throughput-1x4`, lossless, losses counted;
 //! - [`ipc_query`]: `query-<op>-<n>` on a reader's history of 10^3 and 10^6;
 //! - [`ipc_pipeline`]: `pipeline-<stage>`, the tutorial across six processes;
@@ -44,6 +47,8 @@ pub mod inproc_floor_crossbeam;
 pub mod inproc_hop_image;
 pub mod inproc_hop_small;
 pub mod inproc_sampling_jitter;
+pub mod ipc_connect;
+pub mod ipc_connect_echo;
 pub mod ipc_esgm_echo;
 pub mod ipc_esgm_image;
 pub mod ipc_esgm_small;
@@ -82,6 +87,8 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(zenoh_peer::Zenoh::IMAGE),
         Box::new(ros1_peer::Ros1::SMALL),
         Box::new(ros1_peer::Ros1::IMAGE),
+        Box::new(ipc_connect::Connect::SMALL),
+        Box::new(ipc_connect::Connect::IMAGE),
         Box::new(ipc_throughput::Throughput::ONE),
         Box::new(ipc_throughput::Throughput::FOUR),
         Box::new(ipc_query::Query::THOUSAND),
@@ -110,7 +117,15 @@ mod tests {
     #[test]
     fn the_cross_process_names_are_the_issues() {
         let names: Vec<_> = all().iter().map(|s| s.name()).collect();
-        for name in ["floor-iceoryx2", "esgm-small", "esgm-image", "uds-small", "uds-image"] {
+        for name in [
+            "floor-iceoryx2",
+            "esgm-small",
+            "esgm-image",
+            "uds-small",
+            "uds-image",
+            "connect-small",
+            "connect-image",
+        ] {
             assert!(names.contains(&name), "{name} missing from {names:?}");
         }
     }

@@ -1,0 +1,155 @@
+//! `connect-small` and `connect-image`: one hop between two processes through the API a
+//! user calls, [`esgm_shm::ShmEsgm`] (`connect`), rather than the data plane under it
+//! (`esgm-small`, `esgm-image`).
+//!
+//! - `connect-small`: a `RobotState` added in one process (`add` on a primitive
+//!   trajectory it created) until a subscriber in the other process, connected too,
+//!   holds it (its [`esgm_core::Subscription`] returned the sample and `x` was read);
+//! - `connect-image`: a camera's 640×480 RGB `Image` (921,600 bytes of pixels, written
+//!   into a fresh buffer before the timer, as a camera renders a frame) added in one
+//!   process until a subscriber in the other has read a pixel at each end. The pixels
+//!   arrive as an [`esgm_core::Octets`] held in shared memory; the rows say how many
+//!   were.
+//!
+//! Two rows each ([`super::ipc_connect_echo`] has the ping-pong): `spin`, both
+//! subscribers polling `try_recv`, and `event`, both blocking in `recv_timeout`. `event`
+//! is what a user gets: `connect` has no wait strategy to choose, so there is no
+//! `-default` row. Targets, as ratios of rows of the same run: `connect-small` within
+//! 2× `esgm-small` at the same wait (what the API adds to the data plane),
+//! `connect-image` within 1.2× `connect-small` (pixels are not copied on the way), and
+//! `connect-small` (`event`) faster than ROS 1 and Zenoh (`event`), which are reported
+//! as not run when their peers are not built.
+//!
+//! Under `--pin` every thread of a process — the subscriber, the threads `connect`
+//! starts and, in the measuring process, the coordinator's — runs on that process's
+//! core: what a user's pinned process would get.
+
+use super::ipc_connect_echo::{CACHE, ConnectRun, echo, ping_pong};
+use super::ipc_esgm_small;
+use super::ipc_payload::Kind;
+use super::{ros1_peer, zenoh_peer};
+use crate::peer_role::PeerRole;
+use crate::report::{Measurement, Method, Wait};
+use crate::scenario::{Context, Scenario};
+use crate::target::Target;
+use crate::wait_mode::WaitMode;
+
+/// The name of the small structure's scenario.
+pub const SMALL_NAME: &str = "connect-small";
+/// The name of the image's scenario.
+pub const IMAGE_NAME: &str = "connect-image";
+
+/// One payload through `connect` (see the module docs).
+#[derive(Debug, Clone, Copy)]
+pub struct Connect {
+    name: &'static str,
+    kind: Kind,
+}
+
+impl Connect {
+    /// The small structure.
+    pub const SMALL: Connect = Connect { name: SMALL_NAME, kind: Kind::Small };
+    /// The image.
+    pub const IMAGE: Connect = Connect { name: IMAGE_NAME, kind: Kind::Image };
+
+    /// The scenario each row is compared with (same wait).
+    fn baseline(&self) -> &'static str {
+        match self.kind {
+            Kind::Small => ipc_esgm_small::NAME,
+            Kind::Image => SMALL_NAME,
+        }
+    }
+
+    fn row(&self, mode: WaitMode, run: &ConnectRun, payload_bytes: u64) -> Measurement {
+        let how = match mode {
+            WaitMode::Spin => {
+                "both subscribers poll Subscription::try_recv in a loop (a sample reaches a \
+                 subscription through a thread connect runs in each process, which a spinning \
+                 subscriber competes with for a core)"
+            }
+            WaitMode::Block | WaitMode::SpinThenBlock => {
+                "both subscribers block in Subscription::recv_timeout: what a user of connect \
+                 gets (connect has no wait strategy to choose)"
+            }
+        };
+        let mut row = run
+            .one_way
+            .measurement(&mode.row_name(self.name), mode.wait())
+            .payload_bytes(payload_bytes)
+            .method(Method::HalfRoundTrip)
+            .wait_strategy(mode.label())
+            .baseline(self.baseline())
+            .producer_write_p50_ns(run.write.quantile(0.5))
+            .if_empty("no reply was measured")
+            .note(format!(
+                "each leg: add in one connected process -> the Sample held by a subscriber in \
+                 the other; {how}; primitive trajectories with a cache of {CACHE}; coordinator \
+                 on a thread of the measuring process"
+            ));
+        if self.kind == Kind::Image {
+            row = row.note(format!(
+                "{} of {} replies' pixels read in place in shared memory (held), {} copied onto \
+                 the reader's heap",
+                run.held,
+                run.replies,
+                run.replies - run.held
+            ));
+        }
+        for note in &run.peer_notes {
+            row = row.note(format!("peer: {note}"));
+        }
+        row
+    }
+}
+
+impl Scenario for Connect {
+    fn name(&self) -> &'static str {
+        self.name
+    }
+
+    fn summary(&self) -> &'static str {
+        match self.kind {
+            Kind::Small => {
+                "~120-byte RobotState, add in one connected process -> subscriber in another \
+                 (esgm_shm connect on both sides); busy and blocking waits"
+            }
+            Kind::Image => {
+                "921,600-byte 640x480 RGB Image, add in one connected process -> subscriber in \
+                 another reads a pixel at each end (connect on both sides); busy and blocking"
+            }
+        }
+    }
+
+    fn run(&self, ctx: &Context) -> anyhow::Result<Vec<Measurement>> {
+        let payload_bytes = esgm_core::codec::encoded_len(&self.kind.make(0))? as u64;
+        let mut rows = Vec::new();
+        for mode in WaitMode::SPIN_AND_BLOCK {
+            let run = ping_pong(ctx, self.name, self.kind, mode)?;
+            rows.push(self.row(mode, &run, payload_bytes));
+        }
+        Ok(rows)
+    }
+
+    fn targets(&self) -> Vec<Target> {
+        match self.kind {
+            Kind::Small => {
+                let mut targets: Vec<Target> = Wait::BOTH
+                    .iter()
+                    .map(|&w| Target::at_most(SMALL_NAME, ipc_esgm_small::NAME, w, 2.0))
+                    .collect();
+                for peer in [ros1_peer::Ros1::SMALL.name(), zenoh_peer::Zenoh::SMALL.name()] {
+                    targets.push(Target::at_most(SMALL_NAME, peer, Wait::Event, 1.0));
+                }
+                targets
+            }
+            Kind::Image => Wait::BOTH
+                .iter()
+                .map(|&w| Target::at_most(IMAGE_NAME, SMALL_NAME, w, 1.2))
+                .collect(),
+        }
+    }
+
+    fn run_peer(&self, role: &PeerRole) -> anyhow::Result<Vec<String>> {
+        echo(role, self.kind)
+    }
+}
