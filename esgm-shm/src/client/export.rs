@@ -16,13 +16,14 @@
 
 use std::sync::Arc;
 
-use esgm_core::policy::FluentStreamPolicy;
+use esgm_core::esgm::TrajectoryKind;
 use esgm_core::{EntityTrajectoryStructure, InProcessTrajectory, StoreEvent, TapId};
 use iceoryx2::prelude::ServiceName;
 use parking_lot::Mutex;
 
 use super::settings::{handle_qos, inbox_domain, inbox_qos};
 use super::shared_node::SharedNode;
+use crate::control::protocol::TrajectoryRecord;
 use crate::publisher::TrajectoryPublisher;
 use crate::service::OpenError;
 use crate::service_name::TrajectoryServiceNames;
@@ -74,6 +75,8 @@ impl Outlet {
 /// A local trajectory published for other processes.
 #[derive(Debug)]
 pub(crate) struct Export {
+    /// The registry generation this export was built for.
+    pub generation: u64,
     outlet: Arc<Mutex<Outlet>>,
     handle: InProcessTrajectory,
     tap: TapId,
@@ -94,19 +97,20 @@ impl Drop for Export {
 }
 
 impl Export {
-    /// Publishes `handle`'s stream from now on (and its current content, so readers
+    /// Publishes `handle`'s stream (the trajectory of `record`) from now on (and its current content, so readers
     /// that connect later receive the history). A `repointed` name starts with a reset
     /// marker: readers elsewhere forget the stream the name denoted before.
     pub fn start(
         node: &SharedNode,
         domain: &str,
         handle: &InProcessTrajectory,
-        type_name: &str,
-        policy: &FluentStreamPolicy,
-        primitive: bool,
+        record: &TrajectoryRecord,
         repointed: bool,
     ) -> Result<Self, ExportError> {
         let name = handle.name().to_owned();
+        let (type_name, policy) = (&record.info.type_name, &record.info.policy);
+        let primitive = record.info.kind == TrajectoryKind::Primitive;
+        let generation = record.generation;
         let (publisher, violations, inbox) = node.with(|node| {
             let publisher = TrajectoryPublisher::builder(&name, type_name)
                 .domain(domain)
@@ -151,7 +155,7 @@ impl Export {
                 id
             })
             .map_err(|_| ExportError::Gone { trajectory: name.clone() })?;
-        Ok(Self { outlet, handle: handle.clone(), tap, inbox, inbox_wake })
+        Ok(Self { generation, outlet, handle: handle.clone(), tap, inbox, inbox_wake })
     }
 
     /// The wake-up services other processes' adds to this trajectory notify (its inbox).

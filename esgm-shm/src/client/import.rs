@@ -47,6 +47,11 @@ pub(crate) struct ImportSite<'a> {
 /// A trajectory of another process, mirrored into a local replica.
 #[derive(Debug)]
 pub(crate) struct Import {
+    /// The registry generation of the trajectory when this import was made (a
+    /// re-pointed name keeps its import and takes the new one).
+    pub generation: u64,
+    /// The trajectory's type name.
+    pub type_name: String,
     subscriber: TrajectorySubscriber,
     violations: ViolationSubscriber,
     replica: InProcessTrajectory,
@@ -113,6 +118,8 @@ impl Import {
             let _destroyed = replica.with_store(|s| s.forward_adds(Arc::new(outbox)));
         }
         Ok(Self {
+            generation: 0,
+            type_name: type_name.to_owned(),
             subscriber,
             violations,
             replica,

@@ -28,6 +28,10 @@ use crate::holdings::Holdings;
 /// How often publishers hand late readers their history.
 pub(crate) const MAINTENANCE_PERIOD: Duration = Duration::from_millis(20);
 
+/// How often a process compares what it mirrors with the registry, to drop the
+/// trajectories destroyed (or created anew) by other processes.
+pub(crate) const AUDIT_PERIOD: Duration = Duration::from_millis(250);
+
 /// How often a process that serves sensors or units asks the coordinator for the
 /// trajectories it must write (creations it asks for itself are built at once). Every
 /// serving process polls, so this bounds the coordinator's load.
@@ -85,8 +89,9 @@ impl Location {
     pub fn run(mut self, commands: &Receiver<Command>) {
         let mut next_maintenance = Instant::now();
         let mut next_assignments = Instant::now();
+        let mut next_audit = Instant::now() + AUDIT_PERIOD;
         loop {
-            let mut due = next_maintenance;
+            let mut due = next_maintenance.min(next_audit);
             if self.serving {
                 due = due.min(next_assignments);
             }
@@ -103,7 +108,75 @@ impl Location {
                 self.poll_assignments();
                 next_assignments = Instant::now() + ASSIGNMENT_PERIOD;
             }
+            if Instant::now() >= next_audit {
+                self.audit();
+                next_audit = Instant::now() + AUDIT_PERIOD;
+            }
         }
+    }
+
+    /// Drops what this process mirrors of trajectories that no longer are what it
+    /// built them for: destroyed by another process, created anew (another
+    /// generation) or now written elsewhere. A re-pointed name keeps its replica (its
+    /// readers receive a reset in the stream and move over, E5), as long as its type
+    /// is the same.
+    fn audit(&mut self) {
+        if self.mirrors.lock().is_empty() {
+            return;
+        }
+        let placements = match self.control.call(&Request::ListPlacements) {
+            Ok(Response::Placements(p)) => p,
+            Ok(other) => {
+                tracing::warn!(answer = ?other, "unexpected answer to a placement listing");
+                return;
+            }
+            // The coordinator is slow or gone: nothing is known to be stale.
+            Err(e) => {
+                tracing::debug!(error = %e, "cannot list placements");
+                return;
+            }
+        };
+        let now: std::collections::BTreeMap<_, _> =
+            placements.iter().map(|p| (p.name.as_str(), p)).collect();
+        let stale: Vec<String> = {
+            let mut mirrors = self.mirrors.lock();
+            let mut stale = Vec::new();
+            for (name, e) in &mirrors.exports {
+                let current = now.get(name.as_str());
+                if current.is_none_or(|p| p.generation != e.generation || p.writer != self.host) {
+                    stale.push(name.clone());
+                }
+            }
+            for (name, i) in &mut mirrors.imports {
+                match now.get(name.as_str()) {
+                    Some(p) if p.generation == i.generation => {}
+                    Some(p) if p.type_name == i.type_name && p.writer != self.host => {
+                        i.generation = p.generation;
+                    }
+                    _ => stale.push(name.clone()),
+                }
+            }
+            stale
+        };
+        for name in &stale {
+            tracing::info!(trajectory = %name, "destroyed or created anew elsewhere; dropped here");
+            self.forget(name);
+        }
+        if self.serving && stale.iter().any(|n| now.contains_key(n.as_str())) {
+            self.poll_assignments();
+        }
+    }
+
+    /// Removes every trace of `name` from this process: its export or import and its
+    /// local trajectory. Values that still read its images own their samples.
+    fn forget(&mut self, name: &str) {
+        let (export, import) =
+            self.mirrors.change(|m| (m.exports.remove(name), m.imports.remove(name)));
+        drop((export, import));
+        if let Err(e) = self.local.destroy_entity_trajectory_structure(name) {
+            tracing::debug!(trajectory = %name, error = %e, "no local trajectory to destroy");
+        }
+        self.failed.remove(name);
     }
 
     fn handle(&mut self, command: Command) {
@@ -146,6 +219,11 @@ impl Location {
             Err(ControlClientError::Remote(ControlError::Create(e))) => return Err(e),
             Err(e) => return Err(CreateError::Unavailable { reason: e.to_string() }),
         };
+        if !spec.replace {
+            // The registry had no such name: what this process still holds under it
+            // is a former trajectory destroyed elsewhere, not yet audited away.
+            self.forget(&spec.name);
+        }
         if record.writer == self.host {
             self.build(spec, &record, true)
         } else {
@@ -185,16 +263,8 @@ impl Location {
         let repointed =
             spec.replace && self.mirrors.change(|m| m.exports.remove(&spec.name)).is_some();
         if !self.exports(&spec.name) {
-            let export = Export::start(
-                &self.node,
-                &self.domain,
-                &handle,
-                &record.info.type_name,
-                &record.info.policy,
-                record.info.kind == TrajectoryKind::Primitive,
-                repointed,
-            )
-            .map_err(|e| CreateError::Unavailable { reason: e.to_string() })?;
+            let export = Export::start(&self.node, &self.domain, &handle, record, repointed)
+                .map_err(|e| CreateError::Unavailable { reason: e.to_string() })?;
             self.mirrors.change(|m| m.exports.insert(spec.name.clone(), export));
         }
         Ok(handle)
@@ -243,6 +313,7 @@ impl Location {
             record.info.kind == TrajectoryKind::Primitive,
         ) {
             Ok(mut import) => {
+                import.generation = record.generation;
                 // The history the writer already handed over, at once.
                 import.pump();
                 self.mirrors.change(|m| m.imports.insert(name.clone(), import));
@@ -279,16 +350,7 @@ impl Location {
     fn destroy(&mut self, name: &str) -> Result<(), LookupError> {
         let request = Request::DestroyEntityTrajectoryStructure { name: name.to_owned() };
         self.control.call(&request).map_err(lookup_error)?;
-        // Values that still read this trajectory's images own their samples: dropping
-        // the ports here cannot pull memory from under them.
-        let (export, import) =
-            self.mirrors.change(|m| (m.exports.remove(name), m.imports.remove(name)));
-        drop((export, import));
-        if let Err(e) = self.local.destroy_entity_trajectory_structure(name) {
-            // Known to the coordinator, never built here: nothing to remove.
-            tracing::debug!(trajectory = %name, error = %e, "no local trajectory to destroy");
-        }
-        self.failed.remove(name);
+        self.forget(name);
         Ok(())
     }
 

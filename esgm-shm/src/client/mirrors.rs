@@ -23,6 +23,11 @@ pub(crate) struct Mirrors {
 }
 
 impl Mirrors {
+    /// True if nothing is mirrored.
+    pub fn is_empty(&self) -> bool {
+        self.exports.is_empty() && self.imports.is_empty()
+    }
+
     /// Every wake-up service that other processes notify for this connection: each
     /// import's samples and violations, each primitive export's inbox.
     pub fn wake_services(&self) -> Vec<ServiceName> {

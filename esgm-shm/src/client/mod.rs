@@ -468,6 +468,12 @@ impl Esgm for ShmEsgm {
         type_name: &str,
         iface: Arc<dyn SensorInterface>,
     ) -> Result<(), RegistrationError> {
+        // Registered here already: the coordinator would take it for a restarted
+        // worker taking its place back, and the rollback below would remove the one
+        // that serves.
+        if self.inner.local.sensors().iter().any(|(s, _)| s == sensor) {
+            return Err(RegistrationError::SensorAlreadyExists { name: sensor.to_owned() });
+        }
         let request = Request::AddSensorInterface {
             sensor: sensor.to_owned(),
             type_name: type_name.to_owned(),
@@ -500,6 +506,10 @@ impl Esgm for ShmEsgm {
         input_types: Vec<InputType>,
         cu: Arc<dyn CompUnit>,
     ) -> Result<(), RegistrationError> {
+        // As for sensors: a second registration here must not undo the first.
+        if self.inner.local.comp_units().iter().any(|(u, _, _)| u == name) {
+            return Err(RegistrationError::CompUnitAlreadyExists { name: name.to_owned() });
+        }
         let request = Request::AddCompUnit {
             name: name.to_owned(),
             type_name: type_name.to_owned(),

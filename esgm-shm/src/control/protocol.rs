@@ -97,6 +97,10 @@ pub enum Request {
     },
     /// Every trajectory.
     ListTrajectories,
+    /// Where every trajectory is written, and its generation: what a process compares
+    /// with the trajectories it mirrors, to drop those destroyed or re-created
+    /// elsewhere.
+    ListPlacements,
     /// Every sensor.
     ListSensors,
     /// Every unit.
@@ -150,8 +154,21 @@ pub struct TrajectoryRecord {
     /// The process that writes it: the creator of a primitive or operator trajectory,
     /// the sensor's host for a sampled one, the unit's host for a computed one.
     pub writer: String,
-    /// Incremented each time the name is re-pointed.
+    /// Changes each time the name is created or re-pointed (unique in the registry).
     pub generation: u64,
+}
+
+/// Where one trajectory is written ([`Request::ListPlacements`]).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct PlacementRecord {
+    /// The trajectory.
+    pub name: String,
+    /// The process that writes it.
+    pub writer: String,
+    /// Its generation ([`TrajectoryRecord::generation`]).
+    pub generation: u64,
+    /// Its type's name.
+    pub type_name: String,
 }
 
 /// A coordinator's answer.
@@ -184,6 +201,8 @@ pub enum Response {
     CompUnits(Vec<UnitRecord>),
     /// Answer to [`Request::Assignments`].
     Assignments(Vec<Assignment>),
+    /// Answer to [`Request::ListPlacements`].
+    Placements(Vec<PlacementRecord>),
     /// Answer to [`Request::ListProcesses`].
     Processes(Vec<ProcessRecord>),
     /// The operation failed with the seed's error.

@@ -8,7 +8,9 @@ use esgm_core::esgm::{TrajectoryInfo, TrajectoryKind, TrajectorySource, Trajecto
 use esgm_core::{EntityStructureType, TypeChecker, TypeRegistry};
 
 use super::processes::ProcessTable;
-use super::protocol::{Assignment, ControlError, Request, Response, TrajectoryRecord};
+use super::protocol::{
+    Assignment, ControlError, PlacementRecord, Request, Response, TrajectoryRecord,
+};
 
 #[derive(Debug, Clone)]
 struct Placement {
@@ -26,6 +28,9 @@ pub struct Registry {
     placement: BTreeMap<String, Placement>,
     /// The processes the system keeps running.
     processes: ProcessTable,
+    /// The next trajectory generation: unique across the registry, so that a name
+    /// destroyed and created again is never mistaken for its former self.
+    next_generation: u64,
 }
 
 impl Registry {
@@ -35,6 +40,7 @@ impl Registry {
             catalog: Catalog::new(types),
             placement: BTreeMap::new(),
             processes: ProcessTable::default(),
+            next_generation: 0,
         }
     }
 
@@ -130,7 +136,8 @@ impl Registry {
                     _ => host,
                 };
                 let name = spec.name.clone();
-                let generation = self.placement.get(&name).map_or(0, |p| p.generation + 1);
+                let generation = self.next_generation;
+                self.next_generation += 1;
                 self.catalog.insert_trajectory(resolved.info);
                 self.placement.insert(name.clone(), Placement { writer, generation, spec });
                 Response::Trajectory(self.record(&name)?)
@@ -146,6 +153,21 @@ impl Registry {
             Request::ListTrajectories => {
                 Response::Trajectories(self.catalog.trajectories().cloned().collect())
             }
+            Request::ListPlacements => Response::Placements(
+                self.placement
+                    .iter()
+                    .map(|(name, p)| PlacementRecord {
+                        name: name.clone(),
+                        writer: p.writer.clone(),
+                        generation: p.generation,
+                        type_name: self
+                            .catalog
+                            .trajectory(name)
+                            .map(|t| t.type_name.clone())
+                            .unwrap_or_default(),
+                    })
+                    .collect(),
+            ),
             Request::ListSensors => Response::Sensors(self.catalog.sensors().cloned().collect()),
             Request::ListCompUnits => Response::CompUnits(self.catalog.units().cloned().collect()),
             Request::Assignments { host } => {
@@ -266,12 +288,30 @@ mod tests {
         );
         assert_eq!(r.written_by("robot"), vec!["robot_state".to_owned()]);
         assert!(r.is_primitive("robot_state") && !r.is_primitive("images"));
-        // Re-pointing bumps the generation.
+        // Re-pointing, and destroying and creating again, give a new generation.
+        let generation = |r: &mut Registry| match r.handle(Request::ListPlacements) {
+            Response::Placements(p) => {
+                p.into_iter().find(|p| p.name == "robot_state").map(|p| p.generation)
+            }
+            other => panic!("{other:?}"),
+        };
+        let first = generation(&mut r);
         let again = TrajectorySpec::primitive("robot_state", "RobotState").replace();
         match r.handle(Request::CreateTrajectory { spec: again, host: "robot2".into() }) {
-            Response::Trajectory(t) => assert_eq!((t.writer.as_str(), t.generation), ("robot2", 1)),
+            Response::Trajectory(t) => {
+                assert_eq!(t.writer.as_str(), "robot2");
+                assert_ne!(Some(t.generation), first);
+            }
             other => panic!("{other:?}"),
         }
+        let repointed = generation(&mut r);
+        let destroy = Request::DestroyEntityTrajectoryStructure { name: "robot_state".into() };
+        ok(&mut r, destroy);
+        assert_eq!(generation(&mut r), None, "gone");
+        let create = TrajectorySpec::primitive("robot_state", "RobotState");
+        ok(&mut r, Request::CreateTrajectory { spec: create, host: "robot2".into() });
+        let recreated = generation(&mut r);
+        assert!(recreated.is_some() && recreated != repointed && recreated != first);
     }
 
     #[test]

@@ -2,62 +2,36 @@
 //! connects under a stable name (a restarted worker takes its place and its
 //! trajectories back), registers what it serves, and leaves when the coordinator is
 //! gone.
+//!
+//! The camera and the robot are their publishers' own code
+//! ([`camera_publisher::serve`], [`robot_publisher::serve`]): `esgm worker camera` and
+//! the `camera-publisher` binary are one program, and so are `esgm worker robot` and
+//! `robot-publisher`.
 
 use std::num::NonZeroUsize;
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use anyhow::{Context, bail};
-use camera_publisher::{CameraSensor, FrameSource, ImageDirectory, SyntheticScene};
+use camera_publisher::CameraArgs;
 use cu_workers::{BlobDetectionUnit, BlobSelectionUnit, DrivingDirectionUnit, MovingAverageUnit};
-use esgm_core::esgm::{CompUnit, CreateError, TrajectorySpec};
-use esgm_core::{Esgm, FluentStreamPolicy, millis};
+use esgm_core::Esgm;
+use esgm_core::esgm::CompUnit;
 use esgm_shm::ShmEsgm;
+use robot_publisher::RobotArgs;
 
 use crate::config;
 use crate::config::decl::BUILTIN_UNITS;
-use crate::policy_args::duration;
-use robot_publisher::RobotPublisher;
 
 /// The roles.
 #[derive(Debug, clap::Subcommand)]
 pub enum Role {
-    /// Serve a synthetic camera as a pull sensor of `Image`s.
-    Camera {
-        /// Sensor name.
-        #[arg(long, default_value = "camera")]
-        name: String,
-        /// Scene seed (the same seed gives the same scene everywhere).
-        #[arg(long, default_value_t = 0)]
-        seed: u64,
-        /// Number of moving blobs.
-        #[arg(long, default_value_t = 3)]
-        blobs: usize,
-        /// Frame width in pixels.
-        #[arg(long, default_value_t = 640)]
-        width: u32,
-        /// Frame height in pixels.
-        #[arg(long, default_value_t = 480)]
-        height: u32,
-        /// Serve the PNG/JPEG frames of this directory instead of a synthetic scene.
-        #[arg(long)]
-        dir: Option<std::path::PathBuf>,
-        /// With --dir: how long each frame is shown (`100ms`).
-        #[arg(long, default_value = "100ms")]
-        frame_period: String,
-    },
-    /// Push `RobotState`s at a rate, steering by the latest `DrivingDirection`.
-    Robot {
-        /// The trajectory it pushes into.
-        #[arg(long, default_value = "robot_state")]
-        trajectory: String,
-        /// The trajectory it steers by.
-        #[arg(long, default_value = "driving_direction")]
-        follow: String,
-        /// Milliseconds between states.
-        #[arg(long, default_value_t = 100)]
-        period_ms: u32,
-    },
+    /// Serve a synthetic camera (or a directory of frames) as a pull sensor of
+    /// `Image`s: the `camera-publisher` process.
+    Camera(CameraArgs),
+    /// Push `RobotState`s at a rate, steering by the latest `DrivingDirection`: the
+    /// `robot-publisher` process.
+    Robot(RobotArgs),
     /// Serve a built-in computational unit: BlobDetection, BlobSelection,
     /// DrivingDirection or MovingAverage.
     Unit {
@@ -79,78 +53,33 @@ impl Role {
     /// The stable name of this worker in the registry and in logs.
     /// The supervisor names it in `ESGM_WORKER`; by hand, it is named after its role.
     pub fn process_name(&self) -> String {
-        if let Ok(name) = std::env::var(esgm_shm::WORKER_ENV) {
-            return name;
-        }
         match self {
-            Role::Camera { name, .. } => config::sensor_process(name),
-            Role::Robot { trajectory, .. } => config::robot_process(trajectory),
-            Role::Unit { name, .. } => config::unit_process(name),
+            Role::Camera(args) => args.process_name(),
+            Role::Robot(args) => args.process_name(),
+            Role::Unit { name, .. } => {
+                std::env::var(esgm_shm::WORKER_ENV).unwrap_or_else(|_| config::unit_process(name))
+            }
         }
     }
 }
 
 /// Runs the role until the coordinator is gone.
 pub fn run(domain: &str, role: &Role) -> anyhow::Result<()> {
+    let (name, builtin, type_name, window) = match role {
+        Role::Camera(args) => return camera_publisher::serve::run(domain, args),
+        Role::Robot(args) => return robot_publisher::serve::run(domain, args),
+        Role::Unit { name, builtin, type_name, window } => (name, builtin, type_name, window),
+    };
     let esgm = ShmEsgm::builder()
         .domain(domain)
         .host(role.process_name())
-        // A gone coordinator is noticed at once (no server); the deadline is only for a
-        // slow one, which a loaded machine makes common.
-        .timeout(Duration::from_secs(5))
         .connect()
         .with_context(|| format!("cannot reach the system `{domain}`"))?;
-    let _robot = match role {
-        Role::Camera { name, seed, blobs, width, height, dir, frame_period } => {
-            match dir {
-                Some(dir) => {
-                    let period = duration(frame_period).context("--frame-period")?;
-                    let frames = ImageDirectory::open(dir, period)?;
-                    serve_camera(&esgm, name, frames)?;
-                }
-                None => {
-                    let scene = SyntheticScene::builder()
-                        .blobs(*blobs)
-                        .seed(*seed)
-                        .width(*width)
-                        .height(*height)
-                        .create()?;
-                    serve_camera(&esgm, name, scene)?;
-                }
-            }
-            None
-        }
-        Role::Unit { name, builtin, type_name, window } => {
-            serve_unit(
-                &esgm,
-                name,
-                builtin.as_deref().unwrap_or(name),
-                type_name.as_deref(),
-                *window,
-            )?;
-            None
-        }
-        Role::Robot { trajectory, follow, period_ms } => {
-            Some(robot(&esgm, trajectory, follow, *period_ms)?)
-        }
-    };
-    tracing::info!("serving");
+    serve_unit(&esgm, name, builtin.as_deref().unwrap_or(name), type_name.as_deref(), *window)?;
+    tracing::info!(unit = %name, "serving");
     // Leave when the coordinator is gone (for half a second).
     esgm.serve_until_coordinator_gone(Duration::from_millis(500));
-    tracing::info!("the coordinator is gone; leaving");
-    Ok(())
-}
-
-fn serve_camera<S: FrameSource + Send + Sync + 'static>(
-    esgm: &ShmEsgm,
-    name: &str,
-    source: S,
-) -> anyhow::Result<()> {
-    esgm.add_sensor_interface(
-        name,
-        CameraSensor::<S>::TYPE_NAME,
-        Arc::new(CameraSensor::new(source)),
-    )?;
+    tracing::info!(unit = %name, "the coordinator is gone; leaving");
     Ok(())
 }
 
@@ -187,39 +116,4 @@ fn serve_unit(
     };
     esgm.add_comp_unit(name, &output, inputs, unit)?;
     Ok(())
-}
-
-/// The robot: its state trajectory (created, or taken back after a restart), then,
-/// once the direction trajectory exists, a publisher following it.
-fn robot(
-    esgm: &ShmEsgm,
-    trajectory: &str,
-    follow: &str,
-    period_ms: u32,
-) -> anyhow::Result<RobotPublisher> {
-    // The seed's "reasonable" constraints; one producer in order, so no reordering.
-    let policy = FluentStreamPolicy::reasonable(millis(50), 600)?.reorder(false);
-    let spec = TrajectorySpec::primitive(trajectory, "RobotState").policy(policy);
-    let states = match esgm.create_trajectory(spec) {
-        Ok(t) => t,
-        Err(CreateError::EntityStructureAlreadyExists { .. }) => {
-            esgm.get_entity_trajectory_structure(trajectory)?
-        }
-        Err(e) => return Err(e.into()),
-    };
-    let deadline = Instant::now() + Duration::from_secs(60);
-    let directions = loop {
-        if let Ok(d) = esgm.get_entity_trajectory_structure(follow) {
-            break d;
-        }
-        if Instant::now() > deadline || !esgm.ping() {
-            bail!("`{follow}` was never created");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    };
-    let clock = esgm.local().clock().clone();
-    Ok(RobotPublisher::builder(states, clock)
-        .period(millis(i64::from(period_ms)))
-        .follow(directions)
-        .create()?)
 }

@@ -239,9 +239,10 @@ fn check_duplicates(plan: &Plan) -> Result<(), ConfigError> {
 /// for (one program can serve differently named units).
 pub const NAME_ENV: &str = "ESGM_NAME";
 
-/// The process name of a worker serving sensor `name` (also its registry host).
+/// The process name of a worker serving sensor `name` (also its registry host): a
+/// camera's own name for itself when it runs by hand.
 pub fn sensor_process(name: &str) -> String {
-    format!("camera-{name}")
+    camera_publisher::serve::process_name(name)
 }
 
 /// The process name of a worker serving unit `name`.
@@ -249,9 +250,18 @@ pub fn unit_process(name: &str) -> String {
     format!("unit-{name}")
 }
 
-/// The process name of a robot pushing into `trajectory`.
+/// The process name of a robot pushing into `trajectory`: the robot's own name for
+/// itself when it runs by hand.
 pub fn robot_process(trajectory: &str) -> String {
-    format!("robot-{trajectory}")
+    robot_publisher::serve::process_name(trajectory)
+}
+
+/// A duration of a configuration file (`250ms`, or integer nanoseconds) as a worker's
+/// command line takes it (`250ms`), checked.
+fn duration_arg(word: &str) -> anyhow::Result<String> {
+    let ns = crate::policy_args::duration(word)?;
+    let ns = u64::try_from(ns).context("a duration must be positive")?;
+    Ok(humantime::format_duration(std::time::Duration::from_nanos(ns)).to_string())
 }
 
 fn spec(name: String, program: &Path, args: Vec<String>) -> ProcessSpec {
@@ -334,8 +344,7 @@ fn sensor_worker(s: &SensorDecl, esgm: &Path, base: &Path) -> anyhow::Result<Wor
                 }
                 push("--dir", Some(dir.display().to_string()));
                 if let Some(p) = &s.frame_period {
-                    crate::policy_args::duration(p).context("frame_period")?;
-                    push("--frame-period", Some(p.clone()));
+                    push("--frame-period", Some(duration_arg(p).context("frame_period")?));
                 }
             }
             if !s.args.is_empty() || !s.env.is_empty() {
@@ -387,9 +396,7 @@ fn unit_worker(u: &UnitDecl, esgm: &Path, base: &Path) -> anyhow::Result<Worker>
 }
 
 fn robot_worker(r: &RobotDecl, esgm: &Path) -> anyhow::Result<Worker> {
-    let period =
-        crate::policy_args::duration(r.period.as_deref().unwrap_or("100ms")).context("period")?;
-    let period_ms = (period / 1_000_000).max(1);
+    let period = duration_arg(r.period.as_deref().unwrap_or("100ms")).context("period")?;
     let args = vec![
         "worker".into(),
         "robot".into(),
@@ -397,8 +404,8 @@ fn robot_worker(r: &RobotDecl, esgm: &Path) -> anyhow::Result<Worker> {
         r.trajectory.clone(),
         "--follow".into(),
         r.follow.clone(),
-        "--period-ms".into(),
-        period_ms.to_string(),
+        "--period".into(),
+        period,
     ];
     Ok(Worker {
         spec: spec(robot_process(&r.trajectory), esgm, args),
@@ -408,7 +415,7 @@ fn robot_worker(r: &RobotDecl, esgm: &Path) -> anyhow::Result<Worker> {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used)]
+    #![allow(clippy::unwrap_used, clippy::panic)]
 
     use super::*;
 
@@ -422,6 +429,49 @@ mod tests {
         let robot_state =
             plan.trajectories.iter().find(|t| t.what.spec.name == "robot_state").unwrap();
         assert_eq!(robot_state.what.writer.as_deref(), Some("robot-robot_state"));
+    }
+
+    /// What a plan starts is what `esgm worker` (the publishers' own arguments) takes.
+    #[test]
+    fn planned_workers_parse_as_esgm_worker() {
+        use clap::Parser;
+
+        use crate::cmd::worker::Role;
+
+        let base = tempfile::tempdir().unwrap();
+        std::fs::create_dir(base.path().join("frames")).unwrap();
+        let text = "[[sensor]]\nname = \"cam\"\ncamera = \"frames\"\nframe_period = \"250000000\"\n\
+                    [[robot]]\ntrajectory = \"rs\"\nfollow = \"dd\"\nperiod = \"1.5s\"\n";
+        let mut plan = parse("f.toml", text, base.path()).unwrap();
+        plan.workers.extend(
+            parse("tutorial.toml", include_str!("../../tutorial.toml"), Path::new("."))
+                .unwrap()
+                .workers,
+        );
+        for worker in &plan.workers {
+            let args = &worker.what.spec.args;
+            let cli = crate::Cli::try_parse_from(
+                std::iter::once("esgm").chain(args.iter().map(String::as_str)),
+            )
+            .unwrap_or_else(|e| panic!("{args:?}: {e}"));
+            let crate::Command::Worker(role) = cli.command else { panic!("{args:?}") };
+            match (worker.what.spec.name.as_str(), role) {
+                ("camera-cam", Role::Camera(camera)) => {
+                    assert_eq!(camera.dir, Some(base.path().join("frames")));
+                    assert_eq!(camera.frame_period, std::time::Duration::from_millis(250));
+                }
+                ("robot-rs", Role::Robot(robot)) => {
+                    assert_eq!((robot.trajectory.as_str(), robot.follow.as_str()), ("rs", "dd"));
+                    assert_eq!(robot.period, std::time::Duration::from_millis(1500));
+                }
+                ("robot-robot_state", Role::Robot(robot)) => {
+                    assert_eq!(robot.period, std::time::Duration::from_millis(100));
+                }
+                ("camera-camera", Role::Camera(camera)) => assert_eq!(camera.dir, None),
+                (_, Role::Unit { .. }) => {}
+                (name, role) => panic!("{name} runs {role:?}"),
+            }
+        }
     }
 
     #[test]
