@@ -10,7 +10,9 @@
 //! - [`ImageDirectory`]: PNG or JPEG files from a directory, cycled through by time.
 //!
 //! Both are [`FrameSource`]s, and [`CameraSensor`] makes any of them an esgm pull
-//! sensor.
+//! sensor. [`serve`] is the camera as a process: the command line, registration with
+//! any runtime, and the worker that the `camera-publisher` binary and
+//! `esgm worker camera` both run.
 //!
 //! ## Design decisions
 //! - **Frames are written into a caller's buffer** ([`FrameSource::render_into`]): a
@@ -45,9 +47,11 @@ pub mod image_directory;
 mod noise;
 pub mod ppm;
 pub mod scene;
+pub mod serve;
 
 pub use camera_sensor::CameraSensor;
 pub use frame_source::{FrameSource, MAX_DIMENSION, RenderError};
 pub use image_directory::{ImageDirectory, ImageDirectoryError};
 pub use ppm::write_ppm;
 pub use scene::{SceneBuildError, SyntheticScene, SyntheticSceneBuilder};
+pub use serve::{CameraArgs, CameraSource};

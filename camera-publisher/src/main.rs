@@ -1,136 +1,98 @@
-//! `camera-publisher`: for now, renders one frame of a simulated camera and prints its
-//! statistics, or writes it as a PPM file with `--out`.
+//! `camera-publisher`: the camera process of an esgm system. It connects to the
+//! coordinator of `--domain` and serves a synthetic scene (or a directory of frames)
+//! as a pull sensor until the coordinator is gone — the same code as
+//! `esgm worker camera` ([`camera_publisher::serve`]).
 //!
-//! Publishing into an esgm runtime comes with the runtime traits; the rendering is the
-//! library's.
+//! `--render-once` renders one frame offline instead, prints its statistics and,
+//! with `--out`, writes it as a PPM file to look at.
+//!
+//! Exit codes: 0 done, 1 an error (one line on stderr), 2 a usage error.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use anyhow::{Context, bail};
-use camera_publisher::{FrameSource, ImageDirectory, SyntheticScene, write_ppm};
-use esgm_core::time::{Time, millis};
+use anyhow::Context;
+use camera_publisher::serve::{self, CameraArgs, CameraSource};
+use camera_publisher::{FrameSource, write_ppm};
+use clap::Parser;
+use esgm_core::Time;
 
-const USAGE: &str = "usage: camera-publisher [--width N] [--height N] [--blobs N] [--seed N] \
-[--time NS] [--dir DIR [--period NS]] [--out FILE.ppm]";
-
-/// The validated command line.
-#[derive(Debug)]
-struct Config {
-    width: u32,
-    height: u32,
-    blobs: usize,
-    seed: u64,
+/// A simulated camera serving `Image`s to an esgm system.
+#[derive(Debug, Parser)]
+#[command(name = "camera-publisher", version, about)]
+struct Cli {
+    /// The system to serve (one coordinator per domain).
+    #[arg(long, env = esgm_shm::DOMAIN_ENV, default_value = "esgm")]
+    domain: String,
+    #[command(flatten)]
+    camera: CameraArgs,
+    /// Render one frame offline and print its statistics instead of serving.
+    #[arg(long)]
+    render_once: bool,
+    /// With --render-once: the time of the frame, in ns.
+    #[arg(long, default_value_t = 0, requires = "render_once")]
     time: Time,
-    dir: Option<PathBuf>,
-    period: Time,
+    /// With --render-once: also write the frame to this PPM file.
+    #[arg(long, requires = "render_once")]
     out: Option<PathBuf>,
 }
 
-/// Parses `--flag value` pairs; `Ok(None)` means help was asked for.
-fn parse_args(args: impl IntoIterator<Item = String>) -> anyhow::Result<Option<Config>> {
-    let mut config = Config {
-        width: 640,
-        height: 480,
-        blobs: 3,
-        seed: 0,
-        time: 0,
-        dir: None,
-        period: millis(100),
-        out: None,
-    };
-    let mut args = args.into_iter();
-    while let Some(flag) = args.next() {
-        if flag == "-h" || flag == "--help" {
-            return Ok(None);
-        }
-        let value = args.next().with_context(|| format!("{flag} needs a value"))?;
-        let number = || format!("{flag} takes a number, got `{value}`");
-        match flag.as_str() {
-            "--width" => config.width = value.parse().with_context(number)?,
-            "--height" => config.height = value.parse().with_context(number)?,
-            "--blobs" => config.blobs = value.parse().with_context(number)?,
-            "--seed" => config.seed = value.parse().with_context(number)?,
-            "--time" => config.time = value.parse().with_context(number)?,
-            "--period" => config.period = value.parse().with_context(number)?,
-            "--dir" => config.dir = Some(PathBuf::from(value)),
-            "--out" => config.out = Some(PathBuf::from(value)),
-            _ => bail!("unknown option `{flag}`"),
+fn main() -> ExitCode {
+    // Usage errors and --help are clap's: printed in full, exit 2 or 0.
+    let cli = Cli::parse();
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
+    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
+    iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
+    let result =
+        if cli.render_once { render_once(&cli) } else { serve::run(&cli.domain, &cli.camera) };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(err) => {
+            eprintln!("camera-publisher: {}", one_line(&err));
+            ExitCode::FAILURE
         }
     }
-    Ok(Some(config))
 }
 
-fn run(config: Config) -> anyhow::Result<()> {
-    let (source, truth): (Box<dyn FrameSource>, _) = match &config.dir {
-        Some(dir) => (
-            Box::new(
-                ImageDirectory::open(dir, config.period)
-                    .with_context(|| format!("opening image directory {}", dir.display()))?,
-            ),
-            None,
-        ),
-        None => {
-            let scene = SyntheticScene::builder()
-                .width(config.width)
-                .height(config.height)
-                .blobs(config.blobs)
-                .seed(config.seed)
-                .create()
-                .context("building the synthetic scene")?;
-            let truth = scene.truth(config.time);
-            (Box::new(scene), Some(truth))
-        }
-    };
-    let frame = source.frame(config.time);
-    if let Some(path) = &config.out {
-        let file =
-            std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
-        write_ppm(
-            std::io::BufWriter::new(file),
-            source.width(),
-            source.height(),
-            &frame.image_data,
-        )
-        .with_context(|| format!("writing {}", path.display()))?;
+/// The error and its causes on one line, leaving out a cause the line already says
+/// (some errors repeat their source in their own message).
+fn one_line(err: &anyhow::Error) -> String {
+    err.chain().map(ToString::to_string).fold(String::new(), |line, cause| match line.as_str() {
+        "" => cause,
+        _ if line.contains(&cause) => line,
+        _ => format!("{line}: {cause}"),
+    })
+}
+
+/// Renders the frame at `--time`, writes it to `--out` if given, and prints its mean
+/// luminance and, for a scene, where its blobs are.
+fn render_once(cli: &Cli) -> anyhow::Result<()> {
+    let source = cli.camera.source()?;
+    let mut pixels = vec![0u8; source.frame_len()];
+    source.render_into(cli.time, &mut pixels).context("cannot render the frame")?;
+    if let Some(path) = &cli.out {
+        let file = std::fs::File::create(path)
+            .with_context(|| format!("cannot create {}", path.display()))?;
+        write_ppm(std::io::BufWriter::new(file), source.width(), source.height(), &pixels)
+            .with_context(|| format!("cannot write {}", path.display()))?;
         println!("wrote {}", path.display());
     }
-    let pixels = frame.image_data.len() / 3;
-    let luminance: u64 = frame
-        .image_data
+    let luminance: u64 = pixels
         .chunks_exact(3)
         .map(|p| (77 * u64::from(p[0]) + 150 * u64::from(p[1]) + 29 * u64::from(p[2])) >> 8)
         .sum();
     println!(
         "{}x{} RGB8 frame at t={} ns: mean luminance {:.1}",
-        frame.width,
-        frame.height,
-        config.time,
-        luminance as f64 / pixels.max(1) as f64
+        source.width(),
+        source.height(),
+        cli.time,
+        luminance as f64 / (pixels.len() / 3).max(1) as f64
     );
-    for blob in truth.iter().flatten() {
-        println!("  blob at ({}, {}), {} px", blob.x, blob.y, blob.size);
+    if let CameraSource::Scene(scene) = &source {
+        for blob in scene.truth(cli.time) {
+            println!("  blob at ({}, {}), {} px", blob.x, blob.y, blob.size);
+        }
     }
     Ok(())
-}
-
-fn main() -> ExitCode {
-    let config = match parse_args(std::env::args().skip(1)) {
-        Ok(Some(config)) => config,
-        Ok(None) => {
-            println!("{USAGE}");
-            return ExitCode::SUCCESS;
-        }
-        Err(err) => {
-            eprintln!("camera-publisher: {err:#}\n{USAGE}");
-            return ExitCode::from(2);
-        }
-    };
-    match run(config) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(err) => {
-            eprintln!("camera-publisher: {err:#}");
-            ExitCode::FAILURE
-        }
-    }
 }

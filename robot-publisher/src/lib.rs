@@ -16,6 +16,9 @@
 //!   reached, then drives straight, integrating the arc in closed form: two steps of
 //!   50 ms land exactly where one of 100 ms does, so the publishing period does not
 //!   change the path.
+//! - **One robot process.** [`serve`] is the robot as a process — its command line,
+//!   starting it on any runtime, the worker — run by both the `robot-publisher` binary
+//!   and `esgm worker robot`.
 //!
 //! ```
 //! use esgm_core::library::{DrivingDirection, RobotState};
@@ -31,8 +34,10 @@
 
 pub mod kinematics;
 pub mod publisher;
+pub mod serve;
 
 pub use kinematics::{Kinematics, KinematicsConfig, KinematicsError};
 pub use publisher::{
     DEFAULT_PERIOD, PublisherStats, RobotPublisher, RobotPublisherBuilder, RobotPublisherError,
 };
+pub use serve::RobotArgs;
