@@ -259,6 +259,18 @@ pub unsafe fn access_unchecked(bytes: &[u8]) -> Result<&ArchivedEntityStructure,
     Ok(unsafe { rkyv::access_unchecked::<ArchivedEntityStructure>(body) })
 }
 
+/// Validates and decodes codec bytes (envelope + archive) wherever they sit: bytes
+/// that do not start on an [`ARCHIVE_ALIGNMENT`] boundary (a request payload, a file)
+/// are copied to an aligned buffer first.
+pub fn decode_bytes(bytes: &[u8]) -> Result<EntityStructure, CodecError> {
+    if (bytes.as_ptr() as usize) % ARCHIVE_ALIGNMENT == 0 {
+        return decode(access(bytes)?);
+    }
+    let mut aligned = AlignedVec::<ARCHIVE_ALIGNMENT>::with_capacity(bytes.len());
+    aligned.extend_from_slice(bytes);
+    decode(access(&aligned)?)
+}
+
 /// Turns an archived structure back into an owned one (copies every field, including
 /// image bytes: use it only where an owned copy is wanted).
 pub fn decode(archived: &ArchivedEntityStructure) -> Result<EntityStructure, CodecError> {

@@ -478,7 +478,7 @@ impl TrajectoryStore {
             return Err(AddError::InvalidType { trajectory: self.name.clone(), source });
         }
         if let Some(f) = &self.forward {
-            return f.forward(es);
+            return f.forward(es, blocking);
         }
         if let Some((constraint, detail)) = self.arrival_violation(&es, now) {
             return self.violated(&es, now, constraint, detail, blocking);

@@ -82,7 +82,8 @@ pub enum AddOutcome {
     /// The trajectory is written by another process: the structure (checked against
     /// the type here) was sent to it, and its policy gate decides; a violation there
     /// is counted in the trajectory's stats and reported to violation subscribers
-    /// everywhere.
+    /// everywhere. Only the non-blocking forms answer this: the blocking forms wait
+    /// for the writer's own outcome.
     Forwarded,
 }
 
@@ -132,6 +133,9 @@ pub enum AddError {
 /// Sends structures added to a replica to the process that writes the trajectory
 /// (set with [`crate::TrajectoryStore::forward_adds`]); the transport implements it.
 pub trait AddForwarder: Send + Sync + std::fmt::Debug {
-    /// Sends `es`, already checked against the trajectory's type.
-    fn forward(&self, es: Arc<EntityStructure>) -> Result<AddOutcome, AddError>;
+    /// Sends `es`, already checked against the trajectory's type. Non-blocking
+    /// (`blocking` false): answers [`AddOutcome::Forwarded`] once sent. Blocking: waits
+    /// for the writer's gate and answers its outcome, a violation included
+    /// ([`AddError::PolicyViolation`]), as an add in the writer's process would (T4).
+    fn forward(&self, es: Arc<EntityStructure>, blocking: bool) -> Result<AddOutcome, AddError>;
 }

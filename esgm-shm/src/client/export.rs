@@ -21,6 +21,7 @@ use esgm_core::{EntityTrajectoryStructure, InProcessTrajectory, StoreEvent, TapI
 use iceoryx2::prelude::ServiceName;
 use parking_lot::Mutex;
 
+use super::blocking_add::{AddServer, BlockingAddError};
 use super::settings::{handle_qos, inbox_domain, inbox_qos};
 use super::shared_node::SharedNode;
 use crate::control::protocol::TrajectoryRecord;
@@ -37,6 +38,9 @@ pub(crate) enum ExportError {
     /// The services could not be opened.
     #[error(transparent)]
     Open(#[from] OpenError),
+    /// The blocking-add service could not be opened.
+    #[error(transparent)]
+    Blocking(#[from] BlockingAddError),
     /// The local trajectory was destroyed meanwhile.
     #[error("trajectory `{trajectory}` was destroyed meanwhile")]
     Gone { trajectory: String },
@@ -82,6 +86,8 @@ pub(crate) struct Export {
     tap: TapId,
     /// Primitive trajectories: other processes' adds.
     inbox: Option<TrajectorySubscriber>,
+    /// Primitive trajectories: other processes' blocking adds, answered.
+    blocking: Option<AddServer>,
     /// The inbox's wake-up service, for the receiver thread.
     inbox_wake: Option<ServiceName>,
 }
@@ -111,7 +117,7 @@ impl Export {
         let (type_name, policy) = (&record.info.type_name, &record.info.policy);
         let primitive = record.info.kind == TrajectoryKind::Primitive;
         let generation = record.generation;
-        let (publisher, violations, inbox) = node.with(|node| {
+        let (publisher, violations, inbox, blocking) = node.with(|node| {
             let publisher = TrajectoryPublisher::builder(&name, type_name)
                 .domain(domain)
                 .qos(handle_qos(handle, policy))
@@ -128,7 +134,11 @@ impl Export {
                 ),
                 false => None,
             };
-            Ok::<_, OpenError>((publisher, violations, inbox))
+            let blocking = match primitive {
+                true => Some(AddServer::open(node, domain, &name)?),
+                false => None,
+            };
+            Ok::<_, ExportError>((publisher, violations, inbox, blocking))
         })?;
         let inbox_wake = match primitive {
             true => Some(
@@ -155,7 +165,7 @@ impl Export {
                 id
             })
             .map_err(|_| ExportError::Gone { trajectory: name.clone() })?;
-        Ok(Self { generation, outlet, handle: handle.clone(), tap, inbox, inbox_wake })
+        Ok(Self { generation, outlet, handle: handle.clone(), tap, inbox, blocking, inbox_wake })
     }
 
     /// The wake-up services other processes' adds to this trajectory notify (its inbox).
@@ -178,7 +188,7 @@ impl Export {
     /// trajectory's stats (and published as a violation).
     pub fn take_inbox(&self) -> usize {
         let Some(inbox) = &self.inbox else { return 0 };
-        let mut n = 0;
+        let mut n = self.blocking.as_ref().map_or(0, |b| b.serve(&self.handle));
         loop {
             match inbox.receive() {
                 Ok(Some(sample)) => {

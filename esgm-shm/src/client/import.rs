@@ -24,6 +24,7 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::ServiceName;
 use parking_lot::Mutex;
 
+use super::blocking_add::AddClient;
 use super::mirrors::SharedMirrors;
 use super::settings::{bridge_qos, inbox_domain, inbox_qos};
 use super::shared_node::SharedNode;
@@ -113,6 +114,7 @@ impl Import {
                 domain: domain.to_owned(),
                 node: node.clone(),
                 inbox: Mutex::new(None),
+                blocking: Mutex::new(None),
             };
             // A replica destroyed meanwhile forwards nothing.
             let _destroyed = replica.with_store(|s| s.forward_adds(Arc::new(outbox)));
@@ -269,12 +271,30 @@ struct Outbox {
     node: SharedNode,
     /// Opened at the first add: most replicas of a primitive trajectory only read.
     inbox: Mutex<Option<TrajectoryPublisher>>,
+    /// Opened at the first blocking add.
+    blocking: Mutex<Option<AddClient>>,
 }
 
 impl AddForwarder for Outbox {
-    fn forward(&self, es: Arc<EntityStructure>) -> Result<AddOutcome, AddError> {
+    fn forward(&self, es: Arc<EntityStructure>, blocking: bool) -> Result<AddOutcome, AddError> {
         let unavailable =
             |reason: String| AddError::Unavailable { trajectory: self.trajectory.clone(), reason };
+        if blocking {
+            let mut client = self.blocking.lock();
+            if client.is_none() {
+                let names =
+                    TrajectoryServiceNames::new(&inbox_domain(&self.domain), &self.trajectory)
+                        .map_err(|e| unavailable(e.to_string()))?;
+                let opened = self.node.with(|node| {
+                    AddClient::open(node, &self.domain, &self.trajectory, names.wake())
+                });
+                *client = Some(opened.map_err(|e| unavailable(e.to_string()))?);
+            }
+            let Some(client) = client.as_ref() else {
+                return Err(unavailable("the writer's blocking adds are not open".into()));
+            };
+            return client.add(&es);
+        }
         let mut inbox = self.inbox.lock();
         if inbox.is_none() {
             let opened = self.node.with(|node| {

@@ -32,6 +32,7 @@
 //!   stream order) and publishes the new trajectory from then on, so subscribers in
 //!   every process move over. A re-pointed name keeps its type.
 
+mod blocking_add;
 mod export;
 mod import;
 mod location;

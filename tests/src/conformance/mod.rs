@@ -114,6 +114,7 @@ macro_rules! conformance_tests {
             primitive::violations_are_delivered_and_counted,
             primitive::held_samples_are_released_on_time,
             primitive::adds_through_the_reader_reach_the_writer,
+            primitive::blocking_adds_through_the_reader_get_the_writers_outcome,
             sampled::sampling_periods_and_from_to,
             sampled::one_sensor_many_periods,
             sampled::sensor_errors_and_panics_are_counted,

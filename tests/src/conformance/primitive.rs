@@ -290,3 +290,30 @@ pub fn adds_through_the_reader_reach_the_writer<H: Harness>(h: &H) {
     let wrong = reading(t0 + 80, 8.0).with("x", "text");
     assert!(matches!(r.add(wrong), Err(AddError::InvalidType { .. })));
 }
+
+/// T4 across processes: a blocking add through the reader returns the writer's own
+/// outcome — added, or the policy violation with its constraint — never `Forwarded`.
+pub fn blocking_adds_through_the_reader_get_the_writers_outcome<H: Harness>(h: &H) {
+    register_reading(h);
+    let policy = FluentStreamPolicy::default().order(OrderConstraint::StrictMonotone);
+    let w = h
+        .esgm()
+        .create_trajectory(TrajectorySpec::primitive("b", "Reading").policy(policy))
+        .unwrap();
+    let r = read(h, "b");
+    let t0 = h.now();
+    assert_eq!(r.add_blocking(reading(t0 + 10, 1.0)), Ok(AddOutcome::Added));
+    assert_eq!(x_of(&w.get_latest().unwrap()), Some(1.0), "in the writer when it returns");
+    match r.add_blocking(reading(t0 + 10, 2.0)) {
+        Err(AddError::PolicyViolation(v)) => {
+            assert_eq!((v.constraint, v.valid_time), (Constraint::Order, t0 + 10));
+        }
+        other => panic!("expected the writer's order violation, got {other:?}"),
+    }
+    let created = r.create_at_blocking("b", t0 + 20, reading(0, 3.0).attributes.into());
+    assert_eq!(created, Ok(AddOutcome::Added));
+    assert_eq!(w.stats().unwrap().added, 2);
+    assert_eq!(w.stats().unwrap().violations, 1, "counted once, by the writer's gate");
+    wait_visible(&w, &r);
+    assert_eq!(xs(&r), vec![Some(1.0), Some(3.0)]);
+}
