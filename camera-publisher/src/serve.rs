@@ -35,7 +35,7 @@ pub fn process_name(sensor: &str) -> String {
 
 /// A camera's settings, as command-line arguments (`camera-publisher …`,
 /// `esgm worker camera …`).
-#[derive(Debug, Clone, PartialEq, Eq, clap::Args)]
+#[derive(Debug, Clone, PartialEq, Eq, clap::Parser)]
 pub struct CameraArgs {
     /// Sensor name the camera registers under.
     #[arg(long, default_value = "camera")]
@@ -138,15 +138,9 @@ impl FrameSource for CameraSource {
 /// use clap::Parser;
 /// use esgm_core::{Esgm, InProcessEsgm};
 ///
-/// #[derive(Parser)]
-/// struct Cli {
-///     #[command(flatten)]
-///     camera: CameraArgs,
-/// }
-///
-/// let cli = Cli::parse_from(["camera", "--name", "cam", "--width", "64", "--height", "48"]);
+/// let args = CameraArgs::parse_from(["camera", "--name", "cam", "--width", "64", "--height", "48"]);
 /// let esgm = InProcessEsgm::default();
-/// serve(&esgm, &cli.camera)?;
+/// serve(&esgm, &args)?;
 /// assert_eq!(esgm.sensors(), vec![("cam".to_owned(), "Image".to_owned())]);
 /// # Ok::<(), anyhow::Error>(())
 /// ```
@@ -184,14 +178,8 @@ mod tests {
     use super::*;
     use clap::Parser;
 
-    #[derive(Debug, Parser)]
-    struct Cli {
-        #[command(flatten)]
-        camera: CameraArgs,
-    }
-
     fn parse(args: &[&str]) -> Result<CameraArgs, clap::Error> {
-        Cli::try_parse_from(std::iter::once("camera").chain(args.iter().copied())).map(|c| c.camera)
+        CameraArgs::try_parse_from(std::iter::once("camera").chain(args.iter().copied()))
     }
 
     #[test]

@@ -39,7 +39,7 @@ pub fn process_name(trajectory: &str) -> String {
 
 /// A robot's settings, as command-line arguments (`robot-publisher …`,
 /// `esgm worker robot …`).
-#[derive(Debug, Clone, PartialEq, Eq, clap::Args)]
+#[derive(Debug, Clone, PartialEq, Eq, clap::Parser)]
 pub struct RobotArgs {
     /// The primitive `RobotState` trajectory it pushes into (created if missing).
     #[arg(long, default_value = "robot_state")]
@@ -71,16 +71,10 @@ impl RobotArgs {
 /// use esgm_core::{EntityTrajectoryStructure, Esgm, InProcessEsgm};
 /// use robot_publisher::serve::{RobotArgs, start};
 ///
-/// #[derive(Parser)]
-/// struct Cli {
-///     #[command(flatten)]
-///     robot: RobotArgs,
-/// }
-///
-/// let cli = Cli::parse_from(["robot", "--follow", "commands", "--period", "50ms"]);
+/// let args = RobotArgs::parse_from(["robot", "--follow", "commands", "--period", "50ms"]);
 /// let esgm = InProcessEsgm::default();
 /// esgm.create_primitive_entity_trajectory_structure("commands", "DrivingDirection")?;
-/// let robot = start(&esgm, esgm.clock().clone(), &cli.robot)?;
+/// let robot = start(&esgm, esgm.clock().clone(), &args)?;
 /// let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
 /// while robot.stats().published == 0 && std::time::Instant::now() < deadline {
 ///     std::thread::sleep(std::time::Duration::from_millis(1));
@@ -154,14 +148,8 @@ mod tests {
     use clap::Parser;
     use esgm_core::{InProcessEsgm, SimClock, secs};
 
-    #[derive(Debug, Parser)]
-    struct Cli {
-        #[command(flatten)]
-        robot: RobotArgs,
-    }
-
     fn parse(args: &[&str]) -> Result<RobotArgs, clap::Error> {
-        Cli::try_parse_from(std::iter::once("robot").chain(args.iter().copied())).map(|c| c.robot)
+        RobotArgs::try_parse_from(std::iter::once("robot").chain(args.iter().copied()))
     }
 
     #[test]

@@ -1,90 +1,23 @@
 //! The `robot-publisher` binary end to end: a coordinator in this process, the real
 //! binary publishing into it, and this process steering the robot and reading its
 //! states through shared memory. Every wait has a watchdog that fails the test, and
-//! the robot is killed when a test ends, also when it fails.
+//! the robot is killed when a test ends, also when it fails ([`Watched`]).
 
 // Test helpers outside #[test] fns: a failed unwrap is a failed test with a message.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use std::io::Read;
-use std::process::{Child, Command, ExitStatus, Stdio};
-use std::time::{Duration, Instant};
+// One copy of the watched-process helper for both publishers' tests.
+#[path = "../../camera-publisher/tests/support/watched.rs"]
+mod watched;
 
 use esgm_core::library::{DrivingDirection, RobotState};
 use esgm_core::{Entity, EntityTrajectoryStructure, Esgm, Time, TypeRegistry};
 use esgm_shm::control::{Coordinator, Registry};
 use esgm_shm::{ShmEsgm, unique_domain};
 use robot_publisher::Kinematics;
+use watched::Watched;
 
 const ROBOT: &str = env!("CARGO_BIN_EXE_robot-publisher");
-
-/// Long enough for a debug build on a loaded 2-core machine; only a hang reaches it.
-const WATCHDOG: Duration = Duration::from_secs(60);
-
-/// The robot process; killed on drop unless it has already left.
-struct Robot(Child);
-
-impl Robot {
-    fn start(args: &[&str]) -> Self {
-        let child = Command::new(ROBOT)
-            .args(args)
-            .env_remove(esgm_shm::WORKER_ENV)
-            .env_remove(esgm_shm::DOMAIN_ENV)
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("start robot-publisher");
-        Self(child)
-    }
-
-    /// Its exit status, if it has exited, with what it printed on stderr.
-    fn exited(&mut self) -> Option<(ExitStatus, String)> {
-        let status = self.0.try_wait().unwrap()?;
-        let mut stderr = String::new();
-        if let Some(mut pipe) = self.0.stderr.take() {
-            pipe.read_to_string(&mut stderr).unwrap();
-        }
-        Some((status, stderr))
-    }
-
-    /// Polls `probe` until it gives a value; fails if the robot exits or the watchdog
-    /// expires first.
-    fn wait_for<T>(&mut self, what: &str, mut probe: impl FnMut() -> Option<T>) -> T {
-        let deadline = Instant::now() + WATCHDOG;
-        loop {
-            if let Some(t) = probe() {
-                return t;
-            }
-            if let Some((status, stderr)) = self.exited() {
-                panic!("robot-publisher exited ({status}) before {what}:\n{stderr}");
-            }
-            assert!(Instant::now() < deadline, "no {what} within {WATCHDOG:?}");
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
-
-    /// Waits for the robot to leave on its own.
-    fn wait_exit(&mut self, why: &str) -> (ExitStatus, String) {
-        let deadline = Instant::now() + WATCHDOG;
-        loop {
-            if let Some(exit) = self.exited() {
-                return exit;
-            }
-            assert!(Instant::now() < deadline, "robot-publisher did not exit ({why})");
-            std::thread::sleep(Duration::from_millis(20));
-        }
-    }
-}
-
-impl Drop for Robot {
-    fn drop(&mut self) {
-        if self.0.try_wait().ok().flatten().is_none() {
-            let _ = self.0.kill();
-            let _ = self.0.wait();
-        }
-    }
-}
 
 /// The states read so far (none while the replica has no sample yet).
 fn states(t: &impl EntityTrajectoryStructure) -> Vec<(Time, RobotState)> {
@@ -103,16 +36,10 @@ fn publishes_states_steered_by_the_driving_direction_and_leaves_with_the_coordin
     let domain = unique_domain("robot-e2e");
     let coordinator =
         Coordinator::spawn(&domain, Registry::new(TypeRegistry::with_library())).unwrap();
-    let mut robot = Robot::start(&[
-        "--domain",
-        &domain,
-        "--trajectory",
-        "rs",
-        "--follow",
-        "dd",
-        "--period",
-        "50ms",
-    ]);
+    let mut robot = Watched::start(
+        ROBOT,
+        &["--domain", &domain, "--trajectory", "rs", "--follow", "dd", "--period", "50ms"],
+    );
     let esgm = ShmEsgm::builder().domain(&domain).connect().unwrap();
     let robot_state =
         robot.wait_for("the trajectory `rs`", || esgm.get_entity_trajectory_structure("rs").ok());
@@ -147,7 +74,8 @@ fn publishes_states_steered_by_the_driving_direction_and_leaves_with_the_coordin
 #[test]
 fn without_a_coordinator_it_fails_with_one_line() {
     let domain = unique_domain("robot-e2e-none");
-    let (status, stderr) = Robot::start(&["--domain", &domain]).wait_exit("without a system");
+    let (status, stderr) =
+        Watched::start(ROBOT, &["--domain", &domain]).wait_exit("without a system");
     assert_eq!(status.code(), Some(1), "{stderr}");
     assert_eq!(stderr.trim().lines().count(), 1, "{stderr}");
     assert!(
@@ -155,6 +83,6 @@ fn without_a_coordinator_it_fails_with_one_line() {
         "{stderr}"
     );
 
-    let (status, stderr) = Robot::start(&["--period", "soon"]).wait_exit("misused");
+    let (status, stderr) = Watched::start(ROBOT, &["--period", "soon"]).wait_exit("misused");
     assert_eq!(status.code(), Some(2), "a usage error: {stderr}");
 }
