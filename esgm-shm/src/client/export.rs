@@ -22,7 +22,7 @@ use iceoryx2::prelude::ServiceName;
 use parking_lot::Mutex;
 
 use super::blocking_add::{AddServer, BlockingAddError};
-use super::settings::{handle_qos, inbox_domain, inbox_qos};
+use super::settings::{generation_domain, handle_qos, inbox_domain, inbox_qos};
 use super::shared_node::SharedNode;
 use crate::control::protocol::TrajectoryRecord;
 use crate::publisher::TrajectoryPublisher;
@@ -117,6 +117,7 @@ impl Export {
         let (type_name, policy) = (&record.info.type_name, &record.info.policy);
         let primitive = record.info.kind == TrajectoryKind::Primitive;
         let generation = record.generation;
+        let domain = &generation_domain(domain, generation);
         let (publisher, violations, inbox, blocking) = node.with(|node| {
             let publisher = TrajectoryPublisher::builder(&name, type_name)
                 .domain(domain)

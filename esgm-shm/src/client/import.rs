@@ -15,7 +15,7 @@
 
 use std::sync::{Arc, Weak};
 
-use esgm_core::policy::FluentStreamPolicy;
+use esgm_core::esgm::TrajectoryKind;
 use esgm_core::{
     AddError, AddForwarder, AddOutcome, EntityStructure, EntityStructureType,
     EntityTrajectoryStructure, FeedWaiter, InProcessTrajectory, ReplicaFeed,
@@ -26,8 +26,9 @@ use parking_lot::Mutex;
 
 use super::blocking_add::AddClient;
 use super::mirrors::SharedMirrors;
-use super::settings::{bridge_qos, inbox_domain, inbox_qos};
+use super::settings::{bridge_qos, generation_domain, inbox_domain, inbox_qos};
 use super::shared_node::SharedNode;
+use crate::control::protocol::TrajectoryRecord;
 use crate::holdings::{HoldingOwner, Holdings};
 use crate::publisher::TrajectoryPublisher;
 use crate::service::{OpenError, ShmService, open_event_service};
@@ -69,11 +70,13 @@ impl Import {
     pub fn start(
         at: &ImportSite<'_>,
         replica: InProcessTrajectory,
-        type_name: &str,
-        policy: &FluentStreamPolicy,
-        primitive: bool,
+        record: &TrajectoryRecord,
     ) -> Result<Self, OpenError> {
         let ImportSite { node, domain, holdings, mirrors } = *at;
+        let (type_name, policy) = (&record.info.type_name, &record.info.policy);
+        let primitive = record.info.kind == TrajectoryKind::Primitive;
+        let generation = record.generation;
+        let domain = &generation_domain(domain, generation);
         let name = replica.name().to_owned();
         let entity_type = replica.entity_type().unwrap_or_else(|_| EntityStructureType::new(""));
         let qos = bridge_qos(policy, &entity_type);
@@ -101,7 +104,6 @@ impl Import {
         ];
         let feed = ImportFeed {
             trajectory: name.clone(),
-            wake: wakes[0],
             node: node.clone(),
             mirrors: Arc::downgrade(mirrors),
         };
@@ -120,8 +122,8 @@ impl Import {
             let _destroyed = replica.with_store(|s| s.forward_adds(Arc::new(outbox)));
         }
         Ok(Self {
-            generation: 0,
-            type_name: type_name.to_owned(),
+            generation,
+            type_name: type_name.clone(),
             subscriber,
             violations,
             replica,
@@ -135,6 +137,11 @@ impl Import {
     /// The wake-up services a publish on this import's trajectory notifies.
     pub fn wake_services(&self) -> &[ServiceName] {
         &self.wakes
+    }
+
+    /// The wake-up service of this import's samples.
+    fn sample_wake(&self) -> Option<ServiceName> {
+        self.wakes.first().copied()
     }
 
     /// Enters every waiting sample, reset and violation into the replica; returns how
@@ -203,39 +210,68 @@ impl Import {
 #[derive(Debug)]
 struct ImportFeed {
     trajectory: String,
-    wake: ServiceName,
     node: SharedNode,
     mirrors: Weak<SharedMirrors>,
 }
 
 impl ReplicaFeed for ImportFeed {
     fn waiter(&self) -> Option<Box<dyn FeedWaiter>> {
+        Some(Box::new(ImportWaiter {
+            listening: None,
+            trajectory: self.trajectory.clone(),
+            node: self.node.clone(),
+            mirrors: Weak::clone(&self.mirrors),
+        }))
+    }
+}
+
+/// The longest one wait of a subscriber lasts before it looks again at what it
+/// listens to: a re-pointed name is imported from new services, and the subscriber
+/// follows.
+const WAIT_SLICE: std::time::Duration = std::time::Duration::from_millis(100);
+
+/// One subscription's listener on the writer's wake-up service.
+struct ImportWaiter {
+    /// The generation listened to, and the listener.
+    listening: Option<(u64, Listener<ShmService>)>,
+    trajectory: String,
+    node: SharedNode,
+    mirrors: Weak<SharedMirrors>,
+}
+
+impl ImportWaiter {
+    /// Listens to the current import's wake-up service (again, if its generation
+    /// changed); false if there is no import to listen to.
+    fn listen(&mut self) -> bool {
+        let Some(mirrors) = self.mirrors.upgrade() else { return false };
+        let current = mirrors
+            .lock()
+            .imports
+            .get(&self.trajectory)
+            .and_then(|i| i.sample_wake().map(|w| (i.generation, w)));
+        let Some((generation, wake)) = current else { return false };
+        if self.listening.as_ref().is_some_and(|(g, _)| *g == generation) {
+            return true;
+        }
         let listener = self.node.with(|node| {
-            open_event_service(node, &self.wake)?
+            open_event_service(node, &wake)?
                 .listener_builder()
                 .create()
                 .map_err(OpenError::Listener)
         });
         match listener {
-            Ok(listener) => Some(Box::new(ImportWaiter {
-                listener,
-                trajectory: self.trajectory.clone(),
-                mirrors: Weak::clone(&self.mirrors),
-            })),
+            Ok(l) => {
+                self.listening = Some((generation, l));
+                true
+            }
             Err(e) => {
                 tracing::debug!(trajectory = %self.trajectory, error = %e,
                     "a subscriber cannot listen to its writer; the receiver thread wakes it");
-                None
+                self.listening = None;
+                false
             }
         }
     }
-}
-
-/// One subscription's listener on the writer's wake-up service.
-struct ImportWaiter {
-    listener: Listener<ShmService>,
-    trajectory: String,
-    mirrors: Weak<SharedMirrors>,
 }
 
 impl FeedWaiter for ImportWaiter {
@@ -247,7 +283,11 @@ impl FeedWaiter for ImportWaiter {
     }
 
     fn wait_and_feed(&mut self, timeout: std::time::Duration) -> bool {
-        match self.listener.timed_wait(|_| {}, timeout) {
+        if !self.listen() {
+            return false;
+        }
+        let Some((_, listener)) = &self.listening else { return false };
+        match listener.timed_wait(|_| {}, timeout.min(WAIT_SLICE)) {
             Ok(_) => {
                 self.feed();
                 true

@@ -13,7 +13,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, RecvTimeoutError, Sender};
-use esgm_core::esgm::{CreateError, Esgm, LookupError, TrajectoryKind, TrajectorySpec};
+use esgm_core::esgm::{CreateError, Esgm, LookupError, TrajectorySpec};
 use esgm_core::{EntityStructureType, InProcessEsgm, InProcessTrajectory};
 
 use super::export::Export;
@@ -49,6 +49,8 @@ pub(crate) enum Command {
     Destroy(String, Sender<Result<(), LookupError>>),
     /// This process now serves sensors or units: poll for assignments.
     Serving,
+    /// Test support: the location thread panics.
+    Panic,
 }
 
 /// The seed's lookup error if the coordinator gave one, else `Unavailable`.
@@ -138,32 +140,72 @@ impl Location {
         };
         let now: std::collections::BTreeMap<_, _> =
             placements.iter().map(|p| (p.name.as_str(), p)).collect();
-        let stale: Vec<String> = {
-            let mut mirrors = self.mirrors.lock();
-            let mut stale = Vec::new();
+        let (stale, moved): (Vec<String>, Vec<String>) = {
+            let mirrors = self.mirrors.lock();
+            let (mut stale, mut moved) = (Vec::new(), Vec::new());
             for (name, e) in &mirrors.exports {
                 let current = now.get(name.as_str());
                 if current.is_none_or(|p| p.generation != e.generation || p.writer != self.host) {
                     stale.push(name.clone());
                 }
             }
-            for (name, i) in &mut mirrors.imports {
+            for (name, i) in &mirrors.imports {
                 match now.get(name.as_str()) {
                     Some(p) if p.generation == i.generation => {}
                     Some(p) if p.type_name == i.type_name && p.writer != self.host => {
-                        i.generation = p.generation;
+                        moved.push(name.clone());
                     }
                     _ => stale.push(name.clone()),
                 }
             }
-            stale
+            (stale, moved)
         };
+        for name in &moved {
+            self.reimport(name);
+        }
         for name in &stale {
             tracing::info!(trajectory = %name, "destroyed or created anew elsewhere; dropped here");
             self.forget(name);
         }
         if self.serving && stale.iter().any(|n| now.contains_key(n.as_str())) {
             self.poll_assignments();
+        }
+    }
+
+    /// Follows a name re-pointed elsewhere (E5): the replica stays, with its handles
+    /// and subscribers; it forgets the former stream and imports the new trajectory's
+    /// services (each generation has its own).
+    fn reimport(&mut self, name: &str) {
+        let record = match self.record(name) {
+            Ok(r) => r,
+            Err(e) => {
+                tracing::debug!(trajectory = %name, error = %e, "cannot follow a re-pointed name");
+                return;
+            }
+        };
+        let Ok(replica) = self.local.get_entity_trajectory_structure(name) else {
+            return self.forget(name);
+        };
+        let site = ImportSite {
+            node: &self.node,
+            domain: &self.domain,
+            holdings: &self.holdings,
+            mirrors: &self.mirrors,
+        };
+        match Import::start(&site, replica.clone(), &record) {
+            Ok(mut import) => {
+                // The former stream's end: readers forget it, as the writer's did.
+                let _destroyed = replica.with_store(|s| s.reset());
+                import.pump();
+                self.mirrors.change(|m| m.imports.insert(name.to_owned(), import));
+                tracing::info!(trajectory = %name, generation = record.generation,
+                    "following a re-pointed trajectory");
+            }
+            Err(e) => {
+                tracing::warn!(trajectory = %name, error = %e,
+                    "cannot import a re-pointed trajectory; dropped here");
+                self.forget(name);
+            }
         }
     }
 
@@ -193,6 +235,12 @@ impl Location {
             }
             Command::Destroy(name, reply) => {
                 let _ = reply.send(self.destroy(&name));
+            }
+            Command::Panic => {
+                #[allow(clippy::panic, reason = "test support: a panic asked for")]
+                {
+                    panic!("esgm-location: panic injected by a test");
+                }
             }
             Command::Serving => {
                 self.serving = true;
@@ -254,6 +302,10 @@ impl Location {
         record: &TrajectoryRecord,
     ) -> Result<InProcessTrajectory, CreateError> {
         install(&self.local, &record.types);
+        // Re-pointed here from another writer: this process writes it now.
+        if spec.replace {
+            drop(self.mirrors.change(|m| m.imports.remove(&spec.name)));
+        }
         for input in spec.inputs() {
             self.ensure_available(&input)?;
         }
@@ -305,15 +357,8 @@ impl Location {
             holdings: &self.holdings,
             mirrors: &self.mirrors,
         };
-        match Import::start(
-            &site,
-            handle.clone(),
-            &record.info.type_name,
-            &record.info.policy,
-            record.info.kind == TrajectoryKind::Primitive,
-        ) {
+        match Import::start(&site, handle.clone(), record) {
             Ok(mut import) => {
-                import.generation = record.generation;
                 // The history the writer already handed over, at once.
                 import.pump();
                 self.mirrors.change(|m| m.imports.insert(name.clone(), import));

@@ -53,6 +53,8 @@ pub(crate) struct SharedMirrors {
     mirrors: Mutex<Mirrors>,
     generation: AtomicU64,
     stop: AtomicBool,
+    /// Test support: the receiver thread panics at its next wake-up.
+    panic_requested: AtomicBool,
     /// Wakes the receiver thread at once when the set changes (its doorbell service).
     doorbell: OnceLock<Notifier<ShmService>>,
 }
@@ -97,6 +99,17 @@ impl SharedMirrors {
     pub fn stop(&self) {
         self.stop.store(true, Ordering::Release);
         self.ring();
+    }
+
+    /// Test support: makes the receiver thread panic at its next wake-up.
+    pub fn request_panic(&self) {
+        self.panic_requested.store(true, Ordering::Release);
+        self.ring();
+    }
+
+    /// True once [`SharedMirrors::request_panic`] was called.
+    pub fn panic_requested(&self) -> bool {
+        self.panic_requested.load(Ordering::Acquire)
     }
 
     /// True once [`SharedMirrors::stop`] was called.

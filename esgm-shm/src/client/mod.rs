@@ -183,7 +183,7 @@ impl ShmEsgmBuilder {
             local: local.clone(),
             node,
             control,
-            mirrors,
+            mirrors: Arc::clone(&mirrors),
             holdings: Arc::clone(&holdings),
             failed: Default::default(),
             serving: false,
@@ -196,7 +196,16 @@ impl ShmEsgmBuilder {
         tracing::info!(%domain, %host, "connected");
         let thread = parking_lot::Mutex::new(Some(thread));
         Ok(ShmEsgm {
-            inner: Arc::new(Inner { domain, host, local, commands, timeout, holdings, thread }),
+            inner: Arc::new(Inner {
+                domain,
+                host,
+                local,
+                commands,
+                timeout,
+                holdings,
+                mirrors,
+                thread,
+            }),
         })
     }
 }
@@ -225,6 +234,7 @@ struct Inner {
     commands: Sender<Command>,
     timeout: Duration,
     holdings: Arc<Holdings>,
+    mirrors: Arc<SharedMirrors>,
     thread: parking_lot::Mutex<Option<std::thread::JoinHandle<()>>>,
 }
 
@@ -293,6 +303,16 @@ impl ShmEsgm {
     /// hold; kept for callers that match on it).
     pub fn holding_stats(&self) -> Option<HoldingStats> {
         Some(self.inner.holdings.stats())
+    }
+
+    /// Test support, not an API: makes this connection's location thread and
+    /// receiver thread panic, to check that nothing a value reads depends on them.
+    #[doc(hidden)]
+    pub fn inject_thread_panics_for_tests(&self) {
+        if self.inner.commands.send(Command::Panic).is_err() {
+            tracing::debug!("the location thread has stopped already");
+        }
+        self.inner.mirrors.request_panic();
     }
 
     /// Blocks while the coordinator answers; returns once it has been gone for

@@ -117,6 +117,12 @@ fn poll(mirrors: &SharedMirrors) {
     while !mirrors.stopped() {
         std::thread::sleep(RECHECK);
         mirrors.lock().pump();
+        if mirrors.panic_requested() {
+            #[allow(clippy::panic, reason = "test support: a panic asked for")]
+            {
+                panic!("esgm-receiver: panic injected by a test");
+            }
+        }
     }
 }
 
@@ -192,5 +198,11 @@ fn wait_while_unchanged(
             }
         }
         mirrors.lock().pump();
+        if mirrors.panic_requested() {
+            #[allow(clippy::panic, reason = "test support: a panic asked for")]
+            {
+                panic!("esgm-receiver: panic injected by a test");
+            }
+        }
     }
 }
