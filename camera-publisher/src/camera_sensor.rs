@@ -5,7 +5,7 @@
 //! in-process runtime or, later, with a shared-memory worker process.
 
 use esgm_core::library::Image;
-use esgm_core::{Entity, EntityStructure, SensorError, SensorInterface, Time};
+use esgm_core::{Entity, EntityStructure, OctetsAllocator, SensorError, SensorInterface, Time};
 
 use crate::frame_source::FrameSource;
 
@@ -60,6 +60,26 @@ impl<S: FrameSource + Send + Sync> SensorInterface for CameraSensor<S> {
     fn get_current_value(&self, qtime: Time) -> Result<EntityStructure, SensorError> {
         Ok(self.image_at(qtime))
     }
+
+    /// Renders the frame straight into the trajectory's own image buffer — a loan of
+    /// its shared memory when the trajectory is published to other processes — so the
+    /// frame is written once, where every reader reads it.
+    fn get_current_value_with(
+        &self,
+        qtime: Time,
+        images: &dyn OctetsAllocator,
+    ) -> Result<EntityStructure, SensorError> {
+        let (width, height) = (i64::from(self.source.width()), i64::from(self.source.height()));
+        let Some(mut buffer) = images.image(width, height, Image::FORMAT_RGB8) else {
+            return self.get_current_value(qtime);
+        };
+        self.source
+            .render_into(qtime, buffer.pixels_mut())
+            .map_err(|e| SensorError::Failed { reason: e.to_string() })?;
+        let image =
+            Image { width, height, format: Image::FORMAT_RGB8, image_data: buffer.into_octets() };
+        Ok(image.to_structure(Self::STRUCTURE_NAME, qtime, qtime))
+    }
 }
 
 #[cfg(test)]
@@ -76,6 +96,16 @@ mod tests {
         let es = camera.get_current_value(7_000).unwrap();
         assert_eq!(es.name, "image");
         assert_eq!((es.valid_time, es.create_time), (7_000, 7_000));
+        assert_eq!(Image::from_structure(&es).unwrap(), expected);
+    }
+
+    #[test]
+    fn renders_into_the_trajectorys_buffer_the_same_frame() {
+        let scene =
+            SyntheticScene::builder().width(32).height(24).blobs(2).seed(5).create().unwrap();
+        let expected = scene.frame(9_000);
+        let camera = CameraSensor::new(scene);
+        let es = camera.get_current_value_with(9_000, &esgm_core::HeapAllocator).unwrap();
         assert_eq!(Image::from_structure(&es).unwrap(), expected);
     }
 }

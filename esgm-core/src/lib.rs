@@ -40,6 +40,7 @@ pub mod generator;
 pub mod library;
 pub mod octets;
 pub mod operators;
+pub mod pixel_buffer;
 pub mod policy;
 pub mod runtime;
 pub mod sample;
@@ -60,6 +61,7 @@ pub use esgm::{
 pub use filter::{Filter, FilterError};
 pub use frame::{AttributeList, AttributeValuePair, EntityFrame, EntityStructure};
 pub use generator::{FluentGenerator, GeneratorPolicy};
+pub use pixel_buffer::{HeapAllocator, OctetsAllocator, PixelBuffer, PixelStorage};
 pub use policy::{
     CacheConstraint, ChangeConstraint, Constraint, DelayConstraint, DurationConstraint,
     FluentStreamPolicy, OrderConstraint, PolicyError,

@@ -23,6 +23,12 @@ use rkyv::{Archive, Deserialize, Serialize};
 pub trait OctetsHolder: Send + Sync + 'static {
     /// The held bytes.
     fn bytes(&self) -> &[u8];
+
+    /// The holder as `Any`, for a transport that recognises its own holders (a loan
+    /// it can send instead of copying); `None` by default.
+    fn as_any(&self) -> Option<&dyn std::any::Any> {
+        None
+    }
 }
 
 /// Where an [`Octets`]'s bytes are.
@@ -65,6 +71,14 @@ impl Octets {
         let len = holder.bytes().len();
         (range.start <= range.end && range.end <= len)
             .then_some(Octets(OctetBytes::Held { holder, range }))
+    }
+
+    /// The holder of held bytes (see [`OctetsHolder::as_any`]); `None` for heap bytes.
+    pub fn holder(&self) -> Option<&Arc<dyn OctetsHolder>> {
+        match &self.0 {
+            OctetBytes::Held { holder, .. } => Some(holder),
+            OctetBytes::Heap(_) => None,
+        }
     }
 
     /// True if the bytes are held elsewhere (e.g. in shared memory another process

@@ -42,6 +42,20 @@ pub struct HoldingStats {
     /// Received samples with large octets that were copied instead, because their
     /// subscriber's borrow budget was spent (values kept too many older ones).
     pub copied_over_budget: u64,
+    /// Images this process published from loans: pixels written in place by their
+    /// producer, never copied ([`esgm_core::OctetsAllocator`]).
+    pub sent_in_place: u64,
+    /// Images this process published by encoding them: their pixels were copied from
+    /// this process's heap into shared memory once.
+    pub sent_copied: u64,
+}
+
+impl HoldingStats {
+    /// Image copies this process made: received images copied onto its heap, and
+    /// images it copied into shared memory to send.
+    pub fn copies(&self) -> u64 {
+        self.copied_over_budget + self.sent_copied
+    }
 }
 
 /// The process-wide counters behind [`HoldingStats`], shared by every owner.
@@ -50,6 +64,8 @@ pub(crate) struct Holdings {
     held_now: AtomicUsize,
     held_total: AtomicU64,
     copied_over_budget: AtomicU64,
+    sent_in_place: AtomicU64,
+    sent_copied: AtomicU64,
 }
 
 impl Holdings {
@@ -59,6 +75,8 @@ impl Holdings {
             held_now: self.held_now.load(Ordering::Relaxed),
             held_total: self.held_total.load(Ordering::Relaxed),
             copied_over_budget: self.copied_over_budget.load(Ordering::Relaxed),
+            sent_in_place: self.sent_in_place.load(Ordering::Relaxed),
+            sent_copied: self.sent_copied.load(Ordering::Relaxed),
         }
     }
 
@@ -78,6 +96,16 @@ pub(crate) struct HoldingOwner {
 }
 
 impl HoldingOwner {
+    /// Counts an image this process published: from a loan (`in_place`) or encoded
+    /// from the heap (a copy).
+    pub fn count_sent(&self, in_place: bool) {
+        let counter = match in_place {
+            true => &self.process.sent_in_place,
+            false => &self.process.sent_copied,
+        };
+        counter.fetch_add(1, Ordering::Relaxed);
+    }
+
     /// Decodes `sample`. Large octet sequences stay in shared memory, owned by the
     /// values that read them, while the owner has budget; otherwise everything is
     /// copied and the sample returned at once.

@@ -54,12 +54,7 @@ type UninitSample = SampleMutUninit<ShmService, [MaybeUninit<Block16>], SampleHe
 /// Shared memory holding an image under construction; see the module docs.
 pub struct ImageLoan<'p> {
     publisher: &'p TrajectoryPublisher,
-    sample: UninitSample,
-    width: i64,
-    height: i64,
-    format: i64,
-    pixel_len: usize,
-    pixels_init: bool,
+    chunk: ImageChunk,
 }
 
 impl std::fmt::Debug for ImageLoan<'_> {
@@ -67,88 +62,56 @@ impl std::fmt::Debug for ImageLoan<'_> {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("ImageLoan")
             .field("trajectory", &self.publisher.trajectory())
-            .field("size", &(self.width, self.height, self.format))
-            .field("pixel_len", &self.pixel_len)
-            .field("pixels_init", &self.pixels_init)
+            .field("size", &(self.chunk.width, self.chunk.height, self.chunk.format))
+            .field("pixel_len", &self.chunk.pixel_len)
+            .field("pixels_init", &self.chunk.pixels_init)
             .finish_non_exhaustive()
     }
 }
 
 impl<'p> ImageLoan<'p> {
-    /// A loan of at least `image_layout::image_loan_len(pixel_len)` bytes for an image
-    /// of these sizes (already checked by the publisher).
-    pub(crate) fn new(
-        publisher: &'p TrajectoryPublisher,
-        sample: UninitSample,
-        (width, height, format): (i64, i64, i64),
-        pixel_len: usize,
-    ) -> Self {
-        Self { publisher, sample, width, height, format, pixel_len, pixels_init: false }
+    /// A loan for an image, of the publisher that made `chunk`.
+    pub(crate) fn new(publisher: &'p TrajectoryPublisher, chunk: ImageChunk) -> Self {
+        Self { publisher, chunk }
     }
 
     /// Width in pixels.
     pub fn width(&self) -> i64 {
-        self.width
+        self.chunk.width
     }
 
     /// Height in pixels.
     pub fn height(&self) -> i64 {
-        self.height
+        self.chunk.height
     }
 
     /// Pixel format (`Image::FORMAT_*`).
     pub fn format(&self) -> i64 {
-        self.format
+        self.chunk.format
     }
 
     /// Bytes of pixels (width × height × bytes per pixel).
     pub fn pixel_len(&self) -> usize {
-        self.pixel_len
-    }
-
-    fn pixel_range(&self) -> Range<usize> {
-        IMAGE_PIXELS_OFFSET..IMAGE_PIXELS_OFFSET + self.pixel_len
-    }
-
-    fn pixels_uninit(&mut self) -> &mut [MaybeUninit<u8>] {
-        let range = self.pixel_range();
-        let bytes = as_uninit_bytes(self.sample.payload_mut());
-        // The publisher loaned room for the whole image; clamp rather than panic anyway.
-        let len = bytes.len();
-        &mut bytes[range.start.min(len)..range.end.min(len)]
+        self.chunk.pixel_len
     }
 
     /// The pixels in shared memory, row-major as the format says. Zeroed on the first
     /// call (see the module docs); write the frame here.
     pub fn pixels_mut(&mut self) -> &mut [u8] {
-        let was_init = self.pixels_init;
-        self.pixels_init = true;
-        let pixels = self.pixels_uninit();
-        if was_init {
-            // SAFETY: the range was initialised by an earlier call (zeroed and possibly
-            // written since) or promised by `assume_pixels_init`.
-            unsafe { &mut *(pixels as *mut [MaybeUninit<u8>] as *mut [u8]) }
-        } else {
-            zero_fill(pixels)
-        }
+        self.chunk.pixels_mut()
     }
 
     /// The pixels as not-yet-initialised memory, for a writer that fills every byte
     /// (e.g. a copy from a driver buffer) and wants to skip the zeroing. Follow with
     /// [`Self::assume_pixels_init`].
     pub fn pixels_uninit_mut(&mut self) -> &mut [MaybeUninit<u8>] {
-        self.pixels_uninit()
+        self.chunk.pixels_uninit()
     }
 
     /// Copies a whole frame (exactly [`Self::pixel_len`] bytes, e.g. a driver's or a
     /// decoder's buffer) into the pixels, without zeroing them first.
     pub fn write_pixels(&mut self, frame: &[u8]) -> Result<(), ImageError> {
-        let expected = self.pixel_len;
-        if frame.len() != expected || !copy_into(self.pixels_uninit(), frame) {
-            return Err(ImageError::FrameLength { expected, found: frame.len() });
-        }
-        self.pixels_init = true;
-        Ok(())
+        self.chunk.write_pixels(frame)
     }
 
     /// Declares the pixels initialised.
@@ -157,7 +120,7 @@ impl<'p> ImageLoan<'p> {
     /// Every byte of [`Self::pixels_uninit_mut`] must have been written (or
     /// [`Self::pixels_mut`] called) since the loan was made.
     pub unsafe fn assume_pixels_init(&mut self) {
-        self.pixels_init = true;
+        self.chunk.pixels_init = true;
     }
 
     /// Completes the image as entity `name` with the given times and sends it, the
@@ -183,7 +146,84 @@ impl<'p> ImageLoan<'p> {
     ///
     /// Names longer than [`IMAGE_NAME_MAX`] are copied, as for [`Self::send`].
     pub fn into_structure(
+        self,
+        name: &str,
+        valid_time: Time,
+        create_time: Time,
+    ) -> Result<StructureLoan<'p>, PublishError> {
+        self.chunk.complete(self.publisher, name, valid_time, create_time)
+    }
+}
+
+/// The loaned memory of an image under construction, apart from the publisher that
+/// lent it: what a runtime keeps while the pixels are written and the structure goes
+/// through its gate, before the publisher completes and sends it
+/// ([`ImageChunk::complete`]).
+pub(crate) struct ImageChunk {
+    sample: UninitSample,
+    width: i64,
+    height: i64,
+    format: i64,
+    pixel_len: usize,
+    pixels_init: bool,
+}
+
+impl ImageChunk {
+    /// A loan of at least `image_layout::image_loan_len(pixel_len)` bytes for an image
+    /// of these sizes (already checked by the publisher).
+    pub(crate) fn new(
+        sample: UninitSample,
+        (width, height, format): (i64, i64, i64),
+        pixel_len: usize,
+    ) -> Self {
+        Self { sample, width, height, format, pixel_len, pixels_init: false }
+    }
+
+    /// Width, height and format.
+    pub(crate) fn size(&self) -> (i64, i64, i64) {
+        (self.width, self.height, self.format)
+    }
+
+    fn pixel_range(&self) -> Range<usize> {
+        IMAGE_PIXELS_OFFSET..IMAGE_PIXELS_OFFSET + self.pixel_len
+    }
+
+    fn pixels_uninit(&mut self) -> &mut [MaybeUninit<u8>] {
+        let range = self.pixel_range();
+        let bytes = as_uninit_bytes(self.sample.payload_mut());
+        // The publisher loaned room for the whole image; clamp rather than panic anyway.
+        let len = bytes.len();
+        &mut bytes[range.start.min(len)..range.end.min(len)]
+    }
+
+    /// The pixels, zeroed on the first call.
+    pub(crate) fn pixels_mut(&mut self) -> &mut [u8] {
+        let was_init = self.pixels_init;
+        self.pixels_init = true;
+        let pixels = self.pixels_uninit();
+        if was_init {
+            // SAFETY: the range was initialised by an earlier call (zeroed and possibly
+            // written since) or promised by `assume_pixels_init`.
+            unsafe { &mut *(pixels as *mut [MaybeUninit<u8>] as *mut [u8]) }
+        } else {
+            zero_fill(pixels)
+        }
+    }
+
+    fn write_pixels(&mut self, frame: &[u8]) -> Result<(), ImageError> {
+        let expected = self.pixel_len;
+        if frame.len() != expected || !copy_into(self.pixels_uninit(), frame) {
+            return Err(ImageError::FrameLength { expected, found: frame.len() });
+        }
+        self.pixels_init = true;
+        Ok(())
+    }
+
+    /// Completes the image as entity `name` with the given times, for `publisher`
+    /// (the one that lent the chunk), ready to send.
+    pub(crate) fn complete<'p>(
         mut self,
+        publisher: &'p TrajectoryPublisher,
         name: &str,
         valid_time: Time,
         create_time: Time,
@@ -192,7 +232,7 @@ impl<'p> ImageLoan<'p> {
             self.pixels_mut();
         }
         if name.len() > IMAGE_NAME_MAX {
-            return self.into_copied(name, valid_time, create_time);
+            return self.into_copied(publisher, name, valid_time, create_time);
         }
         let pixels = self.pixel_range();
         let bytes = as_uninit_bytes(self.sample.payload_mut());
@@ -218,7 +258,7 @@ impl<'p> ImageLoan<'p> {
         )
         .map_err(PublishError::Encode)?;
         Ok(StructureLoan::new(
-            self.publisher,
+            publisher,
             sample,
             archive_len,
             (valid_time, create_time),
@@ -226,13 +266,14 @@ impl<'p> ImageLoan<'p> {
         ))
     }
 
-    fn into_copied(
+    fn into_copied<'p>(
         mut self,
+        publisher: &'p TrajectoryPublisher,
         name: &str,
         valid_time: Time,
         create_time: Time,
     ) -> Result<StructureLoan<'p>, PublishError> {
-        tracing::debug!(trajectory = %self.publisher.trajectory(), name_len = name.len(),
+        tracing::debug!(trajectory = %publisher.trajectory(), name_len = name.len(),
             max = IMAGE_NAME_MAX, "image name too long to send in place: copying this frame");
         let pixels = Octets::from(&*self.pixels_mut());
         let image = Image {
@@ -241,7 +282,6 @@ impl<'p> ImageLoan<'p> {
             format: self.format,
             image_data: pixels,
         };
-        let publisher = self.publisher;
         // Return the loan before loaning again for the copy.
         drop(self);
         publisher.loan_structure(&image.to_structure(name, valid_time, create_time))

@@ -46,7 +46,7 @@ use iceoryx2::sample_mut::SampleMut;
 use iceoryx2::service::port_factory::PortFactory;
 
 use crate::image_layout::{ImageError, image_loan_len, pixel_len};
-use crate::image_loan::ImageLoan;
+use crate::image_loan::{ImageChunk, ImageLoan};
 use crate::payload::{BLOCK_LEN, Block16, SampleHeader, as_uninit_bytes, blocks_for, zero_fill};
 use crate::qos::{Delivery, TrajectoryQos};
 use crate::service::{DataService, OpenError, ShmNode, open_data_service, open_wake_service};
@@ -381,12 +381,23 @@ impl TrajectoryPublisher {
         height: i64,
         format: i64,
     ) -> Result<ImageLoan<'_>, PublishError> {
+        Ok(ImageLoan::new(self, self.loan_image_chunk(width, height, format)?))
+    }
+
+    /// [`Self::loan_image`] apart from the publisher: the runtime keeps the chunk while
+    /// the pixels are written and completes it with [`ImageChunk::complete`].
+    pub(crate) fn loan_image_chunk(
+        &self,
+        width: i64,
+        height: i64,
+        format: i64,
+    ) -> Result<ImageChunk, PublishError> {
         let pixel_len = pixel_len(width, height, format)?;
         let sample = self
             .port
             .loan_slice_uninit(blocks_for(image_loan_len(pixel_len)))
             .map_err(PublishError::Loan)?;
-        Ok(ImageLoan::new(self, sample, (width, height, format), pixel_len))
+        Ok(ImageChunk::new(sample, (width, height, format), pixel_len))
     }
 
     /// Fills the header, sends, and wakes sleeping readers; the add time is `add_time`,

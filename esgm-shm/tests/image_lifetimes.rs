@@ -157,3 +157,55 @@ fn a_readers_pixels_live_in_the_writers_shared_memory_segment() {
     assert!(px.is_held());
     drop(s.frames);
 }
+
+/// A camera that renders each frame into the buffer its trajectory hands it.
+struct LoanedCamera;
+
+impl esgm_core::SensorInterface for LoanedCamera {
+    fn get_current_value(&self, _qtime: Time) -> Result<EntityStructure, esgm_core::SensorError> {
+        Err(esgm_core::SensorError::Failed { reason: "renders only into a buffer".into() })
+    }
+
+    fn get_current_value_with(
+        &self,
+        qtime: Time,
+        images: &dyn esgm_core::OctetsAllocator,
+    ) -> Result<EntityStructure, esgm_core::SensorError> {
+        let side = SIDE as i64;
+        let format = esgm_core::library::Image::FORMAT_MONO8;
+        let mut buffer = images
+            .image(side, side, format)
+            .ok_or_else(|| esgm_core::SensorError::Failed { reason: "no buffer".into() })?;
+        common::fill(buffer.pixels_mut(), qtime as u64);
+        Ok(EntityStructure::new("cam", qtime, qtime)
+            .with("width", side)
+            .with("height", side)
+            .with("format", format)
+            .with("image_data", buffer.into_octets()))
+    }
+}
+
+#[test]
+fn a_camera_behind_connect_writes_each_frame_once_in_shared_memory() {
+    let c = coordinator("life-camera");
+    let camera = location(&c, "camera");
+    let reader = location(&c, "reader");
+    camera.add_sensor_interface("cam", "Image", std::sync::Arc::new(LoanedCamera)).unwrap();
+    let policy = FluentStreamPolicy::default().cache(CacheConstraint::Elements(3));
+    let spec =
+        TrajectorySpec::sampled("frames", "cam", esgm_core::millis(20)).unwrap().policy(policy);
+    let frames = reader.create_trajectory(spec).unwrap();
+    let sub = frames.subscribe(SubscribeOptions::default()).unwrap();
+    for _ in 0..10 {
+        let s = sub.recv_timeout(TIMEOUT).unwrap();
+        assert_frame(&s, s.structure.valid_time as u64, "a frame read in another process");
+    }
+    // The camera's own process reads its frames through the sample it sent, too.
+    let own = camera.get_entity_trajectory_structure("frames").unwrap();
+    let latest = own.get_latest().unwrap();
+    assert_frame(&latest, latest.structure.valid_time as u64, "the writer's own cache");
+    let sent = camera.holding_stats().unwrap();
+    assert!(sent.sent_in_place >= 10, "{sent:?}");
+    assert_eq!(sent.copies(), 0, "no image copied by the camera's process: {sent:?}");
+    assert_eq!(reader.holding_stats().unwrap().copies(), 0, "nor by the reader's");
+}

@@ -2,6 +2,7 @@
 //! computational units (`CompUnit`), with closures accepted as either.
 
 use crate::frame::EntityStructure;
+use crate::pixel_buffer::OctetsAllocator;
 use crate::sample::Sample;
 use crate::time::Time;
 
@@ -32,6 +33,19 @@ pub enum SensorError {
 pub trait SensorInterface: Send + Sync {
     /// The current value, as asked at `qtime`.
     fn get_current_value(&self, qtime: Time) -> Result<EntityStructure, SensorError>;
+
+    /// The current value, with the trajectory's own image buffers at hand: a camera
+    /// renders its frame into `images.image(..)` (shared memory on the shared-memory
+    /// runtime), so the frame is written once, where every reader reads it. The
+    /// default ignores them and calls [`SensorInterface::get_current_value`].
+    fn get_current_value_with(
+        &self,
+        qtime: Time,
+        images: &dyn OctetsAllocator,
+    ) -> Result<EntityStructure, SensorError> {
+        let _heap_is_fine = images;
+        self.get_current_value(qtime)
+    }
 }
 
 impl<F> SensorInterface for F

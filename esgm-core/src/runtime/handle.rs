@@ -6,6 +6,7 @@ use super::cell::{Descriptor, TrajectoryCell};
 use crate::approximation::ValueApproximation;
 use crate::esgm::EntityTrajectoryStructure;
 use crate::frame::{AttributeList, EntityStructure};
+use crate::pixel_buffer::PixelBuffer;
 use crate::policy::FluentStreamPolicy;
 use crate::sample::Sample;
 use crate::store::{
@@ -71,6 +72,16 @@ impl InProcessTrajectory {
             cell.kick_releaser();
         }
         outcome
+    }
+
+    /// A buffer for an image's pixels in this trajectory's own memory — its shared
+    /// memory where the trajectory is published to other processes, so a frame added
+    /// with these pixels (as its `image_data`) is never copied — else on the heap.
+    /// `None` for an unknown format or an impossible size.
+    pub fn image_buffer(&self, width: i64, height: i64, format: i64) -> Option<PixelBuffer> {
+        let own = self.with_store(|s| s.octets_allocator()).ok().flatten();
+        own.and_then(|a| a.image(width, height, format))
+            .or_else(|| PixelBuffer::heap_image(width, height, format))
     }
 
     /// Adds an already shared structure without copying it (zero-copy push).

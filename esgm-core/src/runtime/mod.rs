@@ -222,6 +222,77 @@ impl InProcessEsgm {
         Ok(InProcessTrajectory { descriptor })
     }
 
+    /// Creates a trajectory as [`Esgm::create_trajectory`] does, and runs `prepare` on
+    /// it after it exists and before its worker starts: a transport installs its tap
+    /// and image buffers there, so the first sample a sampler takes is already
+    /// published, and written in place. An error of `prepare` undoes the creation.
+    pub fn create_trajectory_prepared(
+        &self,
+        spec: TrajectorySpec,
+        prepare: impl FnOnce(&InProcessTrajectory) -> Result<(), CreateError>,
+    ) -> Result<InProcessTrajectory, CreateError> {
+        // The catalog stays locked until the trajectory is published, so a concurrent
+        // create of the same name, or removal of its sensor or unit, cannot slip in
+        // between the checks and the start of its worker.
+        let mut catalog = self.inner.catalog.write();
+        let resolved = catalog.resolve(&spec)?;
+        let inputs = self.input_cells(&spec.inputs())?;
+        let name = spec.name.clone();
+        let store = TrajectoryStore::builder(name.clone(), resolved.checker)
+            .policy(spec.policy.clone())
+            .clock(self.inner.clock.clone())
+            .create()?;
+        let cell = Arc::new(TrajectoryCell {
+            store: parking_lot::Mutex::new(store),
+            external_adds: spec.kind() == TrajectoryKind::Primitive,
+            info: resolved.info.clone(),
+            worker: parking_lot::Mutex::new(None),
+            counters: Arc::default(),
+            kick: self.inner.kick.clone(),
+        });
+        let mut map = self.inner.trajectories.write();
+        let descriptor = match map.get(&name) {
+            Some(d) => {
+                // Re-pointing (the catalog refused it unless `replace` was set): the
+                // old trajectory's subscribers and held samples move to the new one.
+                let old = d.current.write().replace(Arc::clone(&cell));
+                if let Some(old) = old {
+                    old.worker.lock().take();
+                    let mut old_store = old.store.lock();
+                    cell.store.lock().adopt(&mut old_store);
+                }
+                Arc::clone(d)
+            }
+            None => {
+                let d = Arc::new(Descriptor {
+                    name: name.clone(),
+                    current: parking_lot::RwLock::new(Some(Arc::clone(&cell))),
+                });
+                map.insert(name, Arc::clone(&d));
+                d
+            }
+        };
+        drop(map);
+        if let Err(e) = prepare(&InProcessTrajectory { descriptor: Arc::clone(&descriptor) }) {
+            self.inner.trajectories.write().remove(&spec.name);
+            return Err(e);
+        }
+        // Start the feeder last: it subscribes to its inputs, which may include the
+        // trajectory it replaced (now under the same name).
+        let worker = match self.start_worker(&spec, &cell, &inputs) {
+            Ok(w) => w,
+            Err(e) => {
+                // Not reachable after `resolve` succeeded; undo rather than leave a
+                // trajectory without its feeder.
+                self.inner.trajectories.write().remove(&spec.name);
+                return Err(e);
+            }
+        };
+        *cell.worker.lock() = worker;
+        catalog.insert_trajectory(resolved.info);
+        Ok(InProcessTrajectory { descriptor })
+    }
+
     /// Stops every worker; trajectories stay queryable.
     pub fn shutdown(&self) {
         self.inner.shutdown.store(true, Ordering::Relaxed);
@@ -348,62 +419,7 @@ impl Esgm for InProcessEsgm {
     }
 
     fn create_trajectory(&self, spec: TrajectorySpec) -> Result<InProcessTrajectory, CreateError> {
-        // The catalog stays locked until the trajectory is published, so a concurrent
-        // create of the same name, or removal of its sensor or unit, cannot slip in
-        // between the checks and the start of its worker.
-        let mut catalog = self.inner.catalog.write();
-        let resolved = catalog.resolve(&spec)?;
-        let inputs = self.input_cells(&spec.inputs())?;
-        let name = spec.name.clone();
-        let store = TrajectoryStore::builder(name.clone(), resolved.checker)
-            .policy(spec.policy.clone())
-            .clock(self.inner.clock.clone())
-            .create()?;
-        let cell = Arc::new(TrajectoryCell {
-            store: parking_lot::Mutex::new(store),
-            external_adds: spec.kind() == TrajectoryKind::Primitive,
-            info: resolved.info.clone(),
-            worker: parking_lot::Mutex::new(None),
-            counters: Arc::default(),
-            kick: self.inner.kick.clone(),
-        });
-        let mut map = self.inner.trajectories.write();
-        let descriptor = match map.get(&name) {
-            Some(d) => {
-                // Re-pointing (the catalog refused it unless `replace` was set): the
-                // old trajectory's subscribers and held samples move to the new one.
-                let old = d.current.write().replace(Arc::clone(&cell));
-                if let Some(old) = old {
-                    old.worker.lock().take();
-                    let mut old_store = old.store.lock();
-                    cell.store.lock().adopt(&mut old_store);
-                }
-                Arc::clone(d)
-            }
-            None => {
-                let d = Arc::new(Descriptor {
-                    name: name.clone(),
-                    current: parking_lot::RwLock::new(Some(Arc::clone(&cell))),
-                });
-                map.insert(name, Arc::clone(&d));
-                d
-            }
-        };
-        drop(map);
-        // Start the feeder last: it subscribes to its inputs, which may include the
-        // trajectory it replaced (now under the same name).
-        let worker = match self.start_worker(&spec, &cell, &inputs) {
-            Ok(w) => w,
-            Err(e) => {
-                // Not reachable after `resolve` succeeded; undo rather than leave a
-                // trajectory without its feeder.
-                self.inner.trajectories.write().remove(&spec.name);
-                return Err(e);
-            }
-        };
-        *cell.worker.lock() = worker;
-        catalog.insert_trajectory(resolved.info);
-        Ok(InProcessTrajectory { descriptor })
+        self.create_trajectory_prepared(spec, |_| Ok(()))
     }
 
     fn get_entity_trajectory_structure(

@@ -16,6 +16,7 @@ use crate::esgm::{CompUnit, ComputeError, SensorError, SensorInterface};
 use crate::frame::{AttributeValuePair, EntityFrame, EntityStructure};
 use crate::generator::GeneratorPolicy;
 use crate::operators::sync::SyncPolicy;
+use crate::pixel_buffer::{HeapAllocator, OctetsAllocator};
 use crate::sample::Sample;
 use crate::store::{AddError, AddOutcome, FanIn};
 use crate::time::Time;
@@ -90,7 +91,14 @@ pub(crate) fn sampler(
     spawn("sampler", cell, move |stop, _wake| {
         periodic::run(&clock, &stop, schedule, missed(&c), |qtime| {
             WorkerCounters::bump(&c.counters.calls);
-            match guarded(&c, "get_current_value", || sensor.get_current_value(qtime)) {
+            // The trajectory's own image buffers (shared memory where it is published).
+            let images = c.store.lock().octets_allocator();
+            let images: &dyn OctetsAllocator = match &images {
+                Some(a) => a.as_ref(),
+                None => &HeapAllocator,
+            };
+            match guarded(&c, "get_current_value", || sensor.get_current_value_with(qtime, images))
+            {
                 Some(Ok(es)) => emit(&c, Arc::new(es)),
                 Some(Err(SensorError::ValueNotAvailable)) => {
                     WorkerCounters::bump(&c.counters.no_value)

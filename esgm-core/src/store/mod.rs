@@ -36,6 +36,7 @@ use crate::clock::SharedClock;
 use crate::filter::Filter;
 use crate::frame::AttributeList;
 use crate::frame::EntityStructure;
+use crate::pixel_buffer::OctetsAllocator;
 use crate::policy::{
     CacheConstraint, ChangeConstraint, Constraint, DelayConstraint, DurationConstraint,
     FluentStreamPolicy, OrderConstraint, PolicyError,
@@ -153,6 +154,7 @@ impl TrajectoryStoreBuilder {
             tap: None,
             forward: None,
             feed: None,
+            octets_allocator: None,
         })
     }
 }
@@ -186,6 +188,8 @@ pub struct TrajectoryStore {
     forward: Option<Arc<dyn AddForwarder>>,
     /// A replica's subscribers may wait for its writer themselves.
     feed: Option<Arc<dyn ReplicaFeed>>,
+    /// Where this trajectory's producers get image buffers (its shared memory).
+    octets_allocator: Option<Arc<dyn OctetsAllocator>>,
 }
 
 /// One thing that happened to a stream, as a [`TrajectoryStore::tap`] reports it.
@@ -210,8 +214,20 @@ pub enum StoreEvent {
 /// caused it, so it must be short and must never block: count and report failures,
 /// never wait for a reader.
 pub trait StoreTap: Send + 'static {
-    /// One event of the stream, in order.
+    /// One event of the stream, in order. A structure that enters is told to
+    /// [`StoreTap::entering`] instead.
     fn observe(&mut self, event: &StoreEvent);
+
+    /// A structure is entering the stream (admitted by the gate, or released from the
+    /// hold), before it is stored and delivered here: a mirror publishes it now, so
+    /// other processes see it no later than this one. It may answer the structure that
+    /// enters in its place — the same content with its bytes elsewhere, e.g. pixels
+    /// this process wrote into a loan and just sent, now read through a received
+    /// sample — which is then what the store keeps and its subscribers get.
+    fn entering(&mut self, sample: &Sample) -> Option<Arc<EntityStructure>> {
+        self.observe(&StoreEvent::Entered(sample.clone()));
+        None
+    }
 }
 
 impl<F: FnMut(&StoreEvent) + Send + 'static> StoreTap for F {
@@ -404,6 +420,19 @@ impl TrajectoryStore {
         self.stats.record_overflow(backlog.len().saturating_sub(options.capacity.max(1)) as u64);
         let waiter = self.feed.as_ref().and_then(|f| f.waiter());
         self.subscribers.subscribe(options.capacity, backlog.into_iter()).with_waiter(waiter)
+    }
+
+    /// Makes producers of this trajectory (its sampler, or whoever asks) write images
+    /// into buffers from `allocator` — the trajectory's shared memory — instead of the
+    /// heap ([`crate::pixel_buffer`]).
+    pub fn set_octets_allocator(&mut self, allocator: Arc<dyn OctetsAllocator>) {
+        self.octets_allocator = Some(allocator);
+    }
+
+    /// Where producers of this trajectory get image buffers, if it has a place of its
+    /// own.
+    pub fn octets_allocator(&self) -> Option<Arc<dyn OctetsAllocator>> {
+        self.octets_allocator.clone()
     }
 
     /// Lets this store's subscribers (a replica's) wait for its writer themselves, from
@@ -613,6 +642,15 @@ impl TrajectoryStore {
     /// cache says and tells subscribers and the tap.
     fn admit(&mut self, es: Arc<EntityStructure>, add_time: Time) {
         let now = add_time;
+        // The tap first: mirrors publish before this process delivers, and may hand
+        // back the structure to keep instead (see `StoreTap::entering`).
+        let es = match &mut self.tap {
+            Some((_, tap)) => {
+                let entering = Sample { structure: es, add_time: now, query_time: now };
+                tap.entering(&entering).unwrap_or(entering.structure)
+            }
+            None => es,
+        };
         let seq = self.next_seq;
         self.next_seq += 1;
         self.stats.record_added(now, es.valid_time);
@@ -638,9 +676,6 @@ impl TrajectoryStore {
         let sample = Sample { structure: es, add_time: now, query_time: now };
         let overflow = self.subscribers.publish(&sample);
         self.stats.record_overflow(overflow);
-        if self.tap.is_some() {
-            self.tell_tap(StoreEvent::Entered(sample));
-        }
     }
 
     /// Enters a structure that another store's gate already admitted — this store is a

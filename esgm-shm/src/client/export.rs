@@ -17,14 +17,20 @@
 use std::sync::Arc;
 
 use esgm_core::esgm::TrajectoryKind;
-use esgm_core::{EntityTrajectoryStructure, InProcessTrajectory, StoreEvent, TapId};
+use esgm_core::value::Value;
+use esgm_core::{
+    EntityStructure, EntityTrajectoryStructure, InProcessTrajectory, Sample, StoreEvent, TapId,
+};
 use iceoryx2::prelude::ServiceName;
 use parking_lot::Mutex;
 
 use super::blocking_add::{AddServer, BlockingAddError};
+use super::image_loans::{LoanAllocator, as_loan, loaned_image};
 use super::settings::{generation_domain, handle_qos, inbox_domain, inbox_qos};
 use super::shared_node::SharedNode;
 use crate::control::protocol::TrajectoryRecord;
+use crate::holdings::{HoldingOwner, Holdings};
+use crate::image_loan::ImageChunk;
 use crate::publisher::TrajectoryPublisher;
 use crate::service::OpenError;
 use crate::service_name::TrajectoryServiceNames;
@@ -49,14 +55,134 @@ pub(crate) enum ExportError {
 /// The ports an export publishes on, shared by the store's tap (any adding thread)
 /// and the location thread (which hands late readers their history).
 #[derive(Debug)]
-struct Outlet {
+pub(crate) struct Outlet {
     publisher: TrajectoryPublisher,
     violations: ViolationPublisher,
+    /// Trajectories of images: this process's own subscriber, through which the
+    /// writer's store reads the images it sent from loans ([`super::image_loans`]).
+    own: Option<(TrajectorySubscriber, HoldingOwner)>,
     /// Events that could not be published (the first is logged, all are counted).
     failures: u64,
 }
 
 impl Outlet {
+    /// A loan of this outlet's publisher for an image (the trajectory's
+    /// [`esgm_core::OctetsAllocator`]); `None`, logged, if it cannot lend one now.
+    fn loan_image(&mut self, width: i64, height: i64, format: i64) -> Option<ImageChunk> {
+        self.publisher
+            .loan_image_chunk(width, height, format)
+            .map_err(|e| {
+                tracing::debug!(trajectory = %self.publisher.trajectory(), error = %e,
+                    "no shared-memory buffer for an image; it is written on the heap")
+            })
+            .ok()
+    }
+
+    /// Publishes an entering structure. One whose pixels are this outlet's loan is sent
+    /// in place, and the structure as this process received it is returned, for the
+    /// store to keep (see [`super::image_loans`]).
+    fn enter(&mut self, sample: &Sample, owner: usize) -> Option<Arc<EntityStructure>> {
+        let es = &sample.structure;
+        let loaned = self.own.is_some().then(|| loaned_image(es, owner)).flatten();
+        let Some(holder) = loaned else {
+            self.encode(sample);
+            return None;
+        };
+        let loan = as_loan(&holder)?;
+        let Some(chunk) = loan.take() else {
+            // Sent before (the same pixels added twice): encode a copy.
+            self.encode(sample);
+            return None;
+        };
+        let size = (
+            es.get("width").and_then(|v| v.as_long()),
+            es.get("height").and_then(|v| v.as_long()),
+            es.get("format").and_then(|v| v.as_long()),
+        );
+        let (w, h, f) = chunk.size();
+        if size != (Some(w), Some(h), Some(f)) {
+            // The structure says another size than its pixels were loaned for: the
+            // reader must get what the structure says, so encode it (a copy).
+            self.encode(sample);
+            return None;
+        }
+        let sent = chunk
+            .complete(&self.publisher, &es.name, es.valid_time, es.create_time)
+            .and_then(|loan| loan.send_added(sample.add_time));
+        let published = match sent {
+            Ok(p) => p,
+            Err(e) => {
+                self.failed(&e);
+                return None;
+            }
+        };
+        if let Some((_, owner)) = &self.own {
+            owner.count_sent(true);
+        }
+        let received = self.receive_own(published.sequence)?;
+        if let Some(Value::OctetSeq(pixels)) = received.get("image_data") {
+            loan.sent(pixels.clone());
+        }
+        Some(Arc::new(received))
+    }
+
+    /// Publishes an entering structure by encoding it; an image's pixels are copied
+    /// into shared memory (counted).
+    fn encode(&mut self, sample: &Sample) {
+        self.publish(&StoreEvent::Entered(sample.clone()));
+        if let Some((_, owner)) = &self.own {
+            let octets = sample.structure.attributes.iter().any(|a| {
+                matches!(&a.value, Value::OctetSeq(o) if o.len() >= crate::holdings::HOLD_MIN_BYTES)
+            });
+            if octets {
+                owner.count_sent(false);
+            }
+        }
+        self.drain_own();
+    }
+
+    /// Takes what the own subscriber received, up to the sample `sequence`, and
+    /// decodes that one (its pixels held in place).
+    fn receive_own(&mut self, sequence: u64) -> Option<EntityStructure> {
+        let (own, owner) = self.own.as_ref()?;
+        loop {
+            match own.receive() {
+                Ok(Some(sample)) if sample.header().sequence == sequence => {
+                    return owner
+                        .decode(sample)
+                        .map_err(|e| {
+                            tracing::warn!(error = %e, "cannot read back an image this process sent")
+                        })
+                        .ok();
+                }
+                Ok(Some(_)) => {}
+                Ok(None) => {
+                    tracing::warn!(trajectory = %self.publisher.trajectory(),
+                        "an image this process sent did not come back; its store keeps the loan's view");
+                    return None;
+                }
+                Err(e) => {
+                    tracing::debug!(error = %e, "own subscriber");
+                    return None;
+                }
+            }
+        }
+    }
+
+    /// Drops what the own subscriber received (it reads only images sent from loans).
+    fn drain_own(&mut self) {
+        let Some((own, _)) = &self.own else { return };
+        while let Ok(Some(_)) = own.receive() {}
+    }
+
+    fn failed(&mut self, e: &dyn std::fmt::Display) {
+        self.failures += 1;
+        if self.failures == 1 {
+            tracing::warn!(trajectory = %self.publisher.trajectory(), error = %e,
+                "cannot publish to other processes (later failures are only counted)");
+        }
+    }
+
     fn publish(&mut self, event: &StoreEvent) {
         let result = match event {
             StoreEvent::Entered(s) => {
@@ -67,11 +193,7 @@ impl Outlet {
             _ => Ok(()),
         };
         if let Err(e) = result {
-            self.failures += 1;
-            if self.failures == 1 {
-                tracing::warn!(trajectory = %self.publisher.trajectory(), error = %e,
-                    "cannot publish to other processes (later failures are only counted)");
-            }
+            self.failed(&e);
         }
     }
 }
@@ -112,17 +234,31 @@ impl Export {
         handle: &InProcessTrajectory,
         record: &TrajectoryRecord,
         repointed: bool,
+        holdings: &Arc<Holdings>,
     ) -> Result<Self, ExportError> {
         let name = handle.name().to_owned();
         let (type_name, policy) = (&record.info.type_name, &record.info.policy);
         let primitive = record.info.kind == TrajectoryKind::Primitive;
         let generation = record.generation;
         let domain = &generation_domain(domain, generation);
-        let (publisher, violations, inbox, blocking) = node.with(|node| {
+        let qos = handle_qos(handle, policy);
+        let images = has_octets(handle);
+        let (publisher, violations, inbox, blocking, own) = node.with(|node| {
             let publisher = TrajectoryPublisher::builder(&name, type_name)
                 .domain(domain)
-                .qos(handle_qos(handle, policy))
+                .qos(qos)
                 .create(node)?;
+            let own = match images {
+                true => Some(
+                    TrajectorySubscriber::builder(&name, type_name)
+                        .domain(domain)
+                        .qos(qos)
+                        // Read right after each send, never waited on.
+                        .wait_strategy(WaitStrategy::BusySpin)
+                        .create(node)?,
+                ),
+                false => None,
+            };
             let violations = ViolationPublisher::create(node, domain, &name)?;
             let inbox = match primitive {
                 true => Some(
@@ -139,7 +275,7 @@ impl Export {
                 true => Some(AddServer::open(node, domain, &name)?),
                 false => None,
             };
-            Ok::<_, ExportError>((publisher, violations, inbox, blocking))
+            Ok::<_, ExportError>((publisher, violations, inbox, blocking, own))
         })?;
         let inbox_wake = match primitive {
             true => Some(
@@ -149,13 +285,22 @@ impl Export {
             ),
             false => None,
         };
-        let outlet = Arc::new(Mutex::new(Outlet { publisher, violations, failures: 0 }));
+        // One borrow stays free to receive into.
+        let own = own.map(|o| (o, holdings.owner(qos.max_borrowed_samples.saturating_sub(1))));
+        let outlet = Arc::new(Mutex::new(Outlet { publisher, violations, own, failures: 0 }));
+        let owner = Arc::as_ptr(&outlet) as *const () as usize;
         // Content and tap under one lock: nothing falls between the two, and the
         // backlog is published before any later event.
         let tap = Arc::clone(&outlet);
         let tap = handle
             .with_store(|s| {
-                let (id, backlog) = s.set_tap(Box::new(OutletTap(tap)));
+                let (id, backlog) = s.set_tap(Box::new(OutletTap { outlet: tap, owner }));
+                if images {
+                    s.set_octets_allocator(Arc::new(LoanAllocator::new(
+                        &outlet,
+                        Outlet::loan_image,
+                    )));
+                }
                 let mut out = outlet.lock();
                 if repointed {
                     out.publish(&StoreEvent::Reset);
@@ -221,10 +366,25 @@ impl Export {
 }
 
 /// The store's tap: publishes each event through the shared outlet.
-struct OutletTap(Arc<Mutex<Outlet>>);
+struct OutletTap {
+    outlet: Arc<Mutex<Outlet>>,
+    /// The outlet's identity, which its loans carry.
+    owner: usize,
+}
 
 impl esgm_core::StoreTap for OutletTap {
     fn observe(&mut self, event: &StoreEvent) {
-        self.0.lock().publish(event);
+        self.outlet.lock().publish(event);
     }
+
+    fn entering(&mut self, sample: &Sample) -> Option<Arc<EntityStructure>> {
+        self.outlet.lock().enter(sample, self.owner)
+    }
+}
+
+/// True if the trajectory's type has octet sequences (images).
+fn has_octets(handle: &InProcessTrajectory) -> bool {
+    handle
+        .entity_type()
+        .is_ok_and(|t| t.attributes.iter().any(|a| a.sort == esgm_core::value::ValueSort::OctetSeq))
 }

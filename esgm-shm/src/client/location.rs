@@ -309,14 +309,22 @@ impl Location {
         for input in spec.inputs() {
             self.ensure_available(&input)?;
         }
-        let handle = self.local.create_trajectory(spec.clone())?;
-        // Re-pointed here (E5): the export follows the new trajectory, and readers
-        // elsewhere forget the old stream (a reset marker) before the new one's history.
-        let repointed =
-            spec.replace && self.mirrors.change(|m| m.exports.remove(&spec.name)).is_some();
-        if !self.exports(&spec.name) {
-            let export = Export::start(&self.node, &self.domain, &handle, record, repointed)
+        // The export is made before the trajectory's worker starts, so its first sample
+        // is published, and a camera's first frame written in place.
+        let (node, domain, holdings, mirrors) =
+            (&self.node, &self.domain, &self.holdings, &self.mirrors);
+        let mut export = None;
+        let handle = self.local.create_trajectory_prepared(spec.clone(), |handle| {
+            // Re-pointed here (E5): the export follows the new trajectory, and readers
+            // elsewhere follow it to its new generation's services.
+            let repointed =
+                spec.replace && mirrors.change(|m| m.exports.remove(&spec.name)).is_some();
+            let started = Export::start(node, domain, handle, record, repointed, holdings)
                 .map_err(|e| CreateError::Unavailable { reason: e.to_string() })?;
+            export = Some(started);
+            Ok(())
+        })?;
+        if let Some(export) = export {
             self.mirrors.change(|m| m.exports.insert(spec.name.clone(), export));
         }
         Ok(handle)

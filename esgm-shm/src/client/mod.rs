@@ -34,6 +34,7 @@
 
 mod blocking_add;
 mod export;
+mod image_loans;
 mod import;
 mod location;
 mod mirrors;
