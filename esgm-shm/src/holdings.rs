@@ -32,7 +32,7 @@ pub(crate) const HOLD_MIN_BYTES: usize = 16 * 1024;
 
 /// What a process holds in shared memory on behalf of its values, and what it had to
 /// copy: how to check that images from other processes reach this one without a copy.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct HoldingStats {
     /// Received samples borrowed now, because values in this process read their
     /// octets (images) in place.

@@ -39,16 +39,19 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, bail};
+use esgm_core::library::Image;
 use esgm_core::store::RecvError;
 use esgm_core::{
-    AddOutcome, CacheConstraint, EntityStructure, EntityTrajectoryStructure, Esgm,
+    AddOutcome, CacheConstraint, Entity, EntityStructure, EntityTrajectoryStructure, Esgm,
     FluentStreamPolicy, InProcessTrajectory, Sample, SubscribeOptions, Subscription,
     TrajectorySpec, TypeRegistry,
 };
 use esgm_shm::control::{Coordinator, Registry};
 use esgm_shm::{ShmEsgm, unique_domain};
 
-use super::ipc_payload::{Kind, read_value};
+use super::ipc_payload::{
+    IMAGE_FORMAT, IMAGE_HEIGHT, IMAGE_NAME, IMAGE_WIDTH, Kind, pattern, read_value,
+};
 use crate::latency::Latency;
 use crate::patience::Patience;
 use crate::peer_process::FINISH_TIMEOUT;
@@ -171,7 +174,7 @@ pub fn ping_pong(
             }
         }
         let making = Instant::now();
-        let structure = stamped(kind.make(i), seq);
+        let structure = stamped(make_for(&ping, kind, i), seq);
         let made = making.elapsed();
 
         ctx.before_hop(mode.wait());
@@ -254,7 +257,7 @@ pub fn echo(role: &PeerRole, kind: Kind) -> anyhow::Result<Vec<String>> {
         pings += 1;
         early += u64::from(waiting);
         held += u64::from(in_place);
-        reply_frame = kind.make(pings);
+        reply_frame = make_for(&pong, kind, pings);
     }
 
     let mut notes = Vec::new();
@@ -314,6 +317,27 @@ fn subscribe_when_created(
         patience.check(&format!("trajectory {name} from the peer"), started)?;
         std::thread::sleep(Duration::from_millis(5));
     }
+}
+
+/// The `i`-th structure for `trajectory`, as its producer makes it: an image's pixels
+/// are written once, into the trajectory's own buffer (a loan of its shared memory,
+/// [`InProcessTrajectory::image_buffer`]), as a camera renders a frame.
+fn make_for(trajectory: &InProcessTrajectory, kind: Kind, i: u64) -> EntityStructure {
+    let Kind::Image = kind else { return kind.make(i) };
+    let Some(mut buffer) = trajectory.image_buffer(IMAGE_WIDTH, IMAGE_HEIGHT, IMAGE_FORMAT) else {
+        return kind.make(i);
+    };
+    let seed = i as u8;
+    for (k, p) in buffer.pixels_mut().iter_mut().enumerate() {
+        *p = pattern(k, seed);
+    }
+    Image {
+        width: IMAGE_WIDTH,
+        height: IMAGE_HEIGHT,
+        format: IMAGE_FORMAT,
+        image_data: buffer.into_octets(),
+    }
+    .to_structure(IMAGE_NAME, 0, 0)
 }
 
 /// `es` with sequence `seq` as its valid and create time.

@@ -23,10 +23,13 @@ use super::receiver::Receiver as SampleReceiver;
 use super::shared_node::SharedNode;
 use crate::control::protocol::{Assignment, ControlError, Request, Response, TrajectoryRecord};
 use crate::control::{ControlClient, ControlClientError};
-use crate::holdings::Holdings;
+use crate::holdings::{HoldingStats, Holdings};
 
 /// How often publishers hand late readers their history.
 pub(crate) const MAINTENANCE_PERIOD: Duration = Duration::from_millis(20);
+
+/// How often a process tells the coordinator its image counters (if they changed).
+pub(crate) const HOLDINGS_REPORT_PERIOD: Duration = Duration::from_secs(1);
 
 /// How often a process compares what it mirrors with the registry, to drop the
 /// trajectories destroyed (or created anew) by other processes.
@@ -82,6 +85,8 @@ pub(crate) struct Location {
     /// Assignments that failed to build (reported once each).
     pub failed: BTreeSet<String>,
     pub serving: bool,
+    /// The holdings last reported to the coordinator, and when to report next.
+    pub reported: (HoldingStats, Instant),
     /// Stopped and joined when the location ends.
     pub _receiver: SampleReceiver,
 }
@@ -100,7 +105,12 @@ impl Location {
             match commands.recv_timeout(due.saturating_duration_since(Instant::now())) {
                 Ok(c) => self.handle(c),
                 Err(RecvTimeoutError::Timeout) => {}
-                Err(RecvTimeoutError::Disconnected) => return,
+                Err(RecvTimeoutError::Disconnected) => {
+                    // The last word on this process's images, for whoever looks later.
+                    self.reported.1 = Instant::now();
+                    self.report_holdings();
+                    return;
+                }
             }
             if Instant::now() >= next_maintenance {
                 self.maintain();
@@ -252,6 +262,26 @@ impl Location {
     fn maintain(&mut self) {
         for e in self.mirrors.lock().exports.values() {
             e.update_connections();
+        }
+        self.report_holdings();
+    }
+
+    /// Tells the coordinator this process's image counters, about once a second while
+    /// they change (`esgm demo` and `esgm stats` show them).
+    fn report_holdings(&mut self) {
+        let now = Instant::now();
+        if now < self.reported.1 {
+            return;
+        }
+        self.reported.1 = now + HOLDINGS_REPORT_PERIOD;
+        let stats = self.holdings.stats();
+        if stats == self.reported.0 {
+            return;
+        }
+        let request = Request::ReportHoldings { host: self.host.clone(), stats };
+        match self.control.call(&request) {
+            Ok(_) => self.reported.0 = stats,
+            Err(e) => tracing::debug!(error = %e, "cannot report holdings"),
         }
     }
 

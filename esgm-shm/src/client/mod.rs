@@ -188,6 +188,7 @@ impl ShmEsgmBuilder {
             holdings: Arc::clone(&holdings),
             failed: Default::default(),
             serving: false,
+            reported: (HoldingStats::default(), std::time::Instant::now()),
             _receiver: receiver,
         };
         let thread = std::thread::Builder::new()

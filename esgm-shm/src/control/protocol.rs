@@ -12,6 +12,8 @@ use esgm_core::esgm::{
 use esgm_core::{EntityStructureType, TypeRegistryError};
 use serde::{Deserialize, Serialize};
 
+use crate::holdings::HoldingStats;
+
 use super::processes::{ProcessError, ProcessRecord, ProcessSpec, ProcessStatus};
 
 /// A request to the coordinator. Operation names follow the seed's `esgm.idl`.
@@ -97,6 +99,17 @@ pub enum Request {
     },
     /// Every trajectory.
     ListTrajectories,
+    /// A connected process's images in shared memory: what it reads in place, what it
+    /// sent in place, and what it had to copy (sent by each process about once a
+    /// second while it changes).
+    ReportHoldings {
+        /// The reporting process.
+        host: String,
+        /// Its counters.
+        stats: HoldingStats,
+    },
+    /// The last report of every process ([`Request::ReportHoldings`]).
+    ListHoldings,
     /// Where every trajectory is written, and its generation: what a process compares
     /// with the trajectories it mirrors, to drop those destroyed or re-created
     /// elsewhere.
@@ -203,6 +216,8 @@ pub enum Response {
     Assignments(Vec<Assignment>),
     /// Answer to [`Request::ListPlacements`].
     Placements(Vec<PlacementRecord>),
+    /// Answer to [`Request::ListHoldings`]: per process, its last report.
+    Holdings(Vec<(String, HoldingStats)>),
     /// Answer to [`Request::ListProcesses`].
     Processes(Vec<ProcessRecord>),
     /// The operation failed with the seed's error.

@@ -11,6 +11,7 @@ use super::processes::ProcessTable;
 use super::protocol::{
     Assignment, ControlError, PlacementRecord, Request, Response, TrajectoryRecord,
 };
+use crate::holdings::HoldingStats;
 
 #[derive(Debug, Clone)]
 struct Placement {
@@ -31,6 +32,8 @@ pub struct Registry {
     /// The next trajectory generation: unique across the registry, so that a name
     /// destroyed and created again is never mistaken for its former self.
     next_generation: u64,
+    /// Each connected process's last report of its images in shared memory.
+    holdings: BTreeMap<String, HoldingStats>,
 }
 
 impl Registry {
@@ -41,6 +44,7 @@ impl Registry {
             placement: BTreeMap::new(),
             processes: ProcessTable::default(),
             next_generation: 0,
+            holdings: BTreeMap::new(),
         }
     }
 
@@ -152,6 +156,13 @@ impl Registry {
             }
             Request::ListTrajectories => {
                 Response::Trajectories(self.catalog.trajectories().cloned().collect())
+            }
+            Request::ReportHoldings { host, stats } => {
+                self.holdings.insert(host, stats);
+                Response::Done
+            }
+            Request::ListHoldings => {
+                Response::Holdings(self.holdings.iter().map(|(h, s)| (h.clone(), *s)).collect())
             }
             Request::ListPlacements => Response::Placements(
                 self.placement

@@ -13,8 +13,9 @@ use esgm_core::{
     Entity, EntityTrajectoryStructure, Esgm, InProcessTrajectory, Sample, SubscribeOptions, Time,
     ValueApproximation, millis,
 };
+use esgm_shm::control::protocol::{Request, Response};
 use esgm_shm::control::server::cleanup_dead_nodes;
-use esgm_shm::unique_domain;
+use esgm_shm::{ShmEsgm, unique_domain};
 
 use crate::config::{self, Plan};
 use crate::session;
@@ -158,7 +159,32 @@ fn drive(domain: &str, a: &Args, plan: &Plan) -> anyhow::Result<()> {
     let t0 = t0.unwrap_or(latest.structure.valid_time);
     queries(&directions, &latest, t0)?;
     stage_latencies(&stages)?;
+    image_copies(&esgm)?;
     check(a, &latest, &current_blob)
+}
+
+/// Per process, the images it read and sent in shared memory, and the copies it made
+/// (its last report to the coordinator, at most a second old).
+fn image_copies(esgm: &ShmEsgm) -> anyhow::Result<()> {
+    let Response::Holdings(list) = esgm.control(Request::ListHoldings)? else {
+        bail!("the coordinator did not list the processes' images");
+    };
+    println!(
+        "
+images in shared memory, per process
+  {:<30} {:>10} {:>14} {:>7}",
+        "process", "read held", "sent in place", "copies"
+    );
+    let mut copies = 0;
+    for (host, s) in list {
+        if s.held_total + s.sent_in_place + s.copies() == 0 {
+            continue;
+        }
+        copies += s.copies();
+        println!("  {:<30} {:>10} {:>14} {:>7}", host, s.held_total, s.sent_in_place, s.copies());
+    }
+    println!("  image copies in all: {copies}");
+    Ok(())
 }
 
 fn since(t0: Time, t: Time) -> f64 {
