@@ -7,9 +7,9 @@
 //! This is the data plane: [`TrajectoryPublisher`], [`TrajectorySubscriber`], the
 //! sample layout ([`payload`]), service naming ([`service_name`]), waiting
 //! ([`wait`]), structures encoded ahead of sending ([`structure_loan`]) and in-place
-//! images ([`image_loan`]); and on top of it trajectories with
-//! policy and history: [`ShmTrajectoryWriter`], [`ShmTrajectoryReader`],
-//! [`violations`]. The control plane (coordinator, registry, `connect`) builds on it.
+//! images ([`image_loan`]), and the violations of a trajectory ([`violations`]). The
+//! control plane (coordinator, registry) and [`connect`], the `Esgm` interface across
+//! processes, build on it: policy, history and queries are esgm-core's.
 //!
 //! ```no_run
 //! use std::time::Duration;
@@ -61,66 +61,50 @@
 //!   ([`service_name`]), so parallel tests and independent systems never meet.
 //!
 //! ## One writer per trajectory, and it gates
-//! Exactly one process writes a trajectory: its [`ShmTrajectoryWriter`]. The writer runs
-//! the trajectory's policy — type check, duration, delay, filter, order, change, and the
-//! hold-and-reorder of late samples — *before* publishing, with esgm-core's own
-//! [`esgm_core::TrajectoryStore`] as the gate, so every reader receives exactly the
-//! stream, already checked, with the gate's add time in the header, and the add forms
-//! return the in-process outcomes and errors. Dropped structures are published on the
-//! trajectory's violations service ([`violations`]) for any process to watch (C7). A
-//! second writer would gate a second, different stream, so the writer refuses to start
-//! on a trajectory that already has a publisher.
+//! Exactly one process writes a trajectory (the coordinator places it, see
+//! [`connect`]), and there it is an ordinary esgm-core [`esgm_core::TrajectoryStore`]:
+//! its policy — type check, duration, delay, filter, order, change, and the
+//! hold-and-reorder of late samples — gates every add, from that process or forwarded
+//! from others, and the add forms return the in-process outcomes and errors. The
+//! store's tap publishes what it admits inline, stamped with the gate's add time, and
+//! what it drops on the trajectory's violations service ([`violations`]), so every
+//! reader receives exactly the stream, already checked, in order.
 //!
 //! ## Where the history lives
-//! **In each reader.** A [`ShmTrajectoryReader`] keeps the iceoryx2 samples it received
-//! — the structures stay in shared memory, where the writer encoded them — up to the
-//! cache bound, evicts them as the policy's cache constraint says, and answers the
-//! queries (T1, T2) itself, looking samples up by the times in their headers. The
-//! publisher's iceoryx2 history is sized to the same bound, so a reader that connects
-//! late receives the last N samples and starts with the writer's view. Why there:
-//! - **Zero copy end to end.** A cached image is the writer's shared-memory chunk; a
-//!   query answers with it in place. A cache in the producer or a coordinator would
-//!   answer across a process boundary, i.e. copy the answer into a response.
-//! - **No process holds every image.** The writer keeps only what its gate needs; no
-//!   coordinator accumulates every trajectory's history.
+//! **In each reading process, in an esgm-core store.** A process that reads a
+//! trajectory written elsewhere keeps a *replica*: an esgm-core store with the
+//! trajectory's policy, fed from a [`TrajectorySubscriber`] (entries, violations and
+//! resets in stream order). Queries (T1, T2), subscriptions, units and syncs run on it
+//! as in one process, answered by esgm-core's store: there is one valid-time index and
+//! one approximation, esgm-core's. Why there:
 //! - **Queries without a round trip.** `get_latest` in a control loop is a lookup in
-//!   the reader's own memory (≈ nanoseconds), not a request to another process
-//!   (≥ 10 µs, and a failure mode when that process is slow or gone).
-//! - **Consistent because the writer gates.** Every reader receives the same, already
-//!   constrained stream, so their histories agree with each other and with what an
-//!   in-process store of the same policy would hold.
+//!   the reader's own memory, not a request to another process (≥ 10 µs, and a failure
+//!   mode when that process is slow or gone).
+//! - **No process holds every image.** No coordinator accumulates every trajectory's
+//!   history.
+//! - **Consistent because the writer gates.** Every replica receives the same, already
+//!   constrained stream, so replicas agree with each other and with the writer.
 //!
-//! The costs: each reader holds its own view (one that started late or fell behind —
-//! counted as lost — may hold less); shared memory is sized for the cache in every
-//! reader at once — each reader may borrow `bound + 1` chunks and the writer keeps
-//! `bound` for late joiners, so a segment has about
-//! `max_subscribers × (queue + bound) + bound` chunks of the largest sample (tmpfs
-//! commits only the chunks in use); and an
-//! `All` or `Duration` cache, which iceoryx2 needs as a number, holds at most a
-//! configured maximum ([`DEFAULT_MAX_HISTORY`], 1024) — see [`history`]. Readers are
-//! single-threaded like the ports they hold; [`HostedTrajectoryReader`] puts one on a
-//! thread of its own for queries from anywhere (answers then are owned copies).
+//! A replica's small fields are decoded (cheaper than bookkeeping); its images are
+//! not: each octet sequence of a large sample stays in the writer's chunk, kept
+//! borrowed until the last value reading it — in the cache, a unit's input, a
+//! subscriber's queue, a query answer — is dropped ([`holdings`]). A process that keeps
+//! more images than its subscriber may borrow (cache bound + a slack of 8) gets copies
+//! of the later ones, counted in [`ShmEsgm::holding_stats`].
 //!
-//! Through [`connect`], the reader is the process's replica of the trajectory: an
-//! ordinary esgm-core store fed from the subscriber, so units, syncs, subscriptions and
-//! queries run there as in one process. Its small fields are decoded (cheaper than
-//! bookkeeping); its images are not: each octet sequence of a large sample stays in
-//! the writer's chunk, which the location thread keeps borrowed until the last value
-//! reading it — in the cache, a unit's input, a subscriber's queue, a query answer —
-//! is dropped ([`holdings`]). A process that keeps more images than its subscriber may
-//! borrow (cache bound + a slack of 8) gets copies of the later ones, counted in
-//! [`ShmEsgm::holding_stats`].
+//! The publisher keeps the cache's bound of samples ([`qos::history_bound`]), so a
+//! replica made late starts with the writer's view; an `All` or `Duration` cache, which
+//! iceoryx2 needs as a number, gives late replicas at most [`DEFAULT_MAX_HISTORY`]
+//! (1024). Each replica holds its own view: one made late, or one that fell a whole
+//! queue behind (the writer overwrites its oldest unread samples), holds less.
 #![deny(missing_docs)]
 
-pub mod history;
 pub mod holdings;
-pub mod hosted_reader;
 pub mod image_layout;
 pub mod image_loan;
 pub mod payload;
 pub mod publisher;
 pub mod qos;
-pub mod reader;
 pub mod received;
 mod sequence_gaps;
 pub mod service;
@@ -131,19 +115,13 @@ pub mod subscriber;
 pub mod type_id;
 pub mod violations;
 pub mod wait;
-pub mod writer;
 
-pub use history::{DEFAULT_MAX_HISTORY, history_bound, history_qos};
 pub use holdings::HoldingStats;
-pub use hosted_reader::{HostError, HostedTrajectoryReader};
 pub use image_layout::ImageError;
 pub use image_loan::ImageLoan;
 pub use payload::{Block16, SampleHeader};
 pub use publisher::{PublishError, Published, SampleSizing, TrajectoryPublisher};
-pub use qos::{Delivery, TrajectoryQos};
-pub use reader::{
-    Approximated, CachedSample, HistoryError, ReaderCreateError, ReaderStats, ShmTrajectoryReader,
-};
+pub use qos::{DEFAULT_MAX_HISTORY, Delivery, TrajectoryQos, history_bound, history_qos};
 pub use received::ReceivedSample;
 pub use service::{OpenError, ShmNode, ShmService};
 pub use service_name::{NameError, TrajectoryServiceNames, node_name, nodes_of, unique_domain};
@@ -152,7 +130,6 @@ pub use subscriber::{ReceiveError, SubscriberStats, TrajectorySubscriber, Valida
 pub use type_id::type_id;
 pub use violations::{ViolationPublisher, ViolationRecord, ViolationSubscriber};
 pub use wait::WaitStrategy;
-pub use writer::{ShmTrajectoryWriter, WriteError, WriterCreateError, WriterStats};
 pub mod client;
 pub mod control;
 

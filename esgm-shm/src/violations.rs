@@ -152,7 +152,7 @@ fn open_services(
     Ok(ViolationServices { data, wake })
 }
 
-/// Publishes a trajectory's violations; used by [`crate::ShmTrajectoryWriter`].
+/// Publishes a trajectory's violations; used by the writer's tap in [`crate::connect`].
 #[derive(Debug)]
 pub struct ViolationPublisher {
     port: Publisher<ShmService, ViolationRecord, ()>,

@@ -35,7 +35,7 @@
 //!   user calls (`esgm_shm` `connect` on both sides, [`ipc_connect_echo`]), compared
 //!   with `esgm-small`, `ros1-small` and `zenoh-small` (so after them);
 //! - [`ipc_throughput`]: `throughput-1x1`, `throughput-1x4`, lossless, losses counted;
-//! - [`ipc_query`]: `query-<op>-<n>` on a reader's history of 10^3 and 10^6;
+//! - [`ipc_query`]: `query-<op>-<n>` on a `connect` replica holding 10^3 and 10^6;
 //! - [`ipc_pipeline`]: `pipeline-<stage>`, the tutorial across six processes;
 //! - [`ipc_memory`]: resident and shared memory, into the report's `memory` section.
 //!

@@ -7,8 +7,7 @@ use esgm_core::{
     CacheConstraint, EntityStructureType, EntityTrajectoryStructure, InProcessTrajectory,
 };
 
-use crate::history::{DEFAULT_MAX_HISTORY, history_bound, history_qos};
-use crate::qos::TrajectoryQos;
+use crate::qos::{DEFAULT_MAX_HISTORY, TrajectoryQos, history_bound, history_qos};
 
 /// The most samples of a trajectory carrying octets (images, blobs of bytes) kept in
 /// shared memory for late readers when its cache has no element bound: every kept

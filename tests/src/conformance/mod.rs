@@ -16,6 +16,7 @@ pub mod computed;
 pub mod lifecycle;
 pub mod operators;
 pub mod primitive;
+pub mod queries;
 pub mod sampled;
 
 use std::time::Duration;
@@ -115,6 +116,8 @@ macro_rules! conformance_tests {
             primitive::held_samples_are_released_on_time,
             primitive::adds_through_the_reader_reach_the_writer,
             primitive::blocking_adds_through_the_reader_get_the_writers_outcome,
+            queries::the_reader_answers_every_query_as_the_writer,
+            queries::extreme_valid_times_are_queried,
             sampled::sampling_periods_and_from_to,
             sampled::one_sensor_many_periods,
             sampled::sensor_errors_and_panics_are_counted,
