@@ -5,22 +5,55 @@
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
-use crossbeam_channel::{Receiver, select};
+use std::time::Duration;
+
+use crossbeam_channel::{Receiver, TryRecvError, select};
 
 use crate::sample::Sample;
 use crate::store::FanIn;
+
+/// The longest a worker waiting on its input's writer sleeps before looking at its stop.
+const WAIT_SLICE: Duration = Duration::from_millis(50);
 
 /// Calls `on_sample(input_index, sample)` for every sample any input adds, until
 /// `stop` is set or `wake` disconnects (the worker is being stopped).
 ///
 /// Samples the worker fell too far behind to keep are counted in `overflow`.
 pub(crate) fn run(
-    fan_in: FanIn<Sample>,
+    mut fan_in: FanIn<Sample>,
     wake: Receiver<()>,
     stop: &Arc<AtomicBool>,
     overflow: &AtomicU64,
     mut on_sample: impl FnMut(usize, Sample),
 ) {
+    if let Some(mut waiter) = fan_in.take_waiter() {
+        // One replica input: wait on its writer's wake-up, feed, take (see
+        // `ReplicaFeed`). Stop is noticed within a wait slice.
+        loop {
+            if stop.load(Ordering::Relaxed)
+                || matches!(wake.try_recv(), Err(TryRecvError::Disconnected))
+            {
+                return;
+            }
+            match fan_in.receiver().try_recv() {
+                Ok((input, sample)) => {
+                    overflow.store(fan_in.overflowed(), Ordering::Relaxed);
+                    on_sample(input, sample);
+                    continue;
+                }
+                Err(TryRecvError::Disconnected) => return,
+                Err(TryRecvError::Empty) => {}
+            }
+            waiter.feed();
+            if !fan_in.receiver().is_empty() {
+                continue;
+            }
+            if !waiter.wait_and_feed(WAIT_SLICE) {
+                // It cannot wait on the writer: the runtime's feeding thread wakes it.
+                break;
+            }
+        }
+    }
     loop {
         if stop.load(Ordering::Relaxed) {
             return;

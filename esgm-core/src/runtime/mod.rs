@@ -321,7 +321,13 @@ impl InProcessEsgm {
     /// Subscribes a worker's fan-in to every input and reads each input's latest sample
     /// in the same step (under its lock), so no update falls between the two.
     fn subscribe_inputs(&self, inputs: &[Input]) -> (FanIn<Sample>, Vec<workers::InputState>) {
-        let fan_in = FanIn::new(self.inner.subscriber_capacity);
+        let mut fan_in = FanIn::new(self.inner.subscriber_capacity);
+        // One input fed from another process: the worker waits for its writer itself.
+        if let [(_, cell)] = inputs {
+            if let Some(waiter) = cell.store.lock().feed_waiter() {
+                fan_in.set_waiter(waiter);
+            }
+        }
         let states = inputs
             .iter()
             .enumerate()

@@ -435,6 +435,12 @@ impl TrajectoryStore {
         self.octets_allocator.clone()
     }
 
+    /// A waiter on this store's writer, if it is a replica whose writer can be waited
+    /// on (see [`ReplicaFeed`]).
+    pub fn feed_waiter(&self) -> Option<Box<dyn FeedWaiter>> {
+        self.feed.as_ref().and_then(|f| f.waiter())
+    }
+
     /// Lets this store's subscribers (a replica's) wait for its writer themselves, from
     /// the next subscription on (see [`ReplicaFeed`]).
     pub fn set_feed(&mut self, feed: Arc<dyn ReplicaFeed>) {

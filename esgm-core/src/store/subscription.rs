@@ -265,19 +265,48 @@ struct Subscriber<T> {
 
 /// One channel fed by several trajectories, each item tagged with its input index (see
 /// [`crate::TrajectoryStore::subscribe_tagged`]). Dropping it ends those subscriptions.
-#[derive(Debug)]
 pub struct FanIn<T> {
     sender: Sender<(usize, T)>,
     receiver: Receiver<(usize, T)>,
     overflow: Arc<AtomicU64>,
     token: Arc<()>,
+    /// A fan-in of one replica waits for its writer itself (see [`ReplicaFeed`]).
+    waiter: Option<Box<dyn FeedWaiter>>,
+}
+
+impl<T> std::fmt::Debug for FanIn<T> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FanIn")
+            .field("queued", &self.receiver.len())
+            .field("overflowed", &self.overflowed())
+            .field("feeds_itself", &self.waiter.is_some())
+            .finish()
+    }
 }
 
 impl<T> FanIn<T> {
     /// A fan-in buffering up to `capacity` items before discarding the oldest.
     pub fn new(capacity: usize) -> Self {
         let (sender, receiver) = crossbeam_channel::bounded(capacity.max(1));
-        Self { sender, receiver, overflow: Arc::new(AtomicU64::new(0)), token: Arc::new(()) }
+        Self {
+            sender,
+            receiver,
+            overflow: Arc::new(AtomicU64::new(0)),
+            token: Arc::new(()),
+            waiter: None,
+        }
+    }
+
+    /// Makes its reader wait for the writer of its (one) replica input itself: a
+    /// sample from another process then wakes the reader once, not a feeding thread
+    /// first.
+    pub fn set_waiter(&mut self, waiter: Box<dyn FeedWaiter>) {
+        self.waiter = Some(waiter);
+    }
+
+    /// The waiter, for the reader's loop.
+    pub fn take_waiter(&mut self) -> Option<Box<dyn FeedWaiter>> {
+        self.waiter.take()
     }
 
     /// The receiving end, to `select!` on.
