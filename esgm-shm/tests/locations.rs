@@ -369,3 +369,29 @@ fn images_from_another_process_are_read_in_shared_memory_by_cache_units_and_subs
     assert!(pixels(&s).is_held());
     assert!(pixels(&s).iter().all(|p| *p == 41), "kept image changed under its reader");
 }
+
+#[test]
+fn a_replica_accounts_for_every_sample_of_a_burst() {
+    let c = coordinator("loc-burst");
+    let writer = location(&c, "writer");
+    let reader = location(&c, "reader");
+    let policy = FluentStreamPolicy::default().cache(esgm_core::CacheConstraint::Elements(4));
+    let here = writer
+        .create_trajectory(TrajectorySpec::primitive("burst", "RobotState").policy(policy))
+        .unwrap();
+    let there = reader.get_entity_trajectory_structure("burst").unwrap();
+    // Connected: the writer's publisher knows this reader (until then, what it sends
+    // reaches a new reader only through its history).
+    here.add(state(0, 0.0)).unwrap();
+    assert!(wait_for(|| there.stats().map(|s| s.added) == Ok(1)), "{:?}", there.stats());
+    const N: u64 = 20_000;
+    for i in 1..N as Time {
+        here.add(state(i, i as f64)).unwrap();
+    }
+    // Received or counted as lost on the way: never silently missing.
+    let accounted =
+        || there.stats().map(|s| s.added + s.dropped_for(esgm_core::DropCause::Lost)).unwrap_or(0);
+    assert!(wait_for(|| accounted() == N), "reader stats {:?}", there.stats());
+    let latest = there.get_latest().unwrap();
+    assert_eq!(latest.structure.valid_time, N as Time - 1, "the last one arrives");
+}

@@ -692,6 +692,14 @@ impl TrajectoryStore {
         self.admit(es, add_time);
     }
 
+    /// Counts `n` structures the writer of this replica admitted that never reached
+    /// it ([`DropCause::Lost`]).
+    pub fn replicate_loss(&mut self, n: u64) {
+        for _ in 0..n {
+            self.stats.record_dropped(DropCause::Lost);
+        }
+    }
+
     /// Reports a violation the writer of a replicated trajectory found: counted and
     /// passed to this store's violation subscribers, as if found here.
     pub fn replicate_violation(&mut self, v: PolicyViolation) {

@@ -53,6 +53,10 @@ pub enum DropCause {
     InvalidType,
     /// It was held for reordering when the trajectory was reset.
     Reset,
+    /// In a replica of a trajectory another process writes: the writer admitted it,
+    /// but this process never received it (its queue was overwritten while it fell
+    /// behind). Counted from the gap in the writer's sequence numbers.
+    Lost,
 }
 
 impl fmt::Display for DropCause {
@@ -61,6 +65,7 @@ impl fmt::Display for DropCause {
             DropCause::Violation(c) => c.fmt(f),
             DropCause::InvalidType => f.write_str("invalid_type"),
             DropCause::Reset => f.write_str("reset"),
+            DropCause::Lost => f.write_str("lost"),
         }
     }
 }

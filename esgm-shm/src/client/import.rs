@@ -31,6 +31,7 @@ use super::shared_node::SharedNode;
 use crate::control::protocol::TrajectoryRecord;
 use crate::holdings::{HoldingOwner, Holdings};
 use crate::publisher::TrajectoryPublisher;
+use crate::sequence_gaps::SequenceGaps;
 use crate::service::{OpenError, ShmService, open_event_service};
 use crate::service_name::{NameError, TrajectoryServiceNames};
 use crate::subscriber::{ReceiveError, TrajectorySubscriber};
@@ -59,6 +60,10 @@ pub(crate) struct Import {
     replica: InProcessTrajectory,
     /// Samples that could not be taken (already counted by the subscriber).
     rejected: u64,
+    /// The writer's sequence numbers, per publisher: a gap is samples lost on the way.
+    gaps: SequenceGaps,
+    /// Samples lost so far (the first is logged).
+    lost: u64,
     /// Whose samples this import's held images count as, and how many it may hold.
     owner: HoldingOwner,
     /// The wake-up services of the samples and the violations, for the receiver.
@@ -128,6 +133,8 @@ impl Import {
             violations,
             replica,
             rejected: 0,
+            gaps: SequenceGaps::default(),
+            lost: 0,
             // One borrow stays free to receive into.
             owner: holdings.owner(qos.max_borrowed_samples.saturating_sub(1)),
             wakes,
@@ -152,6 +159,7 @@ impl Import {
             match self.subscriber.receive() {
                 Ok(Some(sample)) => {
                     n += 1;
+                    self.count_gap(sample.publisher_id(), sample.header().sequence);
                     let add_time = sample.header().add_time;
                     match self.owner.decode(sample) {
                         Ok(es) => {
@@ -163,8 +171,9 @@ impl Import {
                     }
                 }
                 Ok(None) => break,
-                Err(ReceiveError::Reset { .. }) => {
+                Err(ReceiveError::Reset { sequence, publisher }) => {
                     n += 1;
+                    self.count_gap(publisher, sequence);
                     let _destroyed = self.replica.with_store(|s| s.reset());
                 }
                 Err(e) => {
@@ -193,6 +202,22 @@ impl Import {
             }
         }
         n
+    }
+
+    /// Counts the samples of `publisher` skipped before `sequence` as lost in the
+    /// replica's stats (every sample accounted for).
+    fn count_gap(&mut self, publisher: iceoryx2::identifiers::UniquePublisherId, sequence: u64) {
+        let lost = self.gaps.observe(publisher, sequence);
+        if lost == 0 {
+            return;
+        }
+        if self.lost == 0 {
+            tracing::warn!(trajectory = %self.subscriber.trajectory(), lost,
+                "samples from the writer were lost before this process read them \
+                 (counted as dropped: lost); it fell behind");
+        }
+        self.lost += lost;
+        let _destroyed = self.replica.with_store(|s| s.replicate_loss(lost));
     }
 
     fn reject(&mut self, e: &ReceiveError) {
