@@ -4,7 +4,7 @@
 //! publish-subscribe service whose samples are codec-encoded entity structures
 //! ([`esgm_core::codec`]) that readers use in place.
 //!
-//! This is the data plane: [`TrajectoryPublisher`], [`TrajectorySubscriber`], the
+//! This is the data plane ([`data_plane`]): [`TrajectoryPublisher`], [`TrajectorySubscriber`], the
 //! sample layout ([`payload`]), service naming ([`service_name`]), waiting
 //! ([`wait`]), structures encoded ahead of sending ([`structure_loan`]) and in-place
 //! images ([`image_loan`]), and the violations of a trajectory ([`violations`]). The
@@ -96,25 +96,26 @@
 //! replica made late starts with the writer's view; an `All` or `Duration` cache, which
 //! iceoryx2 needs as a number, gives late replicas at most [`DEFAULT_MAX_HISTORY`]
 //! (1024). Each replica holds its own view: one made late, or one that fell a whole
-//! queue behind (the writer overwrites its oldest unread samples), holds less.
+//! queue behind (the writer overwrites its oldest unread samples), holds less — and
+//! counts every sample it missed that way as dropped (`lost`), from the gap in the
+//! writer's sequence numbers.
+//!
+//! How a sample crosses with one wake-up, and how images are written once, by their
+//! producer, where every reader reads them: see [`client`].
 #![deny(missing_docs)]
 
-pub mod holdings;
-pub mod image_layout;
-pub mod image_loan;
-pub mod payload;
-pub mod publisher;
-pub mod qos;
-pub mod received;
-mod sequence_gaps;
-pub mod service;
-pub mod service_name;
-pub mod size_hint;
-pub mod structure_loan;
-pub mod subscriber;
-pub mod type_id;
-pub mod violations;
-pub mod wait;
+pub mod client;
+pub mod control;
+pub mod data_plane;
+
+// The data plane's modules keep their paths at the crate root (`esgm_shm::publisher`).
+pub(crate) use data_plane::sequence_gaps;
+pub use data_plane::{
+    image_layout, image_loan, payload, publisher, qos, received, service, service_name, size_hint,
+    structure_loan, subscriber, type_id, violations, wait,
+};
+// What connected processes hold in shared memory, with its old path.
+pub use client::holdings;
 
 pub use holdings::HoldingStats;
 pub use image_layout::ImageError;
@@ -130,7 +131,5 @@ pub use subscriber::{ReceiveError, SubscriberStats, TrajectorySubscriber, Valida
 pub use type_id::type_id;
 pub use violations::{ViolationPublisher, ViolationRecord, ViolationSubscriber};
 pub use wait::WaitStrategy;
-pub mod client;
-pub mod control;
 
 pub use client::{ConnectError, DOMAIN_ENV, ShmEsgm, ShmEsgmBuilder, WORKER_ENV, connect};

@@ -192,7 +192,7 @@ pub struct TrajectoryStore {
     octets_allocator: Option<Arc<dyn OctetsAllocator>>,
 }
 
-/// One thing that happened to a stream, as a [`TrajectoryStore::tap`] reports it.
+/// One thing that happened to a stream, as a [`StoreTap`] is told it.
 #[derive(Debug, Clone)]
 #[non_exhaustive]
 pub enum StoreEvent {

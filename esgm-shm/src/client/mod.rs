@@ -19,21 +19,49 @@
 //! by the coordinator, and its errors are the seed's, as if the call were local.
 //!
 //! Trajectory handles are [`InProcessTrajectory`] handles on the local runtime: the
-//! trait answers with owned [`esgm_core::Sample`]s. For zero-copy access to another
-//! process's structures (images), read the trajectory with an
-//! [`crate::ShmTrajectoryReader`] or [`crate::TrajectorySubscriber`] instead.
+//! trait answers with owned [`esgm_core::Sample`]s, whose images read the writer's
+//! shared-memory chunk in place ([`holdings`]).
+//!
+//! ## One wake-up per process boundary
+//! No sample passes through a thread that hands it on:
+//! - **The adding thread publishes.** The writer's store tap ([`esgm_core::StoreTap`])
+//!   publishes each admitted structure inline, under the trajectory's lock, before the
+//!   store keeps it (`client/export.rs`). iceoryx2's thread-safe service variant
+//!   ([`crate::ShmService`]) makes the ports usable from any thread.
+//! - **Readers wake on the writer's event.** A replica's subscription, and a unit or
+//!   operator worker whose one input is a replica, wait on the writer's wake-up
+//!   service themselves and feed the replica ([`esgm_core::ReplicaFeed`]), so a sample
+//!   wakes the thread that uses it once. The connection's *receiver thread*
+//!   (`client/receiver.rs`) waits on every mirrored service too, and feeds what nobody waits
+//!   for: the caches, other workers, violations, and other processes' adds to the
+//!   trajectories this process writes.
+//! - **The location thread is the control plane only** (`client/location.rs`): creates,
+//!   assignments, history for late joiners, and a periodic audit against the
+//!   registry (destroyed names, new generations).
+//!
+//! ## Images never copied
+//! A trajectory of images hands its producers buffers that are loans of its publisher
+//! ([`InProcessTrajectory::image_buffer`], and the sampler's
+//! [`esgm_core::SensorInterface::get_current_value_with`]): a camera renders into shared
+//! memory, the tap sends the loan after the gate admitted the frame
+//! (`client/image_loans.rs`), and every reader — the writer's own store included — reads those
+//! pixels where the camera wrote them. [`ShmEsgm::holding_stats`] counts what was held,
+//! sent in place and (if anything) copied.
 //!
 //! - Any process may add to a primitive trajectory: where it is a replica, the
-//!   structure is type-checked, forwarded to the writer's inbox
-//!   ([`esgm_core::AddOutcome::Forwarded`]) and admitted by the writer's policy gate,
-//!   which orders, checks and counts every process's adds alike.
+//!   structure is type-checked and published on the writer's inbox by the adding
+//!   thread ([`esgm_core::AddOutcome::Forwarded`]); the writer's gate orders, checks and
+//!   counts every process's adds alike. The blocking forms wait for the gate's outcome
+//!   (`client/blocking_add.rs`).
 //!
-//! - Re-pointing a name (E5) in its writer resets readers elsewhere (a reset marker in
-//!   stream order) and publishes the new trajectory from then on, so subscribers in
-//!   every process move over. A re-pointed name keeps its type.
+//! - Each generation of a trajectory has its own services, so a name destroyed and
+//!   created again never meets its former self (whose images may still be read).
+//!   Re-pointing a name (E5) moves readers in every process to the new generation
+//!   with their subscribers; a re-pointed name keeps its type.
 
 mod blocking_add;
 mod export;
+pub mod holdings;
 mod image_loans;
 mod import;
 mod location;

@@ -5,7 +5,7 @@
 //! A received sample is decoded with [`codec::decode_holding`]: its small fields are
 //! copied (they cost less than bookkeeping), its octet sequences become
 //! [`Octets::held`](esgm_core::value::Octets::held) values pointing into the
-//! shared-memory chunk. The values share one [`SharedChunk`], which *owns* the
+//! shared-memory chunk. The values share one `SharedChunk`, which *owns* the
 //! received sample — and through it a share of the subscriber port and node that keep
 //! the chunk borrowed and mapped (see [`ReceivedSample`]). The chunk goes back to its
 //! publisher when the last value reading it is dropped, on whatever thread that

@@ -1,0 +1,23 @@
+//! The data plane: one trajectory's samples in shared memory, without policy or
+//! history — its iceoryx2 services and their names ([`service`], [`service_name`]),
+//! the sample layout ([`payload`]), the writing end ([`publisher`], with structures
+//! encoded ahead of sending in [`structure_loan`] and images written in place in
+//! [`image_loan`]) and the reading end ([`subscriber`], [`received`], [`wait`]), and
+//! the violations service. Trajectories with policy and history are built on it by the
+//! client ([`crate::client`]).
+
+pub mod image_layout;
+pub mod image_loan;
+pub mod payload;
+pub mod publisher;
+pub mod qos;
+pub mod received;
+pub(crate) mod sequence_gaps;
+pub mod service;
+pub mod service_name;
+pub mod size_hint;
+pub mod structure_loan;
+pub mod subscriber;
+pub mod type_id;
+pub mod violations;
+pub mod wait;
