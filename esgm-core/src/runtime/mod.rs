@@ -296,6 +296,8 @@ impl InProcessEsgm {
     /// Stops every worker; trajectories stay queryable.
     pub fn shutdown(&self) {
         self.inner.shutdown.store(true, Ordering::Relaxed);
+        // Wake the releaser to see it (a full channel is a kick already waiting).
+        let _kick_pending = self.inner.kick.try_send(());
         for cell in self.inner.cells() {
             cell.worker.lock().take();
         }

@@ -12,6 +12,10 @@ use crossbeam_channel::Receiver;
 
 use super::Inner;
 use super::periodic::STOP_POLL;
+
+/// How long the thread sleeps when nothing is held (a hold or a shutdown wakes it
+/// sooner): an idle runtime should not wake fifty times a second.
+const IDLE_POLL: Duration = Duration::from_secs(1);
 use crate::time::Time;
 
 pub(crate) fn run(inner: Weak<Inner>, kicks: Receiver<()>) {
@@ -41,9 +45,10 @@ pub(crate) fn run(inner: Weak<Inner>, kicks: Receiver<()>) {
             Some(t) => {
                 Duration::from_nanos(u64::try_from(t.saturating_sub(clock.now())).unwrap_or(0))
             }
-            None => STOP_POLL,
+            // Nothing held: a hold kicks, and so does shutdown.
+            None => IDLE_POLL,
         }
-        .min(STOP_POLL);
+        .min(if next.is_some() { STOP_POLL } else { IDLE_POLL });
         if kicks.recv_timeout(wait).is_ok() {
             // Drain bursts of kicks: one re-plan covers them all.
             while kicks.try_recv().is_ok() {}

@@ -253,7 +253,7 @@ impl ReplicaFeed for ImportFeed {
 /// The longest one wait of a subscriber lasts before it looks again at what it
 /// listens to: a re-pointed name is imported from new services, and the subscriber
 /// follows.
-const WAIT_SLICE: std::time::Duration = std::time::Duration::from_millis(100);
+const WAIT_SLICE: std::time::Duration = std::time::Duration::from_millis(250);
 
 /// One subscription's listener on the writer's wake-up service.
 struct ImportWaiter {
@@ -312,7 +312,7 @@ impl FeedWaiter for ImportWaiter {
             return false;
         }
         let Some((_, listener)) = &self.listening else { return false };
-        match listener.timed_wait(|_| {}, timeout.min(WAIT_SLICE)) {
+        match crate::wait::timed_wait(listener, timeout.min(WAIT_SLICE)) {
             Ok(_) => {
                 self.feed();
                 true

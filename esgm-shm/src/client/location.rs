@@ -26,19 +26,19 @@ use crate::control::{ControlClient, ControlClientError};
 use crate::holdings::{HoldingStats, Holdings};
 
 /// How often publishers hand late readers their history.
-pub(crate) const MAINTENANCE_PERIOD: Duration = Duration::from_millis(20);
+pub(crate) const MAINTENANCE_PERIOD: Duration = Duration::from_millis(250);
 
 /// How often a process tells the coordinator its image counters (if they changed).
 pub(crate) const HOLDINGS_REPORT_PERIOD: Duration = Duration::from_secs(1);
 
 /// How often a process compares what it mirrors with the registry, to drop the
 /// trajectories destroyed (or created anew) by other processes.
-pub(crate) const AUDIT_PERIOD: Duration = Duration::from_millis(250);
+pub(crate) const AUDIT_PERIOD: Duration = Duration::from_secs(1);
 
 /// How often a process that serves sensors or units asks the coordinator for the
 /// trajectories it must write (creations it asks for itself are built at once). Every
 /// serving process polls, so this bounds the coordinator's load.
-pub(crate) const ASSIGNMENT_PERIOD: Duration = Duration::from_millis(200);
+pub(crate) const ASSIGNMENT_PERIOD: Duration = Duration::from_millis(500);
 
 /// What the API asks the location thread.
 pub(crate) enum Command {

@@ -30,7 +30,7 @@ use crate::service::{ShmNode, ShmService, open_event_service};
 
 /// The longest the receiver sleeps before it pumps anyway and looks for a new set of
 /// services (and for its stop).
-pub(crate) const RECHECK: Duration = Duration::from_millis(50);
+pub(crate) const RECHECK: Duration = Duration::from_millis(250);
 
 /// The receiver thread could not be started.
 #[derive(Debug, thiserror::Error)]

@@ -1,6 +1,7 @@
 //! The client side of the control plane: asks the coordinator, with a deadline.
 
 use crate::service::ShmService;
+use iceoryx2::port::notifier::Notifier;
 use std::time::{Duration, Instant};
 
 use iceoryx2::node::NodeCreationFailure;
@@ -83,6 +84,8 @@ pub struct ControlClient {
     client: Client<ShmService, [u8], (), [u8], ()>,
     _service: PortFactory<ShmService, [u8], (), [u8], ()>,
     _node: ShmNode,
+    /// Wakes the coordinator after each request (`None`: it polls for them).
+    ring: Option<Notifier<ShmService>>,
     timeout: Duration,
 }
 
@@ -110,7 +113,18 @@ impl ControlClient {
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
             .map_err(ControlClientError::Client)?;
-        Ok(Self { domain: domain.to_owned(), client, _service: service, _node: node, timeout })
+        let ring = super::server::open_control_wake(&node, domain)
+            .and_then(|w| w.notifier_builder().create().map_err(|e| format!("{e:?}")))
+            .map_err(|e| tracing::warn!(error = %e, "cannot ring the coordinator; it polls"))
+            .ok();
+        Ok(Self {
+            domain: domain.to_owned(),
+            client,
+            _service: service,
+            _node: node,
+            ring,
+            timeout,
+        })
     }
 
     /// Sends `request` and waits for the answer; the seed's errors come back as
@@ -121,6 +135,11 @@ impl ControlClient {
         let pending = loan.write_from_slice(&bytes).send().map_err(ControlClientError::Send)?;
         if pending.number_of_server_connections() == 0 {
             return Err(ControlClientError::NotServing { domain: self.domain.clone() });
+        }
+        if let Some(ring) = &self.ring {
+            if let Err(e) = ring.notify() {
+                tracing::debug!(error = ?e, "cannot ring the coordinator; it looks soon anyway");
+            }
         }
         let deadline = Instant::now() + self.timeout;
         let mut pause = Duration::from_micros(20);

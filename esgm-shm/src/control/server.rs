@@ -2,6 +2,7 @@
 //! after processes that died.
 
 use crate::service::ShmService;
+use iceoryx2::port::listener::Listener;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -60,6 +61,24 @@ pub enum CoordinatorError {
     Stopped,
 }
 
+/// The longest an idle coordinator sleeps before it looks at its stop flag.
+const IDLE_WAIT: Duration = Duration::from_millis(100);
+
+/// Opens the control wake-up of `domain`, sized for every client.
+pub(crate) fn open_control_wake(
+    node: &ShmNode,
+    domain: &str,
+) -> Result<iceoryx2::service::port_factory::event::PortFactory<ShmService>, String> {
+    let name = crate::service_name::control_wake_service(domain).map_err(|e| e.to_string())?;
+    node.service_builder(&name)
+        .event()
+        .max_notifiers(MAX_CLIENTS + 16)
+        .max_listeners(4)
+        .max_nodes(MAX_CLIENTS + 16)
+        .open_or_create()
+        .map_err(|e| format!("{e:?}"))
+}
+
 /// Serves one domain's registry.
 #[derive(Debug)]
 pub struct Coordinator {
@@ -68,6 +87,8 @@ pub struct Coordinator {
     server: Server<ShmService, [u8], (), [u8], ()>,
     _service: PortFactory<ShmService, [u8], (), [u8], ()>,
     node: ShmNode,
+    /// Rung by clients after each request (`None`: polled, if it could not be made).
+    wake: Option<Listener<ShmService>>,
     served: u64,
     failures: u64,
     shutdown_requested: bool,
@@ -99,8 +120,13 @@ impl Coordinator {
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
             .map_err(CoordinatorError::Server)?;
+        let wake = open_control_wake(&node, domain)
+            .and_then(|w| w.listener_builder().create().map_err(|e| format!("{e:?}")))
+            .map_err(|e| tracing::warn!(error = %e, "no control wake-up; the coordinator polls"))
+            .ok();
         tracing::info!(domain, "coordinator serving");
         Ok(Self {
+            wake,
             domain: domain.to_owned(),
             registry,
             server,
@@ -227,15 +253,25 @@ impl Coordinator {
         Ok(CoordinatorThread { domain: domain.to_owned(), stop, thread: Some(thread) })
     }
 
-    /// Serves until `stop` is set, polling briefly after activity and backing off to
-    /// a millisecond when idle (the control plane is not latency-critical), and
-    /// cleaning up dead processes' resources every `cleanup_every`.
+    /// Sleeps up to `timeout` on the control wake-up (or, without it, polls).
+    fn sleep(&self, timeout: Duration) {
+        let Some(wake) = &self.wake else {
+            return std::thread::sleep(timeout.min(Duration::from_millis(1)));
+        };
+        if let Err(e) = crate::wait::timed_wait(wake, timeout) {
+            tracing::warn!(error = ?e, "cannot wait for requests; polling");
+            std::thread::sleep(timeout.min(Duration::from_millis(1)));
+        }
+    }
+
+    /// Serves until `stop` is set — asleep while nobody asks: clients ring the
+    /// coordinator's wake-up after each request — and cleans up dead processes'
+    /// resources every `cleanup_every`.
     pub fn run(
         &mut self,
         stop: &AtomicBool,
         cleanup_every: Duration,
     ) -> Result<(), CoordinatorError> {
-        let mut idle = Duration::from_micros(100);
         let mut next_cleanup = Instant::now() + cleanup_every;
         let mut leaving: Option<Instant> = None;
         while !stop.load(Ordering::Relaxed) {
@@ -247,11 +283,11 @@ impl Coordinator {
                     break;
                 }
             }
-            if self.serve_pending()? > 0 {
-                idle = Duration::from_micros(100);
-            } else {
-                std::thread::sleep(idle);
-                idle = (idle * 2).min(Duration::from_millis(1));
+            if self.serve_pending()? == 0 {
+                // Asleep until a client rings (after sending), the next cleanup, or a
+                // look at `stop`.
+                let until_cleanup = next_cleanup.saturating_duration_since(Instant::now());
+                self.sleep(until_cleanup.min(IDLE_WAIT));
             }
             if Instant::now() >= next_cleanup {
                 let removed = cleanup_dead_nodes();

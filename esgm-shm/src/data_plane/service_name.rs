@@ -104,6 +104,13 @@ pub fn control_service(domain: &str) -> Result<ServiceName, NameError> {
     service_name(&format!("{SERVICE_PREFIX}/{domain}/control"))
 }
 
+/// The coordinator's wake-up of `domain`, `esgm/<domain>/control-wake`: clients notify
+/// it after sending a request, so an idle coordinator sleeps instead of polling.
+pub fn control_wake_service(domain: &str) -> Result<ServiceName, NameError> {
+    check("domain", domain)?;
+    service_name(&format!("{SERVICE_PREFIX}/{domain}/control-wake"))
+}
+
 /// The doorbell of one connection's receiver thread, `esgm/<domain>/bell/<host>`: an
 /// event service its location rings when the set of trajectories it mirrors changes.
 pub fn doorbell_service(domain: &str, host: &str) -> Result<ServiceName, NameError> {

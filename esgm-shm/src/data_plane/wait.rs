@@ -165,8 +165,24 @@ impl Waiter {
             if now >= deadline {
                 return Ok(None);
             }
-            listener.timed_wait(|_| {}, deadline - now)?;
+            timed_wait(listener, deadline - now)?;
         }
+    }
+}
+
+/// Waits up to `timeout` on `listener`, consuming its notifications.
+///
+/// Every esgm wait on an iceoryx2 listener goes through here: iceoryx2 0.10 times a
+/// wait with the socket's receive timeout, where a timeout that rounds down to zero
+/// microseconds means *forever* — a wait that should end at once would never end.
+pub(crate) fn timed_wait(
+    listener: &Listener<ShmService>,
+    timeout: Duration,
+) -> Result<u64, ListenerWaitError> {
+    if timeout < Duration::from_micros(1) {
+        listener.try_wait(|_| {})
+    } else {
+        listener.timed_wait(|_| {}, timeout)
     }
 }
 
