@@ -12,23 +12,17 @@
 
 mod common;
 
-use common::TIMEOUT;
+use common::{TIMEOUT, coordinator};
 use esgm_core::esgm::TrajectorySpec;
 use esgm_core::value::Octets;
 use esgm_core::{
     CacheConstraint, EntityStructure, EntityTrajectoryStructure, Esgm, FluentStreamPolicy,
-    InProcessTrajectory, Sample, SubscribeOptions, Time, TypeRegistry,
+    InProcessTrajectory, Sample, SubscribeOptions, Time,
 };
-use esgm_shm::control::{Coordinator, CoordinatorThread, Registry};
-use esgm_shm::{ShmEsgm, unique_domain};
+use esgm_shm::ShmEsgm;
+use esgm_shm::control::CoordinatorThread;
 
 const SIDE: usize = 256;
-
-fn coordinator(prefix: &str) -> CoordinatorThread {
-    common::node(); // quiet iceoryx2's config warning
-    let domain = unique_domain(prefix);
-    Coordinator::spawn(&domain, Registry::new(TypeRegistry::with_library())).unwrap()
-}
 
 fn location(c: &CoordinatorThread, host: &str) -> ShmEsgm {
     ShmEsgm::builder().domain(c.domain()).host(host).connect().unwrap()

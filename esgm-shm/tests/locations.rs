@@ -12,39 +12,22 @@ mod common;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use common::{TIMEOUT, reap, spawn_child};
+use common::{TIMEOUT, coordinator, reap, spawn_child, wait_for};
 use esgm_core::esgm::{
     ComputeError, CreateError, InputType, LookupError, SensorError, TrajectorySpec,
 };
 use esgm_core::{
     AddError, AddOutcome, EntityStructure, EntityTrajectoryStructure, Esgm, FluentStreamPolicy,
-    Sample, SubscribeOptions, Time, TypeRegistry, ValueApproximation, millis,
+    Sample, SubscribeOptions, Time, ValueApproximation, millis,
 };
-use esgm_shm::control::{Coordinator, CoordinatorThread, Registry};
-use esgm_shm::{ShmEsgm, unique_domain};
+use esgm_shm::ShmEsgm;
+use esgm_shm::control::CoordinatorThread;
 
 const ROLE: &str = "ESGM_LOCATIONS_ROLE";
 const DOMAIN: &str = "ESGM_LOCATIONS_DOMAIN";
 
-fn coordinator(prefix: &str) -> CoordinatorThread {
-    common::node(); // quiet iceoryx2's config warning
-    let domain = unique_domain(prefix);
-    Coordinator::spawn(&domain, Registry::new(TypeRegistry::with_library())).unwrap()
-}
-
 fn location(c: &CoordinatorThread, host: &str) -> ShmEsgm {
     ShmEsgm::builder().domain(c.domain()).host(host).connect().unwrap()
-}
-
-fn wait_for(mut cond: impl FnMut() -> bool) -> bool {
-    let deadline = Instant::now() + TIMEOUT;
-    while Instant::now() < deadline {
-        if cond() {
-            return true;
-        }
-        std::thread::sleep(Duration::from_millis(1));
-    }
-    cond()
 }
 
 fn state(vt: Time, x: f64) -> EntityStructure {

@@ -15,7 +15,7 @@ mod common;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use common::{TIMEOUT, reap, spawn_child};
+use common::{TIMEOUT, coordinator, reap, spawn_child, wait_for};
 use esgm_core::esgm::TrajectorySpec;
 use esgm_core::{
     AddError, AddOutcome, CacheConstraint, EntityStructure, EntityTrajectoryStructure, Esgm,
@@ -23,18 +23,11 @@ use esgm_core::{
     SimClock, SubscribeOptions, Time, TrajectoryStore, TypeChecker, TypeRegistry,
     ValueApproximation,
 };
-use esgm_shm::control::{Coordinator, CoordinatorThread, Registry};
-use esgm_shm::{DEFAULT_MAX_HISTORY, ShmEsgm, unique_domain};
+use esgm_shm::{DEFAULT_MAX_HISTORY, ShmEsgm};
 
 const ROLE: &str = "ESGM_REPLICAS_ROLE";
 const DOMAIN: &str = "ESGM_REPLICAS_DOMAIN";
 const TRAJECTORY: &str = "readings";
-
-fn coordinator(prefix: &str) -> CoordinatorThread {
-    common::node(); // quiet iceoryx2's config warning
-    let domain = unique_domain(prefix);
-    Coordinator::spawn(&domain, Registry::new(TypeRegistry::with_library())).unwrap()
-}
 
 fn location(domain: &str, host: &str, clock: Option<SharedClock>) -> ShmEsgm {
     let builder = ShmEsgm::builder().domain(domain).host(host);
@@ -44,17 +37,6 @@ fn location(domain: &str, host: &str, clock: Option<SharedClock>) -> ShmEsgm {
     }
     .connect()
     .unwrap_or_else(|e| panic!("connect `{host}`: {e}"))
-}
-
-fn wait_for(mut cond: impl FnMut() -> bool) -> bool {
-    let deadline = Instant::now() + TIMEOUT;
-    while Instant::now() < deadline {
-        if cond() {
-            return true;
-        }
-        std::thread::sleep(Duration::from_millis(1));
-    }
-    cond()
 }
 
 fn state(vt: Time, x: f64) -> EntityStructure {

@@ -13,6 +13,27 @@ use iceoryx2::prelude::{LogLevel, NodeBuilder, set_log_level};
 /// lost sample fails the test instead of hanging it.
 pub const TIMEOUT: Duration = Duration::from_secs(10);
 
+/// A coordinator on a thread of this test process, in a domain of its own.
+pub fn coordinator(prefix: &str) -> esgm_shm::control::CoordinatorThread {
+    node(); // quiet iceoryx2's config warning
+    let domain = esgm_shm::unique_domain(prefix);
+    let registry = esgm_shm::control::Registry::new(esgm_core::TypeRegistry::with_library());
+    esgm_shm::control::Coordinator::spawn(&domain, registry).expect("start a coordinator")
+}
+
+/// Polls `cond` until it holds or [`TIMEOUT`] passes; returns whether it held (the
+/// test asserts on it, so a runtime that never gets there fails instead of hanging).
+pub fn wait_for(mut cond: impl FnMut() -> bool) -> bool {
+    let deadline = std::time::Instant::now() + TIMEOUT;
+    while std::time::Instant::now() < deadline {
+        if cond() {
+            return true;
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    cond()
+}
+
 pub fn node() -> ShmNode {
     // iceoryx2 warns that no config file exists; the defaults are what the tests want.
     set_log_level(LogLevel::Error);
