@@ -435,10 +435,10 @@ impl TrajectoryStore {
         self.octets_allocator.clone()
     }
 
-    /// A waiter on this store's writer, if it is a replica whose writer can be waited
-    /// on (see [`ReplicaFeed`]).
+    /// A waiter on this store's writer for a runtime's worker, if it is a replica
+    /// whose writer can be waited on (see [`ReplicaFeed::worker_waiter`]).
     pub fn feed_waiter(&self) -> Option<Box<dyn FeedWaiter>> {
-        self.feed.as_ref().and_then(|f| f.waiter())
+        self.feed.as_ref().and_then(|f| f.worker_waiter())
     }
 
     /// Lets this store's subscribers (a replica's) wait for its writer themselves, from

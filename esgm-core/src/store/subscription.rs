@@ -56,6 +56,14 @@ pub trait ReplicaFeed: Send + Sync + std::fmt::Debug + 'static {
     /// A waiter for one subscription; `None` if none can be made now (the subscription
     /// then waits on its channel, fed by the runtime).
     fn waiter(&self) -> Option<Box<dyn FeedWaiter>>;
+
+    /// A waiter for a runtime's worker (a unit's or operator's input loop), which,
+    /// unlike a user's subscription, always comes back to wait: the transport may
+    /// leave the replica's feeding to it while it waits. The default is
+    /// [`ReplicaFeed::waiter`].
+    fn worker_waiter(&self) -> Option<Box<dyn FeedWaiter>> {
+        self.waiter()
+    }
 }
 
 /// One subscription's way to wait for a replica's writer (see [`ReplicaFeed`]).

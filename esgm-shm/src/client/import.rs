@@ -68,6 +68,10 @@ pub(crate) struct Import {
     owner: HoldingOwner,
     /// The wake-up services of the samples and the violations, for the receiver.
     wakes: Vec<ServiceName>,
+    /// Workers waiting on this import's writer themselves: while there is one, the
+    /// receiver thread does not listen to its samples (the worker feeds the replica
+    /// each time it wakes), so a sample wakes one thread in this process, not two.
+    workers: Arc<std::sync::atomic::AtomicUsize>,
 }
 
 impl Import {
@@ -134,6 +138,7 @@ impl Import {
             replica,
             rejected: 0,
             gaps: SequenceGaps::default(),
+            workers: Arc::default(),
             lost: 0,
             // One borrow stays free to receive into.
             owner: holdings.owner(qos.max_borrowed_samples.saturating_sub(1)),
@@ -141,14 +146,18 @@ impl Import {
         })
     }
 
-    /// The wake-up services a publish on this import's trajectory notifies.
-    pub fn wake_services(&self) -> &[ServiceName] {
-        &self.wakes
-    }
-
     /// The wake-up service of this import's samples.
     fn sample_wake(&self) -> Option<ServiceName> {
         self.wakes.first().copied()
+    }
+
+    /// The wake-up services the receiver thread listens to: without the samples'
+    /// while a worker waits on them itself.
+    pub fn receiver_wakes(&self) -> &[ServiceName] {
+        match self.workers.load(std::sync::atomic::Ordering::Acquire) {
+            0 => &self.wakes,
+            _ => self.wakes.get(1..).unwrap_or_default(),
+        }
     }
 
     /// Enters every waiting sample, reset and violation into the replica; returns how
@@ -246,6 +255,17 @@ impl ReplicaFeed for ImportFeed {
             trajectory: self.trajectory.clone(),
             node: self.node.clone(),
             mirrors: Weak::clone(&self.mirrors),
+            worker: None,
+        }))
+    }
+
+    fn worker_waiter(&self) -> Option<Box<dyn FeedWaiter>> {
+        Some(Box::new(ImportWaiter {
+            listening: None,
+            trajectory: self.trajectory.clone(),
+            node: self.node.clone(),
+            mirrors: Weak::clone(&self.mirrors),
+            worker: Some(None),
         }))
     }
 }
@@ -262,6 +282,15 @@ struct ImportWaiter {
     trajectory: String,
     node: SharedNode,
     mirrors: Weak<SharedMirrors>,
+    /// A worker's waiter: the import's count of waiting workers it is counted in (see
+    /// [`Import::receiver_wakes`]); `None` for a user's subscription.
+    worker: Option<Option<Arc<std::sync::atomic::AtomicUsize>>>,
+}
+
+impl Drop for ImportWaiter {
+    fn drop(&mut self) {
+        self.stand_down();
+    }
 }
 
 impl ImportWaiter {
@@ -273,11 +302,16 @@ impl ImportWaiter {
             .lock()
             .imports
             .get(&self.trajectory)
-            .and_then(|i| i.sample_wake().map(|w| (i.generation, w)));
-        let Some((generation, wake)) = current else { return false };
+            .and_then(|i| i.sample_wake().map(|w| (i.generation, w, Arc::clone(&i.workers))));
+        let Some((generation, wake, workers)) = current else {
+            self.stand_down();
+            return false;
+        };
         if self.listening.as_ref().is_some_and(|(g, _)| *g == generation) {
             return true;
         }
+        // Another generation: count in the import now served.
+        self.stand_down();
         let listener = self.node.with(|node| {
             open_event_service(node, &wake)?
                 .listener_builder()
@@ -287,6 +321,12 @@ impl ImportWaiter {
         match listener {
             Ok(l) => {
                 self.listening = Some((generation, l));
+                if let Some(counted) = &mut self.worker {
+                    workers.fetch_add(1, std::sync::atomic::Ordering::AcqRel);
+                    *counted = Some(workers);
+                    // The receiver stops listening to these samples.
+                    mirrors.change(|_| ());
+                }
                 true
             }
             Err(e) => {
@@ -295,6 +335,17 @@ impl ImportWaiter {
                 self.listening = None;
                 false
             }
+        }
+    }
+}
+
+impl ImportWaiter {
+    /// No longer counted as the import's waiting worker: the receiver listens again.
+    fn stand_down(&mut self) {
+        let Some(Some(workers)) = self.worker.as_mut().map(Option::take) else { return };
+        workers.fetch_sub(1, std::sync::atomic::Ordering::AcqRel);
+        if let Some(mirrors) = self.mirrors.upgrade() {
+            mirrors.change(|_| ());
         }
     }
 }

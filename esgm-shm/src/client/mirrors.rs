@@ -33,7 +33,7 @@ impl Mirrors {
     pub fn wake_services(&self) -> Vec<ServiceName> {
         self.imports
             .values()
-            .flat_map(|i| i.wake_services().iter().copied())
+            .flat_map(|i| i.receiver_wakes().iter().copied())
             .chain(self.exports.values().flat_map(Export::wake_services))
             .collect()
     }
