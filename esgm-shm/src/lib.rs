@@ -107,6 +107,7 @@
 pub mod client;
 pub mod control;
 pub mod data_plane;
+pub mod process;
 
 // The data plane's modules keep their paths at the crate root (`esgm_shm::publisher`).
 pub(crate) use data_plane::sequence_gaps;

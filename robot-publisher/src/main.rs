@@ -25,25 +25,12 @@ struct Cli {
 fn main() -> ExitCode {
     // Usage errors and --help are clap's: printed in full, exit 2 or 0.
     let cli = Cli::parse();
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
-    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
-    iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
+    esgm_shm::process::init_logging();
     match serve::run(&cli.domain, &cli.robot) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
-            eprintln!("robot-publisher: {}", one_line(&err));
+            eprintln!("robot-publisher: {}", esgm_shm::process::one_line(err.chain()));
             ExitCode::FAILURE
         }
     }
-}
-
-/// The error and its causes on one line, leaving out a cause the line already says
-/// (some errors repeat their source in their own message).
-fn one_line(err: &anyhow::Error) -> String {
-    err.chain().map(ToString::to_string).fold(String::new(), |line, cause| match line.as_str() {
-        "" => cause,
-        _ if line.contains(&cause) => line,
-        _ => format!("{line}: {cause}"),
-    })
 }

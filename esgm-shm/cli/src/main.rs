@@ -83,10 +83,7 @@ enum Command {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
-    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
-    iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
+    esgm_shm::process::init_logging();
     let process = cmd::process_name(&cli.command);
     let span = tracing::info_span!("esgm", process = %process);
     let _entered = span.enter();
@@ -108,15 +105,7 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             // One line: the error and its causes, never a backtrace.
-            let chain: Vec<String> = e.chain().map(ToString::to_string).collect();
-            let mut line = chain.first().cloned().unwrap_or_default();
-            for cause in chain.iter().skip(1) {
-                if !line.contains(cause.as_str()) {
-                    line.push_str(": ");
-                    line.push_str(cause);
-                }
-            }
-            eprintln!("esgm: {line}");
+            eprintln!("esgm: {}", esgm_shm::process::one_line(e.chain()));
             ExitCode::FAILURE
         }
     }
