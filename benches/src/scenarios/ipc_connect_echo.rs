@@ -49,6 +49,7 @@ use esgm_core::{
 use esgm_shm::control::{Coordinator, Registry};
 use esgm_shm::{ShmEsgm, unique_domain};
 
+use super::ipc_payload::protocol::{DONE, HELLO, PING, PONG, READY, STOP};
 use super::ipc_payload::{
     IMAGE_FORMAT, IMAGE_HEIGHT, IMAGE_NAME, IMAGE_WIDTH, Kind, pattern, read_value,
 };
@@ -59,16 +60,6 @@ use crate::peer_role::PeerRole;
 use crate::scenario::Context;
 use crate::wait_mode::WaitMode;
 
-const PING: &str = "ping";
-const PONG: &str = "pong";
-/// The peer's "my image reply is made" (see the module docs).
-const READY: &str = "ready";
-/// The measuring process's "I have read your image reply" (see the module docs).
-const DONE: &str = "done";
-/// The sequence of start-up pings; measured pings count from 1.
-const HELLO: i64 = 0;
-/// The sequence that tells the peer to stop.
-const STOP: i64 = -1;
 /// How long the measuring process waits for an answer to its first start-up ping; the
 /// wait doubles with each ping after it, up to [`HELLO_EVERY_MAX`].
 const HELLO_EVERY: Duration = Duration::from_millis(5);

@@ -47,6 +47,7 @@ use esgm_shm::{
 };
 
 use super::ipc_node::ipc_node;
+use super::ipc_payload::protocol::{DONE, HELLO, PING, PONG, READY, STOP};
 use super::ipc_payload::{IMAGE_FORMAT, IMAGE_HEIGHT, IMAGE_NAME, IMAGE_WIDTH, Kind, pattern};
 use crate::latency::Latency;
 use crate::patience::Patience;
@@ -55,16 +56,6 @@ use crate::peer_role::PeerRole;
 use crate::scenario::Context;
 use crate::wait_mode::WaitMode;
 
-const PING: &str = "ping";
-const PONG: &str = "pong";
-/// The peer's "my image reply is written" (see the module docs).
-const READY: &str = "ready";
-/// The measuring process's "I have read your image reply" (see the module docs).
-const DONE: &str = "done";
-/// The sequence of start-up pings; measured pings count from 1.
-const HELLO: i64 = 0;
-/// The sequence that tells the peer to stop.
-const STOP: i64 = -1;
 /// Pause between start-up pings.
 const HELLO_EVERY: Duration = Duration::from_millis(1);
 /// Time for the peer to answer the start-up pings still queued once it answered one.

@@ -81,16 +81,7 @@ impl Kind {
                     ArchivedValue::OctetSeq(o) => o.as_slice(),
                     _ => bail!("attribute image_data of the Image is not an octet sequence"),
                 };
-                let (Some(&first), Some(&last)) = (pixels.first(), pixels.last()) else {
-                    bail!("the image has no pixels")
-                };
-                if pixels.len() != PIXEL_BYTES || last != pattern(PIXEL_BYTES - 1, first) {
-                    bail!(
-                        "the image's pixels are not the frame sent ({} bytes, first {first}, last {last})",
-                        pixels.len()
-                    );
-                }
-                Ok(u64::from(first) + u64::from(last))
+                check_frame(pixels)
             }
         }
     }
@@ -111,18 +102,41 @@ pub fn read_value(kind: Kind, es: &EntityStructure) -> anyhow::Result<(u64, bool
             let Some(pixels) = es.get("image_data").and_then(|v| v.as_octets()) else {
                 bail!("the Image has no octet sequence image_data")
             };
-            let (Some(&first), Some(&last)) = (pixels.first(), pixels.last()) else {
-                bail!("the image has no pixels")
-            };
-            if pixels.len() != PIXEL_BYTES || last != pattern(PIXEL_BYTES - 1, first) {
-                bail!(
-                    "the image's pixels are not the frame sent ({} bytes, first {first}, last {last})",
-                    pixels.len()
-                );
-            }
-            Ok((u64::from(first) + u64::from(last), pixels.is_held()))
+            Ok((check_frame(pixels)?, pixels.is_held()))
         }
     }
+}
+
+/// Reads one pixel at each end of a frame and checks them against the frame sent
+/// ([`pattern`]); returns their sum (for `black_box`).
+fn check_frame(pixels: &[u8]) -> anyhow::Result<u64> {
+    let (Some(&first), Some(&last)) = (pixels.first(), pixels.last()) else {
+        bail!("the image has no pixels")
+    };
+    if pixels.len() != PIXEL_BYTES || last != pattern(PIXEL_BYTES - 1, first) {
+        bail!(
+            "the image's pixels are not the frame sent ({} bytes, first {first}, last {last})",
+            pixels.len()
+        );
+    }
+    Ok(u64::from(first) + u64::from(last))
+}
+
+/// The names and sequences of the cross-process ping-pongs (`ipc_esgm_echo` on the
+/// data plane, `ipc_connect_echo` through `connect`): one protocol, two transports.
+pub mod protocol {
+    /// The measuring process's trajectory.
+    pub const PING: &str = "ping";
+    /// The peer's trajectory.
+    pub const PONG: &str = "pong";
+    /// The peer's "my image reply is made".
+    pub const READY: &str = "ready";
+    /// The measuring process's "I have read your image reply".
+    pub const DONE: &str = "done";
+    /// The sequence of start-up pings; measured pings count from 1.
+    pub const HELLO: i64 = 0;
+    /// The sequence that tells the peer to stop.
+    pub const STOP: i64 = -1;
 }
 
 /// The byte at `index` of a frame whose first byte is `seed`: the pattern of
