@@ -1,0 +1,1 @@
+//! Views: the encodings Foxglove decodes, written beside esgm's lossless channel.
