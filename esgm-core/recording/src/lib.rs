@@ -1,4 +1,35 @@
 //! Recordings: esgm trajectories in MCAP files (SPEC S1, U1, M1).
+//!
+//! `esgm record` writes a running system's trajectories into one MCAP file, the
+//! container `ros2 bag` and Foxglove use. A recording keeps what esgm knows and those
+//! tools do not: each structure's four times (valid, create, add, recorded), its type,
+//! its trajectory's declaration (kind, source, inputs, policy), and the violations and
+//! losses seen while recording. Each structure is kept as the codec's canonical archive,
+//! so what is read back is bit-identical to what was added. Beside the lossless
+//! channels, views in Foxglove's encodings (`foxglove.RawImage`, JSON with a JSON
+//! Schema) make the file open and plot in Foxglove; images are stored once.
+//!
+//! # Layers
+//! - [`layout`]: the file's contract (channels, schemas, headers, metadata);
+//! - [`view`]: the Foxglove encodings;
+//! - [`writer`]: [`RecordingWriter`], the MCAP writer (chunks, compression, splits,
+//!   flushes);
+//! - [`reader`]: [`Recording`], the reader that survives damage;
+//! - [`recorder`]: [`Recorder`], subscriptions to a running system into a writer,
+//!   never blocking the system's writers.
 #![deny(missing_docs)]
 
+pub mod info;
+pub mod layout;
+pub mod reader;
+pub mod recorder;
 pub mod view;
+pub mod writer;
+
+pub use info::{RecordingInfo, TrajectoryInfoLine};
+pub use layout::{EventKind, RecordHeader, RecordedEvent, TypeSchema};
+pub use reader::{Damage, ReadError, RecordedSample, RecordedTrajectory, Recording, Samples};
+pub use recorder::{Recorder, RecorderError, RecorderStats};
+pub use writer::{
+    Compression, RecordError, RecordOptions, RecordingWriter, TrajectoryId, WriteSummary,
+};

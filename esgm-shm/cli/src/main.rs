@@ -76,6 +76,10 @@ enum Command {
     Graph(cmd::graph::Args),
     /// Policy violations of a trajectory as they happen.
     Violations(cmd::violations::Args),
+    /// Record trajectories into an MCAP file (Foxglove opens it).
+    Record(cmd::record::Args),
+    /// What a recording holds: duration, trajectories, counts, rates, losses.
+    Info(cmd::info::Args),
     /// Run one of the system's processes (started by `esgm demo`; also by hand).
     #[command(subcommand, hide = true)]
     Worker(cmd::worker::Role),

@@ -6,8 +6,10 @@ pub mod down;
 pub mod echo;
 pub mod graph;
 pub mod hz;
+pub mod info;
 pub mod ps;
 pub mod query;
+pub mod record;
 pub mod registry;
 pub mod stats;
 pub mod supervise;
@@ -53,6 +55,8 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Stats => stats::run(domain, json),
         Command::Graph(a) => graph::run(domain, json, a),
         Command::Violations(a) => violations::run(domain, json, a),
+        Command::Record(a) => record::run(domain, json, a),
+        Command::Info(a) => info::run(json, a),
         Command::Worker(role) => worker::run(domain, role),
     }
 }
