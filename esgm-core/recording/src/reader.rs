@@ -146,6 +146,11 @@ pub struct Recording {
     pub file_len: u64,
     /// Bytes readable (the position of the damage, or the whole file).
     pub readable_len: u64,
+    /// The longest a structure took from its add to the recorder (recorded − add
+    /// time), ns: structures that came as a trajectory's history when the recorder
+    /// joined are as late as that history is long. Reading in add order needs a
+    /// look-ahead this long ([`crate::replay::AddOrder`]).
+    pub max_lateness: Time,
 }
 
 /// A structure read back, with the times the recorder kept.
@@ -175,6 +180,7 @@ impl Recording {
             damage: None,
             file_len: walker.file_len,
             readable_len: walker.file_len,
+            max_lateness: 0,
         };
         let mut decoder = Decoder::default();
         let mut next_sequence: HashMap<usize, u64> = HashMap::new();
@@ -201,6 +207,9 @@ impl Recording {
                             }
                             *expected = sample.header.sequence + 1;
                             t.count += 1;
+                            rec.max_lateness = rec.max_lateness.max(
+                                sample.header.recorded_time.saturating_sub(sample.header.add_time),
+                            );
                             let v = sample.structure.valid_time;
                             let a = sample.header.add_time;
                             t.valid_range = Some(

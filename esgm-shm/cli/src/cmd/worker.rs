@@ -16,7 +16,7 @@ use anyhow::{Context, bail};
 use camera_publisher::CameraArgs;
 use cu_workers::{BlobDetectionUnit, BlobSelectionUnit, DrivingDirectionUnit, MovingAverageUnit};
 use esgm_core::Esgm;
-use esgm_core::esgm::CompUnit;
+use esgm_core::esgm::{CompUnit, InputType};
 use esgm_shm::ShmEsgm;
 use robot_publisher::RobotArgs;
 
@@ -90,7 +90,19 @@ fn serve_unit(
     type_name: Option<&str>,
     window: usize,
 ) -> anyhow::Result<()> {
-    let (output, inputs, unit): (String, _, Arc<dyn CompUnit>) = match builtin {
+    let (output, inputs, unit) = builtin_unit(builtin, type_name, window)?;
+    esgm.add_comp_unit(name, &output, inputs, unit)?;
+    Ok(())
+}
+
+/// A built-in unit by name: its output type, input types and implementation (used by
+/// the unit worker and by `esgm replay --in-process`).
+pub fn builtin_unit(
+    builtin: &str,
+    type_name: Option<&str>,
+    window: usize,
+) -> anyhow::Result<(String, Vec<InputType>, Arc<dyn CompUnit>)> {
+    Ok(match builtin {
         BlobDetectionUnit::NAME => (
             BlobDetectionUnit::OUTPUT_TYPE.into(),
             BlobDetectionUnit::input_types(),
@@ -113,7 +125,5 @@ fn serve_unit(
             (t.to_owned(), unit.input_types(), Arc::new(unit))
         }
         other => bail!("unknown built-in unit `{other}`; built in: {}", BUILTIN_UNITS.join(", ")),
-    };
-    esgm.add_comp_unit(name, &output, inputs, unit)?;
-    Ok(())
+    })
 }

@@ -125,6 +125,9 @@ pub struct Plan {
     pub workers: Vec<Item<Worker>>,
     /// Trajectories to create, in the file's order.
     pub trajectories: Vec<Item<PlannedTrajectory>>,
+    /// The units as declared (for `esgm replay --in-process`, which runs built-in
+    /// units itself instead of starting their processes).
+    pub units: Vec<Item<UnitDecl>>,
 }
 
 impl Plan {
@@ -171,6 +174,7 @@ pub fn parse(file: &str, text: &str, base: &Path) -> Result<Plan, ConfigError> {
         types: Vec::new(),
         workers: Vec::new(),
         trajectories: Vec::new(),
+        units: Vec::new(),
     };
 
     for t in &parsed.types {
@@ -189,6 +193,7 @@ pub fn parse(file: &str, text: &str, base: &Path) -> Result<Plan, ConfigError> {
         let worker = unit_worker(u.get_ref(), &esgm, base)
             .map_err(|e| plan.error(line, format!("{e:#}")))?;
         plan.workers.push(Item { line, what: worker });
+        plan.units.push(Item { line, what: u.get_ref().clone() });
     }
     for r in &parsed.robots {
         let line = line_of(r.span().start);
