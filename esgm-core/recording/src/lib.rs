@@ -16,20 +16,32 @@
 //!   flushes);
 //! - [`reader`]: [`Recording`], the reader that survives damage;
 //! - [`recorder`]: [`Recorder`], subscriptions to a running system into a writer,
-//!   never blocking the system's writers.
+//!   never blocking the system's writers;
+//! - [`compare`]: two recordings aligned by valid time, trajectory by trajectory
+//!   ([`value_diff`] names the attribute that differs, [`type_diff`] the type);
+//! - [`load`]: recorded trajectories made queryable in an ESGM, with their policies.
 #![deny(missing_docs)]
 
+pub mod compare;
 pub mod info;
 pub mod layout;
+pub mod load;
 pub mod reader;
 pub mod recorder;
+pub mod type_diff;
+pub mod value_diff;
 pub mod view;
 pub mod writer;
 
+pub use compare::{
+    Alignment, CompareError, CompareOptions, CompareReport, Presence, TrajectoryComparison, compare,
+};
 pub use info::{RecordingInfo, TrajectoryInfoLine};
 pub use layout::{EventKind, RecordHeader, RecordedEvent, TypeSchema};
+pub use load::{LoadError, LoadOptions, LoadReport, LoadedTrajectory, Relaxation, load, load_with};
 pub use reader::{Damage, ReadError, RecordedSample, RecordedTrajectory, Recording, Samples};
 pub use recorder::{Recorder, RecorderError, RecorderStats};
+pub use type_diff::TypeDifference;
 pub use writer::{
     Compression, RecordError, RecordOptions, RecordingWriter, TrajectoryId, WriteSummary,
 };

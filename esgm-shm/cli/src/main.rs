@@ -80,6 +80,10 @@ enum Command {
     Record(cmd::record::Args),
     /// What a recording holds: duration, trajectories, counts, rates, losses.
     Info(cmd::info::Args),
+    /// Compare two recordings by valid time; exits 1 when they differ.
+    Compare(cmd::compare::Args),
+    /// Make a recording's trajectories queryable in the domain.
+    Load(cmd::load::Args),
     /// Run one of the system's processes (started by `esgm demo`; also by hand).
     #[command(subcommand, hide = true)]
     Worker(cmd::worker::Role),
@@ -107,6 +111,8 @@ fn main() -> ExitCode {
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
+        // `esgm compare` found differences: its report said so, no error line.
+        Err(e) if e.is::<cmd::compare::Differ>() => ExitCode::FAILURE,
         Err(e) => {
             // One line: the error and its causes, never a backtrace.
             eprintln!("esgm: {}", esgm_shm::process::one_line(e.chain()));

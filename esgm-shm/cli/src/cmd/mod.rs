@@ -1,12 +1,14 @@
 //! One file per subcommand.
 
 pub mod apply;
+pub mod compare;
 pub mod demo;
 pub mod down;
 pub mod echo;
 pub mod graph;
 pub mod hz;
 pub mod info;
+pub mod load;
 pub mod ps;
 pub mod query;
 pub mod record;
@@ -57,6 +59,8 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Violations(a) => violations::run(domain, json, a),
         Command::Record(a) => record::run(domain, json, a),
         Command::Info(a) => info::run(json, a),
+        Command::Compare(a) => compare::run(json, a),
+        Command::Load(a) => load::run(domain, json, a),
         Command::Worker(role) => worker::run(domain, role),
     }
 }
