@@ -63,6 +63,11 @@ pub struct CompareOptions {
     /// Whether create times must be equal too (off for a replay whose times were
     /// shifted to now).
     pub create_time: bool,
+    /// Compare each trajectory only over the valid times both files cover: two
+    /// recordings of one system started at different moments (a live recording that
+    /// began with each trajectory's history, and a rerun of its inputs) then compare
+    /// what they have in common.
+    pub overlap: bool,
 }
 
 impl Default for CompareOptions {
@@ -72,6 +77,7 @@ impl Default for CompareOptions {
             alignment: Alignment::Exact,
             value_tolerance: None,
             create_time: true,
+            overlap: false,
         }
     }
 }
@@ -108,6 +114,12 @@ impl CompareOptions {
     #[must_use]
     pub fn create_time(mut self, on: bool) -> Self {
         self.create_time = on;
+        self
+    }
+    /// Compares only the valid times both files cover (off by default).
+    #[must_use]
+    pub fn overlap(mut self, on: bool) -> Self {
+        self.overlap = on;
         self
     }
 }
@@ -339,8 +351,15 @@ pub fn compare(
                 (Some(ta), Some(tb)) => (ta, tb),
                 _ => continue,
             };
-            let sa = from_a.remove(name).unwrap_or_default();
-            let sb = from_b.remove(name).unwrap_or_default();
+            let mut sa = from_a.remove(name).unwrap_or_default();
+            let mut sb = from_b.remove(name).unwrap_or_default();
+            if options.overlap {
+                if let (Some((a_lo, a_hi)), Some((b_lo, b_hi))) = (ta.valid_range, tb.valid_range) {
+                    let (lo, hi) = (a_lo.max(b_lo), a_hi.min(b_hi));
+                    sa.retain(|s| (lo..=hi).contains(&s.valid_time));
+                    sb.retain(|s| (lo..=hi).contains(&s.valid_time));
+                }
+            }
             results.insert(name, compare_one(options, (b, tb), ta, tb, sa, sb)?);
         }
     }

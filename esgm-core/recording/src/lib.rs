@@ -17,6 +17,9 @@
 //! - [`reader`]: [`Recording`], the reader that survives damage;
 //! - [`recorder`]: [`Recorder`], subscriptions to a running system into a writer,
 //!   never blocking the system's writers;
+//! - [`replay`]: publishing a recording into a running ESGM again, in add order;
+//! - [`rerun`]: a configuration's units run on recorded inputs in one process,
+//!   deterministically, under the simulated clock.
 //! - [`compare`]: two recordings aligned by valid time, trajectory by trajectory
 //!   ([`value_diff`] names the attribute that differs, [`type_diff`] the type);
 //! - [`load`]: recorded trajectories made queryable in an ESGM, with their policies.
@@ -28,6 +31,8 @@ pub mod layout;
 pub mod load;
 pub mod reader;
 pub mod recorder;
+pub mod replay;
+pub mod rerun;
 pub mod type_diff;
 pub mod value_diff;
 pub mod view;
@@ -41,6 +46,8 @@ pub use layout::{EventKind, RecordHeader, RecordedEvent, TypeSchema};
 pub use load::{LoadError, LoadOptions, LoadReport, LoadedTrajectory, Relaxation, load, load_with};
 pub use reader::{Damage, ReadError, RecordedSample, RecordedTrajectory, Recording, Samples};
 pub use recorder::{Recorder, RecorderError, RecorderStats};
+pub use replay::{ComputedMode, Pace, ReplayError, ReplayOptions, ReplayReport, TimeMode};
+pub use rerun::{RerunError, RerunPlan, RerunReport, RerunUnit, rerun};
 pub use type_diff::TypeDifference;
 pub use writer::{
     Compression, RecordError, RecordOptions, RecordingWriter, TrajectoryId, WriteSummary,

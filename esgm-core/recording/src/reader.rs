@@ -523,6 +523,14 @@ impl Walker {
             let mut len_bytes = [0u8; 8];
             len_bytes.copy_from_slice(&head[1..]);
             let len = u64::from_le_bytes(len_bytes);
+            if opcode == OP_CHUNK && len == u64::MAX {
+                // The writer writes a chunk's length when it finishes the chunk.
+                self.finished = true;
+                return Err(damage(
+                    "an unfinished chunk: the recorder stopped while writing it, and the file ends without its summary"
+                        .into(),
+                ));
+            }
             if len > remaining - 9 {
                 self.finished = true;
                 return Err(damage(format!(

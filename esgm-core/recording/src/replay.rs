@@ -31,6 +31,7 @@ use esgm_core::{
 
 use crate::layout::PIXELS_ATTRIBUTE;
 use crate::reader::{ReadError, RecordedSample, Recording, Samples};
+use crate::type_diff::type_difference;
 
 /// How fast a replay publishes.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -154,7 +155,7 @@ pub struct ReplayReport {
 }
 
 /// How the domain took one trajectory's replayed structures.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize)]
 pub struct PublishCounts {
     /// Added.
     pub added: u64,
@@ -162,6 +163,8 @@ pub struct PublishCounts {
     pub held: u64,
     /// Dropped by the trajectory's policy.
     pub dropped: u64,
+    /// Drops by the constraint that dropped them.
+    pub dropped_by: BTreeMap<String, u64>,
     /// Images written into the trajectory's own (shared) memory.
     pub images_in_place: u64,
 }
@@ -169,38 +172,6 @@ pub struct PublishCounts {
 /// True for the kinds a replay publishes by default.
 fn is_input(kind: TrajectoryKind) -> bool {
     matches!(kind, TrajectoryKind::Primitive | TrajectoryKind::Sampled)
-}
-
-/// The first difference between a recorded type and the domain's, if any.
-pub fn type_difference(
-    recorded: &EntityStructureType,
-    domain: &EntityStructureType,
-) -> Option<String> {
-    for a in &recorded.attributes {
-        match domain.attribute(&a.name) {
-            None => return Some(format!("attribute `{}` is not in the domain's type", a.name)),
-            Some(d) if d.sort != a.sort => {
-                return Some(format!(
-                    "attribute `{}` is {} in the recording, {} in the domain",
-                    a.name,
-                    a.sort.idl_name(),
-                    d.sort.idl_name()
-                ));
-            }
-            Some(d) if d.element_type != a.element_type => {
-                return Some(format!(
-                    "attribute `{}` holds {:?} in the recording, {:?} in the domain",
-                    a.name, a.element_type, d.element_type
-                ));
-            }
-            Some(_) => {}
-        }
-    }
-    domain
-        .attributes
-        .iter()
-        .find(|d| recorded.attribute(&d.name).is_none())
-        .map(|d| format!("attribute `{}` is not in the recording's type", d.name))
 }
 
 /// Registers the recording's types in `esgm`, refusing (before registering anything)
@@ -219,8 +190,13 @@ pub fn check_and_register_types<E: Esgm>(
     for (name, recorded) in &needed {
         match esgm.get_entity_structure_type(name) {
             Ok(domain) => {
-                if let Some(detail) = type_difference(recorded, &domain) {
-                    return Err(ReplayError::TypeMismatch { type_name: name.clone(), detail });
+                if let Some(d) =
+                    type_difference(name, recorded, &domain, ("in the recording", "in the domain"))
+                {
+                    return Err(ReplayError::TypeMismatch {
+                        type_name: name.clone(),
+                        detail: d.detail,
+                    });
                 }
             }
             Err(_) => missing.push((name, recorded)),
@@ -297,7 +273,16 @@ where
         if !existing.contains_key(&t.name) {
             let mut policy = t.policy.clone();
             if options.times == TimeMode::Keep {
+                // Recorded times are old: a delay bound would drop every structure,
+                // and a duration starting "when created" (from = 0) would too.
                 policy.delay = esgm_core::DelayConstraint::Any;
+                if let esgm_core::DurationConstraint::Between { from: 0, to } = policy.duration {
+                    let first = rec
+                        .trajectory(&t.name)
+                        .and_then(|r| r.valid_range)
+                        .map_or(1, |r| r.0.max(1));
+                    policy.duration = esgm_core::DurationConstraint::Between { from: first, to };
+                }
             }
             esgm.create_trajectory(TrajectorySpec::primitive(&t.name, &t.type_name).policy(policy))
                 .map_err(|e| ReplayError::Domain {
@@ -397,7 +382,10 @@ where
             match handle.add(es) {
                 Ok(AddOutcome::Added) => counts.added += 1,
                 Ok(AddOutcome::Held { .. }) => counts.held += 1,
-                Ok(AddOutcome::Dropped(_)) => counts.dropped += 1,
+                Ok(AddOutcome::Dropped(v)) => {
+                    counts.dropped += 1;
+                    *counts.dropped_by.entry(v.constraint.to_string()).or_default() += 1;
+                }
                 Ok(other) => {
                     tracing::debug!("`{name}`: replayed structure {other:?}");
                     counts.added += 1;

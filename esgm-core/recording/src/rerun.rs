@@ -25,7 +25,8 @@ use esgm_core::{
 
 use crate::layout::TypeSchema;
 use crate::reader::{ReadError, Recording};
-use crate::replay::{AddOrder, ReplayError, check_and_register_types, type_difference};
+use crate::replay::{AddOrder, ReplayError, check_and_register_types};
+use crate::type_diff::type_difference;
 use crate::writer::{RecordError, RecordingWriter, WriteSummary};
 
 /// A unit a rerun can call: its name, output type, input types and implementation.
@@ -139,10 +140,14 @@ pub fn rerun(
     for (name, t) in &plan.types {
         match esgm.get_entity_structure_type(name) {
             Ok(have) => {
-                if let Some(detail) = type_difference(t, &have) {
-                    return Err(
-                        ReplayError::TypeMismatch { type_name: name.clone(), detail }.into()
-                    );
+                if let Some(d) =
+                    type_difference(name, t, &have, ("in the configuration", "in the library"))
+                {
+                    return Err(ReplayError::TypeMismatch {
+                        type_name: name.clone(),
+                        detail: d.detail,
+                    }
+                    .into());
                 }
             }
             Err(_) => esgm

@@ -28,6 +28,10 @@ pub struct Args {
     /// Do not compare create times (a replay with times shifted to now).
     #[arg(long)]
     pub ignore_create_time: bool,
+    /// Compare each trajectory only over the valid times both files cover (a live
+    /// recording against a rerun of its inputs).
+    #[arg(long)]
+    pub overlap: bool,
 }
 
 /// Alignment rules on the command line.
@@ -77,7 +81,8 @@ fn options(a: &Args) -> anyhow::Result<CompareOptions> {
         .only(a.only.iter().cloned())
         .alignment(alignment)
         .value_tolerance(value)
-        .create_time(!a.ignore_create_time))
+        .create_time(!a.ignore_create_time)
+        .overlap(a.overlap))
 }
 
 /// Compares and prints; a difference is [`Differ`].

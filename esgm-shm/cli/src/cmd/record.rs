@@ -52,6 +52,10 @@ pub struct Args {
     /// only images; the file is smaller).
     #[arg(long)]
     pub no_views: bool,
+    /// Wait for the named trajectories to exist (a replay or a system starting up)
+    /// instead of refusing names that do not exist yet.
+    #[arg(long)]
+    pub wait: bool,
     /// Structures buffered per trajectory before the recorder drops (and counts) one.
     #[arg(long, default_value_t = DEFAULT_BUFFER)]
     pub buffer: usize,
@@ -60,7 +64,18 @@ pub struct Args {
 /// Records until a stop condition, then prints the summary.
 pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
     let esgm = connect(domain)?;
-    let names = select(&esgm.trajectories().into_iter().map(|t| t.name).collect::<Vec<_>>(), a)?;
+    let existing = || esgm.trajectories().into_iter().map(|t| t.name).collect::<Vec<_>>();
+    if a.wait {
+        let give_up = a.duration.map(|d| Instant::now() + d);
+        // Names with patterns wait for one match each; --all for any trajectory.
+        while select(&existing(), a).is_err() {
+            if give_up.is_some_and(|g| Instant::now() >= g) {
+                break;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+    let names = select(&existing(), a)?;
     let options = RecordOptions::default()
         .compression(a.compression)
         .chunk_size(a.chunk_kib.saturating_mul(1024))

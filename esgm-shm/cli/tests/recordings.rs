@@ -1,0 +1,204 @@
+//! Recording a running system end to end, as a new user would: record the tutorial,
+//! `esgm info` it, kill a recorder with -9 and read what it left, rerun the units
+//! deterministically, replay into a fresh domain while recording that, and compare.
+//! Real processes, unique domains, a watchdog on every command.
+
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+const ESGM: &str = env!("CARGO_BIN_EXE_esgm");
+const TUTORIAL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tutorial.toml");
+
+/// Runs `esgm args…`, killing it (and failing) after `limit`; returns exit code and
+/// stdout, stderr.
+fn run(args: &[&str], limit: Duration) -> (Option<i32>, String, String) {
+    let child = Command::new(ESGM)
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run esgm");
+    let out = wait_with_limit(child, limit, args);
+    (out.status.code(), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
+}
+
+fn wait_with_limit(mut child: Child, limit: Duration, args: &[&str]) -> std::process::Output {
+    let deadline = Instant::now() + limit;
+    while child.try_wait().unwrap().is_none() {
+        if Instant::now() > deadline {
+            child.kill().unwrap();
+            child.wait().unwrap();
+            panic!("`esgm {}` did not finish within {limit:?}", args.join(" "));
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.wait_with_output().unwrap()
+}
+
+fn ok(args: &[&str], limit: Duration) -> String {
+    let (code, out, err) = run(args, limit);
+    assert_eq!(code, Some(0), "`esgm {}` failed:\n{out}\n{err}", args.join(" "));
+    out
+}
+
+fn info(path: &Path) -> serde_json::Value {
+    let out = ok(&["--json", "info", path.to_str().unwrap()], Duration::from_secs(60));
+    serde_json::from_str(&out).expect("info --json is JSON")
+}
+
+fn count(info: &serde_json::Value, trajectory: &str) -> u64 {
+    info["trajectories"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|t| t["name"] == trajectory)
+        .unwrap_or_else(|| panic!("no `{trajectory}` in {info:#}"))["count"]
+        .as_u64()
+        .unwrap()
+}
+
+/// Stops a domain's system when the test ends, also when it fails.
+struct Down(String);
+
+impl Drop for Down {
+    fn drop(&mut self) {
+        let status = Command::new(ESGM).args(["--domain", &self.0, "down"]).stdout(Stdio::null()).stderr(Stdio::null()).status();
+        if let Err(e) = status {
+            eprintln!("cannot stop `{}`: {e}", self.0);
+        }
+    }
+}
+
+#[test]
+fn record_info_kill_rerun_replay_and_compare_the_tutorial() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = |name: &str| dir.path().join(name);
+    let path = |name: &str| file(name).display().to_string();
+    let long = Duration::from_secs(120);
+
+    // The tutorial, running.
+    let a = esgm_shm::unique_domain("rec-a");
+    ok(&["--domain", &a, "up", "--detach"], long);
+    let _down_a = Down(a.clone());
+    ok(&["--domain", &a, "apply", TUTORIAL], long);
+    ok(&["--domain", &a, "echo", "driving_direction", "--count", "3", "--seconds", "60"], long);
+
+    // Record it: nothing missed, everything in the file.
+    let out = ok(&["--domain", &a, "record", "--all", "-o", &path("live.mcap"), "--duration", "4s"], long);
+    assert!(out.contains("nothing missed"), "{out}");
+    let live = info(&file("live.mcap"));
+    assert_eq!(live["complete"], true, "{live:#}");
+    assert!(count(&live, "images") >= 8, "{live:#}");
+    assert!(count(&live, "robot_state") >= 20, "{live:#}");
+    assert!(count(&live, "driving_direction") >= 10, "{live:#}");
+    for t in live["trajectories"].as_array().unwrap() {
+        assert_eq!(t["losses"], serde_json::json!({}), "{t:#}");
+    }
+
+    // A recorder killed with -9 loses at most its flush interval.
+    let mut killed = Command::new(ESGM)
+        .args(["--domain", &a, "record", "--all", "-o", &path("killed.mcap"), "--flush", "500ms"])
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // Wait until it has flushed a few seconds' worth, then kill it mid-stream.
+    let deadline = Instant::now() + long;
+    let flushed = loop {
+        assert!(Instant::now() < deadline, "the recorder flushed nothing within {long:?}");
+        std::thread::sleep(Duration::from_millis(500));
+        if file("killed.mcap").exists() {
+            let (code, out, _) = run(&["--json", "info", &path("killed.mcap")], long);
+            if code == Some(0) {
+                let partial: serde_json::Value = serde_json::from_str(&out).unwrap();
+                if partial["trajectories"].as_array().is_some_and(|t| t.len() == 5) && count(&partial, "images") >= 6 {
+                    break count(&partial, "robot_state");
+                }
+            }
+        }
+    };
+    std::thread::sleep(Duration::from_secs(1));
+    let killed_at = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_nanos() as i64;
+    killed.kill().unwrap(); // SIGKILL
+    killed.wait().unwrap();
+    let cut = info(&file("killed.mcap"));
+    assert_eq!(cut["complete"], false, "{cut:#}");
+    assert!(cut["damage"]["reason"].as_str().unwrap().contains("summary"), "{cut:#}");
+    assert!(count(&cut, "robot_state") >= flushed, "what was flushed stays readable: {cut:#}");
+    // At most the flush interval (500 ms) is lost, plus a robot period and the
+    // scheduling slack of a loaded 2-core machine.
+    let last = cut["end_valid_time"].as_i64().unwrap();
+    assert!(killed_at - last < 2_000_000_000, "{} ms lost: {cut:#}", (killed_at - last) / 1_000_000);
+
+    // The units rerun on the recorded inputs, deterministically.
+    for out in ["rerun1.mcap", "rerun2.mcap"] {
+        ok(&["replay", &path("live.mcap"), "--in-process", "--config", TUTORIAL, "--record", &path(out)], long);
+    }
+    let (one, two) = (std::fs::read(file("rerun1.mcap")).unwrap(), std::fs::read(file("rerun2.mcap")).unwrap());
+    assert!(one == two, "two reruns of one recording wrote different files");
+    let rerun = info(&file("rerun1.mcap"));
+    assert_eq!(count(&rerun, "blobs"), count(&live, "images"), "one BlobSeq per recorded image: {rerun:#}");
+    // The single-input stages computed again equal what the live system computed
+    // (over the valid times both cover; create times are when each ran).
+    let (code, out, err) = run(
+        &[
+            "compare",
+            &path("live.mcap"),
+            &path("rerun1.mcap"),
+            "--only",
+            "blobs",
+            "current_blob",
+            "--ignore-create-time",
+            "--overlap",
+        ],
+        long,
+    );
+    assert_eq!(code, Some(0), "the rerun's blobs differ from the live ones:\n{out}\n{err}");
+
+    // Replay into a fresh domain while recording it there; the two recordings match.
+    let b = esgm_shm::unique_domain("rec-b");
+    ok(&["--domain", &b, "up", "--detach"], long);
+    let _down_b = Down(b.clone());
+    let recorder = Command::new(ESGM)
+        .args(["--domain", &b, "record", "robot_state", "images", "--wait", "-o", &path("replayed.mcap")])
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let replay = ok(
+        &["--domain", &b, "replay", &path("live.mcap"), "--keep-times", "--rate", "4", "--only", "robot_state", "images"],
+        long,
+    );
+    assert!(replay.contains("created `images`"), "{replay}");
+    std::thread::sleep(Duration::from_secs(1));
+    let stop = Command::new("kill").args(["-INT", &recorder.id().to_string()]).status().unwrap();
+    assert!(stop.success());
+    let recorded = wait_with_limit(recorder, long, &["record"]);
+    let said = String::from_utf8_lossy(&recorded.stdout);
+    assert!(recorded.status.success(), "{said}\n{}", String::from_utf8_lossy(&recorded.stderr));
+    assert!(said.contains("nothing missed"), "{said}");
+    let (code, out, err) = run(
+        &["compare", &path("live.mcap"), &path("replayed.mcap"), "--only", "robot_state", "images"],
+        long,
+    );
+    assert_eq!(code, Some(0), "the replayed recording differs:\n{out}\n{err}");
+    let replayed = info(&file("replayed.mcap"));
+    assert_eq!(count(&replayed, "images"), count(&live, "images"));
+    assert_eq!(count(&replayed, "robot_state"), count(&live, "robot_state"));
+
+    // A damaged file is named with its position.
+    let mut bytes = std::fs::read(file("live.mcap")).unwrap();
+    bytes.truncate(bytes.len() / 2);
+    std::fs::write(file("half.mcap"), bytes).unwrap();
+    let half = info(&file("half.mcap"));
+    assert!(half["damage"]["position"].as_u64().unwrap() > 0, "{half:#}");
+    let (code, _, err) = run(&["info", "/nonexistent/recording.mcap"], long);
+    assert_eq!(code, Some(1));
+    assert!(err.contains("/nonexistent/recording.mcap"), "{err}");
+}
