@@ -80,6 +80,8 @@ enum Command {
     Record(cmd::record::Args),
     /// What a recording holds: duration, trajectories, counts, rates, losses.
     Info(cmd::info::Args),
+    /// Publish a recording into the domain again, or rerun it deterministically here.
+    Replay(cmd::replay::Args),
     /// Compare two recordings by valid time; exits 1 when they differ.
     Compare(cmd::compare::Args),
     /// Make a recording's trajectories queryable in the domain.

@@ -13,6 +13,7 @@ pub mod ps;
 pub mod query;
 pub mod record;
 pub mod registry;
+pub mod replay;
 pub mod stats;
 pub mod supervise;
 pub mod traj;
@@ -59,6 +60,7 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Violations(a) => violations::run(domain, json, a),
         Command::Record(a) => record::run(domain, json, a),
         Command::Info(a) => info::run(json, a),
+        Command::Replay(a) => replay::run(domain, json, a),
         Command::Compare(a) => compare::run(json, a),
         Command::Load(a) => load::run(domain, json, a),
         Command::Worker(role) => worker::run(domain, role),
