@@ -24,12 +24,8 @@ use anyhow::{Context, bail};
 use camera_publisher::{CameraSensor, FrameSource, SyntheticScene};
 use cu_workers::{DrivingDirectionUnit, register_tutorial_units};
 use esgm_core::library::{Blob, DrivingDirection, RobotState};
-use esgm_core::time::millis;
-use esgm_core::{
-    Entity, EntityTrajectoryStructure, Esgm, FluentStreamPolicy, InProcessEsgm, SharedClock,
-    SubscribeOptions, TIMEUNITS_PER_MILLI_SECOND, TIMEUNITS_PER_SECOND, Time, TrajectorySpec,
-    ValueApproximation,
-};
+use esgm_core::prelude::*;
+use esgm_core::{SharedClock, TIMEUNITS_PER_MILLI_SECOND, TIMEUNITS_PER_SECOND};
 use robot_publisher::RobotPublisher;
 
 const USAGE: &str =
@@ -363,9 +359,10 @@ fn print_stats(esgm: &impl Esgm) {
         "failed"
     );
     for name in PIPELINE {
-        let Some((info, s, w)) = stats.trajectories.iter().find(|(i, _, _)| i.name == name) else {
+        let Some(report) = stats.get(name) else {
             continue;
         };
+        let (info, s, w) = (&report.info, &report.stats, &report.worker);
         let worker = |n: u64| if info.source.is_some() { n.to_string() } else { "-".to_owned() };
         println!(
             "  {:<18} {:>6} {:>8} {:>7} {:>11} {:>11} {:>6} {:>9} {:>7}",

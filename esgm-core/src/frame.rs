@@ -174,9 +174,43 @@ pub struct EntityStructure {
 }
 
 impl EntityStructure {
-    /// A structure with no attributes yet.
+    /// A structure with no attributes yet (the seed's argument order: valid time, then
+    /// create time). [`EntityStructure::named`] names both times instead.
     pub fn new(name: impl Into<String>, valid_time: Time, create_time: Time) -> Self {
         Self { name: name.into(), valid_time, create_time, attributes: Vec::new() }
+    }
+
+    /// A structure with no attributes and both times 0, to be given its times by name:
+    ///
+    /// ```
+    /// use esgm_core::{EntityStructure, secs};
+    /// let es = EntityStructure::named("robot").valid_at(secs(2)).created_at(secs(3)).with("x", 1.0);
+    /// assert_eq!((es.valid_time, es.create_time), (secs(2), secs(3)));
+    /// let same = EntityStructure::named("robot").at(secs(2));
+    /// assert_eq!((same.valid_time, same.create_time), (secs(2), secs(2)));
+    /// ```
+    pub fn named(name: impl Into<String>) -> Self {
+        Self::new(name, 0, 0)
+    }
+
+    /// Builder form: the valid time (when the content is true of the world).
+    #[must_use]
+    pub fn valid_at(mut self, valid_time: Time) -> Self {
+        self.valid_time = valid_time;
+        self
+    }
+
+    /// Builder form: the create time (when the content was made).
+    #[must_use]
+    pub fn created_at(mut self, create_time: Time) -> Self {
+        self.create_time = create_time;
+        self
+    }
+
+    /// Builder form: valid and created at `t` (a measurement stamped when taken).
+    #[must_use]
+    pub fn at(self, t: Time) -> Self {
+        self.valid_at(t).created_at(t)
     }
 
     /// A structure from a frame and its two times.

@@ -42,6 +42,7 @@ pub mod octets;
 pub mod operators;
 pub mod pixel_buffer;
 pub mod policy;
+pub mod prelude;
 pub mod runtime;
 pub mod sample;
 pub mod store;

@@ -117,6 +117,8 @@ pub use data_plane::{
 };
 // What connected processes hold in shared memory, with its old path.
 pub use client::holdings;
+// `use esgm_shm::prelude::*;`: connect, ShmEsgm and esgm_core's prelude.
+pub use client::prelude;
 
 pub use holdings::HoldingStats;
 pub use image_layout::ImageError;

@@ -20,7 +20,7 @@ mod spec;
 
 pub use errors::{CreateError, InputType, LookupError, RegistrationError};
 pub use interfaces::{CompUnit, ComputeError, SensorError, SensorInterface};
-pub use report::{EsgmStats, LogLevel, MemoryStats, TrajectoryInfo, WorkerStats};
+pub use report::{EsgmStats, LogLevel, MemoryStats, TrajectoryInfo, TrajectoryReport, WorkerStats};
 pub use spec::{TrajectoryKind, TrajectorySource, TrajectorySpec};
 
 use std::sync::Arc;
@@ -56,6 +56,13 @@ pub trait EntityTrajectoryStructure: Clone + Send + Sync + std::fmt::Debug {
 
     /// T1: the latest sample added.
     fn get_latest(&self) -> Result<Sample, QueryError>;
+    /// T1: the most current value (the seed's `get_latest_vtime`): the sample with the
+    /// latest *valid* time, which is not the last one added when structures arrive
+    /// out of order (then [`EntityTrajectoryStructure::get_latest`] differs). Of
+    /// several samples valid at that time, the one added last.
+    fn get_latest_vtime(&self) -> Result<Sample, QueryError> {
+        self.get_closest_at_or_before(Time::MAX)
+    }
     /// T1: the `n`-th latest sample (0 = latest).
     fn get_nth_latest(&self, n: usize) -> Result<Sample, QueryError>;
     /// T1: samples with valid time in `[from, to]`, by valid time.
@@ -128,6 +135,21 @@ pub trait Esgm: Send + Sync {
         type_name: &str,
         entity_type: EntityStructureType,
     ) -> Result<(), TypeRegistryError>;
+    /// E1 without repeating the name: registers `entity_type` under its own name
+    /// ([`EntityStructureType::name`]). The IDL form,
+    /// [`Esgm::create_entity_structure_type`], stays for a registered name that
+    /// differs from the type's.
+    fn create_type(&self, entity_type: EntityStructureType) -> Result<(), TypeRegistryError> {
+        let name = entity_type.name.clone();
+        self.create_entity_structure_type(&name, entity_type)
+    }
+    /// E1: registers the type a `#[derive(Entity)]` struct declares, under its name.
+    fn create_type_of<T: crate::entity::Entity>(&self) -> Result<(), TypeRegistryError>
+    where
+        Self: Sized,
+    {
+        self.create_entity_structure_type(T::TYPE_NAME, T::entity_structure_type())
+    }
     /// E1: removes a type (existing trajectories keep theirs).
     fn destroy_entity_structure_type(&self, type_name: &str) -> Result<(), TypeRegistryError>;
     /// E1: a registered type.

@@ -48,11 +48,32 @@ pub struct WorkerStats {
     pub input_overflow: u64,
 }
 
-/// Statistics of the whole ESGM.
+/// One trajectory in [`EsgmStats`]: its listing, its store's statistics and its
+/// worker's counters.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TrajectoryReport {
+    /// The trajectory as listed (kind, type, source, inputs, policy).
+    pub info: TrajectoryInfo,
+    /// Its store's statistics (added, dropped and why, stored, subscribers, delays).
+    pub stats: TrajectoryStats,
+    /// The counters of the worker feeding it (zero for a primitive trajectory or a
+    /// replica, whose worker runs in the writing process).
+    pub worker: WorkerStats,
+}
+
+/// Statistics of the whole ESGM: every trajectory by name (`stats.trajectories["r"]`,
+/// or [`EsgmStats::get`] where the name may be missing).
+#[derive(Debug, Clone, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EsgmStats {
-    /// Per trajectory: its listing, its store's stats, its worker's.
-    pub trajectories: Vec<(TrajectoryInfo, TrajectoryStats, WorkerStats)>,
+    /// Per trajectory name: its listing, its store's stats, its worker's.
+    pub trajectories: std::collections::BTreeMap<String, TrajectoryReport>,
+}
+
+impl EsgmStats {
+    /// The report of the trajectory called `name`, if there is one.
+    pub fn get(&self, name: &str) -> Option<&TrajectoryReport> {
+        self.trajectories.get(name)
+    }
 }
 
 /// Memory held by the ESGM's trajectories.

@@ -109,6 +109,9 @@ impl EntityTrajectoryStructure for InProcessTrajectory {
     fn get_latest(&self) -> Result<Sample, QueryError> {
         self.query(|s| s.get_latest())
     }
+    fn get_latest_vtime(&self) -> Result<Sample, QueryError> {
+        self.query(|s| s.get_latest_vtime())
+    }
     fn get_nth_latest(&self, n: usize) -> Result<Sample, QueryError> {
         self.query(|s| s.get_nth_latest(n))
     }

@@ -30,8 +30,8 @@ use crate::catalog::Catalog;
 use crate::clock::{SharedClock, SystemClock};
 use crate::esgm::{
     CompUnit, CreateError, Esgm, EsgmStats, InputType, LogLevel, LookupError, MemoryStats,
-    RegistrationError, SensorInterface, TrajectoryInfo, TrajectoryKind, TrajectorySource,
-    TrajectorySpec,
+    RegistrationError, SensorInterface, TrajectoryInfo, TrajectoryKind, TrajectoryReport,
+    TrajectorySource, TrajectorySpec,
 };
 use crate::sample::Sample;
 use crate::store::{FanIn, TrajectoryStore};
@@ -533,7 +533,14 @@ impl Esgm for InProcessEsgm {
                 .inner
                 .cells()
                 .iter()
-                .map(|c| (c.info.clone(), c.store.lock().stats(), c.counters.snapshot()))
+                .map(|c| {
+                    let report = TrajectoryReport {
+                        info: c.info.clone(),
+                        stats: c.store.lock().stats(),
+                        worker: c.counters.snapshot(),
+                    };
+                    (c.info.name.clone(), report)
+                })
                 .collect(),
         }
     }

@@ -103,6 +103,16 @@ impl TrajectoryStore {
         })
     }
 
+    /// The most current value (the seed's `get_latest_vtime`): the sample with the
+    /// latest valid time (of several, the one added last).
+    pub fn get_latest_vtime(&self) -> Result<Sample, QueryError> {
+        let now = self.clock.now();
+        self.history
+            .at_or_before(Time::MAX)
+            .map(|e| self.sample_of(e, now))
+            .ok_or_else(|| self.not_available("get_latest_vtime: the trajectory is empty"))
+    }
+
     /// The value at `t`, approximated by `aprx` when no sample is valid exactly at `t`.
     /// Interpolated and default values are new structures valid at `t` and created at
     /// the query time.

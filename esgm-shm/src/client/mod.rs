@@ -66,6 +66,7 @@ mod image_loans;
 mod import;
 mod location;
 mod mirrors;
+pub mod prelude;
 mod receiver;
 mod settings;
 mod shared_node;

@@ -272,9 +272,7 @@ pub fn stats_memory_ping_reset_log_level<H: Harness>(h: &H) {
     img.add(image.to_structure("i", h.now(), h.now())).unwrap();
     img.add(image.to_structure("i", h.now() + 1, h.now())).unwrap();
     assert!(e.ping());
-    let stats = e.stats();
-    let r = stats.trajectories.iter().find(|(i, _, _)| i.name == "r").unwrap();
-    assert_eq!(r.1.added, 10);
+    assert_eq!(e.stats().trajectories["r"].stats.added, 10);
     let m = e.memory_stats();
     assert_eq!((m.trajectories, m.stored_samples), (2, 12));
     assert!(m.approx_bytes >= 64 * 1024 && m.approx_bytes < 2 * 64 * 1024, "{}", m.approx_bytes);
@@ -283,9 +281,7 @@ pub fn stats_memory_ping_reset_log_level<H: Harness>(h: &H) {
     wait_visible(&img, &img_seen);
     assert!(h.reader().ping());
     assert_eq!(t_seen.stats().unwrap().added, 10);
-    let stats = h.reader().stats();
-    let r = stats.trajectories.iter().find(|(i, _, _)| i.name == "r").unwrap();
-    assert_eq!(r.1.added, 10);
+    assert_eq!(h.reader().stats().trajectories["r"].stats.added, 10);
     assert_eq!(h.reader().memory_stats().stored_samples, 12);
     e.reset();
     assert_eq!(e.memory_stats().stored_samples, 0);

@@ -12,6 +12,7 @@
 //! writer's own outcome (an error returned by an add) check it on the writer's handle
 //! and what the reader sees of it as well.
 
+pub mod api;
 pub mod computed;
 pub mod lifecycle;
 pub mod operators;
@@ -105,6 +106,8 @@ pub fn wait_stored<T: EntityTrajectoryStructure>(t: &T, n: usize) {
 macro_rules! conformance_tests {
     ($runtime:ident, $make:expr) => {
         $crate::conformance_tests!(@each $runtime, $make;
+            api::get_latest_vtime_is_the_most_current,
+            api::types_structures_and_stats_by_name,
             primitive::types_create_get_destroy,
             primitive::primitive_add_and_query,
             primitive::primitive_policy_is_enforced,

@@ -41,14 +41,7 @@ pub fn sync_exact<H: Harness>(h: &H) {
     assert_eq!(s.entity_type().unwrap(), w.entity_type().unwrap(), "the synthesized type");
     wait_visible(&w, &s);
     // a@10 and b@15 never found a partner: counted, not lost silently.
-    let discarded = || {
-        h.esgm()
-            .stats()
-            .trajectories
-            .into_iter()
-            .find(|(i, _, _)| i.name == "ab")
-            .map(|(_, _, w)| w.discarded)
-    };
+    let discarded = || h.esgm().stats().get("ab").map(|r| r.worker.discarded);
     assert!(wait_for(WAIT, || discarded() == Some(2)), "discarded {:?}", discarded());
 }
 
@@ -230,13 +223,7 @@ pub fn sampled_temporal_function<H: Harness>(h: &H) {
         )
         .unwrap();
     // A unit without compute_at: every tick is a counted failure, nothing is stored.
-    let failures = || {
-        e.stats()
-            .trajectories
-            .into_iter()
-            .find(|(i, _, _)| i.name == "g")
-            .map(|(_, _, w)| w.failures)
-    };
+    let failures = || e.stats().get("g").map(|r| r.worker.failures);
     // Both samplers must take each tick before the clock moves on (a late sampler
     // skips a period, as it should).
     wait_stored(&f, 1);
