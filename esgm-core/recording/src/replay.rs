@@ -112,7 +112,7 @@ pub enum ReplayError {
     #[error(transparent)]
     Read(#[from] ReadError),
     /// A recorded type differs from the domain's type of that name.
-    #[error("type `{type_name}` differs from the recording's: {detail}; nothing was published")]
+    #[error("the domain's {detail}; nothing was published")]
     TypeMismatch {
         /// The type.
         type_name: String,
@@ -195,7 +195,7 @@ pub fn check_and_register_types<E: Esgm>(
                 {
                     return Err(ReplayError::TypeMismatch {
                         type_name: name.clone(),
-                        detail: d.detail,
+                        detail: d.to_string(),
                     });
                 }
             }

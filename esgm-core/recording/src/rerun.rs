@@ -145,7 +145,7 @@ pub fn rerun(
                 {
                     return Err(ReplayError::TypeMismatch {
                         type_name: name.clone(),
-                        detail: d.detail,
+                        detail: d.to_string(),
                     }
                     .into());
                 }

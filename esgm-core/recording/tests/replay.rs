@@ -1,0 +1,244 @@
+//! Replay into a running ESGM and deterministic reruns, in process.
+
+#![allow(clippy::expect_used, clippy::unwrap_used, clippy::panic)] // a failure is a failed test
+
+use std::path::Path;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use esgm_core::esgm::{TrajectoryInfo, TrajectoryKind};
+use esgm_core::library::RobotState;
+use esgm_core::{
+    CompUnit, ComputeError, Entity, EntityStructure, EntityStructureType,
+    EntityTrajectoryStructure, Esgm, FluentStreamPolicy, InProcessEsgm, InputType, Sample, Time,
+    TrajectorySpec, ValueSort,
+};
+use esgm_recording::replay::{ReplayOptions, replay};
+use esgm_recording::{
+    Pace, RecordOptions, Recording, RecordingWriter, ReplayError, RerunPlan, RerunUnit, TimeMode,
+    TypeSchema, rerun,
+};
+
+fn info(name: &str, type_name: &str) -> TrajectoryInfo {
+    TrajectoryInfo {
+        name: name.into(),
+        kind: TrajectoryKind::Primitive,
+        type_name: type_name.into(),
+        source: None,
+        inputs: vec![],
+        policy: FluentStreamPolicy::default(),
+    }
+}
+
+fn pose_type(sort: ValueSort) -> EntityStructureType {
+    EntityStructureType::new("Marker").attr("x", sort)
+}
+
+/// A recording of `robot_state` (10 structures) and `pose` (10), interleaved.
+fn record(path: &Path) {
+    let mut w = RecordingWriter::create(path, RecordOptions::default()).unwrap();
+    let r = w
+        .add_trajectory(
+            info("robot_state", "RobotState"),
+            TypeSchema::collect(RobotState::entity_structure_type(), &|_| None),
+        )
+        .unwrap();
+    let p = w
+        .add_trajectory(
+            info("pose", "Marker"),
+            TypeSchema::collect(pose_type(ValueSort::Double), &|_| None),
+        )
+        .unwrap();
+    for i in 0..10_i64 {
+        let t = 1_000_000 + i * 1_000;
+        let rs = RobotState { x: i as f64, y: 0.0, dir: 0.0 }.to_structure("robot", t, t);
+        w.write(r, &rs, t + 10, t + 20).unwrap();
+        let pose = EntityStructure::new("pose", t + 5, t + 5).with("x", i as f64 * 2.0);
+        w.write(p, &pose, t + 15, t + 25).unwrap();
+    }
+    w.finish().unwrap();
+}
+
+#[test]
+fn a_replay_publishes_every_recorded_structure_in_add_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("in.mcap");
+    record(&path);
+    let rec = Recording::open(&path).unwrap();
+    let esgm = InProcessEsgm::default();
+    let options =
+        ReplayOptions { pace: Pace::Max, times: TimeMode::Keep, ..ReplayOptions::default() };
+    let report = replay(&esgm, &rec, &options, &AtomicBool::new(false)).unwrap();
+    assert_eq!(report.published["robot_state"].added, 10, "{report:?}");
+    assert_eq!(report.published["pose"].added, 10, "{report:?}");
+    assert_eq!(report.created.len(), 2);
+    let t = esgm.get_entity_trajectory_structure("pose").unwrap();
+    let all = t.get_between(0, Time::MAX).unwrap();
+    assert_eq!(all.len(), 10);
+    assert_eq!(all[3].structure.get("x").and_then(|v| v.as_double()), Some(6.0));
+    assert_eq!(all[3].structure.valid_time, 1_003_005, "times kept");
+}
+
+#[test]
+fn shifted_times_keep_their_spacing_and_start_now() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("in.mcap");
+    record(&path);
+    let rec = Recording::open(&path).unwrap();
+    let esgm = InProcessEsgm::default();
+    let options = ReplayOptions {
+        pace: Pace::Max,
+        only: Some(vec!["robot_state".into()]),
+        ..ReplayOptions::default()
+    };
+    let before = esgm_core::Clock::now(&esgm_core::SystemClock);
+    let report = replay(&esgm, &rec, &options, &AtomicBool::new(false)).unwrap();
+    assert!(!report.published.contains_key("pose"), "--only");
+    let all = esgm
+        .get_entity_trajectory_structure("robot_state")
+        .unwrap()
+        .get_between(0, Time::MAX)
+        .unwrap();
+    assert_eq!(all.len(), 10);
+    assert!(all[0].structure.valid_time >= before, "shifted to now");
+    assert_eq!(all[9].structure.valid_time - all[0].structure.valid_time, 9_000, "spacing kept");
+}
+
+#[test]
+fn a_type_that_differs_is_refused_naming_the_attribute_before_anything_is_published() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("in.mcap");
+    record(&path);
+    let rec = Recording::open(&path).unwrap();
+    let esgm = InProcessEsgm::default();
+    esgm.create_entity_structure_type("Marker", pose_type(ValueSort::Long)).unwrap();
+    let e = replay(
+        &esgm,
+        &rec,
+        &ReplayOptions { pace: Pace::Max, ..ReplayOptions::default() },
+        &AtomicBool::new(false),
+    )
+    .expect_err("a conflicting type");
+    assert!(matches!(e, ReplayError::TypeMismatch { .. }), "{e}");
+    assert!(e.to_string().contains("Marker") && e.to_string().contains("`x`"), "{e}");
+    assert!(esgm.trajectories().is_empty(), "nothing was created");
+}
+
+#[test]
+fn a_computed_trajectory_in_the_domain_is_not_written_over() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("in.mcap");
+    record(&path);
+    let rec = Recording::open(&path).unwrap();
+    let esgm = InProcessEsgm::default();
+    esgm.create_entity_structure_type("Marker", pose_type(ValueSort::Double)).unwrap();
+    esgm.add_comp_unit(
+        "Double",
+        "Marker",
+        vec![InputType::Type("Marker".into())],
+        Arc::new(Doubler),
+    )
+    .unwrap();
+    esgm.create_trajectory(TrajectorySpec::primitive("source", "Marker")).unwrap();
+    esgm.create_trajectory(TrajectorySpec::computed("pose", "Double", ["source"])).unwrap();
+    let e = replay(
+        &esgm,
+        &rec,
+        &ReplayOptions { pace: Pace::Max, ..ReplayOptions::default() },
+        &AtomicBool::new(false),
+    )
+    .expect_err("pose is computed here");
+    assert!(e.to_string().contains("`pose`") && e.to_string().contains("computed"), "{e}");
+}
+
+/// Doubles `x` of its input; the result is valid when its input is.
+struct Doubler;
+
+impl CompUnit for Doubler {
+    fn compute(&self, inputs: &[Sample], qtime: Time) -> Result<EntityStructure, ComputeError> {
+        let x = inputs
+            .first()
+            .and_then(|s| s.get("x"))
+            .and_then(|v| v.as_double())
+            .ok_or(ComputeError::ValueNotAvailable)?;
+        Ok(EntityStructure::new("doubled", inputs[0].valid_time, qtime).with("x", x * 2.0))
+    }
+}
+
+/// Adds the robot's x to the pose's x: two inputs, so the result depends on which
+/// input's update came last.
+struct Sum;
+
+impl CompUnit for Sum {
+    fn compute(&self, inputs: &[Sample], qtime: Time) -> Result<EntityStructure, ComputeError> {
+        let x = |s: &Sample| {
+            s.get("x").and_then(|v| v.as_double()).ok_or(ComputeError::ValueNotAvailable)
+        };
+        let valid = inputs[0].valid_time.max(inputs[1].valid_time);
+        Ok(EntityStructure::new("sum", valid, qtime).with("x", x(&inputs[0])? + x(&inputs[1])?))
+    }
+}
+
+#[test]
+fn a_rerun_is_deterministic_and_runs_units_as_the_runtime_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("in.mcap");
+    record(&path);
+    let rec = Recording::open(&path).unwrap();
+    let plan = RerunPlan {
+        types: vec![("Marker".into(), pose_type(ValueSort::Double))],
+        units: vec![
+            RerunUnit {
+                name: "Double".into(),
+                output_type: "Marker".into(),
+                inputs: vec![InputType::Type("Marker".into())],
+                unit: Arc::new(Doubler),
+            },
+            RerunUnit {
+                name: "Sum".into(),
+                output_type: "Marker".into(),
+                inputs: vec![
+                    InputType::Type("RobotState".into()),
+                    InputType::Type("Marker".into()),
+                ],
+                unit: Arc::new(Sum),
+            },
+        ],
+        trajectories: vec![
+            TrajectorySpec::primitive("robot_state", "RobotState"),
+            TrajectorySpec::primitive("pose", "Marker"),
+            TrajectorySpec::computed("doubled", "Double", ["pose"]),
+            TrajectorySpec::computed("sum", "Sum", ["robot_state", "doubled"]),
+        ],
+    };
+    let run = |out: &str| {
+        let out = dir.path().join(out);
+        let writer = RecordingWriter::create(
+            &out,
+            RecordOptions::default().flush_interval(std::time::Duration::MAX),
+        )
+        .unwrap();
+        let report = rerun(&rec, &plan, Some(writer)).unwrap();
+        (report, std::fs::read(&out).unwrap(), out)
+    };
+    let (report, first, out) = run("a.mcap");
+    let (_, second, _) = run("b.mcap");
+    assert!(first == second, "the same rerun wrote different bytes");
+    assert_eq!(report.trajectories["doubled"].added, 10);
+    // Add order: r0 p0 r1 p1 …; `sum` runs on every update once both inputs have one:
+    // p0 (doubled 0) completes it, then r1, d1, r2, d2, … : 1 + 2 × 9 calls.
+    assert_eq!(report.trajectories["sum"].calls, 19, "{report:?}");
+    let rerun = Recording::open(&out).unwrap();
+    let sums: Vec<f64> = rerun
+        .samples()
+        .unwrap()
+        .map(Result::unwrap)
+        .filter(|s| rerun.trajectories[s.trajectory].info.name == "sum")
+        .map(|s| s.structure.get("x").and_then(|v| v.as_double()).unwrap())
+        .collect();
+    // After r_i: r_i + d_(i-1) = i + 4(i-1); after d_i: i + 4i.
+    assert_eq!(&sums[..5], &[0.0, 1.0, 5.0, 6.0, 10.0], "{sums:?}");
+    let doubled = rerun.trajectory("doubled").unwrap();
+    assert_eq!(doubled.info.kind, TrajectoryKind::Computed);
+    assert_eq!(doubled.info.inputs, vec!["pose".to_string()]);
+}
