@@ -111,13 +111,17 @@ pub struct RerunCounts {
     pub failures: u64,
 }
 
+/// A computed trajectory's unit, its inputs (node indexes) and each input's latest
+/// sample (the runtime's unit worker keeps the same).
+type Computing = (Arc<dyn CompUnit>, Vec<usize>, Vec<Option<Sample>>);
+
 /// One trajectory of the rerun.
 struct Node {
     info: TrajectoryInfo,
     handle: InProcessTrajectory,
     updates: Subscription<Sample>,
-    /// For computed ones: the unit, its inputs (node indexes) and their latest samples.
-    unit: Option<(Arc<dyn CompUnit>, Vec<usize>, Vec<Option<Sample>>)>,
+    /// For computed ones: the unit, its inputs and their latest samples.
+    unit: Option<Computing>,
     counts: RerunCounts,
     written: Option<crate::writer::TrajectoryId>,
 }
@@ -302,6 +306,7 @@ fn propagate(
             if let (Some(w), Some(id)) = (out.as_mut(), nodes[i].written) {
                 w.write(id, &update.structure, update.add_time, clock.now())?;
             }
+            #[allow(clippy::needless_range_loop)] // `offer` below needs `nodes[d]` mutably
             for d in 0..nodes.len() {
                 let Some((unit, inputs, latest)) = nodes[d].unit.as_mut() else { continue };
                 let mut touched = false;
