@@ -5,6 +5,10 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+/// The independent reader (PyPI's `mcap`), shared with the recording crate's tests.
+#[path = "../../../esgm-core/recording/tests/common/python.rs"]
+mod python;
+
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -23,7 +27,11 @@ fn run(args: &[&str], limit: Duration) -> (Option<i32>, String, String) {
         .spawn()
         .expect("run esgm");
     let out = wait_with_limit(child, limit, args);
-    (out.status.code(), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
 }
 
 fn wait_with_limit(mut child: Child, limit: Duration, args: &[&str]) -> std::process::Output {
@@ -66,7 +74,11 @@ struct Down(String);
 
 impl Drop for Down {
     fn drop(&mut self) {
-        let status = Command::new(ESGM).args(["--domain", &self.0, "down"]).stdout(Stdio::null()).stderr(Stdio::null()).status();
+        let status = Command::new(ESGM)
+            .args(["--domain", &self.0, "down"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .status();
         if let Err(e) = status {
             eprintln!("cannot stop `{}`: {e}", self.0);
         }
@@ -88,7 +100,10 @@ fn record_info_kill_rerun_replay_and_compare_the_tutorial() {
     ok(&["--domain", &a, "echo", "driving_direction", "--count", "3", "--seconds", "60"], long);
 
     // Record it: nothing missed, everything in the file.
-    let out = ok(&["--domain", &a, "record", "--all", "-o", &path("live.mcap"), "--duration", "4s"], long);
+    let out = ok(
+        &["--domain", &a, "record", "--all", "-o", &path("live.mcap"), "--duration", "4s"],
+        long,
+    );
     assert!(out.contains("nothing missed"), "{out}");
     let live = info(&file("live.mcap"));
     assert_eq!(live["complete"], true, "{live:#}");
@@ -98,6 +113,22 @@ fn record_info_kill_rerun_replay_and_compare_the_tutorial() {
     for t in live["trajectories"].as_array().unwrap() {
         assert_eq!(t["losses"], serde_json::json!({}), "{t:#}");
     }
+    // Foxglove's reader reads all of it: every message, an image, a structure.
+    let foxglove = python::independent_reader(&file("live.mcap"));
+    for name in ["images", "robot_state", "blobs", "current_blob", "driving_direction"] {
+        assert_eq!(
+            foxglove["messages_per_topic"][name].as_u64(),
+            Some(count(&live, name)),
+            "{name}: {foxglove:#}"
+        );
+        assert_eq!(
+            foxglove["messages_per_topic"][format!("esgm/{name}")].as_u64(),
+            Some(count(&live, name))
+        );
+    }
+    assert_eq!(foxglove["first_image"]["width"], 640, "{foxglove:#}");
+    assert_eq!(foxglove["first_image"]["encoding"], "rgb8", "{foxglove:#}");
+    assert!(foxglove["first_json"]["robot_state"]["x"].is_number(), "{foxglove:#}");
 
     // A recorder killed with -9 loses at most its flush interval.
     let mut killed = Command::new(ESGM)
@@ -116,14 +147,18 @@ fn record_info_kill_rerun_replay_and_compare_the_tutorial() {
             let (code, out, _) = run(&["--json", "info", &path("killed.mcap")], long);
             if code == Some(0) {
                 let partial: serde_json::Value = serde_json::from_str(&out).unwrap();
-                if partial["trajectories"].as_array().is_some_and(|t| t.len() == 5) && count(&partial, "images") >= 6 {
+                if partial["trajectories"].as_array().is_some_and(|t| t.len() == 5)
+                    && count(&partial, "images") >= 6
+                {
                     break count(&partial, "robot_state");
                 }
             }
         }
     };
     std::thread::sleep(Duration::from_secs(1));
-    let killed_at = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_nanos() as i64;
+    let killed_at =
+        std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_nanos()
+            as i64;
     killed.kill().unwrap(); // SIGKILL
     killed.wait().unwrap();
     let cut = info(&file("killed.mcap"));
@@ -133,16 +168,37 @@ fn record_info_kill_rerun_replay_and_compare_the_tutorial() {
     // At most the flush interval (500 ms) is lost, plus a robot period and the
     // scheduling slack of a loaded 2-core machine.
     let last = cut["end_valid_time"].as_i64().unwrap();
-    assert!(killed_at - last < 2_000_000_000, "{} ms lost: {cut:#}", (killed_at - last) / 1_000_000);
+    assert!(
+        killed_at - last < 2_000_000_000,
+        "{} ms lost: {cut:#}",
+        (killed_at - last) / 1_000_000
+    );
 
     // The units rerun on the recorded inputs, deterministically.
     for out in ["rerun1.mcap", "rerun2.mcap"] {
-        ok(&["replay", &path("live.mcap"), "--in-process", "--config", TUTORIAL, "--record", &path(out)], long);
+        ok(
+            &[
+                "replay",
+                &path("live.mcap"),
+                "--in-process",
+                "--config",
+                TUTORIAL,
+                "--record",
+                &path(out),
+            ],
+            long,
+        );
     }
-    let (one, two) = (std::fs::read(file("rerun1.mcap")).unwrap(), std::fs::read(file("rerun2.mcap")).unwrap());
+    let (one, two) =
+        (std::fs::read(file("rerun1.mcap")).unwrap(), std::fs::read(file("rerun2.mcap")).unwrap());
     assert!(one == two, "two reruns of one recording wrote different files");
     let rerun = info(&file("rerun1.mcap"));
-    assert_eq!(count(&rerun, "blobs"), count(&live, "images"), "one BlobSeq per recorded image: {rerun:#}");
+    python::independent_reader(&file("rerun1.mcap"));
+    assert_eq!(
+        count(&rerun, "blobs"),
+        count(&live, "images"),
+        "one BlobSeq per recorded image: {rerun:#}"
+    );
     // The single-input stages computed again equal what the live system computed
     // (over the valid times both cover; create times are when each ran).
     let (code, out, err) = run(
@@ -165,14 +221,34 @@ fn record_info_kill_rerun_replay_and_compare_the_tutorial() {
     ok(&["--domain", &b, "up", "--detach"], long);
     let _down_b = Down(b.clone());
     let recorder = Command::new(ESGM)
-        .args(["--domain", &b, "record", "robot_state", "images", "--wait", "-o", &path("replayed.mcap")])
+        .args([
+            "--domain",
+            &b,
+            "record",
+            "robot_state",
+            "images",
+            "--wait",
+            "-o",
+            &path("replayed.mcap"),
+        ])
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
     let replay = ok(
-        &["--domain", &b, "replay", &path("live.mcap"), "--keep-times", "--rate", "4", "--only", "robot_state", "images"],
+        &[
+            "--domain",
+            &b,
+            "replay",
+            &path("live.mcap"),
+            "--keep-times",
+            "--rate",
+            "4",
+            "--only",
+            "robot_state",
+            "images",
+        ],
         long,
     );
     assert!(replay.contains("created `images`"), "{replay}");
@@ -189,6 +265,7 @@ fn record_info_kill_rerun_replay_and_compare_the_tutorial() {
     );
     assert_eq!(code, Some(0), "the replayed recording differs:\n{out}\n{err}");
     let replayed = info(&file("replayed.mcap"));
+    python::independent_reader(&file("replayed.mcap"));
     assert_eq!(count(&replayed, "images"), count(&live, "images"));
     assert_eq!(count(&replayed, "robot_state"), count(&live, "robot_state"));
 

@@ -19,13 +19,27 @@ use std::sync::OnceLock;
 
 const MARKER: &str = ".esgm-requirements";
 
-fn crate_dir() -> &'static Path {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
+/// The workspace root: the nearest directory above the testing crate whose
+/// `Cargo.toml` declares the workspace (tests of other crates include this file too).
+fn workspace_dir() -> PathBuf {
+    let mut dir = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    loop {
+        let manifest = std::fs::read_to_string(dir.join("Cargo.toml")).unwrap_or_default();
+        if manifest.contains("[workspace]") {
+            return dir;
+        }
+        assert!(dir.pop(), "no workspace above {}", env!("CARGO_MANIFEST_DIR"));
+    }
+}
+
+/// The recording crate, where the reader script lives.
+fn crate_dir() -> PathBuf {
+    workspace_dir().join("esgm-core/recording")
 }
 
 /// `<workspace>/target/py-venv`.
 pub fn venv_dir() -> PathBuf {
-    crate_dir().join("../../target/py-venv")
+    workspace_dir().join("target/py-venv")
 }
 
 fn requirements() -> PathBuf {
