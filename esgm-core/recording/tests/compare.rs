@@ -6,38 +6,20 @@
 
 use std::path::Path;
 
-use esgm_core::esgm::{TrajectoryInfo, TrajectoryKind};
+#[path = "common/fixtures.rs"]
+mod fixtures;
+use fixtures::{primitive as info, robot};
+
+fn image(i: i64) -> EntityStructure {
+    fixtures::image(i, 4, 2)
+}
+
 use esgm_core::library::{Image, RobotState};
-use esgm_core::{Attr, Entity, EntityStructure, FluentStreamPolicy, ValueSort};
+use esgm_core::{Attr, Entity, EntityStructure, ValueSort};
 use esgm_recording::{
     Alignment, CompareError, CompareOptions, Presence, RecordOptions, Recording, RecordingWriter,
     TypeSchema, compare,
 };
-
-fn info(name: &str, type_name: &str) -> TrajectoryInfo {
-    TrajectoryInfo {
-        name: name.into(),
-        kind: TrajectoryKind::Primitive,
-        type_name: type_name.into(),
-        source: None,
-        inputs: vec![],
-        policy: FluentStreamPolicy::default(),
-    }
-}
-
-fn robot(i: i64) -> EntityStructure {
-    RobotState { x: i as f64 * 0.5, y: -(i as f64), dir: 90.0 }.to_structure(
-        "robot",
-        1_000 + i * 100,
-        2_000 + i,
-    )
-}
-
-fn image(i: i64) -> EntityStructure {
-    let pixels: Vec<u8> = (0..4 * 2 * 3).map(|p| (p as i64 * 7 + i) as u8).collect();
-    Image { width: 4, height: 2, format: Image::FORMAT_RGB8, image_data: pixels.into() }
-        .to_structure("camera", 1_000 + i * 250, 1_001 + i * 250)
-}
 
 /// A recording of `robot_state` (robot types `schema`) and `images`, each structure
 /// passed through `edit` first (return `None` to leave it out).

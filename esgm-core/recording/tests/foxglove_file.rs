@@ -4,26 +4,19 @@
 
 #![allow(clippy::expect_used, clippy::unwrap_used, clippy::panic)] // a failure is a failed test
 
+#[path = "common/fixtures.rs"]
+mod fixtures;
 #[path = "common/python.rs"]
 mod python;
 
-use esgm_core::esgm::{TrajectoryInfo, TrajectoryKind};
+use fixtures::info;
+
+use esgm_core::Entity;
+use esgm_core::esgm::TrajectoryKind;
 use esgm_core::library::{Image, RobotState};
-use esgm_core::{Entity, FluentStreamPolicy};
 use esgm_recording::{
     Compression, EventKind, RecordOptions, RecordedEvent, RecordingWriter, TypeSchema,
 };
-
-fn info(name: &str, kind: TrajectoryKind, type_name: &str) -> TrajectoryInfo {
-    TrajectoryInfo {
-        name: name.into(),
-        kind,
-        type_name: type_name.into(),
-        source: None,
-        inputs: vec![],
-        policy: FluentStreamPolicy::default(),
-    }
-}
 
 #[test]
 fn foxglove_reads_images_structures_schemas_and_summary() {

@@ -4,47 +4,19 @@
 #![allow(clippy::expect_used, clippy::unwrap_used, clippy::panic)] // a failure is a failed test
 
 use std::path::Path;
+
+#[path = "common/fixtures.rs"]
+mod fixtures;
+use fixtures::{info, robot, schema_of};
 use std::time::{Duration, Instant};
 
-use esgm_core::esgm::{TrajectoryInfo, TrajectoryKind};
+use esgm_core::esgm::TrajectoryKind;
 use esgm_core::library::{Image, RobotState};
 use esgm_core::{
     Entity, EntityStructure, EntityTrajectoryStructure, Esgm, FluentStreamPolicy, InProcessEsgm,
     OrderConstraint, TrajectorySpec, codec,
 };
-use esgm_recording::{
-    Compression, ReadError, RecordOptions, Recorder, Recording, RecordingWriter, TypeSchema,
-};
-
-fn info(name: &str, kind: TrajectoryKind, type_name: &str) -> TrajectoryInfo {
-    TrajectoryInfo {
-        name: name.into(),
-        kind,
-        type_name: type_name.into(),
-        source: None,
-        inputs: vec![],
-        policy: FluentStreamPolicy::default(),
-    }
-}
-
-fn schema_of<E: Entity>() -> TypeSchema {
-    TypeSchema::collect(E::entity_structure_type(), &|_| None)
-}
-
-fn robot(i: i64) -> EntityStructure {
-    RobotState { x: i as f64 * 0.5, y: -(i as f64), dir: 90.0 }.to_structure(
-        "robot",
-        1_000 + i * 100,
-        2_000 + i,
-    )
-}
-
-fn image(i: i64) -> EntityStructure {
-    let (w, h) = (8, 4);
-    let pixels: Vec<u8> = (0..w * h * 3).map(|p| (p * 7 + i) as u8).collect();
-    Image { width: w, height: h, format: Image::FORMAT_RGB8, image_data: pixels.into() }
-        .to_structure("camera", 1_000 + i * 250, 1_001 + i * 250)
-}
+use esgm_recording::{Compression, ReadError, RecordOptions, Recorder, Recording, RecordingWriter};
 
 /// Writes `n` robot states and `n` images; returns what was written, in order.
 fn write(path: &Path, options: RecordOptions, n: i64) -> Vec<(String, EntityStructure, i64, i64)> {
@@ -60,7 +32,7 @@ fn write(path: &Path, options: RecordOptions, n: i64) -> Vec<(String, EntityStru
         .expect("add");
     let mut written = Vec::new();
     for i in 0..n {
-        let (rs, im) = (robot(i), image(i));
+        let (rs, im) = (robot(i), fixtures::image(i, 8, 4));
         w.write(r, &rs, 5_000 + i, 6_000 + i).expect("write");
         w.write(c, &im, 7_000 + i, 8_000 + i).expect("write");
         written.push(("robot_state".to_owned(), rs, 5_000 + i, 6_000 + i));

@@ -3,32 +3,25 @@
 #![allow(clippy::expect_used, clippy::unwrap_used, clippy::panic)] // a failure is a failed test
 
 use std::path::Path;
+
+#[path = "common/fixtures.rs"]
+mod fixtures;
+use fixtures::primitive as info;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
-use esgm_core::esgm::{TrajectoryInfo, TrajectoryKind};
+use esgm_core::esgm::TrajectoryKind;
 use esgm_core::library::RobotState;
 use esgm_core::{
     CompUnit, ComputeError, Entity, EntityStructure, EntityStructureType,
-    EntityTrajectoryStructure, Esgm, FluentStreamPolicy, InProcessEsgm, InputType, Sample, Time,
-    TrajectorySpec, ValueSort,
+    EntityTrajectoryStructure, Esgm, InProcessEsgm, InputType, Sample, Time, TrajectorySpec,
+    ValueSort,
 };
 use esgm_recording::replay::{ReplayOptions, replay};
 use esgm_recording::{
     Pace, RecordOptions, Recording, RecordingWriter, ReplayError, RerunPlan, RerunUnit, TimeMode,
     TypeSchema, rerun,
 };
-
-fn info(name: &str, type_name: &str) -> TrajectoryInfo {
-    TrajectoryInfo {
-        name: name.into(),
-        kind: TrajectoryKind::Primitive,
-        type_name: type_name.into(),
-        source: None,
-        inputs: vec![],
-        policy: FluentStreamPolicy::default(),
-    }
-}
 
 fn pose_type(sort: ValueSort) -> EntityStructureType {
     EntityStructureType::new("Marker").attr("x", sort)
