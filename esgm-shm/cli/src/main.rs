@@ -7,6 +7,7 @@
 
 mod cmd;
 mod config;
+mod dashboard;
 mod policy_args;
 mod session;
 mod show;
@@ -72,6 +73,8 @@ enum Command {
     Hz(cmd::hz::Args),
     /// Statistics of every trajectory.
     Stats,
+    /// The whole system on one screen, refreshed every second (a dashboard).
+    Top(cmd::top::Args),
     /// The dataflow: sensors, units and trajectories.
     Graph(cmd::graph::Args),
     /// Policy violations of a trajectory as they happen.

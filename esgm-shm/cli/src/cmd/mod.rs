@@ -16,6 +16,7 @@ pub mod registry;
 pub mod replay;
 pub mod stats;
 pub mod supervise;
+pub mod top;
 pub mod traj;
 pub mod types;
 pub mod up;
@@ -56,6 +57,7 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Echo(a) => echo::run(domain, json, a),
         Command::Hz(a) => hz::run(domain, json, a),
         Command::Stats => stats::run(domain, json),
+        Command::Top(a) => top::run(domain, json, a),
         Command::Graph(a) => graph::run(domain, json, a),
         Command::Violations(a) => violations::run(domain, json, a),
         Command::Record(a) => record::run(domain, json, a),
