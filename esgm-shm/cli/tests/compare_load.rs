@@ -5,70 +5,19 @@
 // Test helpers outside #[test] fns: a failed unwrap is a failed test with a message.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use std::io::Read;
 use std::path::Path;
-use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use esgm_core::esgm::{TrajectoryInfo, TrajectoryKind};
 use esgm_core::library::RobotState;
 use esgm_core::{DelayConstraint, Entity, EntityStructure, FluentStreamPolicy, OrderConstraint};
 use esgm_recording::{RecordOptions, RecordingWriter, TypeSchema};
 
-const ESGM: &str = env!("CARGO_BIN_EXE_esgm");
+mod common;
+
+use common::{StopOnDrop, esgm, ok};
+
 const T0: i64 = 1_700_000_000_000_000_000;
-
-struct Output {
-    code: Option<i32>,
-    stdout: String,
-    stderr: String,
-}
-
-/// Runs `esgm args…`, killing it after `limit`.
-fn esgm(args: &[&str], limit: Duration) -> Output {
-    let mut child = Command::new(ESGM)
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("run esgm");
-    let deadline = Instant::now() + limit;
-    let status = loop {
-        if let Some(s) = child.try_wait().unwrap() {
-            break s;
-        }
-        if Instant::now() > deadline {
-            let _ = child.kill();
-            let _ = child.wait();
-            panic!("`esgm {}` did not finish within {limit:?}", args.join(" "));
-        }
-        std::thread::sleep(Duration::from_millis(10));
-    };
-    let (mut stdout, mut stderr) = (String::new(), String::new());
-    child.stdout.take().unwrap().read_to_string(&mut stdout).unwrap();
-    child.stderr.take().unwrap().read_to_string(&mut stderr).unwrap();
-    Output { code: status.code(), stdout, stderr }
-}
-
-fn ok(args: &[&str]) -> String {
-    let o = esgm(args, Duration::from_secs(60));
-    assert_eq!(o.code, Some(0), "`esgm {}` failed:\n{}\n{}", args.join(" "), o.stdout, o.stderr);
-    o.stdout
-}
-
-/// Stops the test's system when the test ends, also when it fails.
-struct StopOnDrop(String);
-
-impl Drop for StopOnDrop {
-    fn drop(&mut self) {
-        let _ = Command::new(ESGM)
-            .args(["--domain", &self.0, "down"])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .status();
-    }
-}
 
 fn robot(i: i64, y: f64) -> EntityStructure {
     let vt = T0 + i * 100_000_000;

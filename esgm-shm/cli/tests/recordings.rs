@@ -10,41 +10,19 @@
 mod python;
 
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-const ESGM: &str = env!("CARGO_BIN_EXE_esgm");
+mod common;
+
+use common::{ESGM, StopOnDrop as Down, esgm, finish};
+
 const TUTORIAL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tutorial.toml");
 
-/// Runs `esgm args…`, killing it (and failing) after `limit`; returns exit code and
-/// stdout, stderr.
+/// Runs `esgm args…` under a watchdog: exit code, stdout, stderr.
 fn run(args: &[&str], limit: Duration) -> (Option<i32>, String, String) {
-    let child = Command::new(ESGM)
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("run esgm");
-    let out = wait_with_limit(child, limit, args);
-    (
-        out.status.code(),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
-}
-
-fn wait_with_limit(mut child: Child, limit: Duration, args: &[&str]) -> std::process::Output {
-    let deadline = Instant::now() + limit;
-    while child.try_wait().unwrap().is_none() {
-        if Instant::now() > deadline {
-            child.kill().unwrap();
-            child.wait().unwrap();
-            panic!("`esgm {}` did not finish within {limit:?}", args.join(" "));
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    child.wait_with_output().unwrap()
+    let o = esgm(args, limit);
+    (o.code, o.stdout, o.stderr)
 }
 
 fn ok(args: &[&str], limit: Duration) -> String {
@@ -67,22 +45,6 @@ fn count(info: &serde_json::Value, trajectory: &str) -> u64 {
         .unwrap_or_else(|| panic!("no `{trajectory}` in {info:#}"))["count"]
         .as_u64()
         .unwrap()
-}
-
-/// Stops a domain's system when the test ends, also when it fails.
-struct Down(String);
-
-impl Drop for Down {
-    fn drop(&mut self) {
-        let status = Command::new(ESGM)
-            .args(["--domain", &self.0, "down"])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .status();
-        if let Err(e) = status {
-            eprintln!("cannot stop `{}`: {e}", self.0);
-        }
-    }
 }
 
 #[test]
@@ -255,9 +217,9 @@ fn record_info_kill_rerun_replay_and_compare_the_tutorial() {
     std::thread::sleep(Duration::from_secs(1));
     let stop = Command::new("kill").args(["-INT", &recorder.id().to_string()]).status().unwrap();
     assert!(stop.success());
-    let recorded = wait_with_limit(recorder, long, &["record"]);
-    let said = String::from_utf8_lossy(&recorded.stdout);
-    assert!(recorded.status.success(), "{said}\n{}", String::from_utf8_lossy(&recorded.stderr));
+    let recorded = finish(recorder, long, "record");
+    let said = &recorded.stdout;
+    assert_eq!(recorded.code, Some(0), "{said}\n{}", recorded.stderr);
     assert!(said.contains("nothing missed"), "{said}");
     let (code, out, err) = run(
         &["compare", &path("live.mcap"), &path("replayed.mcap"), "--only", "robot_state", "images"],
