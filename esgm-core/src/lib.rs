@@ -56,8 +56,8 @@ pub use approximation::{MergeRule, ValueApproximation};
 pub use clock::{Clock, SharedClock, SimClock, SystemClock};
 pub use entity::{AttributeField, Entity, FromEntityError};
 pub use esgm::{
-    CompUnit, ComputeError, CreateError, EntityTrajectoryStructure, Esgm, InputType, LookupError,
-    RegistrationError, SensorError, SensorInterface, TrajectorySpec,
+    CompUnit, ComputeError, CreateError, EntityTrajectoryStructure, Esgm, FlushError, InputType,
+    LookupError, RegistrationError, SensorError, SensorInterface, TrajectorySpec,
 };
 pub use filter::{Filter, FilterError};
 pub use frame::{AttributeList, AttributeValuePair, EntityFrame, EntityStructure};
@@ -71,8 +71,8 @@ pub use runtime::{InProcessEsgm, InProcessTrajectory};
 pub use sample::Sample;
 pub use store::{
     AddError, AddForwarder, AddOutcome, DropCause, FeedWaiter, PolicyViolation, QueryError,
-    ReplicaFeed, StoreEvent, StoreTap, SubscribeOptions, Subscription, SubscriptionId, TapId,
-    TrajectoryStats, TrajectoryStore,
+    ReplicaFeed, ResetForwarder, StoreEvent, StoreTap, SubscribeOptions, Subscription,
+    SubscriptionId, TapId, TrajectoryStats, TrajectoryStore,
 };
 pub use time::{TIMEUNITS_PER_MILLI_SECOND, TIMEUNITS_PER_SECOND, Time, micros, millis, secs};
 pub use type_check::{InvalidType, TypeChecker};

@@ -7,13 +7,59 @@
 //! used — are not news) and report a failure alike (one line naming what was wrong,
 //! never a backtrace; STYLE habit 6).
 
+use std::sync::OnceLock;
+
+use esgm_core::esgm::LogLevel;
+
+/// Replaces the process's log filter (installed by [`init_logging`]).
+type SetFilter = Box<dyn Fn(&str) -> Result<(), String> + Send + Sync>;
+
+/// The running filter's reload handle, once [`init_logging`] installed it.
+static LOG_FILTER: OnceLock<SetFilter> = OnceLock::new();
+
 /// Sets up the process's logging: `tracing` to stderr filtered by `RUST_LOG` (default
-/// `warn`), iceoryx2's log at errors. Call once, first thing in `main`.
+/// `warn`), iceoryx2's log at errors. Call once, first thing in `main`. The filter can
+/// be replaced while the process runs ([`apply_log_level`]; `esgm log-level`, or
+/// `set_log_level` from any process of the system, reaches it).
 pub fn init_logging() {
+    use tracing_subscriber::layer::SubscriberExt as _;
+    use tracing_subscriber::util::SubscriberInitExt as _;
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
-    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).init();
+    let (filter, handle) = tracing_subscriber::reload::Layer::new(filter);
+    tracing_subscriber::registry()
+        .with(filter)
+        .with(tracing_subscriber::fmt::layer().with_writer(std::io::stderr))
+        .init();
+    let set: SetFilter = Box::new(move |directives: &str| {
+        let filter =
+            tracing_subscriber::EnvFilter::try_new(directives).map_err(|e| e.to_string())?;
+        handle.reload(filter).map_err(|e| e.to_string())
+    });
+    if LOG_FILTER.set(set).is_err() {
+        tracing::warn!("init_logging called twice; the first filter stays reloadable");
+    }
     iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
+}
+
+/// Makes `level` this process's log filter (every target at that level), if
+/// [`init_logging`] installed a reloadable one: `Ok(true)` once applied, `Ok(false)`
+/// for a process whose logging is its own (a library user's subscriber; it reads the
+/// level from `Esgm::log_level`).
+pub fn apply_log_level(level: LogLevel) -> Result<bool, String> {
+    let Some(set) = LOG_FILTER.get() else { return Ok(false) };
+    set(level_directive(level)).map(|()| true)
+}
+
+/// The filter directive of a level.
+pub fn level_directive(level: LogLevel) -> &'static str {
+    match level {
+        LogLevel::Error => "error",
+        LogLevel::Warn => "warn",
+        LogLevel::Info => "info",
+        LogLevel::Debug => "debug",
+        LogLevel::Trace => "trace",
+    }
 }
 
 /// An error and its causes on one line (`anyhow::Error::chain()`, or any error's

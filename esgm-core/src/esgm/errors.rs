@@ -240,3 +240,22 @@ impl InputType {
         }
     }
 }
+
+/// [`crate::Esgm::flush`] gave up.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error, serde::Serialize, serde::Deserialize)]
+#[non_exhaustive]
+pub enum FlushError {
+    /// The deadline passed with work still queued (a unit slower than the deadline
+    /// allows, or one that never returns); wait longer, or look at `waiting_for`.
+    #[error("the deadline passed while `{waiting_for}` was still processing")]
+    DeadlinePassed {
+        /// A trajectory, or a process, still at work.
+        waiting_for: String,
+    },
+    /// A process of the system could not be asked (see the reason).
+    #[error("cannot flush the system: {reason}")]
+    Unavailable {
+        /// Why.
+        reason: String,
+    },
+}

@@ -18,7 +18,7 @@ mod interfaces;
 mod report;
 mod spec;
 
-pub use errors::{CreateError, InputType, LookupError, RegistrationError};
+pub use errors::{CreateError, FlushError, InputType, LookupError, RegistrationError};
 pub use interfaces::{CompUnit, ComputeError, SensorError, SensorInterface};
 pub use report::{EsgmStats, LogLevel, MemoryStats, TrajectoryInfo, TrajectoryReport, WorkerStats};
 pub use spec::{TrajectoryKind, TrajectorySource, TrajectorySpec};
@@ -246,6 +246,13 @@ pub trait Esgm: Send + Sync {
     fn sensors(&self) -> Vec<(String, String)>;
     /// Registered units as (name, output type, input types).
     fn comp_units(&self) -> Vec<(String, String, Vec<InputType>)>;
+
+    /// Waits for the runtime: returns once every structure added before the call has
+    /// been processed by every unit, sync and merge (and what they produced by theirs),
+    /// delivered to every subscriber and, across processes, entered into every other
+    /// process's replica — or fails when `deadline` passes. Held samples (reordering)
+    /// and clock-driven sampling are not waited for.
+    fn flush(&self, deadline: std::time::Instant) -> Result<(), FlushError>;
 
     /// E7: true if the ESGM answers.
     fn ping(&self) -> bool;

@@ -21,6 +21,12 @@ pub(crate) struct WorkerCounters {
     pub missed_periods: AtomicU64,
     pub discarded: AtomicU64,
     pub input_overflow: AtomicU64,
+    /// An input-driven worker's queue, to send it flush markers (see `flush`).
+    pub flush_sender: Mutex<Option<crossbeam_channel::Sender<(usize, crate::sample::Sample)>>>,
+    /// Flush markers sent to the worker, and markers it reached: every input queued
+    /// before a marker has been processed once the marker is reached.
+    pub flush_asked: AtomicU64,
+    pub flush_done: AtomicU64,
 }
 
 impl WorkerCounters {

@@ -178,10 +178,16 @@ impl EntityTrajectoryStructure for InProcessTrajectory {
         self.add_with("create_at_now_blocking", |s| s.create_at_now_blocking(name, attributes))
     }
     fn reset(&self) -> Result<(), QueryError> {
-        self.with_store(|s| s.reset())
+        match self.with_store(|s| s.reset_forwarder())? {
+            Some(forwarder) => forwarder.reset(self.name(), false),
+            None => self.with_store(|s| s.reset()),
+        }
     }
     fn reset_blocking(&self) -> Result<(), QueryError> {
-        self.with_store(|s| s.reset_blocking())
+        match self.with_store(|s| s.reset_forwarder())? {
+            Some(forwarder) => forwarder.reset(self.name(), true),
+            None => self.with_store(|s| s.reset_blocking()),
+        }
     }
     fn stats(&self) -> Result<TrajectoryStats, QueryError> {
         self.with_store(|s| s.stats())

@@ -15,6 +15,10 @@ use crate::store::FanIn;
 /// The longest a worker waiting on its input's writer sleeps before looking at its stop.
 const WAIT_SLICE: Duration = Duration::from_millis(50);
 
+/// The input tag of a flush marker: not a sample, but a point in the queue the
+/// runtime's `flush` waits for the worker to reach (counted in `flushed`).
+pub(crate) const FLUSH_MARKER: usize = usize::MAX;
+
 /// Calls `on_sample(input_index, sample)` for every sample any input adds, until
 /// `stop` is set or `wake` disconnects (the worker is being stopped).
 ///
@@ -24,8 +28,16 @@ pub(crate) fn run(
     wake: Receiver<()>,
     stop: &Arc<AtomicBool>,
     overflow: &AtomicU64,
+    flushed: &AtomicU64,
     mut on_sample: impl FnMut(usize, Sample),
 ) {
+    let mut on_sample = move |input: usize, sample: Sample| {
+        if input == FLUSH_MARKER {
+            flushed.fetch_add(1, Ordering::Release);
+        } else {
+            on_sample(input, sample);
+        }
+    };
     if let Some(mut waiter) = fan_in.take_waiter() {
         // One replica input: wait on its writer's wake-up, feed, take (see
         // `ReplicaFeed`). Stop is noticed within a wait slice.

@@ -29,9 +29,9 @@ use parking_lot::RwLock;
 use crate::catalog::Catalog;
 use crate::clock::{SharedClock, SystemClock};
 use crate::esgm::{
-    CompUnit, CreateError, Esgm, EsgmStats, InputType, LogLevel, LookupError, MemoryStats,
-    RegistrationError, SensorInterface, TrajectoryInfo, TrajectoryKind, TrajectoryReport,
-    TrajectorySource, TrajectorySpec,
+    CompUnit, CreateError, Esgm, EsgmStats, FlushError, InputType, LogLevel, LookupError,
+    MemoryStats, RegistrationError, SensorInterface, TrajectoryInfo, TrajectoryKind,
+    TrajectoryReport, TrajectorySource, TrajectorySpec,
 };
 use crate::sample::Sample;
 use crate::store::{FanIn, TrajectoryStore};
@@ -293,6 +293,61 @@ impl InProcessEsgm {
         Ok(InProcessTrajectory { descriptor })
     }
 
+    /// Waits until every structure added before the call has been processed by every
+    /// unit, sync and merge worker, and what they produced by theirs in turn (a chain
+    /// settles level by level), or `deadline` passes. Subscribers have every such
+    /// structure in their channels on return (delivery is part of the add).
+    ///
+    /// How: a marker is queued behind each input-driven worker's inputs and waited for;
+    /// rounds repeat until one changes no trajectory (no add, drop or call). Not waited
+    /// for: samples held for reordering (they enter at their release time), sampling
+    /// on a clock, callbacks' own threads, and work added after the call.
+    pub fn flush(&self, deadline: std::time::Instant) -> Result<(), FlushError> {
+        let mut previous = None;
+        loop {
+            let cells = self.inner.cells();
+            let mut waiting = Vec::new();
+            for cell in &cells {
+                let Some(sender) = cell.counters.flush_sender.lock().clone() else { continue };
+                let stopped = cell.worker.lock().is_none();
+                if stopped {
+                    continue;
+                }
+                let ticket = cell.counters.flush_asked.fetch_add(1, Ordering::AcqRel) + 1;
+                let marker = Sample {
+                    structure: Arc::new(crate::frame::EntityStructure::default()),
+                    add_time: 0,
+                    query_time: 0,
+                };
+                if sender.send_deadline((inputs::FLUSH_MARKER, marker), deadline).is_err() {
+                    return Err(FlushError::DeadlinePassed { waiting_for: cell.info.name.clone() });
+                }
+                waiting.push((cell, ticket));
+            }
+            for (cell, ticket) in waiting {
+                while cell.counters.flush_done.load(Ordering::Acquire) < ticket {
+                    if std::time::Instant::now() >= deadline {
+                        return Err(FlushError::DeadlinePassed {
+                            waiting_for: cell.info.name.clone(),
+                        });
+                    }
+                    std::thread::sleep(std::time::Duration::from_micros(100));
+                }
+            }
+            let progress: u64 = cells
+                .iter()
+                .map(|c| {
+                    let s = c.store.lock().stats();
+                    s.added + s.dropped_total + c.counters.calls.load(Ordering::Relaxed)
+                })
+                .sum();
+            if previous == Some(progress) {
+                return Ok(());
+            }
+            previous = Some(progress);
+        }
+    }
+
     /// Stops every worker; trajectories stay queryable.
     pub fn shutdown(&self) {
         self.inner.shutdown.store(true, Ordering::Relaxed);
@@ -367,6 +422,7 @@ impl InProcessEsgm {
                 let cu = self.inner.units.read().get(unit).cloned();
                 cu.map(|cu| {
                     let (fan_in, latest) = self.subscribe_inputs(inputs);
+                    *cell.counters.flush_sender.lock() = Some(fan_in.sender());
                     workers::unit(cell, clock, cu, fan_in, latest)
                 })
             }
@@ -374,11 +430,13 @@ impl InProcessEsgm {
                 // Validated here so the worker can re-create it after a reset.
                 policy.create::<Sample>(inputs.len())?;
                 let (fan_in, states) = self.subscribe_inputs(inputs);
+                *cell.counters.flush_sender.lock() = Some(fan_in.sender());
                 let names = inputs.iter().map(|(d, _)| d.name.clone()).collect();
                 Some(workers::sync(cell, clock, policy.clone(), names, fan_in, states))
             }
             TrajectorySource::Merge { .. } => {
                 let (fan_in, _) = self.subscribe_inputs(inputs);
+                *cell.counters.flush_sender.lock() = Some(fan_in.sender());
                 Some(workers::merge(cell, fan_in))
             }
             TrajectorySource::SampledGenerators { inputs: gens, unit, from, to, sample_period } => {
@@ -515,6 +573,10 @@ impl Esgm for InProcessEsgm {
             .units()
             .map(|u| (u.name.clone(), u.type_name.clone(), u.input_types.clone()))
             .collect()
+    }
+
+    fn flush(&self, deadline: std::time::Instant) -> Result<(), FlushError> {
+        InProcessEsgm::flush(self, deadline)
     }
 
     fn ping(&self) -> bool {

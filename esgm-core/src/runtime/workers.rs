@@ -165,27 +165,34 @@ pub(crate) fn unit(
 ) -> Worker {
     let c = Arc::clone(cell);
     spawn("unit", cell, move |stop, wake| {
-        inputs::run(fan_in, wake, &stop, &c.counters.input_overflow, |i, sample| {
-            update_inputs(&mut states, i, sample);
-            let Some(args) =
-                states.iter().map(|s| s.latest.clone()).collect::<Option<Vec<Sample>>>()
-            else {
-                return;
-            };
-            WorkerCounters::bump(&c.counters.calls);
-            let qtime = clock.now();
-            match guarded(&c, "compute", || cu.compute(&args, qtime)) {
-                Some(Ok(es)) => emit(&c, Arc::new(es)),
-                Some(Err(ComputeError::ValueNotAvailable)) => {
-                    WorkerCounters::bump(&c.counters.no_value)
+        inputs::run(
+            fan_in,
+            wake,
+            &stop,
+            &c.counters.input_overflow,
+            &c.counters.flush_done,
+            |i, sample| {
+                update_inputs(&mut states, i, sample);
+                let Some(args) =
+                    states.iter().map(|s| s.latest.clone()).collect::<Option<Vec<Sample>>>()
+                else {
+                    return;
+                };
+                WorkerCounters::bump(&c.counters.calls);
+                let qtime = clock.now();
+                match guarded(&c, "compute", || cu.compute(&args, qtime)) {
+                    Some(Ok(es)) => emit(&c, Arc::new(es)),
+                    Some(Err(ComputeError::ValueNotAvailable)) => {
+                        WorkerCounters::bump(&c.counters.no_value)
+                    }
+                    Some(Err(e)) => {
+                        WorkerCounters::bump(&c.counters.failures);
+                        tracing::warn!(trajectory = %c.info.name, error = %e, "unit failed");
+                    }
+                    None => {}
                 }
-                Some(Err(e)) => {
-                    WorkerCounters::bump(&c.counters.failures);
-                    tracing::warn!(trajectory = %c.info.name, error = %e, "unit failed");
-                }
-                None => {}
-            }
-        });
+            },
+        );
     })
 }
 
@@ -227,44 +234,52 @@ pub(crate) fn sync(
     spawn("sync", cell, move |stop, wake| {
         let Ok(mut synchronizer) = policy.create::<Sample>(names.len()) else { return };
         let mut discarded = 0;
-        inputs::run(fan_in, wake, &stop, &c.counters.input_overflow, |i, sample| {
-            WorkerCounters::bump(&c.counters.calls);
-            // A reset input's queued samples belong to a stream that no longer exists:
-            // start matching afresh (what was queued counts as discarded).
-            if states.iter_mut().fold(false, |any, s| s.forget_if_reset() | any) {
-                c.counters
-                    .discarded
-                    .fetch_add(synchronizer.queued() as u64, std::sync::atomic::Ordering::Relaxed);
-                if let Ok(fresh) = policy.create::<Sample>(names.len()) {
-                    synchronizer = fresh;
-                    discarded = 0;
-                }
-            }
-            let result = synchronizer.push(i, sample);
-            // Samples the synchronizer gave up on are counted, never lost silently.
-            let now_discarded = synchronizer.dropped();
-            c.counters
-                .discarded
-                .fetch_add(now_discarded - discarded, std::sync::atomic::Ordering::Relaxed);
-            discarded = now_discarded;
-            match result {
-                Ok(sets) => {
-                    for set in sets {
-                        let vt = set.iter().map(|s| s.valid_time).max().unwrap_or_default();
-                        let parts: Vec<(&str, &EntityStructure)> = names
-                            .iter()
-                            .map(String::as_str)
-                            .zip(set.iter().map(|s| &*s.structure))
-                            .collect();
-                        emit(&c, Arc::new(state(&c.info.name, vt, clock.now(), &parts)));
+        inputs::run(
+            fan_in,
+            wake,
+            &stop,
+            &c.counters.input_overflow,
+            &c.counters.flush_done,
+            |i, sample| {
+                WorkerCounters::bump(&c.counters.calls);
+                // A reset input's queued samples belong to a stream that no longer exists:
+                // start matching afresh (what was queued counts as discarded).
+                if states.iter_mut().fold(false, |any, s| s.forget_if_reset() | any) {
+                    c.counters.discarded.fetch_add(
+                        synchronizer.queued() as u64,
+                        std::sync::atomic::Ordering::Relaxed,
+                    );
+                    if let Ok(fresh) = policy.create::<Sample>(names.len()) {
+                        synchronizer = fresh;
+                        discarded = 0;
                     }
                 }
-                Err(e) => {
-                    WorkerCounters::bump(&c.counters.failures);
-                    tracing::warn!(trajectory = %c.info.name, error = %e, "sync failed");
+                let result = synchronizer.push(i, sample);
+                // Samples the synchronizer gave up on are counted, never lost silently.
+                let now_discarded = synchronizer.dropped();
+                c.counters
+                    .discarded
+                    .fetch_add(now_discarded - discarded, std::sync::atomic::Ordering::Relaxed);
+                discarded = now_discarded;
+                match result {
+                    Ok(sets) => {
+                        for set in sets {
+                            let vt = set.iter().map(|s| s.valid_time).max().unwrap_or_default();
+                            let parts: Vec<(&str, &EntityStructure)> = names
+                                .iter()
+                                .map(String::as_str)
+                                .zip(set.iter().map(|s| &*s.structure))
+                                .collect();
+                            emit(&c, Arc::new(state(&c.info.name, vt, clock.now(), &parts)));
+                        }
+                    }
+                    Err(e) => {
+                        WorkerCounters::bump(&c.counters.failures);
+                        tracing::warn!(trajectory = %c.info.name, error = %e, "sync failed");
+                    }
                 }
-            }
-        });
+            },
+        );
     })
 }
 
@@ -272,10 +287,17 @@ pub(crate) fn sync(
 pub(crate) fn merge(cell: &Arc<TrajectoryCell>, fan_in: FanIn<Sample>) -> Worker {
     let c = Arc::clone(cell);
     spawn("merge", cell, move |stop, wake| {
-        inputs::run(fan_in, wake, &stop, &c.counters.input_overflow, |_, sample| {
-            WorkerCounters::bump(&c.counters.calls);
-            emit(&c, sample.structure);
-        });
+        inputs::run(
+            fan_in,
+            wake,
+            &stop,
+            &c.counters.input_overflow,
+            &c.counters.flush_done,
+            |_, sample| {
+                WorkerCounters::bump(&c.counters.calls);
+                emit(&c, sample.structure);
+            },
+        );
     })
 }
 

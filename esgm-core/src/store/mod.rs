@@ -155,6 +155,7 @@ impl TrajectoryStoreBuilder {
             forward: None,
             feed: None,
             octets_allocator: None,
+            reset_forwarder: None,
         })
     }
 }
@@ -190,6 +191,21 @@ pub struct TrajectoryStore {
     feed: Option<Arc<dyn ReplicaFeed>>,
     /// Where this trajectory's producers get image buffers (its shared memory).
     octets_allocator: Option<Arc<dyn OctetsAllocator>>,
+    /// Where a reset of this trajectory through a handle goes, if the trajectory
+    /// lives in more than one process.
+    reset_forwarder: Option<Arc<dyn ResetForwarder>>,
+}
+
+/// Carries a reset asked through a handle (T5) to every process that holds the
+/// trajectory: its writer, which empties the stream, and every replica, which forgets
+/// it. Set with [`TrajectoryStore::forward_resets`]; the transport implements it. It is
+/// called without the store's lock held, so it may wait for other processes.
+pub trait ResetForwarder: Send + Sync + std::fmt::Debug {
+    /// Resets `trajectory` everywhere. Not `blocking`: returns once the reset is on its
+    /// way (the writer's own stream is empty on return when the caller is the writer).
+    /// `blocking`: returns once the writer has reset and every connected reader has
+    /// forgotten the stream.
+    fn reset(&self, trajectory: &str, blocking: bool) -> Result<(), QueryError>;
 }
 
 /// One thing that happened to a stream, as a [`StoreTap`] is told it.
@@ -492,6 +508,18 @@ impl TrajectoryStore {
     /// gate decides and the structure comes back through replication.
     pub fn forward_adds(&mut self, forwarder: Arc<dyn AddForwarder>) {
         self.forward = Some(forwarder);
+    }
+
+    /// Makes resets asked through handles go to `forwarder` (see [`ResetForwarder`]),
+    /// which resets this store itself where this process writes it.
+    pub fn forward_resets(&mut self, forwarder: Arc<dyn ResetForwarder>) {
+        self.reset_forwarder = Some(forwarder);
+    }
+
+    /// Where resets through handles go, if this trajectory lives in other processes
+    /// too.
+    pub fn reset_forwarder(&self) -> Option<Arc<dyn ResetForwarder>> {
+        self.reset_forwarder.clone()
     }
 
     /// True if adds are forwarded to a writer elsewhere.

@@ -40,6 +40,16 @@ pub enum QueryError {
         /// What did not fit.
         source: InvalidType,
     },
+    /// The trajectory lives in other processes too and they could not be reached (see
+    /// the reason): a reset through a replica, whose writer is elsewhere, or a
+    /// blocking reset whose readers did not all answer.
+    #[error("trajectory `{trajectory}`: other processes cannot be reached: {reason}")]
+    Unavailable {
+        /// The trajectory.
+        trajectory: String,
+        /// Why.
+        reason: String,
+    },
 }
 
 impl TrajectoryStore {

@@ -317,6 +317,12 @@ impl<T> FanIn<T> {
         self.waiter.take()
     }
 
+    /// A sending end of the reader's queue, for what its runtime sends the reader
+    /// itself (a flush marker, queued behind everything delivered before it).
+    pub fn sender(&self) -> Sender<(usize, T)> {
+        self.sender.clone()
+    }
+
     /// The receiving end, to `select!` on.
     pub fn receiver(&self) -> &Receiver<(usize, T)> {
         &self.receiver

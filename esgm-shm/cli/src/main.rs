@@ -73,6 +73,12 @@ enum Command {
     Hz(cmd::hz::Args),
     /// Statistics of every trajectory.
     Stats,
+    /// Empty a trajectory (or all) in its writer and every reader.
+    Reset(cmd::reset::Args),
+    /// Change the log level of the running processes (or of one).
+    LogLevel(cmd::log_level::Args),
+    /// Add one structure by hand: `esgm push TRAJ attr=value … [--valid-time T]`.
+    Push(cmd::push::Args),
     /// The whole system on one screen, refreshed every second (a dashboard).
     Top(cmd::top::Args),
     /// The dataflow: sensors, units and trajectories.

@@ -87,6 +87,9 @@ pub(crate) struct Location {
     pub serving: bool,
     /// The holdings last reported to the coordinator, and when to report next.
     pub reported: (HoldingStats, Instant),
+    /// Where resets through this process's handles go (every process holding the
+    /// trajectory; see `admin`): installed on every export and replica.
+    pub resets: Arc<dyn esgm_core::ResetForwarder>,
     /// Stopped and joined when the location ends.
     pub _receiver: SampleReceiver,
 }
@@ -343,6 +346,7 @@ impl Location {
         // is published, and a camera's first frame written in place.
         let (node, domain, holdings, mirrors) =
             (&self.node, &self.domain, &self.holdings, &self.mirrors);
+        let resets = &self.resets;
         let mut export = None;
         let handle = self.local.create_trajectory_prepared(spec.clone(), |handle| {
             // Re-pointed here (E5): the export follows the new trajectory, and readers
@@ -351,6 +355,8 @@ impl Location {
                 spec.replace && mirrors.change(|m| m.exports.remove(&spec.name)).is_some();
             let started = Export::start(node, domain, handle, record, repointed, holdings)
                 .map_err(|e| CreateError::Unavailable { reason: e.to_string() })?;
+            // A store destroyed meanwhile needs no resets.
+            let _destroyed = handle.with_store(|s| s.forward_resets(Arc::clone(resets)));
             export = Some(started);
             Ok(())
         })?;
@@ -397,6 +403,8 @@ impl Location {
         };
         match Import::start(&site, handle.clone(), record) {
             Ok(mut import) => {
+                // A replica destroyed meanwhile needs no resets.
+                let _destroyed = handle.with_store(|s| s.forward_resets(Arc::clone(&self.resets)));
                 // The history the writer already handed over, at once.
                 import.pump();
                 self.mirrors.change(|m| m.imports.insert(name.clone(), import));

@@ -59,6 +59,7 @@
 //!   Re-pointing a name (E5) moves readers in every process to the new generation
 //!   with their subscribers; a re-pointed name keeps its type.
 
+mod admin;
 mod blocking_add;
 mod export;
 pub mod holdings;
@@ -78,8 +79,8 @@ use std::time::Duration;
 use crossbeam_channel::Sender;
 use esgm_core::clock::SharedClock;
 use esgm_core::esgm::{
-    CompUnit, CreateError, Esgm, EsgmStats, InputType, LogLevel, LookupError, MemoryStats,
-    RegistrationError, SensorInterface, TrajectoryInfo, TrajectorySpec,
+    CompUnit, CreateError, Esgm, EsgmStats, FlushError, InputType, LogLevel, LookupError,
+    MemoryStats, RegistrationError, SensorInterface, TrajectoryInfo, TrajectorySpec,
 };
 use esgm_core::{EntityStructureType, InProcessEsgm, InProcessTrajectory, TypeRegistryError};
 use iceoryx2::prelude::NodeBuilder;
@@ -87,6 +88,8 @@ use iceoryx2::prelude::NodeBuilder;
 use crate::control::protocol::{ControlError, Request, Response};
 use crate::control::{ControlClient, ControlClientError};
 use crate::holdings::{HoldingStats, Holdings};
+pub use admin::AdminError;
+use admin::{Admin, AdminAnswer, AdminOp, DomainReset};
 use location::{Command, Location, install};
 use mirrors::SharedMirrors;
 use receiver::Receiver as SampleReceiver;
@@ -114,6 +117,10 @@ pub enum ConnectError {
     /// The domain or host cannot name an iceoryx2 service; rename it.
     #[error(transparent)]
     Name(#[from] crate::service_name::NameError),
+    /// The domain's administration channel (domain-wide reset, stats, log level,
+    /// flush) could not be joined.
+    #[error(transparent)]
+    Admin(#[from] AdminError),
 }
 
 /// Connects to the coordinator of `domain` with the default settings.
@@ -206,6 +213,9 @@ impl ShmEsgmBuilder {
             crate::service_name::doorbell_service(&domain, &host)?,
             Arc::clone(&mirrors),
         )?;
+        let admin = Admin::start(&node, &domain, &host, local.clone(), Arc::clone(&mirrors))?;
+        let resets: Arc<dyn esgm_core::ResetForwarder> =
+            Arc::new(DomainReset { admin: Arc::downgrade(&admin), timeout });
         let (commands, inbox) = crossbeam_channel::unbounded();
         let location = Location {
             domain: domain.clone(),
@@ -218,6 +228,7 @@ impl ShmEsgmBuilder {
             failed: Default::default(),
             serving: false,
             reported: (HoldingStats::default(), std::time::Instant::now()),
+            resets,
             _receiver: receiver,
         };
         let thread = std::thread::Builder::new()
@@ -236,6 +247,7 @@ impl ShmEsgmBuilder {
                 holdings,
                 mirrors,
                 thread,
+                admin,
             }),
         })
     }
@@ -267,6 +279,7 @@ struct Inner {
     holdings: Arc<Holdings>,
     mirrors: Arc<SharedMirrors>,
     thread: parking_lot::Mutex<Option<std::thread::JoinHandle<()>>>,
+    admin: Arc<Admin>,
 }
 
 impl Drop for Inner {
@@ -280,6 +293,7 @@ impl Drop for Inner {
                 let _ = t.join();
             }
         }
+        self.admin.stop();
         self.local.shutdown();
     }
 }
@@ -378,6 +392,127 @@ impl ShmEsgm {
                 "no answer from the location thread within {:?}",
                 self.inner.timeout * 3
             )),
+        }
+    }
+
+    /// E7 across the system: every process empties the trajectories it writes, then
+    /// every process takes what it was sent, so every replica has forgotten on return.
+    pub fn reset_domain(&self) -> Result<(), AdminError> {
+        let timeout = self.inner.timeout;
+        self.inner.admin.ask(AdminOp::Reset { trajectory: None }, timeout)?;
+        self.inner.admin.ask(AdminOp::CatchUp, timeout)?;
+        Ok(())
+    }
+
+    /// E7 across the system: every trajectory's statistics from the process that
+    /// writes it (a replica's, what it received, where no writer answered).
+    pub fn domain_stats(&self) -> Result<EsgmStats, AdminError> {
+        let answers = self.inner.admin.ask(AdminOp::Stats, self.inner.timeout)?;
+        let mut stats = EsgmStats::default();
+        let mut from_writer = std::collections::BTreeSet::new();
+        for (_, answer) in answers {
+            let AdminAnswer::Stats(reports) = answer else { continue };
+            for (writes, report) in reports {
+                let name = report.info.name.clone();
+                if writes {
+                    from_writer.insert(name.clone());
+                    stats.trajectories.insert(name, report);
+                } else if !from_writer.contains(&name) {
+                    stats.trajectories.entry(name).or_insert(report);
+                }
+            }
+        }
+        Ok(stats)
+    }
+
+    /// E7 across the system: the memory of every connected process added up (a
+    /// replica is memory of its process, so a trajectory read in three processes
+    /// counts three times).
+    pub fn domain_memory(&self) -> Result<MemoryStats, AdminError> {
+        let answers = self.inner.admin.ask(AdminOp::Memory, self.inner.timeout)?;
+        let mut total = MemoryStats::default();
+        for (_, answer) in answers {
+            if let AdminAnswer::Memory(m) = answer {
+                total.trajectories += m.trajectories;
+                total.stored_samples += m.stored_samples;
+                total.held_samples += m.held_samples;
+                total.approx_bytes += m.approx_bytes;
+            }
+        }
+        Ok(total)
+    }
+
+    /// E7: sets the log level of the process named `process` (its host name in the
+    /// registry, the process name `esgm ps` shows for supervised workers), or of every
+    /// process. A process logging through `esgm_shm::process::init_logging` replaces
+    /// its tracing filter at once. Returns the processes it applied to; none matching
+    /// `process` is an error.
+    pub fn set_log_level_of(
+        &self,
+        process: Option<&str>,
+        level: LogLevel,
+    ) -> Result<Vec<String>, AdminError> {
+        let op = AdminOp::SetLogLevel { level, process: process.map(str::to_owned) };
+        let answers = self.inner.admin.ask(op, self.inner.timeout)?;
+        let mut applied = Vec::new();
+        for (host, answer) in answers {
+            match answer {
+                AdminAnswer::LogLevel { applied: true, .. } => applied.push(host),
+                AdminAnswer::Failed { reason } => {
+                    return Err(AdminError::Send { reason: format!("{host}: {reason}") });
+                }
+                _ => {}
+            }
+        }
+        if applied.is_empty() {
+            let reason = format!("no connected process is called `{}`", process.unwrap_or("*"));
+            return Err(AdminError::Unavailable { reason });
+        }
+        applied.sort();
+        Ok(applied)
+    }
+
+    /// `flush` across the system: rounds in which every process takes what other
+    /// processes sent and waits for its own workers, until a round changes nothing
+    /// anywhere (a chain of units across processes settles hop by hop).
+    fn flush_domain(&self, deadline: std::time::Instant) -> Result<(), FlushError> {
+        let mut previous = None;
+        loop {
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            if left.is_zero() {
+                return Err(FlushError::DeadlinePassed { waiting_for: "the system".into() });
+            }
+            // Each process gives up at the deadline and says so; the asker waits a
+            // control call's time longer for those answers.
+            let op = AdminOp::Flush { timeout: left };
+            let answers = match self.inner.admin.ask(op, left + self.inner.timeout) {
+                Ok(a) => a,
+                Err(AdminError::Incomplete { answered, expected, .. }) => {
+                    return Err(FlushError::DeadlinePassed {
+                        waiting_for: format!("{} of {expected} processes", expected - answered),
+                    });
+                }
+                Err(e) => return Err(FlushError::Unavailable { reason: e.to_string() }),
+            };
+            for (host, answer) in &answers {
+                if let AdminAnswer::Failed { reason } = answer {
+                    return Err(FlushError::DeadlinePassed {
+                        waiting_for: format!("{host}: {reason}"),
+                    });
+                }
+            }
+            let progress = self
+                .domain_stats()
+                .map_err(|e| FlushError::Unavailable { reason: e.to_string() })?;
+            let progress: Vec<(String, u64, u64)> = progress
+                .trajectories
+                .into_iter()
+                .map(|(n, r)| (n, r.stats.added + r.stats.dropped_total, r.worker.calls))
+                .collect();
+            if previous.as_ref() == Some(&progress) {
+                return Ok(());
+            }
+            previous = Some(progress);
         }
     }
 
@@ -612,16 +747,28 @@ impl Esgm for ShmEsgm {
         matches!(self.control(Request::Ping), Ok(Response::Pong { .. }))
     }
 
+    fn flush(&self, deadline: std::time::Instant) -> Result<(), FlushError> {
+        self.flush_domain(deadline)
+    }
+
     fn reset(&self) {
-        self.inner.local.reset();
+        if let Err(e) = self.reset_domain() {
+            tracing::warn!(error = %e, "reset did not reach every process");
+        }
     }
 
     fn stats(&self) -> EsgmStats {
-        self.inner.local.stats()
+        self.domain_stats().unwrap_or_else(|e| {
+            tracing::warn!(error = %e, "domain statistics unavailable; this process's own instead");
+            self.inner.local.stats()
+        })
     }
 
     fn memory_stats(&self) -> MemoryStats {
-        self.inner.local.memory_stats()
+        self.domain_memory().unwrap_or_else(|e| {
+            tracing::warn!(error = %e, "domain memory unavailable; this process's own instead");
+            self.inner.local.memory_stats()
+        })
     }
 
     fn log_level(&self) -> LogLevel {
@@ -629,6 +776,12 @@ impl Esgm for ShmEsgm {
     }
 
     fn set_log_level(&self, level: LogLevel) {
-        self.inner.local.set_log_level(level);
+        match self.set_log_level_of(None, level) {
+            Ok(_) => {}
+            Err(e) => {
+                tracing::warn!(error = %e, "the log level did not reach every process");
+                self.inner.local.set_log_level(level);
+            }
+        }
     }
 }

@@ -14,6 +14,7 @@
 
 pub mod api;
 pub mod computed;
+pub mod domain;
 pub mod lifecycle;
 pub mod operators;
 pub mod primitive;
@@ -108,6 +109,10 @@ macro_rules! conformance_tests {
         $crate::conformance_tests!(@each $runtime, $make;
             api::get_latest_vtime_is_the_most_current,
             api::types_structures_and_stats_by_name,
+            domain::reset_from_any_side_reaches_writer_and_readers,
+            domain::e7_acts_on_the_system_from_either_side,
+            domain::flush_waits_for_units_and_replicas,
+            domain::flush_gives_up_at_its_deadline,
             primitive::types_create_get_destroy,
             primitive::primitive_add_and_query,
             primitive::primitive_policy_is_enforced,

@@ -9,11 +9,14 @@ pub mod graph;
 pub mod hz;
 pub mod info;
 pub mod load;
+pub mod log_level;
 pub mod ps;
+pub mod push;
 pub mod query;
 pub mod record;
 pub mod registry;
 pub mod replay;
+pub mod reset;
 pub mod stats;
 pub mod supervise;
 pub mod top;
@@ -57,6 +60,9 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Echo(a) => echo::run(domain, json, a),
         Command::Hz(a) => hz::run(domain, json, a),
         Command::Stats => stats::run(domain, json),
+        Command::Reset(a) => reset::run(domain, json, a),
+        Command::LogLevel(a) => log_level::run(domain, json, a),
+        Command::Push(a) => push::run(domain, json, a),
         Command::Top(a) => top::run(domain, json, a),
         Command::Graph(a) => graph::run(domain, json, a),
         Command::Violations(a) => violations::run(domain, json, a),
