@@ -5,21 +5,16 @@
 //!   they ran), for busy-polling (`spin`) and blocking (`event`) receivers;
 //! - `cdf_<wait>.png`: the latency distribution of every cross-process hop row.
 //!
-//! Text is rasterised by `ab_glyph` from DejaVu Sans, bundled in `benches/assets`
-//! (Bitstream Vera licence beside it), so no system font library is needed to build
-//! or to draw.
+//! The setup (the bundled font, the palette, the legend) is esgm-chart's, shared with
+//! `esgm plot`: no system font library is needed to build or to draw.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context as _, anyhow};
-use plotters::prelude::*;
-use plotters::style::{FontStyle, register_font};
+use esgm_chart::plotters::prelude::*;
+use esgm_chart::{SIZE, color, finish, number_label};
 
 use crate::report::{Measurement, Report, Wait};
-
-/// The font every chart uses.
-const FONT: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
-const SIZE: (u32, u32) = (1000, 650);
 
 /// The transport a cross-process hop row measures, for the legend; `None` for rows
 /// that are not such hops.
@@ -46,8 +41,7 @@ pub fn transport(m: &Measurement) -> Option<&'static str> {
 /// Draws every chart of `report` into `dir`; returns the files written.
 pub fn draw(report: &Report, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    register_font("sans-serif", FontStyle::Normal, FONT)
-        .map_err(|_| anyhow!("the bundled font could not be read"))?;
+    esgm_chart::register_font()?;
     let mut written = Vec::new();
     for wait in Wait::BOTH {
         let rows: Vec<&Measurement> =
@@ -66,22 +60,6 @@ pub fn draw(report: &Report, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
     Ok(written)
 }
 
-fn color(i: usize) -> RGBColor {
-    const COLORS: [RGBColor; 10] = [
-        RGBColor(31, 119, 180),
-        RGBColor(255, 127, 14),
-        RGBColor(44, 160, 44),
-        RGBColor(214, 39, 40),
-        RGBColor(148, 103, 189),
-        RGBColor(140, 86, 75),
-        RGBColor(227, 119, 194),
-        RGBColor(23, 190, 207),
-        RGBColor(127, 127, 127),
-        RGBColor(188, 189, 34),
-    ];
-    COLORS[i % COLORS.len()]
-}
-
 /// `64 B`, `1 kB`, `922 kB`.
 fn bytes_label(v: f64) -> String {
     if v >= 1e6 {
@@ -90,17 +68,6 @@ fn bytes_label(v: f64) -> String {
         format!("{:.0} kB", v / 1e3)
     } else {
         format!("{v:.0} B")
-    }
-}
-
-/// `0.5`, `2`, `150`: no trailing zeros.
-fn number_label(v: f64) -> String {
-    if v >= 10.0 {
-        format!("{v:.0}")
-    } else if v >= 1.0 {
-        format!("{v:.1}").trim_end_matches(".0").to_owned()
-    } else {
-        format!("{v:.2}")
     }
 }
 
@@ -169,7 +136,7 @@ fn latency_vs_payload(rows: &[&Measurement], wait: Wait, path: &Path) -> anyhow:
             .draw_series(points.into_iter().map(|p| Circle::new(p, 5, c.filled())))
             .map_err(|e| anyhow!("{e}"))?;
     }
-    finish(&mut chart, &root, SeriesLabelPosition::UpperLeft)
+    Ok(finish(&mut chart, &root, SeriesLabelPosition::UpperLeft)?)
 }
 
 fn cdf(rows: &[&Measurement], wait: Wait, path: &Path) -> anyhow::Result<()> {
@@ -206,24 +173,7 @@ fn cdf(rows: &[&Measurement], wait: Wait, path: &Path) -> anyhow::Result<()> {
             .label(label)
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
     }
-    finish(&mut chart, &root, SeriesLabelPosition::LowerRight)
-}
-
-/// Draws the legend at `position` and writes the picture: how every chart ends.
-fn finish<'a, CT: CoordTranslate>(
-    chart: &mut ChartContext<'a, BitMapBackend<'a>, CT>,
-    root: &DrawingArea<BitMapBackend<'a>, plotters::coord::Shift>,
-    position: SeriesLabelPosition,
-) -> anyhow::Result<()> {
-    chart
-        .configure_series_labels()
-        .position(position)
-        .label_font(("sans-serif", 15))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()
-        .map_err(|e| anyhow!("{e}"))?;
-    root.present().map_err(|e| anyhow!("{e}"))
+    Ok(finish(&mut chart, &root, SeriesLabelPosition::LowerRight)?)
 }
 
 #[cfg(test)]

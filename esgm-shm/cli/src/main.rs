@@ -9,6 +9,7 @@ mod cmd;
 mod config;
 mod dashboard;
 mod policy_args;
+mod series;
 mod session;
 mod show;
 mod time_arg;
@@ -81,6 +82,8 @@ enum Command {
     Push(cmd::push::Args),
     /// The whole system on one screen, refreshed every second (a dashboard).
     Top(cmd::top::Args),
+    /// Attributes of a trajectory over valid time, as a PNG chart.
+    Plot(cmd::plot::Args),
     /// The dataflow: sensors, units and trajectories.
     Graph(cmd::graph::Args),
     /// Policy violations of a trajectory as they happen.

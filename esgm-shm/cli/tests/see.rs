@@ -103,3 +103,100 @@ fn top_once_prints_every_trajectory_and_the_coordinator() {
     drop(robot);
     drop(system);
 }
+
+/// A recording of robot states (x = i / 2, y = -i, 100 ms apart) and a few images.
+fn recording(path: &std::path::Path) {
+    use esgm_core::esgm::{TrajectoryInfo, TrajectoryKind};
+    use esgm_core::library::{Image, RobotState};
+    use esgm_core::{Entity, FluentStreamPolicy};
+    use esgm_recording::{RecordOptions, RecordingWriter, TypeSchema};
+
+    let info = |name: &str, type_name: &str| TrajectoryInfo {
+        name: name.into(),
+        kind: TrajectoryKind::Primitive,
+        type_name: type_name.into(),
+        source: None,
+        inputs: vec![],
+        policy: FluentStreamPolicy::default(),
+    };
+    let mut w = RecordingWriter::create(path, RecordOptions::default()).unwrap();
+    let robot = w
+        .add_trajectory(
+            info("robot_state", "RobotState"),
+            TypeSchema::collect(RobotState::entity_structure_type(), &|_| None),
+        )
+        .unwrap();
+    let camera = w
+        .add_trajectory(
+            info("camera", "Image"),
+            TypeSchema::collect(Image::entity_structure_type(), &|_| None),
+        )
+        .unwrap();
+    let t0 = 1_700_000_000_000_000_000_i64;
+    for i in 0..50 {
+        let t = t0 + i * 100_000_000;
+        let rs = RobotState { x: i as f64 * 0.5, y: -(i as f64), dir: 90.0 };
+        w.write(robot, &rs.to_structure("r1", t, t), t + 1_000, t + 2_000).unwrap();
+        if i % 10 == 0 {
+            let im = Image {
+                width: 2,
+                height: 1,
+                format: Image::FORMAT_MONO8,
+                image_data: vec![1, 2].into(),
+            };
+            w.write(camera, &im.to_structure("cam", t, t), t + 1_000, t + 2_000).unwrap();
+        }
+    }
+    w.finish().unwrap();
+}
+
+#[test]
+fn plot_from_a_recording_writes_a_png_and_names_bad_attributes() {
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("rec.mcap");
+    recording(&rec);
+    let (rec, png) = (rec.to_str().unwrap(), dir.path().join("xy.png"));
+    let png_arg = png.to_str().unwrap();
+
+    let out = ok(&["plot", "robot_state", "x", "y", "--file", rec, "-o", png_arg]);
+    assert!(out.contains("over 50 structures (100 points)"), "{out}");
+    let bytes = std::fs::read(&png).unwrap();
+    assert!(bytes.starts_with(b"\x89PNG\r\n\x1a\n"), "not a PNG");
+    assert!(bytes.len() > 1000, "{} bytes", bytes.len());
+
+    // A window of valid time, relative to the latest sample: 1 s back holds 11 samples.
+    let window = dir.path().join("window.png");
+    let out = ok(&[
+        "--json",
+        "plot",
+        "robot_state",
+        "x",
+        "--from",
+        "-1s",
+        "--file",
+        rec,
+        "-o",
+        window.to_str().unwrap(),
+    ]);
+    let v: serde_json::Value = serde_json::from_str(out.trim()).unwrap();
+    assert_eq!(v["structures"], 11, "{out}");
+
+    let unknown = dir.path().join("never.png");
+    for (args, expected) in [
+        (
+            ["robot_state", "z"],
+            "`robot_state` (RobotState) has no attribute `z`; plottable: x, y, dir",
+        ),
+        (["camera", "image_data"], "attribute `image_data` of `camera` (Image) is"),
+        (["nobody", "x"], "has no trajectory `nobody`; it has robot_state, camera"),
+    ] {
+        let mut all = vec!["plot"];
+        all.extend(args);
+        all.extend(["--file", rec, "-o", unknown.to_str().unwrap()]);
+        let o = esgm(&all, Duration::from_secs(60));
+        assert_eq!(o.code, Some(1), "{}", o.stderr);
+        assert_eq!(o.stderr.trim().lines().count(), 1, "one line: {}", o.stderr);
+        assert!(o.stderr.contains(expected), "expected `{expected}` in: {}", o.stderr);
+        assert!(!unknown.exists(), "no file is written for a refused plot");
+    }
+}

@@ -9,6 +9,7 @@ pub mod graph;
 pub mod hz;
 pub mod info;
 pub mod load;
+pub mod plot;
 pub mod log_level;
 pub mod ps;
 pub mod push;
@@ -64,6 +65,7 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::LogLevel(a) => log_level::run(domain, json, a),
         Command::Push(a) => push::run(domain, json, a),
         Command::Top(a) => top::run(domain, json, a),
+        Command::Plot(a) => plot::run(domain, json, a),
         Command::Graph(a) => graph::run(domain, json, a),
         Command::Violations(a) => violations::run(domain, json, a),
         Command::Record(a) => record::run(domain, json, a),

@@ -270,7 +270,7 @@ mod tests {
         assert!(ui.key(KeyCode::Enter, KeyModifiers::NONE));
         assert_eq!(ui.shape.filter, "cam");
         assert!(screen(&ui).contains("trajectories (0)"), "{}", screen(&ui));
-        assert!(ui.key(KeyCode::Char('q'), KeyModifiers::NONE) == false);
+        assert!(!ui.key(KeyCode::Char('q'), KeyModifiers::NONE));
         let mut ui = Ui::default();
         assert!(!ui.key(KeyCode::Char('c'), KeyModifiers::CONTROL));
     }
