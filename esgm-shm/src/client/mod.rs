@@ -337,7 +337,9 @@ impl ShmEsgm {
     /// sync and merge trajectories created for it by others, e.g. the system's own
     /// location in `esgm up`, which writes what the command line creates.
     pub fn serve_assignments(&self) {
-        let _ = self.inner.commands.send(Command::Serving);
+        if self.inner.commands.send(Command::Serving).is_err() {
+            tracing::warn!("cannot serve assignments: the location thread has stopped");
+        }
     }
 
     /// Images (octet sequences) received from other processes that this process reads
@@ -538,6 +540,17 @@ impl ShmEsgm {
     }
 }
 
+/// A listing the coordinator did not give: the interface answers with what this
+/// process knows (a list cannot carry an error), and says why, once per call.
+fn unanswered(what: &str, answer: &Result<Response, ControlClientError>) {
+    match answer {
+        Err(e) => tracing::warn!(error = %e,
+            "the coordinator did not list the {what}; this process's own are listed instead"),
+        Ok(other) => tracing::warn!(answer = ?other,
+            "the coordinator listed the {what} in an unexpected form; this process's own are listed instead"),
+    }
+}
+
 fn type_error(e: ControlClientError) -> TypeRegistryError {
     match e {
         ControlClientError::Remote(ControlError::Type(e)) => e,
@@ -570,15 +583,18 @@ impl Esgm for ShmEsgm {
         self.control(request).map_err(type_error)?;
         // Already known here (e.g. from a destroyed-and-recreated name): take the
         // coordinator's, which is the one just registered.
-        let _ = self.inner.local.destroy_entity_structure_type(type_name);
-        let _ = self.inner.local.create_entity_structure_type(type_name, entity_type);
+        let _not_known_here = self.inner.local.destroy_entity_structure_type(type_name);
+        if let Err(e) = self.inner.local.create_entity_structure_type(type_name, entity_type) {
+            tracing::warn!(type_name, error = %e,
+                "registered in the system but not in this process; it is fetched when used");
+        }
         Ok(())
     }
 
     fn destroy_entity_structure_type(&self, type_name: &str) -> Result<(), TypeRegistryError> {
         let request = Request::DestroyEntityStructureType { type_name: type_name.to_owned() };
         self.control(request).map_err(type_error)?;
-        let _ = self.inner.local.destroy_entity_structure_type(type_name);
+        let _not_known_here = self.inner.local.destroy_entity_structure_type(type_name);
         Ok(())
     }
 
@@ -596,7 +612,10 @@ impl Esgm for ShmEsgm {
     fn entity_structure_type_names(&self) -> Vec<String> {
         match self.control(Request::ListEntityStructureTypes) {
             Ok(Response::Names(names)) => names,
-            _ => self.inner.local.entity_structure_type_names(),
+            other => {
+                unanswered("type names", &other);
+                self.inner.local.entity_structure_type_names()
+            }
         }
     }
 
@@ -645,7 +664,10 @@ impl Esgm for ShmEsgm {
     fn trajectories(&self) -> Vec<TrajectoryInfo> {
         match self.control(Request::ListTrajectories) {
             Ok(Response::Trajectories(t)) => t,
-            _ => self.inner.local.trajectories(),
+            other => {
+                unanswered("trajectories", &other);
+                self.inner.local.trajectories()
+            }
         }
     }
 
@@ -672,7 +694,11 @@ impl Esgm for ShmEsgm {
             .map_err(registration_error)
             .and_then(|()| self.inner.local.add_sensor_interface(sensor, type_name, iface));
         if let Err(e) = local {
-            let _ = self.control(Request::RemoveSensorInterface { sensor: sensor.to_owned() });
+            let undo = self.control(Request::RemoveSensorInterface { sensor: sensor.to_owned() });
+            if let Err(undo) = undo {
+                tracing::warn!(sensor, error = %undo,
+                    "a sensor that failed to register here stays registered in the system");
+            }
             return Err(e);
         }
         self.serve_assignments();
@@ -682,7 +708,8 @@ impl Esgm for ShmEsgm {
     fn remove_sensor_interface(&self, sensor: &str) -> Result<(), RegistrationError> {
         let request = Request::RemoveSensorInterface { sensor: sensor.to_owned() };
         self.control(request).map_err(registration_error)?;
-        let _ = self.inner.local.remove_sensor_interface(sensor);
+        // Registered in another process, it is not known here.
+        let _served_elsewhere = self.inner.local.remove_sensor_interface(sensor);
         Ok(())
     }
 
@@ -713,7 +740,11 @@ impl Esgm for ShmEsgm {
         let local =
             local.and_then(|()| self.inner.local.add_comp_unit(name, type_name, input_types, cu));
         if let Err(e) = local {
-            let _ = self.control(Request::RemoveCompUnit { name: name.to_owned() });
+            let undo = self.control(Request::RemoveCompUnit { name: name.to_owned() });
+            if let Err(undo) = undo {
+                tracing::warn!(unit = name, error = %undo,
+                    "a unit that failed to register here stays registered in the system");
+            }
             return Err(e);
         }
         self.serve_assignments();
@@ -723,14 +754,18 @@ impl Esgm for ShmEsgm {
     fn remove_comp_unit(&self, name: &str) -> Result<(), RegistrationError> {
         let request = Request::RemoveCompUnit { name: name.to_owned() };
         self.control(request).map_err(registration_error)?;
-        let _ = self.inner.local.remove_comp_unit(name);
+        // Registered in another process, it is not known here.
+        let _served_elsewhere = self.inner.local.remove_comp_unit(name);
         Ok(())
     }
 
     fn sensors(&self) -> Vec<(String, String)> {
         match self.control(Request::ListSensors) {
             Ok(Response::Sensors(s)) => s.into_iter().map(|s| (s.name, s.type_name)).collect(),
-            _ => self.inner.local.sensors(),
+            other => {
+                unanswered("sensors", &other);
+                self.inner.local.sensors()
+            }
         }
     }
 
@@ -739,7 +774,10 @@ impl Esgm for ShmEsgm {
             Ok(Response::CompUnits(u)) => {
                 u.into_iter().map(|u| (u.name, u.type_name, u.input_types)).collect()
             }
-            _ => self.inner.local.comp_units(),
+            other => {
+                unanswered("units", &other);
+                self.inner.local.comp_units()
+            }
         }
     }
 
