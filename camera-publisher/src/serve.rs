@@ -17,14 +17,16 @@ use anyhow::Context;
 use esgm_core::library::Image;
 use esgm_core::{Esgm, Time};
 use esgm_shm::ShmEsgm;
+use esgm_shm::control::attach::serve_while_system_lives;
 
 use crate::camera_sensor::CameraSensor;
 use crate::frame_source::{FrameSource, RenderError};
 use crate::image_directory::ImageDirectory;
 use crate::scene::SyntheticScene;
 
-/// How long the coordinator may stay silent before a serving camera leaves: long enough
-/// to ride out a busy machine, short enough that `esgm down` is prompt.
+/// How long a stopped system's coordinator may stay gone before a serving camera
+/// leaves (a slow or crashed coordinator is waited for: see
+/// [`esgm_shm::control::attach`]).
 pub const COORDINATOR_PATIENCE: Duration = Duration::from_millis(500);
 
 /// The name a camera serving sensor `sensor` goes by in the registry and in logs
@@ -155,8 +157,9 @@ fn register<E: Esgm>(esgm: &E, name: &str, source: CameraSource) -> anyhow::Resu
 }
 
 /// The camera process: checks its settings, connects to the system of `domain`,
-/// serves the camera, and returns once the coordinator has been gone for
-/// [`COORDINATOR_PATIENCE`].
+/// serves the camera, and returns once the system was stopped (its coordinator gone
+/// for [`COORDINATOR_PATIENCE`] and its registry no longer kept). A slow or crashed
+/// coordinator is waited for: the camera keeps serving its readers meanwhile.
 pub fn run(domain: &str, args: &CameraArgs) -> anyhow::Result<()> {
     let source = args.source()?;
     let esgm = ShmEsgm::builder()
@@ -166,8 +169,8 @@ pub fn run(domain: &str, args: &CameraArgs) -> anyhow::Result<()> {
         .with_context(|| format!("cannot reach the system `{domain}`"))?;
     register(&esgm, &args.name, source)?;
     tracing::info!(sensor = %args.name, "serving");
-    esgm.serve_until_coordinator_gone(COORDINATOR_PATIENCE);
-    tracing::info!(sensor = %args.name, "the coordinator is gone; leaving");
+    serve_while_system_lives(&esgm, None, COORDINATOR_PATIENCE);
+    tracing::info!(sensor = %args.name, "the system was stopped; leaving");
     Ok(())
 }
 

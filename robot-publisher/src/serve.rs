@@ -17,11 +17,13 @@ use esgm_core::esgm::{CreateError, TrajectorySpec};
 use esgm_core::library::RobotState;
 use esgm_core::{Entity, Esgm, FluentStreamPolicy, SharedClock, Time, millis};
 use esgm_shm::ShmEsgm;
+use esgm_shm::control::attach::serve_while_system_lives;
 
 use crate::publisher::RobotPublisher;
 
-/// How long the coordinator may stay silent before a running robot leaves: long enough
-/// to ride out a busy machine, short enough that `esgm down` is prompt.
+/// How long a stopped system's coordinator may stay gone before a running robot
+/// leaves (a slow or crashed coordinator is waited for, publishing on: see
+/// [`esgm_shm::control::attach`]).
 pub const COORDINATOR_PATIENCE: Duration = Duration::from_millis(500);
 
 /// How long [`start`] waits for the trajectory it follows to be created (a system
@@ -124,7 +126,8 @@ where
 }
 
 /// The robot process: connects to the system of `domain`, publishes, and returns once
-/// the coordinator has been gone for [`COORDINATOR_PATIENCE`].
+/// the system was stopped (its coordinator gone for [`COORDINATOR_PATIENCE`] and its
+/// registry no longer kept). A slow or crashed coordinator is waited for.
 pub fn run(domain: &str, args: &RobotArgs) -> anyhow::Result<()> {
     let esgm = ShmEsgm::builder()
         .domain(domain)
@@ -133,10 +136,10 @@ pub fn run(domain: &str, args: &RobotArgs) -> anyhow::Result<()> {
         .with_context(|| format!("cannot reach the system `{domain}`"))?;
     let robot = start(&esgm, esgm.local().clock().clone(), args)?;
     tracing::info!(trajectory = %args.trajectory, follow = %args.follow, "publishing");
-    esgm.serve_until_coordinator_gone(COORDINATOR_PATIENCE);
+    serve_while_system_lives(&esgm, None, COORDINATOR_PATIENCE);
     let stats = robot.stats();
     robot.stop();
-    tracing::info!(trajectory = %args.trajectory, ?stats, "the coordinator is gone; leaving");
+    tracing::info!(trajectory = %args.trajectory, ?stats, "the system was stopped; leaving");
     Ok(())
 }
 

@@ -42,6 +42,8 @@ enum Command {
     Apply(cmd::apply::Args),
     /// The processes the system keeps running, with restarts.
     Ps,
+    /// What the system's processes logged (`esgm up` keeps a log per process).
+    Logs(cmd::logs::Args),
     /// The seed's tutorial as separate processes: coordinator, camera, robot, units.
     Demo(cmd::demo::Args),
     /// Entity structure types.

@@ -87,7 +87,8 @@ impl Drop for StopOnDrop {
 /// Nothing of the system is left in shared memory: no node of its domain, alive or
 /// dead (crashed processes' resources were cleaned).
 fn assert_nothing_left(domain: &str) {
-    let nodes = esgm_shm::nodes_of(domain);
+    // A listing that fails fails the test: "none" is never assumed.
+    let nodes = esgm_shm::nodes_of(domain).expect("cannot list iceoryx2 nodes");
     assert!(nodes.is_empty(), "nodes of `{domain}` left behind: {nodes:?}");
 }
 

@@ -13,7 +13,7 @@ use iceoryx2::service::port_factory::client::ClientCreateError;
 use iceoryx2::service::port_factory::request_response::PortFactory;
 
 use super::protocol::{ControlError, Request, Response, decode, encode};
-use super::server::MAX_CLIENTS;
+use super::server::{MAX_CLIENTS, MAX_NODES};
 use crate::service::ShmNode;
 use crate::service_name::{NameError, control_service};
 
@@ -62,9 +62,22 @@ pub enum ControlClientError {
         /// The domain.
         domain: String,
     },
-    /// The request could not be encoded or the answer decoded.
+    /// The request could not be encoded.
     #[error("malformed control message: {0}")]
     Malformed(#[source] serde_json::Error),
+    /// The coordinator answered in a form this esgm cannot read: it is another esgm
+    /// version. Use the same esgm for the coordinator and its clients.
+    #[error(
+        "protocol mismatch: the coordinator of domain `{domain}` answered in a form this esgm ({version}) cannot read; use the same esgm version for the coordinator and its clients ({source})"
+    )]
+    ProtocolMismatch {
+        /// The domain.
+        domain: String,
+        /// This client's esgm version.
+        version: &'static str,
+        /// What could not be read.
+        source: serde_json::Error,
+    },
     /// This process's location thread, which makes the calls, has stopped or is stuck.
     #[error("the location thread is unavailable: {reason}")]
     LocationUnavailable {
@@ -101,6 +114,7 @@ impl ControlClient {
             .service_builder(&name)
             .request_response::<[u8], [u8]>()
             .max_clients(MAX_CLIENTS)
+            .max_nodes(MAX_NODES)
             .max_active_requests_per_client(4)
             .open()
             .map_err(|source| ControlClientError::NoCoordinator {
@@ -145,9 +159,14 @@ impl ControlClient {
         let mut pause = Duration::from_micros(20);
         loop {
             if let Some(answer) = pending.receive().map_err(ControlClientError::Receive)? {
-                return match decode::<Response>(answer.payload())
-                    .map_err(ControlClientError::Malformed)?
-                {
+                let answer = decode::<Response>(answer.payload()).map_err(|source| {
+                    ControlClientError::ProtocolMismatch {
+                        domain: self.domain.clone(),
+                        version: env!("CARGO_PKG_VERSION"),
+                        source,
+                    }
+                })?;
+                return match answer {
                     Response::Error(e) => Err(ControlClientError::Remote(e)),
                     ok => Ok(ok),
                 };

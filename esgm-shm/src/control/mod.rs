@@ -7,15 +7,23 @@
 //! - [`Coordinator`]: serves the registry.
 //! - [`processes`]: the workers a system keeps running, declared to the coordinator.
 //! - [`ControlClient`]: asks it, with a deadline on every call.
+//! - [`attach`]: a worker's main loop, which rides out a slow or crashed coordinator.
+//! - [`limits`]: what the coordinator accepts (bounded names and requests).
+//! - [`state`]: the registry on disk, so a crashed coordinator comes back whole (and
+//!   why a state file rather than processes re-registering).
 
+pub mod attach;
 pub mod client;
+pub mod limits;
 pub mod processes;
 pub mod protocol;
 pub mod registry;
 pub mod server;
+pub mod state;
 
 pub use client::{ControlClient, ControlClientError};
 pub use processes::{ProcessError, ProcessRecord, ProcessSpec, ProcessStatus};
 pub use protocol::{Assignment, ControlError, Request, Response, TrajectoryRecord};
-pub use registry::Registry;
+pub use registry::{Origin, Registry};
 pub use server::{Coordinator, CoordinatorError, CoordinatorThread};
+pub use state::{StateDir, StateError};

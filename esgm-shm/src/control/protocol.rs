@@ -249,6 +249,43 @@ pub enum ControlError {
         /// What was wrong with it.
         reason: String,
     },
+    /// The request is not in this coordinator's protocol: the client is another esgm
+    /// version. Use the same esgm for the coordinator and its clients.
+    #[error(
+        "protocol mismatch: the coordinator (esgm {coordinator_version}) cannot read this request; use the same esgm version for the coordinator and its clients ({reason})"
+    )]
+    ProtocolMismatch {
+        /// The coordinator's esgm version.
+        coordinator_version: String,
+        /// What could not be read.
+        reason: String,
+    },
+    /// A name is refused (empty, too long, or with `/`, spaces or control characters);
+    /// rename it (see [`super::limits`]).
+    #[error("illegal {what} name `{name}`: {reason}")]
+    IllegalName {
+        /// What it names (`trajectory`, `type`, `process`…).
+        what: String,
+        /// The name (shortened if long).
+        name: String,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// The request is larger than the coordinator accepts; split it.
+    #[error("request of {bytes} bytes refused; the coordinator accepts at most {max}")]
+    TooLarge {
+        /// Its size.
+        bytes: usize,
+        /// The limit ([`super::limits::MAX_REQUEST_BYTES`]).
+        max: usize,
+    },
+    /// The asking process may not do this (a process reports on itself only, or the
+    /// supervisor on the processes it runs).
+    #[error("not allowed: {reason}")]
+    NotAllowed {
+        /// Why.
+        reason: String,
+    },
 }
 
 /// Encodes a message for the wire.

@@ -11,6 +11,7 @@ use super::processes::ProcessTable;
 use super::protocol::{
     Assignment, ControlError, PlacementRecord, Request, Response, TrajectoryRecord,
 };
+use super::state::{SNAPSHOT_VERSION, SavedTrajectory, Snapshot};
 use crate::holdings::HoldingStats;
 
 #[derive(Debug, Clone)]
@@ -53,12 +54,116 @@ impl Registry {
         &self.catalog
     }
 
-    /// Carries out one request.
+    /// Carries out one request from the coordinator's own process (trusted: the
+    /// supervisor reports from there).
     pub fn handle(&mut self, request: Request) -> Response {
-        match self.apply(request) {
+        self.handle_from(request, Origin::Coordinator)
+    }
+
+    /// Carries out one request from `origin`: its names are checked first
+    /// ([`super::limits`]), and a process report is accepted only from the
+    /// coordinator's own process (the supervisor) or from the reported process itself.
+    pub fn handle_from(&mut self, request: Request, origin: Origin) -> Response {
+        let checked = super::limits::check_request(&request)
+            .and_then(|()| check_origin(&request, origin))
+            .and_then(|()| self.apply(request));
+        match checked {
             Ok(r) => r,
             Err(e) => Response::Error(e),
         }
+    }
+
+    /// Everything a new coordinator needs to answer as this one does
+    /// ([`super::state`]).
+    pub fn snapshot(&self) -> Snapshot {
+        let types = self
+            .catalog
+            .types()
+            .names()
+            .into_iter()
+            .filter_map(|n| {
+                let t = self.catalog.types().get_entity_structure_type(&n).ok()?;
+                Some((n, t.as_ref().clone()))
+            })
+            .collect();
+        let mut trajectories: Vec<SavedTrajectory> = self
+            .placement
+            .iter()
+            .filter_map(|(name, p)| {
+                let info = self.catalog.trajectory(name).ok()?.clone();
+                Some(SavedTrajectory {
+                    info,
+                    spec: p.spec.clone(),
+                    writer: p.writer.clone(),
+                    generation: p.generation,
+                })
+            })
+            .collect();
+        trajectories.sort_by_key(|t| t.generation);
+        Snapshot {
+            version: SNAPSHOT_VERSION,
+            types,
+            sensors: self.catalog.sensors().cloned().collect(),
+            units: self.catalog.units().cloned().collect(),
+            trajectories,
+            next_generation: self.next_generation,
+            processes: self.processes.list(),
+        }
+    }
+
+    /// A registry with `types` (the library types, usually) and everything `snapshot`
+    /// holds. What cannot be restored (a type naming a type that is missing, say) is
+    /// an error naming it: a registry silently missing part of its system would make
+    /// running processes drop what they serve.
+    pub fn restore(types: TypeRegistry, snapshot: Snapshot) -> Result<Self, ControlError> {
+        let mut r = Self::new(types);
+        // Types may name each other: define in passes until none is left.
+        let mut pending: Vec<(String, EntityStructureType)> = snapshot
+            .types
+            .into_iter()
+            .filter(|(n, t)| {
+                r.catalog.types().get_entity_structure_type(n).map_or(true, |known| *known != *t)
+            })
+            .collect();
+        while !pending.is_empty() {
+            let before = pending.len();
+            let mut last_error = None;
+            pending.retain(|(n, t)| {
+                match r.catalog.types_mut().create_entity_structure_type(n.clone(), t.clone()) {
+                    Ok(()) => false,
+                    Err(e) => {
+                        last_error = Some(e);
+                        true
+                    }
+                }
+            });
+            if pending.len() == before {
+                if let Some(e) = last_error {
+                    return Err(e.into());
+                }
+            }
+        }
+        for s in snapshot.sensors {
+            r.catalog.add_sensor(&s.name, &s.type_name, &s.host)?;
+        }
+        for u in snapshot.units {
+            r.catalog.add_unit(&u.name, &u.type_name, u.input_types, &u.host)?;
+        }
+        for t in snapshot.trajectories {
+            let name = t.info.name.clone();
+            r.catalog.insert_trajectory(t.info);
+            r.placement.insert(
+                name,
+                Placement { writer: t.writer, generation: t.generation, spec: t.spec },
+            );
+        }
+        r.next_generation = snapshot.next_generation;
+        for p in snapshot.processes {
+            let name = p.spec.name.clone();
+            r.processes.declare(p.spec)?;
+            r.processes.report(&name, p.status)?;
+        }
+        Ok(r)
     }
 
     fn record(&self, name: &str) -> Result<TrajectoryRecord, ControlError> {
@@ -74,6 +179,11 @@ impl Registry {
         let (writer, generation) =
             self.placement.get(name).map(|p| (p.writer.clone(), p.generation)).unwrap_or_default();
         Ok(TrajectoryRecord { info, types, writer, generation })
+    }
+
+    /// The pid a process reported for `name`, if any.
+    pub fn process_pid(&self, name: &str) -> Option<u32> {
+        self.processes.list().into_iter().find(|p| p.spec.name == name).and_then(|p| p.status.pid)
     }
 
     fn apply(&mut self, request: Request) -> Result<Response, ControlError> {
@@ -235,6 +345,59 @@ impl Registry {
     }
 }
 
+/// Who asked: what the coordinator knows of the process behind a request (from
+/// iceoryx2's record of the client port's node, which the asking process cannot forge).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Origin {
+    /// The coordinator's own process (the supervisor in `esgm up`).
+    Coordinator,
+    /// Another process, by pid.
+    Process(u32),
+    /// A process the coordinator could not identify.
+    Unknown,
+}
+
+/// True if the request changes the registry (and the state file must follow).
+pub fn changes_registry(request: &Request) -> bool {
+    !matches!(
+        request,
+        Request::Ping
+            | Request::Shutdown
+            | Request::GetEntityStructureType { .. }
+            | Request::ListEntityStructureTypes
+            | Request::GetTypeDefinitions { .. }
+            | Request::GetEntityTrajectoryStructure { .. }
+            | Request::ListTrajectories
+            | Request::ReportHoldings { .. }
+            | Request::ListHoldings
+            | Request::ListPlacements
+            | Request::ListSensors
+            | Request::ListCompUnits
+            | Request::Assignments { .. }
+            | Request::ListProcesses
+    )
+}
+
+/// A process report comes from the supervisor, or from the process itself about its
+/// own pid: nobody else may rewrite a process's record (a pid of 1 there made
+/// `esgm down` wait for init).
+fn check_origin(request: &Request, origin: Origin) -> Result<(), ControlError> {
+    let Request::ReportProcess { name, status } = request else { return Ok(()) };
+    match origin {
+        Origin::Coordinator => Ok(()),
+        Origin::Process(pid) if status.pid == Some(pid) => Ok(()),
+        Origin::Process(pid) => Err(ControlError::NotAllowed {
+            reason: format!(
+                "process {pid} may not report on `{name}` (pid {}); only its supervisor or itself may",
+                status.pid.map_or_else(|| "none".to_owned(), |p| p.to_string())
+            ),
+        }),
+        Origin::Unknown => Err(ControlError::NotAllowed {
+            reason: format!("a process the coordinator cannot identify may not report on `{name}`"),
+        }),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -370,5 +533,95 @@ mod tests {
         let mut r = registry();
         assert!(matches!(r.handle(back), Response::Trajectory(_)));
         assert!(super::super::protocol::decode::<Request>(b"{not json").is_err());
+    }
+
+    #[test]
+    fn names_are_bounded_before_any_lookup() {
+        let mut r = registry();
+        for bad in [String::new(), "a/b".to_owned(), "x".repeat(300)] {
+            let e = err(r.handle(Request::GetEntityTrajectoryStructure { name: bad.clone() }));
+            assert!(matches!(e, ControlError::IllegalName { .. }), "{bad:?}: {e:?}");
+            let e = err(r.handle(Request::CreateTrajectory {
+                spec: TrajectorySpec::primitive(bad.clone(), "RobotState"),
+                host: "h".into(),
+            }));
+            assert!(matches!(e, ControlError::IllegalName { .. }), "{bad:?}: {e:?}");
+        }
+        // The probe: a 4 MiB unknown name is refused before the "did you mean"
+        // search, so its cost does not depend on the name's length.
+        let huge = "q".repeat(4 << 20);
+        let e = err(r.handle(Request::GetEntityStructureType { type_name: huge }));
+        assert!(matches!(e, ControlError::IllegalName { .. }), "{e:?}");
+        assert!(r.catalog().trajectories().next().is_none());
+    }
+
+    #[test]
+    fn a_process_cannot_rewrite_another_ones_record() {
+        use super::super::processes::{ProcessSpec, ProcessStatus};
+        let mut r = registry();
+        let spec =
+            ProcessSpec { name: "cam".into(), program: "esgm".into(), args: vec![], env: vec![] };
+        assert!(matches!(r.handle(Request::DeclareProcess { spec }), Response::Done));
+        let report = |pid| Request::ReportProcess {
+            name: "cam".into(),
+            status: ProcessStatus { pid: Some(pid), restarts: 0, last_exit: None },
+        };
+        // The supervisor (the coordinator's own process) may.
+        assert!(matches!(r.handle(report(4242)), Response::Done));
+        // Another process may not set someone's pid (to 1, say)...
+        let e = err(r.handle_from(report(1), Origin::Process(777)));
+        assert!(matches!(e, ControlError::NotAllowed { .. }), "{e:?}");
+        let e = err(r.handle_from(report(1), Origin::Unknown));
+        assert!(matches!(e, ControlError::NotAllowed { .. }), "{e:?}");
+        assert_eq!(r.process_pid("cam"), Some(4242));
+        // ...but a process may report itself.
+        assert!(matches!(r.handle_from(report(777), Origin::Process(777)), Response::Done));
+        assert_eq!(r.process_pid("cam"), Some(777));
+    }
+
+    #[test]
+    fn a_restored_registry_answers_as_the_saved_one() {
+        let mut r = registry();
+        let t = EntityStructureType::new("Pose2").attr("x", ValueSort::Double);
+        let outer = EntityStructureType::new("Tracked").frame("pose", "Pose2");
+        for (n, t) in [("Pose2", t), ("Tracked", outer)] {
+            assert!(matches!(
+                r.handle(Request::CreateEntityStructureType {
+                    type_name: n.into(),
+                    entity_type: t
+                }),
+                Response::Done
+            ));
+        }
+        r.handle(Request::AddSensorInterface {
+            sensor: "cam".into(),
+            type_name: "Image".into(),
+            host: "camera".into(),
+        });
+        let created = r.handle(Request::CreateTrajectory {
+            spec: TrajectorySpec::primitive("poses", "Pose2"),
+            host: "robot".into(),
+        });
+        let Response::Trajectory(before) = created else { panic!("{created:?}") };
+        let snapshot = r.snapshot();
+        let json = serde_json::to_vec(&snapshot).unwrap();
+        let back = serde_json::from_slice(&json).unwrap();
+        let mut restored = Registry::restore(TypeRegistry::with_library(), back).unwrap();
+        let Response::Trajectory(after) =
+            restored.handle(Request::GetEntityTrajectoryStructure { name: "poses".into() })
+        else {
+            panic!("no trajectory after restore")
+        };
+        assert_eq!(before, after);
+        assert!(restored.catalog().sensor("cam").is_some());
+        assert!(restored.catalog().types().get_entity_structure_type("Tracked").is_ok());
+        // The next generation continues, never reusing one.
+        let Response::Trajectory(next) = restored.handle(Request::CreateTrajectory {
+            spec: TrajectorySpec::primitive("more", "Pose2"),
+            host: "robot".into(),
+        }) else {
+            panic!("cannot create after restore")
+        };
+        assert!(next.generation > before.generation);
     }
 }

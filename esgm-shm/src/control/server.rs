@@ -11,17 +11,27 @@ use iceoryx2::node::{NodeCreationFailure, NodeState};
 use iceoryx2::port::server::Server;
 use iceoryx2::port::{LoanError, ReceiveError, SendError};
 use iceoryx2::prelude::{AllocationStrategy, NodeBuilder};
-use iceoryx2::service::builder::request_response::RequestResponseCreateError;
+use iceoryx2::service::builder::request_response::{
+    RequestResponseCreateError, RequestResponseOpenError,
+};
+use iceoryx2::service::port_factory::PortFactory as _;
 use iceoryx2::service::port_factory::request_response::PortFactory;
 use iceoryx2::service::port_factory::server::ServerCreateError;
 
+use super::limits::MAX_REQUEST_BYTES;
 use super::protocol::{ControlError, Request, Response, decode, encode};
-use super::registry::Registry;
+use super::registry::{Origin, Registry, changes_registry};
+use super::state::{StateDir, StateError};
 use crate::service::ShmNode;
 use crate::service_name::{NameError, control_service};
 
 /// Room for this many clients (processes and their threads) in one system.
 pub const MAX_CLIENTS: usize = 128;
+
+/// Nodes that may open the control service (and its wake-up): one per client, the
+/// coordinator's, and a margin for nodes being torn down while new ones connect.
+/// iceoryx2's default (20) locked a system of more than 20 processes out.
+pub const MAX_NODES: usize = MAX_CLIENTS + 16;
 
 /// The coordinator could not start or serve.
 #[derive(Debug, thiserror::Error)]
@@ -41,6 +51,35 @@ pub enum CoordinatorError {
         /// iceoryx2's reason.
         source: RequestResponseCreateError,
     },
+    /// The control service was left by a coordinator that died (its clients keep it)
+    /// but could not be taken over.
+    #[error(
+        "cannot take over the control service of domain `{domain}` left by a stopped coordinator: {source}"
+    )]
+    TakeOver {
+        /// The domain.
+        domain: String,
+        /// iceoryx2's reason.
+        source: RequestResponseOpenError,
+    },
+    /// The domain's state could not be locked, read or restored.
+    #[error("the state of domain `{domain}`: {source}")]
+    State {
+        /// The domain.
+        domain: String,
+        /// The cause.
+        source: StateError,
+    },
+    /// The saved registry could not be restored.
+    #[error("cannot restore the registry of domain `{domain}` from {}: {source}", path.display())]
+    Restore {
+        /// The domain.
+        domain: String,
+        /// The state file.
+        path: std::path::PathBuf,
+        /// What could not be restored.
+        source: Box<ControlError>,
+    },
     /// The server port could not be created.
     #[error("cannot create the control server: {0}")]
     Server(#[source] ServerCreateError),
@@ -53,6 +92,9 @@ pub enum CoordinatorError {
     /// Sending a response failed.
     #[error("cannot send a response: {0}")]
     Send(#[source] SendError),
+    /// An answer could not be encoded.
+    #[error("cannot encode an answer: {0}")]
+    Encode(#[source] serde_json::Error),
     /// The coordinator's thread could not be started.
     #[error("cannot start the coordinator thread: {0}")]
     Spawn(#[source] std::io::Error),
@@ -60,6 +102,10 @@ pub enum CoordinatorError {
     #[error("the coordinator thread stopped while starting")]
     Stopped,
 }
+
+/// Responses the coordinator keeps room for: a client has one question out at a time
+/// (and may leave one abandoned answer behind after a timeout).
+const RESPONSES: usize = 4 * MAX_CLIENTS;
 
 /// The longest an idle coordinator sleeps before it looks at its stop flag.
 const IDLE_WAIT: Duration = Duration::from_millis(100);
@@ -74,7 +120,7 @@ pub(crate) fn open_control_wake(
         .event()
         .max_notifiers(MAX_CLIENTS + 16)
         .max_listeners(4)
-        .max_nodes(MAX_CLIENTS + 16)
+        .max_nodes(MAX_NODES)
         .open_or_create()
         .map_err(|e| format!("{e:?}"))
 }
@@ -92,32 +138,103 @@ pub struct Coordinator {
     served: u64,
     failures: u64,
     shutdown_requested: bool,
+    /// Where the registry is kept after each change (`None`: in memory only).
+    state: Option<StateDir>,
+    /// The domain's coordinator lock, held while serving.
+    _lock: Option<std::fs::File>,
 }
 
 impl Coordinator {
-    /// Starts a coordinator for `domain` with `registry`. Dead nodes left by crashed
-    /// processes are cleaned first.
+    /// Starts a coordinator for `domain` with `registry`, kept in memory only. Dead
+    /// nodes left by crashed processes are cleaned first.
     pub fn create(domain: &str, registry: Registry) -> Result<Self, CoordinatorError> {
+        Self::serve_registry(domain, registry, None, None)
+    }
+
+    /// Starts the coordinator of `domain` whose registry is kept in `state` (see
+    /// [`super::state`]): takes the domain's lock, restores the registry a crashed
+    /// coordinator left there (else starts one with `types`), takes over the control
+    /// service if the crashed one's clients still hold it, and saves the registry
+    /// after every change. Returns how many trajectories were recovered, too.
+    pub fn recover(
+        domain: &str,
+        types: esgm_core::TypeRegistry,
+        state: StateDir,
+    ) -> Result<(Self, usize), CoordinatorError> {
+        let failed = |source| CoordinatorError::State { domain: domain.to_owned(), source };
+        let lock = state.lock().map_err(failed)?;
+        let registry = match state.load().map_err(failed)? {
+            Some(snapshot) => {
+                Registry::restore(types, snapshot).map_err(|source| CoordinatorError::Restore {
+                    domain: domain.to_owned(),
+                    path: state.registry_file(),
+                    source: Box::new(source),
+                })?
+            }
+            None => Registry::new(types),
+        };
+        let recovered = registry.catalog().trajectories().count();
+        let coordinator = Self::serve_registry(domain, registry, Some(state), Some(lock))?;
+        coordinator.save_state();
+        Ok((coordinator, recovered))
+    }
+
+    fn serve_registry(
+        domain: &str,
+        registry: Registry,
+        state: Option<StateDir>,
+        lock: Option<std::fs::File>,
+    ) -> Result<Self, CoordinatorError> {
         let name = control_service(domain)?;
         let node = NodeBuilder::new()
             .name(&crate::service_name::node_name(domain, "coordinator"))
             .create::<ShmService>()
             .map_err(CoordinatorError::Node)?;
-        cleanup_dead_nodes();
-        let service = node
-            .service_builder(&name)
-            .request_response::<[u8], [u8]>()
-            .max_clients(MAX_CLIENTS)
-            .max_active_requests_per_client(4)
-            .create()
-            .map_err(|source| CoordinatorError::AlreadyRunning {
-                domain: domain.to_owned(),
-                source,
-            })?;
+        log_cleanup(cleanup_dead_nodes());
+        let builder = || {
+            node.service_builder(&name)
+                .request_response::<[u8], [u8]>()
+                .max_clients(MAX_CLIENTS)
+                .max_nodes(MAX_NODES)
+                .max_active_requests_per_client(4)
+        };
+        let service = match builder().create() {
+            Ok(service) => service,
+            // The clients of a coordinator that died keep its service: take it over,
+            // unless a coordinator still serves it.
+            Err(RequestResponseCreateError::AlreadyExists) => {
+                let service = builder().open().map_err(|source| CoordinatorError::TakeOver {
+                    domain: domain.to_owned(),
+                    source,
+                })?;
+                if service.dynamic_config().number_of_servers() > 0 {
+                    return Err(CoordinatorError::AlreadyRunning {
+                        domain: domain.to_owned(),
+                        source: RequestResponseCreateError::AlreadyExists,
+                    });
+                }
+                tracing::info!(
+                    domain,
+                    "taking over the control service a stopped coordinator left"
+                );
+                service
+            }
+            Err(source) => {
+                return Err(CoordinatorError::AlreadyRunning { domain: domain.to_owned(), source });
+            }
+        };
         let server = service
             .server_builder()
             .initial_max_slice_len(4096)
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            // iceoryx2 sizes the response pool for every client holding its maximum
+            // of responses (6,144 chunks here), and every client's connection carries
+            // a used-chunk list of that size for each of the 255 segments a growing
+            // data segment may have: ~1.5 M entries initialised per client that
+            // connects. Clients ask one question at a time, so a few responses per
+            // client suffice; this makes connecting (client churn, and a coordinator
+            // taking over from a crashed one with every worker connected) 12x cheaper.
+            .override_response_preallocation(|_| RESPONSES)
             .create()
             .map_err(CoordinatorError::Server)?;
         let wake = open_control_wake(&node, domain)
@@ -135,7 +252,44 @@ impl Coordinator {
             served: 0,
             failures: 0,
             shutdown_requested: false,
+            state,
+            _lock: lock,
         })
+    }
+
+    /// Writes the registry to the state directory, if it has one. A failure is logged
+    /// and counted: the coordinator keeps serving, but a crash would lose the change.
+    fn save_state(&self) {
+        let Some(state) = &self.state else { return };
+        if let Err(e) = state.save(&self.registry.snapshot()) {
+            tracing::error!(domain = %self.domain, error = %e,
+                "cannot save the registry; a coordinator crash now would lose changes");
+        }
+    }
+
+    /// Who sent `active`: the pid of the node its client port belongs to, as iceoryx2
+    /// recorded it when the port was made.
+    fn origin(
+        &self,
+        active: &iceoryx2::active_request::ActiveRequest<ShmService, [u8], (), [u8], ()>,
+    ) -> Origin {
+        let client = active.origin();
+        let mut origin = Origin::Unknown;
+        self._service.dynamic_config().list_clients(|details| {
+            if details.client_id == client {
+                if let Ok(pid) = details.node_id.pid::<ShmService>() {
+                    let pid = pid.value();
+                    origin = match u32::try_from(pid) {
+                        Ok(p) if p == std::process::id() => Origin::Coordinator,
+                        Ok(p) => Origin::Process(p),
+                        Err(_) => Origin::Unknown,
+                    };
+                }
+                return iceoryx2::prelude::CallbackProgression::Stop;
+            }
+            iceoryx2::prelude::CallbackProgression::Continue
+        });
+        origin
     }
 
     /// The domain served.
@@ -174,24 +328,54 @@ impl Coordinator {
                     return Ok(n);
                 }
             };
-            let response = match decode::<Request>(active.payload()) {
-                Ok(Request::Shutdown) => {
-                    tracing::info!(domain = %self.domain, "shutdown requested");
-                    self.shutdown_requested = true;
-                    Response::Done
-                }
-                Ok(request) => self.registry.handle(request),
-                Err(e) => {
-                    tracing::warn!(error = %e, "malformed control request");
-                    Response::Error(ControlError::BadRequest { reason: e.to_string() })
+            let payload = active.payload();
+            let response = if payload.len() > MAX_REQUEST_BYTES {
+                tracing::warn!(bytes = payload.len(), "control request too large; refused");
+                Response::Error(ControlError::TooLarge {
+                    bytes: payload.len(),
+                    max: MAX_REQUEST_BYTES,
+                })
+            } else {
+                match decode::<Request>(payload) {
+                    Ok(Request::Shutdown) => {
+                        tracing::info!(domain = %self.domain, "shutdown requested");
+                        self.shutdown_requested = true;
+                        // An orderly stop: the next coordinator starts empty, and
+                        // workers that find no coordinator and no state leave.
+                        if let Some(state) = &self.state {
+                            if let Err(e) = state.remove_registry() {
+                                tracing::error!(error = %e, "cannot forget the registry");
+                            }
+                        }
+                        Response::Done
+                    }
+                    Ok(request) => {
+                        let persist = changes_registry(&request);
+                        let origin = match &request {
+                            Request::ReportProcess { .. } => self.origin(&active),
+                            _ => Origin::Unknown,
+                        };
+                        let response = self.registry.handle_from(request, origin);
+                        if persist && !matches!(response, Response::Error(_)) {
+                            self.save_state();
+                        }
+                        response
+                    }
+                    Err(e) => {
+                        tracing::warn!(error = %e, "control request in another protocol");
+                        Response::Error(ControlError::ProtocolMismatch {
+                            coordinator_version: env!("CARGO_PKG_VERSION").to_owned(),
+                            reason: e.to_string(),
+                        })
+                    }
                 }
             };
             let bytes = match encode(&response) {
                 Ok(b) => b,
                 Err(e) => {
-                    let fallback =
-                        Response::Error(ControlError::BadRequest { reason: e.to_string() });
-                    encode(&fallback).unwrap_or_default()
+                    // Not expected (every answer is plain data); the client times out.
+                    self.fail(CoordinatorError::Encode(e));
+                    continue;
                 }
             };
             let sent = match active.loan_slice_uninit(bytes.len()) {
@@ -226,20 +410,50 @@ impl Coordinator {
     /// Starts a coordinator for `domain` on a thread of its own (iceoryx2 ports stay on
     /// the thread that made them); it serves until the returned handle is dropped.
     pub fn spawn(domain: &str, registry: Registry) -> Result<CoordinatorThread, CoordinatorError> {
+        Self::spawn_with(domain, move |d| Coordinator::create(d, registry))
+    }
+
+    /// [`Coordinator::recover`] on a thread of its own (see [`Coordinator::spawn`]);
+    /// also returns how many trajectories were recovered.
+    pub fn spawn_recovering(
+        domain: &str,
+        types: esgm_core::TypeRegistry,
+        state: StateDir,
+    ) -> Result<(CoordinatorThread, usize), CoordinatorError> {
+        let (tx, rx) = std::sync::mpsc::sync_channel(1);
+        let thread = Self::spawn_with(domain, move |d| {
+            let (c, recovered) = Coordinator::recover(d, types, state)?;
+            if tx.send(recovered).is_err() {
+                tracing::debug!("nobody waits for the recovery count");
+            }
+            Ok(c)
+        })?;
+        let recovered = rx.try_recv().unwrap_or(0);
+        Ok((thread, recovered))
+    }
+
+    fn spawn_with(
+        domain: &str,
+        make: impl FnOnce(&str) -> Result<Coordinator, CoordinatorError> + Send + 'static,
+    ) -> Result<CoordinatorThread, CoordinatorError> {
         let stop = Arc::new(AtomicBool::new(false));
         let (ready, started) = std::sync::mpsc::sync_channel(1);
         let (d, s) = (domain.to_owned(), Arc::clone(&stop));
         let thread = std::thread::Builder::new()
             .name(format!("esgm-coordinator-{domain}"))
             .spawn(move || {
-                let mut coordinator = match Coordinator::create(&d, registry) {
+                let mut coordinator = match make(&d) {
                     Ok(c) => c,
                     Err(e) => {
-                        let _ = ready.send(Err(e));
+                        if let Err(e) = ready.send(Err(e)) {
+                            tracing::error!(error = ?e.0, "the coordinator could not start");
+                        }
                         return;
                     }
                 };
-                let _ = ready.send(Ok(()));
+                if ready.send(Ok(())).is_err() {
+                    tracing::debug!("nobody waits for the coordinator to start");
+                }
                 if let Err(e) = coordinator.run(&s, Duration::from_secs(1)) {
                     tracing::error!(error = %e, "coordinator stopped");
                 }
@@ -290,10 +504,7 @@ impl Coordinator {
                 self.sleep(until_cleanup.min(IDLE_WAIT));
             }
             if Instant::now() >= next_cleanup {
-                let removed = cleanup_dead_nodes();
-                if removed > 0 {
-                    tracing::info!(removed, "cleaned up resources of dead processes");
-                }
+                log_cleanup(cleanup_dead_nodes());
                 next_cleanup = Instant::now() + cleanup_every;
             }
         }
@@ -327,28 +538,43 @@ impl Drop for CoordinatorThread {
     fn drop(&mut self) {
         self.stop.store(true, Ordering::Relaxed);
         if let Some(t) = self.thread.take() {
-            let _ = t.join();
+            if t.join().is_err() {
+                tracing::error!(domain = %self.domain, "the coordinator thread panicked");
+            }
         }
     }
 }
 
 /// Removes what crashed processes left in shared memory (iceoryx2's dead-node cleanup);
-/// returns how many dead nodes were cleaned.
-pub fn cleanup_dead_nodes() -> usize {
+/// returns how many dead nodes were cleaned. A dead node that cannot be cleaned is
+/// logged with the reason; an error means the nodes could not even be listed.
+pub fn cleanup_dead_nodes() -> Result<usize, iceoryx2::node::NodeListFailure> {
+    use iceoryx2::node::{NodeCleanupFailure, NodeView};
     let mut removed = 0;
-    let result = iceoryx2::node::Node::<ShmService>::list(
-        iceoryx2::config::Config::global_config(),
-        |state| {
-            if let NodeState::Dead(view) = state {
-                if view.try_remove_stale_resources().is_ok() {
-                    removed += 1;
-                }
+    iceoryx2::node::Node::<ShmService>::list(iceoryx2::config::Config::global_config(), |state| {
+        if let NodeState::Dead(view) = state {
+            let id = format!("{:?}", view.id());
+            match view.try_remove_stale_resources() {
+                Ok(()) => removed += 1,
+                // Someone else cleans it (another coordinator, a new node).
+                Err(
+                    NodeCleanupFailure::ResourcesAlreadyCleanedUp
+                    | NodeCleanupFailure::AnotherInstanceIsCleaningUpTheNode,
+                ) => {}
+                Err(e) => tracing::warn!(node = %id, error = ?e,
+                    "cannot clean up after a dead process"),
             }
-            iceoryx2::prelude::CallbackProgression::Continue
-        },
-    );
-    if let Err(e) = result {
-        tracing::warn!(error = %e, "cannot list nodes for cleanup");
+        }
+        iceoryx2::prelude::CallbackProgression::Continue
+    })?;
+    Ok(removed)
+}
+
+/// Logs the outcome of a [`cleanup_dead_nodes`] that runs in the background.
+pub fn log_cleanup(outcome: Result<usize, iceoryx2::node::NodeListFailure>) {
+    match outcome {
+        Ok(0) => {}
+        Ok(removed) => tracing::info!(removed, "cleaned up resources of dead processes"),
+        Err(e) => tracing::warn!(error = %e, "cannot list nodes to clean up after dead processes"),
     }
-    removed
 }

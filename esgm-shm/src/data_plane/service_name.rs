@@ -166,14 +166,19 @@ pub fn node_name(domain: &str, role: &str) -> iceoryx2::prelude::NodeName {
 
 /// The nodes of `domain` on this host, alive or not: `(name, alive)`. After a clean
 /// stop (and cleanup of crashed processes) there are none.
-pub fn nodes_of(domain: &str) -> Vec<(String, bool)> {
+///
+/// An error means the nodes could not be listed (iceoryx2's node directory is
+/// unreadable, say): "none" is never answered for "unknown", so a check that nothing
+/// was left behind fails when it cannot look.
+pub fn nodes_of(domain: &str) -> Result<Vec<(String, bool)>, iceoryx2::node::NodeListFailure> {
     use iceoryx2::node::{Node, NodeState, NodeView};
     let prefix = format!("{SERVICE_PREFIX}/{domain}/");
     let mut out = Vec::new();
-    let _ = Node::<ShmService>::list(iceoryx2::config::Config::global_config(), |state| {
+    Node::<ShmService>::list(iceoryx2::config::Config::global_config(), |state| {
         let (details, alive) = match &state {
             NodeState::Alive(v) => (v.details().clone(), true),
             NodeState::Dead(v) => (v.details().clone(), false),
+            // A node being created or torn down, or one of another user: no details.
             _ => (None, false),
         };
         if let Some(d) = details {
@@ -182,8 +187,8 @@ pub fn nodes_of(domain: &str) -> Vec<(String, bool)> {
             }
         }
         iceoryx2::prelude::CallbackProgression::Continue
-    });
-    out
+    })?;
+    Ok(out)
 }
 
 #[cfg(test)]

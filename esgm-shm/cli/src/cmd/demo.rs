@@ -15,6 +15,7 @@ use esgm_core::{
 };
 use esgm_shm::control::protocol::{Request, Response};
 use esgm_shm::control::server::cleanup_dead_nodes;
+use esgm_shm::control::{ProcessRecord, StateDir};
 use esgm_shm::{ShmEsgm, unique_domain};
 
 use crate::config::{self, Plan};
@@ -56,26 +57,54 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
     // A fresh system unless the user named one.
     let domain = if domain == "esgm" { unique_domain("demo") } else { domain.to_owned() };
     println!("esgm demo: the seed's tutorial as separate processes, domain `{domain}`");
+    // A state directory of its own, removed at the end: the demo leaves nothing.
+    let state = StateDir::at(std::env::temp_dir().join(format!("esgm-{domain}")));
     // The coordinator's log (worker restarts among it) goes to this terminal.
-    let mut coordinator = super::up::spawn_detached(&domain, Stdio::inherit())?;
+    let mut coordinator = super::up::spawn_detached(&domain, Some(state.path()), Stdio::inherit())?;
     let result = drive(&domain, a, &plan);
-    let processes = super::ps::processes(&domain).unwrap_or_default();
+    let processes: Vec<ProcessRecord> = match super::ps::processes(&domain) {
+        Ok(p) => p,
+        Err(e) => {
+            eprintln!("esgm: cannot list the demo's processes: {e:#}");
+            Vec::new()
+        }
+    };
 
     // Shut down: the coordinator goes, the workers notice and leave, `esgm up` waits
     // for them and cleans up after anything that died.
-    super::up::shutdown(&domain);
-    let deadline = Instant::now() + Duration::from_secs(20);
-    while coordinator.try_wait().ok().flatten().is_none() && Instant::now() < deadline {
-        std::thread::sleep(Duration::from_millis(10));
+    if let Err(e) = super::up::shutdown(&domain) {
+        eprintln!("esgm: {e:#}");
     }
-    if coordinator.try_wait().ok().flatten().is_none() {
-        let _ = coordinator.kill();
-        let _ = coordinator.wait();
+    let stopped = wait_for_exit(&mut coordinator, Duration::from_secs(20))?;
+    if !stopped {
+        eprintln!("esgm: the demo's coordinator did not stop within 20 s; killing it");
+        coordinator.kill().context("cannot kill the demo's coordinator")?;
+        coordinator.wait().context("cannot reap the demo's coordinator")?;
     }
-    cleanup_dead_nodes();
+    let cleaned = cleanup_dead_nodes().context("cannot list nodes to clean up")?;
+    if cleaned > 0 {
+        println!("cleaned up after {cleaned} processes that did not leave");
+    }
+    if let Err(e) = std::fs::remove_dir_all(state.path()) {
+        eprintln!("esgm: cannot remove {}: {e}", state.path().display());
+    }
     let restarts: u32 = processes.iter().map(|p| p.status.restarts).sum();
     println!("\nstopped: coordinator and {} workers ({restarts} restarts)", processes.len());
     result
+}
+
+/// Waits up to `limit` for `child` to exit; true if it did.
+fn wait_for_exit(child: &mut std::process::Child, limit: Duration) -> anyhow::Result<bool> {
+    let deadline = Instant::now() + limit;
+    loop {
+        if child.try_wait().context("cannot wait for the coordinator")?.is_some() {
+            return Ok(true);
+        }
+        if Instant::now() >= deadline {
+            return Ok(false);
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
 }
 
 /// The tutorial's configuration file with the demo's settings.

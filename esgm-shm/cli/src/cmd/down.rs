@@ -1,27 +1,45 @@
 //! `esgm down`: stop the coordinator and everything it started. The workers leave
-//! when the coordinator is gone and `esgm up` waits for them, so this returns once
-//! the coordinator's process and every worker's are gone.
+//! when the coordinator is gone and its registry forgotten, and `esgm up` waits for
+//! them, so this returns once the coordinator's process and every worker's are gone.
+//!
+//! If the coordinator crashed (its workers still run and its registry is kept in the
+//! state directory), `esgm down` stops the system without it: it forgets the registry
+//! (so the workers leave) and waits for the workers the registry names.
 
-use std::path::Path;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use esgm_shm::control::server::cleanup_dead_nodes;
-use esgm_shm::control::{ControlClient, Request, Response};
+use esgm_shm::control::{
+    ControlClient, ControlClientError, ProcessRecord, Request, Response, StateDir,
+};
+
+use super::supervise::{alive, is_worker_of};
 
 /// How long the system may take to wind down.
 const WITHIN: Duration = Duration::from_secs(20);
 
 /// Stops the coordinator of `domain` and waits until its processes are gone.
 pub fn run(domain: &str) -> anyhow::Result<()> {
-    let client = ControlClient::connect(domain, Duration::from_secs(3))
-        .with_context(|| format!("cannot stop `{domain}`"))?;
+    let client = match ControlClient::connect(domain, Duration::from_secs(3)) {
+        Ok(c) => c,
+        Err(e) => return stop_without_coordinator(domain, e),
+    };
     let mut pids = Vec::new();
-    if let Ok(Response::Pong { pid, .. }) = client.call(&Request::Ping) {
-        pids.push(pid);
+    match client.call(&Request::Ping) {
+        Ok(Response::Pong { pid, .. }) => pids.push(pid),
+        Ok(other) => tracing::warn!(answer = ?other, "unexpected answer to a ping"),
+        // The service is there (its workers hold it) but nobody serves it.
+        Err(e @ ControlClientError::NotServing { .. }) => {
+            drop(client);
+            return stop_without_coordinator(domain, e);
+        }
+        Err(e) => tracing::warn!(error = %e, "the coordinator did not answer a ping"),
     }
-    if let Ok(Response::Processes(list)) = client.call(&Request::ListProcesses) {
-        pids.extend(list.iter().filter_map(|p| p.status.pid));
+    match client.call(&Request::ListProcesses) {
+        Ok(Response::Processes(list)) => pids.extend(list.iter().filter_map(|p| p.status.pid)),
+        Ok(other) => tracing::warn!(answer = ?other, "unexpected answer to a process listing"),
+        Err(e) => tracing::warn!(error = %e, "cannot list the processes to wait for"),
     }
     let answer = client.call(&Request::Shutdown);
     drop(client);
@@ -33,10 +51,11 @@ pub fn run(domain: &str) -> anyhow::Result<()> {
     }
     let deadline = Instant::now() + WITHIN;
     while ControlClient::connect(domain, Duration::from_millis(200)).is_ok()
-        || pids.iter().any(alive)
+        || pids.iter().any(|p| alive(*p))
     {
         if Instant::now() > deadline {
-            let left: Vec<String> = pids.iter().filter(|p| alive(p)).map(u32::to_string).collect();
+            let left: Vec<String> =
+                pids.iter().filter(|p| alive(**p)).map(u32::to_string).collect();
             bail!(
                 "`{domain}` acknowledged the stop but is still running (pids {})",
                 left.join(", ")
@@ -44,10 +63,16 @@ pub fn run(domain: &str) -> anyhow::Result<()> {
         }
         std::thread::sleep(Duration::from_millis(20));
     }
-    cleanup_dead_nodes();
+    finish(domain)
+}
+
+/// Cleans up after dead processes and notes programs esgm did not start.
+fn finish(domain: &str) -> anyhow::Result<()> {
+    cleanup_dead_nodes().context("cannot list nodes to clean up after dead processes")?;
     println!("stopped `{domain}`");
     // Programs esgm did not start (a user's own) may still hold the domain's services.
-    let others: Vec<String> = esgm_shm::nodes_of(domain).into_iter().map(|(n, _)| n).collect();
+    let nodes = esgm_shm::nodes_of(domain).context("cannot list the domain's nodes")?;
+    let others: Vec<String> = nodes.into_iter().map(|(n, _)| n).collect();
     if !others.is_empty() {
         eprintln!(
             "esgm: note: processes esgm did not start are still connected to `{domain}`: {}",
@@ -57,17 +82,35 @@ pub fn run(domain: &str) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// True while process `pid` runs (an exited process its parent has not reaped yet —
-/// a zombie — has stopped).
-fn alive(pid: &u32) -> bool {
-    if *pid == 0 {
-        return false;
-    }
-    match std::fs::read_to_string(Path::new("/proc").join(pid.to_string()).join("stat")) {
-        // The state follows the command name in parentheses: `123 (esgm) S ...`.
-        Ok(stat) => {
-            stat.rsplit_once(')').is_some_and(|(_, rest)| !rest.trim_start().starts_with('Z'))
+/// No coordinator answers: if one crashed and left its registry, stop its workers.
+fn stop_without_coordinator(domain: &str, unreachable: ControlClientError) -> anyhow::Result<()> {
+    let state = StateDir::from_env(domain).context("cannot choose a state directory")?;
+    let Some(snapshot) = state.load().context("cannot read the saved registry")? else {
+        return Err(anyhow::Error::new(unreachable).context(format!("cannot stop `{domain}`")));
+    };
+    let workers: Vec<(String, u32)> = snapshot
+        .processes
+        .iter()
+        .filter_map(|p: &ProcessRecord| Some((p.spec.name.clone(), p.status.pid?)))
+        .filter(|(name, pid)| is_worker_of(*pid, domain, name))
+        .collect();
+    eprintln!(
+        "esgm: no coordinator serves `{domain}` (it crashed); stopping its {} workers",
+        workers.len()
+    );
+    // Without a kept registry, workers that find no coordinator leave by themselves.
+    state.remove_registry().context("cannot forget the registry")?;
+    let deadline = Instant::now() + WITHIN;
+    while workers.iter().any(|(_, pid)| alive(*pid)) {
+        if Instant::now() > deadline {
+            let left: Vec<String> = workers
+                .iter()
+                .filter(|(_, pid)| alive(*pid))
+                .map(|(name, pid)| format!("{name} ({pid})"))
+                .collect();
+            bail!("the workers of `{domain}` did not leave: {}", left.join(", "));
         }
-        Err(_) => false,
+        std::thread::sleep(Duration::from_millis(20));
     }
+    finish(domain)
 }

@@ -9,6 +9,7 @@ pub mod graph;
 pub mod hz;
 pub mod info;
 pub mod load;
+pub mod logs;
 pub mod plot;
 pub mod log_level;
 pub mod ps;
@@ -47,6 +48,7 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Down => down::run(domain),
         Command::Apply(a) => apply::run(domain, json, a),
         Command::Ps => ps::run(domain, json),
+        Command::Logs(a) => logs::run(domain, json, a),
         Command::Demo(a) => demo::run(domain, a),
         Command::Type(c) => types::run(domain, json, c),
         Command::Traj(c) => traj::run(domain, json, c),

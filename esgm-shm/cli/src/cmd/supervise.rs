@@ -2,12 +2,23 @@
 //! the coordinator are started; one that exits unexpectedly is restarted with
 //! exponential backoff, and the restart is logged and counted; one whose declaration
 //! changes is restarted with the new one; one no longer declared is stopped.
+//!
+//! After a coordinator crash, the next `esgm up` *adopts* the workers that still run
+//! (their pids are in the recovered process table, and each is checked to be that
+//! worker of that domain by its environment): they keep their pid and restart count
+//! and are not restarted. An adopted process is not this process's child, so it is
+//! watched through `/proc` and stopped with signals.
+//!
+//! Each process's output goes to `<log dir>/<process>.log` (appended), which
+//! `esgm logs` shows.
 
 use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use esgm_shm::control::{ProcessRecord, ProcessSpec, ProcessStatus};
+use esgm_shm::control::state::STATE_DIR_ENV;
+use esgm_shm::control::{ProcessRecord, ProcessSpec, ProcessStatus, StateDir};
 use esgm_shm::{DOMAIN_ENV, WORKER_ENV};
 
 const FIRST_BACKOFF: Duration = Duration::from_millis(100);
@@ -20,6 +31,8 @@ const STABLE_AFTER: Duration = Duration::from_secs(30);
 struct Supervised {
     spec: ProcessSpec,
     child: Option<Child>,
+    /// A process a former coordinator started, adopted by pid.
+    adopted: Option<u32>,
     started: Instant,
     status: ProcessStatus,
     backoff: Duration,
@@ -32,13 +45,17 @@ struct Supervised {
 #[derive(Debug)]
 pub struct Supervisor {
     domain: String,
+    /// The domain's state directory (passed to each process; its logs go there).
+    state: Option<StateDir>,
     processes: BTreeMap<String, Supervised>,
 }
 
 impl Supervisor {
-    /// A supervisor of the processes of `domain` (passed to each as `ESGM_DOMAIN`).
-    pub fn new(domain: &str) -> Self {
-        Self { domain: domain.to_owned(), processes: BTreeMap::new() }
+    /// A supervisor of the processes of `domain` (passed to each as `ESGM_DOMAIN`),
+    /// with the domain's state directory `state` (passed as `ESGM_STATE_DIR`; each
+    /// process's output goes to its `logs/`).
+    pub fn new(domain: &str, state: Option<StateDir>) -> Self {
+        Self { domain: domain.to_owned(), state, processes: BTreeMap::new() }
     }
 
     /// Makes the supervised set what the coordinator declares.
@@ -64,6 +81,7 @@ impl Supervisor {
                     let mut p = Supervised {
                         spec: d.spec.clone(),
                         child: None,
+                        adopted: None,
                         started: Instant::now(),
                         // Restarts survive a restart of the supervisor's own bookkeeping.
                         status: ProcessStatus { restarts: d.status.restarts, ..Default::default() },
@@ -71,7 +89,15 @@ impl Supervisor {
                         restart_at: None,
                         reported: None,
                     };
-                    self.start(&mut p, false);
+                    match d.status.pid.filter(|pid| is_worker_of(*pid, &self.domain, &d.spec.name))
+                    {
+                        Some(pid) => {
+                            tracing::info!(worker = %d.spec.name, pid, "adopted a running worker");
+                            p.adopted = Some(pid);
+                            p.status = d.status.clone();
+                        }
+                        None => self.start(&mut p, false),
+                    }
                     self.processes.insert(d.spec.name.clone(), p);
                 }
             }
@@ -79,7 +105,7 @@ impl Supervisor {
     }
 
     fn start(&self, p: &mut Supervised, restart: bool) {
-        match spawn(&p.spec, &self.domain) {
+        match spawn(&p.spec, &self.domain, self.state.as_ref()) {
             Ok(child) => {
                 p.status.pid = Some(child.id());
                 p.child = Some(child);
@@ -110,8 +136,25 @@ impl Supervisor {
         let names: Vec<String> = self.processes.keys().cloned().collect();
         for name in names {
             let Some(mut p) = self.processes.remove(&name) else { continue };
+            if let Some(pid) = p.adopted.filter(|pid| !alive(*pid)) {
+                tracing::warn!(worker = %p.spec.name, pid, backoff = ?p.backoff,
+                    "adopted worker exited; restarting");
+                p.adopted = None;
+                p.status.pid = None;
+                p.status.last_exit = Some("exited (adopted; exit status unknown)".to_owned());
+                p.restart_at = Some(Instant::now() + p.backoff);
+                p.backoff = (p.backoff * 2).min(MAX_BACKOFF);
+            }
             if let Some(child) = &mut p.child {
-                if let Ok(Some(status)) = child.try_wait() {
+                let exited = match child.try_wait() {
+                    Ok(exited) => exited,
+                    Err(e) => {
+                        tracing::warn!(worker = %p.spec.name, error = %e,
+                            "cannot look at a worker; trying again");
+                        None
+                    }
+                };
+                if let Some(status) = exited {
                     if p.started.elapsed() > STABLE_AFTER {
                         p.backoff = FIRST_BACKOFF;
                     }
@@ -124,7 +167,10 @@ impl Supervisor {
                     p.backoff = (p.backoff * 2).min(MAX_BACKOFF);
                 }
             }
-            if p.child.is_none() && p.restart_at.is_some_and(|t| Instant::now() >= t) {
+            if p.child.is_none()
+                && p.adopted.is_none()
+                && p.restart_at.is_some_and(|t| Instant::now() >= t)
+            {
                 self.start(&mut p, true);
             }
             self.processes.insert(name, p);
@@ -148,15 +194,28 @@ impl Supervisor {
     pub fn wait_all(&mut self, grace: Duration) {
         let deadline = Instant::now() + grace;
         for p in self.processes.values_mut() {
+            if let Some(pid) = p.adopted.take() {
+                while alive(pid) && Instant::now() < deadline {
+                    std::thread::sleep(Duration::from_millis(10));
+                }
+                if alive(pid) {
+                    tracing::warn!(worker = %p.spec.name, pid, "worker did not leave; killing it");
+                    signal(pid, libc::SIGKILL);
+                }
+            }
             let Some(child) = &mut p.child else { continue };
             loop {
-                if matches!(child.try_wait(), Ok(Some(_)) | Err(_)) {
-                    break;
+                match child.try_wait() {
+                    Ok(Some(_)) => break,
+                    Ok(None) => {}
+                    Err(e) => {
+                        tracing::warn!(worker = %p.spec.name, error = %e, "cannot wait for a worker");
+                        break;
+                    }
                 }
                 if Instant::now() >= deadline {
                     tracing::warn!(worker = %p.spec.name, "worker did not leave; killing it");
-                    let _ = child.kill();
-                    let _ = child.wait();
+                    kill_child(&p.spec.name, child);
                     break;
                 }
                 std::thread::sleep(Duration::from_millis(10));
@@ -180,20 +239,93 @@ fn child_id(p: &Supervised) -> u32 {
 
 fn stop(p: &mut Supervised) {
     if let Some(child) = &mut p.child {
-        let _ = child.kill();
-        let _ = child.wait();
+        kill_child(&p.spec.name, child);
+    }
+    if let Some(pid) = p.adopted.take() {
+        signal(pid, libc::SIGKILL);
     }
     p.child = None;
     p.status.pid = None;
 }
 
-fn spawn(spec: &ProcessSpec, domain: &str) -> std::io::Result<Child> {
-    Command::new(&spec.program)
+/// Kills a child and reaps it; a failure is logged (it has exited already, say).
+fn kill_child(name: &str, child: &mut Child) {
+    if let Err(e) = child.kill() {
+        tracing::debug!(worker = %name, error = %e, "cannot kill a worker (exited already?)");
+    }
+    if let Err(e) = child.wait() {
+        tracing::warn!(worker = %name, error = %e, "cannot reap a worker");
+    }
+}
+
+/// Sends `sig` to an adopted process.
+fn signal(pid: u32, sig: libc::c_int) {
+    let Ok(pid) = libc::pid_t::try_from(pid) else { return };
+    // SAFETY: kill(2) takes plain integers; it touches no memory of this process.
+    if unsafe { libc::kill(pid, sig) } != 0 {
+        tracing::debug!(pid, sig, error = %std::io::Error::last_os_error(),
+            "cannot signal a process (exited already?)");
+    }
+}
+
+/// True while process `pid` runs (a zombie has stopped).
+pub fn alive(pid: u32) -> bool {
+    if pid == 0 {
+        return false;
+    }
+    match std::fs::read_to_string(Path::new("/proc").join(pid.to_string()).join("stat")) {
+        // The state follows the command name in parentheses: `123 (esgm) S ...`.
+        Ok(stat) => {
+            stat.rsplit_once(')').is_some_and(|(_, rest)| !rest.trim_start().starts_with('Z'))
+        }
+        Err(_) => false,
+    }
+}
+
+/// True if process `pid` is the worker `name` of `domain` (its environment says so,
+/// as the supervisor set it): a pid from a saved table may have been reused since.
+pub fn is_worker_of(pid: u32, domain: &str, name: &str) -> bool {
+    if !alive(pid) {
+        return false;
+    }
+    let environ = match std::fs::read(Path::new("/proc").join(pid.to_string()).join("environ")) {
+        Ok(e) => e,
+        Err(e) => {
+            tracing::debug!(pid, error = %e, "cannot read a process's environment");
+            return false;
+        }
+    };
+    let (want_domain, want_name) = (
+        format!("{DOMAIN_ENV}={domain}").into_bytes(),
+        format!("{WORKER_ENV}={name}").into_bytes(),
+    );
+    let vars: Vec<&[u8]> = environ.split(|b| *b == 0).collect();
+    vars.contains(&want_domain.as_slice()) && vars.contains(&want_name.as_slice())
+}
+
+/// The log file of process `name` in `state`'s log directory.
+pub fn log_file(state: &StateDir, name: &str) -> PathBuf {
+    state.log_dir().join(format!("{name}.log"))
+}
+
+fn spawn(spec: &ProcessSpec, domain: &str, state: Option<&StateDir>) -> std::io::Result<Child> {
+    let mut command = Command::new(&spec.program);
+    command
         .args(&spec.args)
         .envs(spec.env.iter().map(|(k, v)| (k.as_str(), v.as_str())))
         .env(DOMAIN_ENV, domain)
         .env(WORKER_ENV, &spec.name)
         .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .spawn()
+        .stdout(Stdio::null());
+    if let Some(state) = state {
+        // Plain text in the log file (tracing's formatter honours NO_COLOR).
+        command.env(STATE_DIR_ENV, state.path()).env("NO_COLOR", "1");
+        std::fs::create_dir_all(state.log_dir())?;
+        let log = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(log_file(state, &spec.name))?;
+        command.stdout(log.try_clone()?).stderr(log);
+    }
+    command.spawn()
 }

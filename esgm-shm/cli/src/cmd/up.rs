@@ -8,16 +8,22 @@
 //! `esgm down` asks the coordinator to stop; the workers notice and leave, the
 //! supervisor waits for them (killing stragglers) and dead processes' shared memory
 //! is cleaned.
+//!
+//! The registry is kept in the domain's state directory (`--state-dir`, else
+//! `$XDG_STATE_HOME/esgm/<domain>`; see `esgm_shm::control::state` for why a file).
+//! If the coordinator crashes, its workers keep running and exchanging data; the next
+//! `esgm up` starts at once, restores the registry, takes over the control service,
+//! and adopts the running workers (same pids, no restart).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use esgm_core::TypeRegistry;
 use esgm_shm::ShmEsgm;
-use esgm_shm::control::server::cleanup_dead_nodes;
-use esgm_shm::control::{ControlClient, Coordinator, Registry, Request, Response};
+use esgm_shm::control::server::{cleanup_dead_nodes, log_cleanup};
+use esgm_shm::control::{ControlClient, Coordinator, Request, Response, StateDir};
 
 use super::supervise::Supervisor;
 use crate::config::apply::SYSTEM_HOST;
@@ -35,7 +41,23 @@ pub struct Args {
     /// Print nothing but warnings (for a coordinator another command started).
     #[arg(long, hide = true)]
     pub quiet: bool,
+    /// Keep the registry and the processes' logs here (default:
+    /// `$XDG_STATE_HOME/esgm/<domain>`, else `~/.local/state/esgm/<domain>`).
+    #[arg(long, value_name = "DIR")]
+    pub state_dir: Option<PathBuf>,
 }
+
+/// The state directory of `domain`: `dir` if given, else the default.
+pub fn state_dir(domain: &str, dir: Option<&Path>) -> anyhow::Result<StateDir> {
+    match dir {
+        Some(d) => Ok(StateDir::at(d)),
+        None => StateDir::default_for(domain).context("cannot choose a state directory"),
+    }
+}
+
+/// How long a detached coordinator may take to serve: taking over from a crashed one
+/// connects every running worker's control client first.
+const START_WITHIN: Duration = Duration::from_secs(30);
 
 /// How often the supervisor looks at the declared processes.
 const SUPERVISE_EVERY: Duration = Duration::from_millis(100);
@@ -44,26 +66,42 @@ const SUPERVISE_EVERY: Duration = Duration::from_millis(100);
 pub fn run(domain: &str, args: &Args) -> anyhow::Result<()> {
     // A configuration is checked before anything starts.
     let plan = args.config.as_deref().map(config::load).transpose()?;
+    let state = state_dir(domain, args.state_dir.as_deref())?;
     if args.detach {
-        let pid = spawn_detached(domain, Stdio::null())?.id();
+        state.create().context("cannot create the state directory")?;
+        std::fs::create_dir_all(state.log_dir()).context("cannot create the log directory")?;
+        let log_path = state.log_dir().join("coordinator.log");
+        let log = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&log_path)
+            .with_context(|| format!("cannot open {}", log_path.display()))?;
+        let pid = spawn_detached(domain, Some(state.path()), Stdio::from(log))?.id();
         println!("coordinator of `{domain}` serving (pid {pid}); stop it with `esgm down`");
         if let Some(plan) = &plan {
             if let Err(e) = super::apply::apply_plan(domain, plan, false) {
-                shutdown(domain);
+                if let Err(stop) = shutdown(domain) {
+                    tracing::warn!(error = %stop, "cannot stop the coordinator");
+                }
                 return Err(e.context("the configuration could not be applied; stopped"));
             }
         }
         return Ok(());
     }
-    serve(domain, plan, args.quiet)
+    serve(domain, plan, args.quiet, state)
 }
 
 /// The foreground coordinator: serves until asked to stop.
-fn serve(domain: &str, plan: Option<Plan>, quiet: bool) -> anyhow::Result<()> {
-    let coordinator = Coordinator::spawn(domain, Registry::new(TypeRegistry::with_library()))
-        .with_context(|| {
-            format!("cannot serve `{domain}`; is a coordinator already running for it?")
-        })?;
+fn serve(domain: &str, plan: Option<Plan>, quiet: bool, state: StateDir) -> anyhow::Result<()> {
+    let (coordinator, recovered) =
+        Coordinator::spawn_recovering(domain, TypeRegistry::with_library(), state.clone())
+            .with_context(|| {
+                format!("cannot serve `{domain}`; is a coordinator already running for it?")
+            })?;
+    if recovered > 0 {
+        tracing::warn!(domain, recovered, state = %state.path().display(),
+            "recovered the registry a stopped coordinator left");
+    }
     let system = ShmEsgm::builder()
         .domain(domain)
         .host(SYSTEM_HOST)
@@ -80,20 +118,35 @@ fn serve(domain: &str, plan: Option<Plan>, quiet: bool) -> anyhow::Result<()> {
             let result = super::apply::apply_plan(&d, &plan, false);
             if let Err(e) = &result {
                 eprintln!("esgm: {e:#}");
-                shutdown(&d);
+                if let Err(stop) = shutdown(&d) {
+                    tracing::warn!(error = %stop, "cannot stop the coordinator");
+                }
             }
             result.is_ok()
         })
     });
 
-    let mut supervisor = Supervisor::new(domain);
+    let mut supervisor = Supervisor::new(domain, Some(state));
+    // Failures to reach the own coordinator are logged once per streak.
+    let mut failing = false;
     while !coordinator.is_finished() {
-        if let Ok(Response::Processes(declared)) = system.control(Request::ListProcesses) {
-            supervisor.reconcile(&declared);
+        match system.control(Request::ListProcesses) {
+            Ok(Response::Processes(declared)) => {
+                failing = false;
+                supervisor.reconcile(&declared);
+            }
+            Ok(other) => tracing::warn!(answer = ?other, "unexpected answer to a process listing"),
+            Err(e) if !failing => {
+                failing = true;
+                tracing::warn!(error = %e, "cannot list the declared processes; retrying");
+            }
+            Err(_) => {}
         }
         supervisor.poll();
         for (name, status) in supervisor.take_changes() {
-            let _ = system.control(Request::ReportProcess { name, status });
+            if let Err(e) = system.control(Request::ReportProcess { name: name.clone(), status }) {
+                tracing::warn!(process = %name, error = %e, "cannot report a process's status");
+            }
         }
         std::thread::sleep(SUPERVISE_EVERY);
     }
@@ -101,33 +154,47 @@ fn serve(domain: &str, plan: Option<Plan>, quiet: bool) -> anyhow::Result<()> {
     supervisor.wait_all(Duration::from_secs(10));
     drop(supervisor);
     drop(coordinator);
-    let cleaned = cleanup_dead_nodes();
-    tracing::info!(cleaned, "coordinator stopped");
+    log_cleanup(cleanup_dead_nodes());
+    tracing::info!("coordinator stopped");
     match applying.map(std::thread::JoinHandle::join) {
         Some(Ok(false)) => bail!("the configuration could not be applied; stopped"),
+        Some(Err(_)) => bail!("applying the configuration panicked; stopped"),
         _ => Ok(()),
     }
 }
 
-/// Asks the coordinator of `domain` to stop (best effort).
-pub fn shutdown(domain: &str) {
-    if let Ok(c) = ControlClient::connect(domain, Duration::from_secs(2)) {
-        let _ = c.call(&Request::Shutdown);
-    }
+/// Asks the coordinator of `domain` to stop.
+pub fn shutdown(domain: &str) -> anyhow::Result<()> {
+    let c = ControlClient::connect(domain, Duration::from_secs(2))
+        .with_context(|| format!("cannot reach the coordinator of `{domain}`"))?;
+    c.call(&Request::Shutdown).with_context(|| format!("cannot stop `{domain}`"))?;
+    Ok(())
 }
 
 /// Starts `esgm up` for `domain` as a background process (its log lines go to
 /// `stderr`) and waits until it answers.
-pub fn spawn_detached(domain: &str, stderr: Stdio) -> anyhow::Result<std::process::Child> {
+pub fn spawn_detached(
+    domain: &str,
+    state_dir: Option<&Path>,
+    stderr: Stdio,
+) -> anyhow::Result<std::process::Child> {
     let exe = std::env::current_exe().context("cannot find the esgm executable")?;
-    let mut child = Command::new(exe)
-        .args(["up", "--quiet", "--domain", domain])
+    let mut command = Command::new(exe);
+    command.args(["up", "--quiet", "--domain", domain]);
+    if !matches!(std::env::var_os("NO_COLOR"), Some(v) if !v.is_empty()) {
+        // Its log goes to a file (or the demo's terminal): plain text.
+        command.env("NO_COLOR", "1");
+    }
+    if let Some(dir) = state_dir {
+        command.arg("--state-dir").arg(dir);
+    }
+    let mut child = command
         .stdin(Stdio::null())
         .stdout(Stdio::null())
         .stderr(stderr)
         .spawn()
         .context("cannot start the coordinator process")?;
-    let deadline = Instant::now() + Duration::from_secs(10);
+    let deadline = Instant::now() + START_WITHIN;
     loop {
         if let Ok(c) = ControlClient::connect(domain, Duration::from_millis(500)) {
             if c.call(&Request::Ping).is_ok() {
@@ -140,8 +207,10 @@ pub fn spawn_detached(domain: &str, stderr: Stdio) -> anyhow::Result<std::proces
             );
         }
         if Instant::now() > deadline {
-            let _ = child.kill();
-            bail!("the coordinator did not start serving within 10 s");
+            if let Err(e) = child.kill() {
+                tracing::warn!(error = %e, "cannot kill the coordinator that did not start");
+            }
+            bail!("the coordinator did not start serving within {START_WITHIN:?}");
         }
         std::thread::sleep(Duration::from_millis(20));
     }

@@ -1,7 +1,8 @@
 //! `esgm worker camera|robot|unit`: the processes of the tutorial's system. Each
 //! connects under a stable name (a restarted worker takes its place and its
-//! trajectories back), registers what it serves, and leaves when the coordinator is
-//! gone.
+//! trajectories back), registers what it serves, and serves while its system lives:
+//! through a slow or crashed coordinator, leaving only once the system was stopped
+//! (`esgm_shm::control::attach`).
 //!
 //! The camera and the robot are their publishers' own code
 //! ([`camera_publisher::serve`], [`robot_publisher::serve`]): `esgm worker camera` and
@@ -18,6 +19,7 @@ use cu_workers::{BlobDetectionUnit, BlobSelectionUnit, DrivingDirectionUnit, Mov
 use esgm_core::Esgm;
 use esgm_core::esgm::{CompUnit, InputType};
 use esgm_shm::ShmEsgm;
+use esgm_shm::control::attach::serve_while_system_lives;
 use robot_publisher::RobotArgs;
 
 use crate::config;
@@ -77,9 +79,10 @@ pub fn run(domain: &str, role: &Role) -> anyhow::Result<()> {
         .with_context(|| format!("cannot reach the system `{domain}`"))?;
     serve_unit(&esgm, name, builtin.as_deref().unwrap_or(name), type_name.as_deref(), *window)?;
     tracing::info!(unit = %name, "serving");
-    // Leave when the coordinator is gone (for half a second).
-    esgm.serve_until_coordinator_gone(Duration::from_millis(500));
-    tracing::info!(unit = %name, "the coordinator is gone; leaving");
+    // Leave once the system was stopped (no coordinator for half a second, and no
+    // registry kept); a crashed coordinator is waited for.
+    serve_while_system_lives(&esgm, None, Duration::from_millis(500));
+    tracing::info!(unit = %name, "the system was stopped; leaving");
     Ok(())
 }
 

@@ -1,0 +1,329 @@
+//! Crashes end to end: the coordinator of a running tutorial system is killed with
+//! `kill -9`; data keeps flowing between its workers, a new `esgm up` recovers the
+//! registry and adopts them; the demo leaves nothing behind. Real processes, unique
+//! domains and state directories, a watchdog on every command and wait.
+
+// Test helpers outside #[test] fns: a failed unwrap is a failed test with a message.
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
+
+use std::io::{BufRead, BufReader, Read};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use esgm_shm::control::{ControlClient, Request, Response};
+
+const ESGM: &str = env!("CARGO_BIN_EXE_esgm");
+const TUTORIAL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tutorial.toml");
+
+/// One system at a time (each is six processes on a 2-core machine).
+static ONE_SYSTEM: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+struct Output {
+    code: Option<i32>,
+    stdout: String,
+    stderr: String,
+}
+
+/// A test's system: its domain and state home, stopped when the test ends.
+struct System {
+    domain: String,
+    state_home: PathBuf,
+}
+
+impl System {
+    fn new(prefix: &str) -> Self {
+        let domain = esgm_shm::unique_domain(prefix);
+        let state_home = std::env::temp_dir().join(format!("esgm-test-state-{domain}"));
+        Self { domain, state_home }
+    }
+
+    fn command(&self, args: &[&str]) -> Command {
+        let mut c = Command::new(ESGM);
+        c.args(["--domain", &self.domain])
+            .args(args)
+            .env("XDG_STATE_HOME", &self.state_home)
+            .env_remove("ESGM_STATE_DIR")
+            .stdin(Stdio::null());
+        c
+    }
+
+    /// Runs `esgm --domain d args…`, killing it after `limit`.
+    fn run(&self, args: &[&str], limit: Duration) -> Output {
+        let mut child =
+            self.command(args).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+        let deadline = Instant::now() + limit;
+        let status = loop {
+            if let Some(s) = child.try_wait().unwrap() {
+                break s;
+            }
+            if Instant::now() > deadline {
+                child.kill().unwrap();
+                child.wait().unwrap();
+                panic!("`esgm {}` did not finish within {limit:?}", args.join(" "));
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        };
+        let (mut stdout, mut stderr) = (String::new(), String::new());
+        child.stdout.take().unwrap().read_to_string(&mut stdout).unwrap();
+        child.stderr.take().unwrap().read_to_string(&mut stderr).unwrap();
+        Output { code: status.code(), stdout, stderr }
+    }
+
+    fn ok(&self, args: &[&str]) -> String {
+        let o = self.run(args, Duration::from_secs(60));
+        assert_eq!(
+            o.code,
+            Some(0),
+            "`esgm {}` failed:\n{}\n{}",
+            args.join(" "),
+            o.stdout,
+            o.stderr
+        );
+        o.stdout
+    }
+
+    fn state_dir(&self) -> PathBuf {
+        self.state_home.join("esgm").join(&self.domain)
+    }
+
+    /// `(name, pid, restarts)` of every process, from `esgm ps --json`.
+    fn processes(&self) -> Vec<(String, Option<u32>, u64)> {
+        self.ok(&["--json", "ps"])
+            .lines()
+            .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+            .map(|v| {
+                (
+                    v["spec"]["name"].as_str().unwrap().to_owned(),
+                    v["status"]["pid"].as_u64().map(|p| u32::try_from(p).unwrap()),
+                    v["status"]["restarts"].as_u64().unwrap(),
+                )
+            })
+            .collect()
+    }
+
+    /// Polls until every declared process has a pid, or fails after `limit`.
+    fn wait_for_pids(&self, limit: Duration) -> Vec<(String, Option<u32>, u64)> {
+        let deadline = Instant::now() + limit;
+        loop {
+            let p = self.processes();
+            if !p.is_empty() && p.iter().all(|(_, pid, _)| pid.is_some()) {
+                return p;
+            }
+            assert!(Instant::now() < deadline, "processes did not start: {p:?}");
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    /// The valid time of the latest sample of `traj`, polled until there is one.
+    fn latest_valid_time(&self, traj: &str, limit: Duration) -> i64 {
+        let deadline = Instant::now() + limit;
+        loop {
+            let o = self.run(&["--json", "latest", traj], Duration::from_secs(60));
+            if o.code == Some(0) {
+                if let Some(line) = o.stdout.lines().next() {
+                    let v: serde_json::Value = serde_json::from_str(line).unwrap();
+                    if let Some(t) = v["valid_time"].as_i64() {
+                        return t;
+                    }
+                }
+            }
+            assert!(Instant::now() < deadline, "no sample in `{traj}`: {}{}", o.stdout, o.stderr);
+            std::thread::sleep(Duration::from_millis(200));
+        }
+    }
+}
+
+impl Drop for System {
+    fn drop(&mut self) {
+        match self.command(&["down"]).stdout(Stdio::null()).stderr(Stdio::null()).status() {
+            Ok(_) => {}
+            Err(e) => eprintln!("cannot run `esgm down`: {e}"),
+        }
+        if let Err(e) = std::fs::remove_dir_all(&self.state_home) {
+            if e.kind() != std::io::ErrorKind::NotFound {
+                eprintln!("cannot remove {}: {e}", self.state_home.display());
+            }
+        }
+    }
+}
+
+fn alive(pid: u32) -> bool {
+    std::fs::read_to_string(Path::new("/proc").join(pid.to_string()).join("stat"))
+        .is_ok_and(|s| s.rsplit_once(')').is_some_and(|(_, r)| !r.trim_start().starts_with('Z')))
+}
+
+fn coordinator_pid(domain: &str) -> u32 {
+    let c = ControlClient::connect(domain, Duration::from_secs(10)).unwrap();
+    match c.call(&Request::Ping).unwrap() {
+        Response::Pong { pid, .. } => pid,
+        other => panic!("{other:?}"),
+    }
+}
+
+/// Lines of a child's stdout, as they come.
+fn lines_of(child: &mut Child) -> mpsc::Receiver<String> {
+    let (tx, rx) = mpsc::channel();
+    let out = child.stdout.take().unwrap();
+    std::thread::spawn(move || {
+        for line in BufReader::new(out).lines().map_while(Result::ok) {
+            if tx.send(line).is_err() {
+                break;
+            }
+        }
+    });
+    rx
+}
+
+#[test]
+fn a_killed_coordinator_leaves_data_flowing_and_comes_back_whole() {
+    let _one = ONE_SYSTEM.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let sys = System::new("crash-coord");
+    sys.ok(&["up", "--detach"]);
+    sys.ok(&["apply", TUTORIAL]);
+    let before = sys.wait_for_pids(Duration::from_secs(60));
+    sys.latest_valid_time("driving_direction", Duration::from_secs(60));
+
+    // A subscriber in the middle of the stream.
+    let mut echo = sys
+        .command(&["echo", "robot_state"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let lines = lines_of(&mut echo);
+    lines.recv_timeout(Duration::from_secs(30)).expect("the subscriber receives");
+
+    let coordinator = coordinator_pid(&sys.domain);
+    let killed = Command::new("kill").args(["-9", &coordinator.to_string()]).status().unwrap();
+    assert!(killed.success());
+    let killed_at = Instant::now();
+    while alive(coordinator) {
+        assert!(killed_at.elapsed() < Duration::from_secs(10), "the coordinator did not die");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+
+    // Data keeps flowing between the existing processes: the subscriber receives the
+    // robot's states (the robot steers by the driving direction the units compute).
+    while lines.try_recv().is_ok() {}
+    let mut received = 0;
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while received < 20 {
+        assert!(Instant::now() < deadline, "the subscriber stopped after the crash ({received})");
+        if lines.recv_timeout(Duration::from_secs(5)).is_ok() {
+            received += 1;
+        }
+    }
+    for (name, pid, _) in &before {
+        assert!(alive(pid.unwrap()), "{name} exited when the coordinator died");
+    }
+    // The registry is kept for the next coordinator.
+    assert!(sys.state_dir().join("registry.json").exists());
+
+    // A new coordinator starts while the old workers live, recovers the registry and
+    // adopts them: same pids, no restart.
+    sys.ok(&["up", "--detach"]);
+    let after = sys.wait_for_pids(Duration::from_secs(30));
+    assert_eq!(before.len(), after.len(), "{after:?}");
+    for ((name, pid, _), (name2, pid2, restarts)) in before.iter().zip(&after) {
+        assert_eq!((name, pid), (name2, pid2), "{name} was not adopted");
+        assert_eq!(*restarts, 0, "{name} was restarted");
+    }
+    let traj = sys.ok(&["traj", "list"]);
+    for t in ["images", "blobs", "current_blob", "driving_direction", "robot_state"] {
+        assert!(traj.contains(t), "`{t}` not recovered:\n{traj}");
+    }
+    // New data after the recovery, answered through the new coordinator.
+    let t0 = sys.latest_valid_time("driving_direction", Duration::from_secs(30));
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while sys.latest_valid_time("driving_direction", Duration::from_secs(30)) <= t0 {
+        assert!(Instant::now() < deadline, "driving_direction stopped after the recovery");
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    // The subscriber still receives.
+    lines.recv_timeout(Duration::from_secs(10)).expect("the subscriber receives after recovery");
+    echo.kill().unwrap();
+    echo.wait().unwrap();
+
+    // Each process logged to the domain's log directory.
+    let logs = sys.ok(&["logs"]);
+    for name in ["coordinator", "camera-camera", "robot-robot_state"] {
+        assert!(logs.contains(name), "no log of {name}:\n{logs}");
+    }
+    let camera = sys.ok(&["logs", "camera-camera"]);
+    assert!(camera.contains("the coordinator is gone; serving on"), "{camera}");
+
+    sys.ok(&["down"]);
+    for (name, pid, _) in &after {
+        assert!(!alive(pid.unwrap()), "{name} still runs after `esgm down`");
+    }
+    assert!(!sys.state_dir().join("registry.json").exists(), "an orderly stop forgets");
+    let nodes = esgm_shm::nodes_of(&sys.domain).expect("cannot list nodes");
+    assert!(nodes.is_empty(), "nodes left behind: {nodes:?}");
+}
+
+#[test]
+fn down_stops_a_system_whose_coordinator_crashed() {
+    let _one = ONE_SYSTEM.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let sys = System::new("crash-down");
+    sys.ok(&["up", "--detach"]);
+    sys.ok(&["apply", TUTORIAL]);
+    let workers = sys.wait_for_pids(Duration::from_secs(60));
+    let coordinator = coordinator_pid(&sys.domain);
+    assert!(
+        Command::new("kill").args(["-9", &coordinator.to_string()]).status().unwrap().success()
+    );
+    let out = sys.run(&["down"], Duration::from_secs(60));
+    assert_eq!(out.code, Some(0), "{}\n{}", out.stdout, out.stderr);
+    assert!(out.stderr.contains("crashed"), "{}", out.stderr);
+    for (name, pid, _) in &workers {
+        assert!(!alive(pid.unwrap()), "{name} still runs");
+    }
+    let nodes = esgm_shm::nodes_of(&sys.domain).expect("cannot list nodes");
+    assert!(nodes.is_empty(), "nodes left behind: {nodes:?}");
+}
+
+/// The demo in a private `/dev/shm` and `/tmp` (a user namespace): afterwards only
+/// iceoryx2's own global counter file may remain, nothing of the demo.
+#[test]
+fn the_demo_leaves_no_file_in_shared_memory() {
+    let _one = ONE_SYSTEM.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let probe = Command::new("unshare").args(["-rm", "true"]).status();
+    if !probe.is_ok_and(|s| s.success()) {
+        eprintln!("skipped: no user namespaces here (unshare -rm), so no private /dev/shm");
+        return;
+    }
+    let script = format!(
+        "mount -t tmpfs tmpfs /dev/shm && mount -t tmpfs tmpfs /tmp && \
+         {ESGM} demo --seconds 6 >/tmp/demo.out 2>&1; rc=$?; \
+         if [ $rc -ne 0 ]; then cat /tmp/demo.out; exit $rc; fi; \
+         echo LEFT; ls -A /dev/shm; find /tmp/iceoryx2 -type f 2>/dev/null; true"
+    );
+    let mut child = Command::new("unshare")
+        .args(["-rm", "sh", "-c", &script])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(180);
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if Instant::now() > deadline {
+            child.kill().unwrap();
+            panic!("the demo did not finish");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let mut out = String::new();
+    child.stdout.take().unwrap().read_to_string(&mut out).unwrap();
+    assert!(status.success(), "demo failed:\n{out}");
+    let left: Vec<&str> = out
+        .split_once("LEFT")
+        .map(|(_, l)| l.lines().filter(|l| !l.trim().is_empty()).collect())
+        .unwrap_or_default();
+    let extra: Vec<&&str> = left.iter().filter(|f| !f.ends_with(".global_mgmt")).collect();
+    assert!(extra.is_empty(), "the demo left files behind: {extra:?}");
+}

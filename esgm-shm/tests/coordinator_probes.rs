@@ -1,0 +1,201 @@
+//! The probes of a hostile or careless local process against the coordinator, kept as
+//! tests: it cannot be stalled (huge names, client churn, many nodes) or lied to
+//! (another process's record). Unique domains; every wait has a deadline that fails
+//! the test; durations are printed, never asserted.
+// Test helpers: a failed expectation is a failed test with its message.
+#![allow(clippy::expect_used, clippy::unwrap_used, clippy::panic)]
+
+use std::time::{Duration, Instant};
+
+use esgm_core::TypeRegistry;
+use esgm_shm::control::processes::{ProcessSpec, ProcessStatus};
+use esgm_shm::control::server::{MAX_CLIENTS, MAX_NODES};
+use esgm_shm::control::{
+    ControlClient, ControlClientError, ControlError, Coordinator, Registry, Request, Response,
+};
+use esgm_shm::unique_domain;
+use iceoryx2::prelude::{AllocationStrategy, NodeBuilder};
+
+const DEADLINE: Duration = Duration::from_secs(10);
+
+fn coordinator(domain: &str) -> esgm_shm::control::CoordinatorThread {
+    Coordinator::spawn(domain, Registry::new(TypeRegistry::with_library())).unwrap()
+}
+
+fn ping(domain: &str) -> Duration {
+    let started = Instant::now();
+    let c = ControlClient::connect(domain, DEADLINE).unwrap();
+    assert!(matches!(c.call(&Request::Ping).unwrap(), Response::Pong { .. }));
+    started.elapsed()
+}
+
+#[test]
+fn client_churn_does_not_stall_the_next_call() {
+    let d = unique_domain("probe-churn");
+    let _c = coordinator(&d);
+    let first = ping(&d);
+    let churn = Instant::now();
+    for _ in 0..40 {
+        let c = ControlClient::connect(&d, DEADLINE).unwrap();
+        c.call(&Request::Ping).unwrap();
+    }
+    let churn = churn.elapsed();
+    // The next call answers (within the deadline, or the test fails).
+    let after = ping(&d);
+    eprintln!(
+        "first ping {first:?}; 40 clients made and dropped in {churn:?}; next ping {after:?}"
+    );
+}
+
+#[test]
+fn more_clients_than_iceoryx2s_default_node_limit_are_admitted() {
+    let d = unique_domain("probe-nodes");
+    let _c = coordinator(&d);
+    // iceoryx2's default is 20 nodes per service; every client is a node.
+    let clients: Vec<ControlClient> =
+        (0..40).map(|_| ControlClient::connect(&d, DEADLINE).unwrap()).collect();
+    for c in &clients {
+        assert!(matches!(c.call(&Request::Ping).unwrap(), Response::Pong { .. }));
+    }
+    const { assert!(MAX_NODES > MAX_CLIENTS, "room for every client's node and the coordinator's") };
+}
+
+#[test]
+fn a_huge_unknown_name_is_refused_while_others_are_served() {
+    let d = unique_domain("probe-names");
+    let _c = coordinator(&d);
+    let huge = "n".repeat(4 << 20);
+    let asker = {
+        let d = d.clone();
+        std::thread::spawn(move || {
+            let c = ControlClient::connect(&d, Duration::from_secs(30)).unwrap();
+            let started = Instant::now();
+            let answer = c.call(&Request::GetEntityStructureType { type_name: huge });
+            (answer, started.elapsed())
+        })
+    };
+    // Meanwhile another client is answered.
+    let other = ping(&d);
+    let (answer, took) = asker.join().unwrap();
+    match answer {
+        Err(ControlClientError::Remote(ControlError::TooLarge { bytes, .. })) => {
+            assert!(bytes > 4 << 20);
+        }
+        other => panic!("a 4 MiB name must be refused as too large: {other:?}"),
+    }
+    // Within the request limit, a long name is refused by its length, before any
+    // "did you mean" search.
+    let c = ControlClient::connect(&d, DEADLINE).unwrap();
+    let long = "m".repeat(200_000);
+    let started = Instant::now();
+    match c.call(&Request::GetEntityStructureType { type_name: long }) {
+        Err(ControlClientError::Remote(ControlError::IllegalName { reason, .. })) => {
+            assert!(reason.contains("200000 bytes"), "{reason}");
+        }
+        other => panic!("{other:?}"),
+    }
+    let long_took = started.elapsed();
+    for bad in ["", "a/b", "has space"] {
+        match c.call(&Request::GetEntityTrajectoryStructure { name: bad.into() }) {
+            Err(ControlClientError::Remote(ControlError::IllegalName { .. })) => {}
+            other => panic!("{bad:?}: {other:?}"),
+        }
+    }
+    eprintln!(
+        "4 MiB name refused in {took:?} (a ping meanwhile: {other:?}); 200 kB name in {long_took:?}"
+    );
+}
+
+#[test]
+fn a_request_in_another_protocol_is_named_a_protocol_mismatch() {
+    let d = unique_domain("probe-protocol");
+    let _c = coordinator(&d);
+    let node = NodeBuilder::new().create::<esgm_shm::ShmService>().unwrap();
+    let service = node
+        .service_builder(&esgm_shm::service_name::control_service(&d).unwrap())
+        .request_response::<[u8], [u8]>()
+        .max_clients(MAX_CLIENTS)
+        .max_nodes(MAX_NODES)
+        .max_active_requests_per_client(4)
+        .open()
+        .unwrap();
+    let client = service
+        .client_builder()
+        .initial_max_slice_len(4096)
+        .allocation_strategy(AllocationStrategy::PowerOfTwo)
+        .create()
+        .unwrap();
+    // A request of a future esgm version.
+    let bytes = br#"{"TeleportRobot":{"to":"mars"}}"#;
+    let pending =
+        client.loan_slice_uninit(bytes.len()).unwrap().write_from_slice(bytes).send().unwrap();
+    let deadline = Instant::now() + DEADLINE;
+    let answer = loop {
+        if let Some(a) = pending.receive().unwrap() {
+            break esgm_shm::control::protocol::decode::<Response>(a.payload()).unwrap();
+        }
+        assert!(Instant::now() < deadline, "no answer within {DEADLINE:?}");
+        std::thread::sleep(Duration::from_millis(1));
+    };
+    match answer {
+        Response::Error(ControlError::ProtocolMismatch { coordinator_version, reason }) => {
+            assert_eq!(coordinator_version, env!("CARGO_PKG_VERSION"));
+            assert!(reason.contains("TeleportRobot"), "{reason}");
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+/// The child half of the next test: run in another process, it tries to set a
+/// process's pid to 1 (which once made `esgm down` wait for init).
+#[test]
+fn report_from_another_process_child() {
+    let Ok(d) = std::env::var("ESGM_PROBE_DOMAIN") else { return };
+    let c = ControlClient::connect(&d, DEADLINE).unwrap();
+    let forged = Request::ReportProcess {
+        name: "cam".into(),
+        status: ProcessStatus { pid: Some(1), restarts: 0, last_exit: None },
+    };
+    match c.call(&forged) {
+        Err(ControlClientError::Remote(ControlError::NotAllowed { .. })) => {}
+        other => panic!("a forged report must be refused: {other:?}"),
+    }
+    // Reporting on itself is allowed.
+    let own = Request::ReportProcess {
+        name: "cam".into(),
+        status: ProcessStatus { pid: Some(std::process::id()), restarts: 0, last_exit: None },
+    };
+    c.call(&own).unwrap();
+}
+
+#[test]
+fn a_process_cannot_rewrite_another_ones_pid() {
+    let d = unique_domain("probe-report");
+    let _c = coordinator(&d);
+    let c = ControlClient::connect(&d, DEADLINE).unwrap();
+    let spec =
+        ProcessSpec { name: "cam".into(), program: "true".into(), args: vec![], env: vec![] };
+    c.call(&Request::DeclareProcess { spec }).unwrap();
+    let mut child = std::process::Command::new(std::env::current_exe().unwrap())
+        .args(["--exact", "report_from_another_process_child", "--nocapture"])
+        .env("ESGM_PROBE_DOMAIN", &d)
+        .spawn()
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if Instant::now() > deadline {
+            child.kill().unwrap();
+            panic!("the child probe did not finish");
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    assert!(status.success(), "the child probe failed");
+    let Response::Processes(list) = c.call(&Request::ListProcesses).unwrap() else {
+        panic!("no process list")
+    };
+    let pid = list[0].status.pid;
+    assert_eq!(pid, Some(child.id()), "only the child's report on itself counted");
+}
