@@ -338,10 +338,14 @@ impl Catalog {
         &self,
         name: &str,
         inputs: &[(String, String)],
+        member_times: bool,
     ) -> Result<TypeChecker, CreateError> {
         let mut ty = EntityStructureType::new(format!("{name}:state"));
         for (input, type_name) in inputs {
             ty = ty.frame(input.clone(), type_name.clone());
+        }
+        if member_times {
+            ty = crate::operators::sync::with_member_times(ty);
         }
         let mut registry = self.types.clone();
         let key = ty.name.clone();
@@ -418,7 +422,7 @@ impl Catalog {
             TrajectorySource::Sync { policy, .. } => {
                 // Validate the operator's settings now, not when the worker starts.
                 policy.create::<Sample>(inputs.len())?;
-                (self.state_checker(&name, &inputs)?, Some("sync".into()))
+                (self.state_checker(&name, &inputs, true)?, Some("sync".into()))
             }
             TrajectorySource::SampledGenerators { sample_period, unit, .. } => {
                 if *sample_period <= 0 {
@@ -437,7 +441,7 @@ impl Catalog {
                     None if inputs.len() == 1 => {
                         (self.checker(&inputs[0].1)?, Some("generator".into()))
                     }
-                    None => (self.state_checker(&name, &inputs)?, Some("state".into())),
+                    None => (self.state_checker(&name, &inputs, false)?, Some("state".into())),
                 }
             }
         };

@@ -1,12 +1,19 @@
 //! sync(s1..sn) (G2): a stream of states, each holding one item of every input, valid at
 //! the same time.
 //!
-//! Two policies, each a [`Synchronizer`]:
+//! Three policies, each a [`Synchronizer`]:
 //! - [`ExactSync`] emits a set when every input has an item with the same valid time.
 //! - [`ApproximateSync`] matches items whose valid times differ, choosing exactly the sets
 //!   ROS `message_filters`' ApproximateTime policy chooses on the same input (the
 //!   requirement G2 states), optionally bounded by a tolerance
-//!   ([`ApproximateConfig::max_interval_duration`]).
+//!   ([`ApproximateConfig::tolerance`]).
+//! - [`EpsilonSync`] emits a set as soon as every input has an item within a tolerance
+//!   of the oldest, as message_filters' ApproximateEpsilonTime policy does.
+//!
+//! Every policy's bound on how far apart a set's valid times may be is called the
+//! *tolerance*, in Rust, in configuration files (`tolerance = "20ms"`) and on the
+//! command line (`--tolerance 20ms`). message_filters calls it `max_interval_duration`
+//! (ApproximateTime) and `epsilon` (ApproximateEpsilonTime).
 //!
 //! ## Design decisions
 //! - **Pure.** A synchronizer owns its queues and nothing else: [`Synchronizer::push`]
@@ -32,7 +39,7 @@
 //!     }
 //! }
 //!
-//! let config = ApproximateConfig::default().max_interval_duration(millis(20));
+//! let config = ApproximateConfig::default().tolerance(millis(20));
 //! let mut sync = ApproximateSync::new(2, config)?;
 //! assert!(sync.push(0, Reading(millis(0), "camera"))?.is_empty());
 //! // A later camera frame could still pair better with this scan: wait.
@@ -44,12 +51,33 @@
 //! ```
 
 mod approximate;
+mod epsilon;
 mod exact;
 
 pub use approximate::{ApproximateConfig, ApproximateSync};
+pub use epsilon::{EpsilonConfig, EpsilonSync};
 pub use exact::{ExactConfig, ExactSync};
 
 use crate::{Sample, Time};
+
+/// The attribute of every sync trajectory's structures that holds its members' valid
+/// times, in input order (a `LongSeq` of nanoseconds): which samples were matched.
+pub const MEMBER_VALID_TIMES: &str = "member_valid_times";
+/// The attribute of every sync trajectory's structures that holds its members' create
+/// times, in input order (a `LongSeq` of nanoseconds).
+pub const MEMBER_CREATE_TIMES: &str = "member_create_times";
+
+/// A sync trajectory's type from its state type (one frame per input): the state with
+/// [`MEMBER_VALID_TIMES`] and [`MEMBER_CREATE_TIMES`] added. The one definition every
+/// place that synthesizes a sync's type uses (the runtime's catalog, the coordinator).
+#[must_use]
+pub fn with_member_times(
+    state: crate::types::EntityStructureType,
+) -> crate::types::EntityStructureType {
+    state
+        .attr(MEMBER_VALID_TIMES, crate::value::ValueSort::LongSeq)
+        .attr(MEMBER_CREATE_TIMES, crate::value::ValueSort::LongSeq)
+}
 
 /// An item that carries the time it is valid at: what sync matches on.
 ///
@@ -133,6 +161,9 @@ pub enum SyncPolicy {
     Exact(ExactConfig),
     /// Sets chosen as ROS message_filters' ApproximateTime does ([`ApproximateSync`]).
     Approximate(ApproximateConfig),
+    /// Sets emitted as soon as every input has an item within the tolerance of the
+    /// oldest, as ROS message_filters' ApproximateEpsilonTime does ([`EpsilonSync`]).
+    Epsilon(EpsilonConfig),
 }
 
 impl Default for SyncPolicy {
@@ -157,6 +188,7 @@ impl SyncPolicy {
             SyncPolicy::Approximate(config) => {
                 Box::new(ApproximateSync::new(inputs, config.clone())?)
             }
+            SyncPolicy::Epsilon(config) => Box::new(EpsilonSync::new(inputs, config.clone())?),
         })
     }
 }
@@ -212,11 +244,8 @@ mod tests {
             Some(SyncError::ZeroQueueSize)
         );
         assert_eq!(
-            approx(ApproximateConfig::default().max_interval_duration(-1)),
-            Some(SyncError::NegativeDuration {
-                setting: "max_interval_duration".into(),
-                value: -1
-            })
+            approx(ApproximateConfig::default().tolerance(-1)),
+            Some(SyncError::NegativeDuration { setting: "tolerance".into(), value: -1 })
         );
         assert_eq!(
             approx(ApproximateConfig::default().inter_message_lower_bound(1, -5)),

@@ -15,7 +15,7 @@ use crate::clock::SharedClock;
 use crate::esgm::{CompUnit, ComputeError, SensorError, SensorInterface};
 use crate::frame::{AttributeValuePair, EntityFrame, EntityStructure};
 use crate::generator::GeneratorPolicy;
-use crate::operators::sync::SyncPolicy;
+use crate::operators::sync::{MEMBER_CREATE_TIMES, MEMBER_VALID_TIMES, SyncPolicy};
 use crate::pixel_buffer::{HeapAllocator, OctetsAllocator};
 use crate::sample::Sample;
 use crate::store::{AddError, AddOutcome, FanIn};
@@ -270,7 +270,18 @@ pub(crate) fn sync(
                                 .map(String::as_str)
                                 .zip(set.iter().map(|s| &*s.structure))
                                 .collect();
-                            emit(&c, Arc::new(state(&c.info.name, vt, clock.now(), &parts)));
+                            let mut es = state(&c.info.name, vt, clock.now(), &parts);
+                            // Which samples were matched (documented in `operators::sync`).
+                            let times = |f: fn(&Sample) -> Time| set.iter().map(f).collect();
+                            es.attributes.push(AttributeValuePair {
+                                name: MEMBER_VALID_TIMES.to_owned(),
+                                value: Value::LongSeq(times(|s| s.structure.valid_time)),
+                            });
+                            es.attributes.push(AttributeValuePair {
+                                name: MEMBER_CREATE_TIMES.to_owned(),
+                                value: Value::LongSeq(times(|s| s.structure.create_time)),
+                            });
+                            emit(&c, Arc::new(es));
                         }
                     }
                     Err(e) => {

@@ -330,6 +330,9 @@ impl Registry {
                 }
             }
         }
+        if info.kind == TrajectoryKind::Sync {
+            state = esgm_core::operators::sync::with_member_times(state);
+        }
         out.insert(0, (info.type_name.clone(), state));
         out
     }

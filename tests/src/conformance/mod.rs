@@ -150,6 +150,7 @@ macro_rules! conformance_tests {
             lifecycle::stats_memory_ping_reset_log_level,
             operators::sync_exact,
             operators::sync_approximate,
+            operators::sync_epsilon,
             operators::merge_interleaves_inputs,
             operators::merge_keeps_add_order_across_inputs,
             operators::sampled_generator_and_state,

@@ -1,7 +1,10 @@
 //! Operators (G2–G4): sync, merge, generators and states. The operators run with the
 //! writer, which creates them; their streams are read through the reader.
 
-use esgm_core::operators::sync::{ApproximateConfig, ExactConfig, SyncPolicy};
+use esgm_core::operators::sync::{
+    ApproximateConfig, EpsilonConfig, ExactConfig, MEMBER_CREATE_TIMES, MEMBER_VALID_TIMES,
+    SyncPolicy,
+};
 use esgm_core::{
     EntityTrajectoryStructure, Esgm, GeneratorPolicy, MergeRule, SubscribeOptions, TrajectorySpec,
     ValueApproximation, millis,
@@ -37,7 +40,8 @@ pub fn sync_exact<H: Harness>(h: &H) {
     let state = sub.recv_timeout(WAIT).unwrap();
     assert_eq!(state.valid_time, t0 + 20);
     assert_eq!((frame_x(&state, "a"), frame_x(&state, "b")), (Some(3.0), Some(4.0)));
-    assert_eq!(s.entity_type().unwrap().attributes.len(), 2);
+    // One frame per input, and the members' times.
+    assert_eq!(s.entity_type().unwrap().attributes.len(), 4);
     assert_eq!(s.entity_type().unwrap(), w.entity_type().unwrap(), "the synthesized type");
     wait_visible(&w, &s);
     // a@10 and b@15 never found a partner: counted, not lost silently.
@@ -64,6 +68,50 @@ pub fn sync_approximate<H: Harness>(h: &H) {
     assert_eq!((frame_x(&first, "a"), frame_x(&first, "b")), (Some(0.0), Some(10.0)));
     let second = sub.recv_timeout(WAIT).unwrap();
     assert_eq!((frame_x(&second, "a"), frame_x(&second, "b")), (Some(1.0), Some(11.0)));
+    // Which samples were matched: every member's valid and create time, by input.
+    assert_eq!(member_times(&second, MEMBER_VALID_TIMES), Some(vec![t0 + 10, t0 + 13]));
+    assert_eq!(member_times(&second, MEMBER_CREATE_TIMES), Some(vec![t0 + 10, t0 + 13]));
+    assert_eq!(second.valid_time, t0 + 13, "a set is valid at its latest member's time");
+}
+
+fn member_times(s: &esgm_core::Sample, attr: &str) -> Option<Vec<esgm_core::Time>> {
+    match s.get(attr) {
+        Some(esgm_core::Value::LongSeq(v)) => Some(v.clone()),
+        _ => None,
+    }
+}
+
+/// G2 epsilon (message_filters' ApproximateEpsilonTime): a set leaves as soon as every
+/// input has a head within the tolerance of the oldest; an oldest head no input can
+/// match goes, counted. The output keeps each member's times.
+pub fn sync_epsilon<H: Harness>(h: &H) {
+    register_reading(h);
+    let e = h.esgm();
+    let a = e.create_primitive_entity_trajectory_structure("a", "Reading").unwrap();
+    let b = e.create_primitive_entity_trajectory_structure("b", "Reading").unwrap();
+    let policy = SyncPolicy::Epsilon(EpsilonConfig::default().tolerance(5));
+    e.create_trajectory(TrajectorySpec::sync("ab", ["a", "b"], policy)).unwrap();
+    let s = read(h, "ab");
+    let sub = s.subscribe(SubscribeOptions::default()).unwrap();
+    let t0 = h.now();
+    a.add(reading(t0, 1.0)).unwrap();
+    b.add(reading(t0 + 4, 2.0)).unwrap(); // within 5 of a@0: out at once
+    let first = sub.recv_timeout(WAIT).unwrap();
+    assert_eq!((frame_x(&first, "a"), frame_x(&first, "b")), (Some(1.0), Some(2.0)));
+    assert_eq!(member_times(&first, MEMBER_VALID_TIMES), Some(vec![t0, t0 + 4]));
+    a.add(reading(t0 + 10, 3.0)).unwrap();
+    b.add(reading(t0 + 30, 4.0)).unwrap(); // a@10 has no partner: dropped
+    a.add(reading(t0 + 27, 5.0)).unwrap(); // within 5 of b@30
+    let second = sub.recv_timeout(WAIT).unwrap();
+    assert_eq!((frame_x(&second, "a"), frame_x(&second, "b")), (Some(5.0), Some(4.0)));
+    assert_eq!(member_times(&second, MEMBER_VALID_TIMES), Some(vec![t0 + 27, t0 + 30]));
+    let discarded = || h.esgm().stats().get("ab").map(|r| r.worker.discarded);
+    assert!(wait_for(WAIT, || discarded() == Some(1)), "discarded {:?}", discarded());
+    // A negative tolerance is refused when the trajectory is created, on either side.
+    for side in [e, h.reader()] {
+        let bad = SyncPolicy::Epsilon(EpsilonConfig::default().tolerance(-1));
+        assert!(side.create_trajectory(TrajectorySpec::sync("bad", ["a", "b"], bad)).is_err());
+    }
 }
 
 /// G3: every sample of every input, in arrival order.

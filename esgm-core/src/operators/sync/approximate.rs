@@ -47,10 +47,11 @@ pub struct ApproximateConfig {
     /// At least 1; 2 or more is recommended, and the queue must be long enough to wait
     /// for the slowest input, or sets are lost.
     pub queue_size: usize,
-    /// The tolerance: no emitted set spans more than this (latest minus earliest valid
-    /// time, nanoseconds). `None` (the default) leaves sets unbounded, as message_filters
-    /// does by default.
-    pub max_interval_duration: Option<Time>,
+    /// The tolerance (message_filters' `max_interval_duration`): no emitted set spans
+    /// more than this (latest minus earliest valid time, nanoseconds). `None` (the
+    /// default) leaves sets unbounded, as message_filters does by default.
+    #[serde(alias = "max_interval_duration")]
+    pub tolerance: Option<Time>,
     /// Per input, the least gap between the valid times of two consecutive items
     /// (nanoseconds; missing entries are 0). A correct bound never changes the sets, only
     /// lets them out sooner; a wrong one is warned about once per input.
@@ -67,7 +68,7 @@ impl Default for ApproximateConfig {
     fn default() -> Self {
         Self {
             queue_size: 10,
-            max_interval_duration: None,
+            tolerance: None,
             inter_message_lower_bounds: Vec::new(),
             age_penalty: 0.1,
         }
@@ -82,10 +83,10 @@ impl ApproximateConfig {
         self
     }
 
-    /// Sets the tolerance, [`ApproximateConfig::max_interval_duration`].
+    /// Sets [`ApproximateConfig::tolerance`].
     #[must_use]
-    pub fn max_interval_duration(mut self, max: Time) -> Self {
-        self.max_interval_duration = Some(max);
+    pub fn tolerance(mut self, max: Time) -> Self {
+        self.tolerance = Some(max);
         self
     }
 
@@ -232,11 +233,8 @@ impl<T: Stamped> ApproximateSync<T> {
         if config.queue_size == 0 {
             return Err(SyncError::ZeroQueueSize);
         }
-        if let Some(max) = config.max_interval_duration.filter(|&max| max < 0) {
-            return Err(SyncError::NegativeDuration {
-                setting: "max_interval_duration".into(),
-                value: max,
-            });
+        if let Some(max) = config.tolerance.filter(|&max| max < 0) {
+            return Err(SyncError::NegativeDuration { setting: "tolerance".into(), value: max });
         }
         if !config.age_penalty.is_finite() || config.age_penalty < 0.0 {
             return Err(SyncError::InvalidAgePenalty(config.age_penalty));
@@ -265,7 +263,7 @@ impl<T: Stamped> ApproximateSync<T> {
         Ok(Self {
             lanes,
             queue_size: config.queue_size,
-            max_interval: config.max_interval_duration,
+            max_interval: config.tolerance,
             age_penalty: config.age_penalty,
             candidate: None,
             dropped: 0,
@@ -793,15 +791,15 @@ mod tests {
         Ok(())
     }
 
-    // esgm's own: max_interval_duration rejects sets wider than the tolerance.
+    // esgm's own: the tolerance rejects sets wider than the tolerance.
     //   Input A:  a.........b    no tolerance: (a, A) then (b, B)
     //   Input B:  ...A......B    tolerance 1 s: (b, B) only; a and A are dropped
     #[test]
-    fn max_interval_duration_rejects_wide_sets() -> Result<(), SyncError> {
+    fn tolerance_rejects_wide_sets() -> Result<(), SyncError> {
         let pushes = [(0, 0), (1, 3), (0, 10), (1, 10)];
         assert_eq!(sets(2, queue(10), &pushes)?, vec![vec![0, 3], vec![10, 10]]);
 
-        let (out, sync) = run(2, queue(10).max_interval_duration(secs(1)), &pushes)?;
+        let (out, sync) = run(2, queue(10).tolerance(secs(1)), &pushes)?;
         assert_eq!(out.concat(), vec![vec![10, 10]]);
         assert_eq!((sync.queued(), sync.dropped()), (0, 2));
         Ok(())
@@ -809,9 +807,9 @@ mod tests {
 
     // esgm's own: a set exactly as wide as the tolerance is kept.
     #[test]
-    fn max_interval_duration_is_inclusive() -> Result<(), SyncError> {
+    fn tolerance_is_inclusive() -> Result<(), SyncError> {
         let pushes = [(0, 0), (1, 1), (0, 5), (1, 6)];
-        let out = sets(2, queue(10).max_interval_duration(secs(1)), &pushes)?;
+        let out = sets(2, queue(10).tolerance(secs(1)), &pushes)?;
         assert_eq!(out, vec![vec![0, 1]]);
         Ok(())
     }
@@ -916,7 +914,7 @@ mod tests {
             let inputs = data.len();
             let mut config = queue(64).age_penalty(age_penalty);
             if let Some(t) = tolerance {
-                config = config.max_interval_duration(crate::millis(t));
+                config = config.tolerance(crate::millis(t));
             }
             let total: usize = data.iter().map(Vec::len).sum();
             let run_a = feed_ms(inputs, config.clone(), &interleave(&data, &picks_a));

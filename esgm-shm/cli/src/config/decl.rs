@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 
 use anyhow::{Context, bail};
 use esgm_core::esgm::TrajectorySpec;
-use esgm_core::operators::sync::{ApproximateConfig, ExactConfig, SyncPolicy};
+use esgm_core::operators::sync::{ApproximateConfig, EpsilonConfig, ExactConfig, SyncPolicy};
 use esgm_core::value::ValueSort;
 use esgm_core::{Attr, EntityStructureType, Time};
 use serde::Deserialize;
@@ -177,6 +177,11 @@ pub struct TrajectoryDecl {
     /// Sync: match items within this tolerance (ROS ApproximateTime) instead of exactly.
     #[arg(long)]
     pub tolerance: Option<String>,
+    /// Sync with a tolerance: `approximate` (the default; ROS ApproximateTime, the best
+    /// sets) or `epsilon` (ROS ApproximateEpsilonTime: a set as soon as every input
+    /// has an item within the tolerance of the oldest).
+    #[arg(long, value_name = "POLICY")]
+    pub sync_policy: Option<String>,
     /// Sync: items held per input (default 10).
     #[arg(long)]
     pub queue: Option<usize>,
@@ -236,6 +241,7 @@ impl TrajectoryDecl {
         only_for(self.sampled.is_none() && self.stop.is_some(), "stop", "sampled")?;
         only_for(self.computed.is_none() && self.inputs.is_some(), "inputs", "computed")?;
         only_for(self.sync.is_none() && self.tolerance.is_some(), "tolerance", "sync")?;
+        only_for(self.sync.is_none() && self.sync_policy.is_some(), "sync_policy", "sync")?;
         only_for(self.sync.is_none() && self.queue.is_some(), "queue", "sync")?;
         only_for(self.primitive.is_none() && self.writer.is_some(), "writer", "primitive")?;
 
@@ -257,13 +263,27 @@ impl TrajectoryDecl {
             TrajectorySpec::computed(&self.name, unit, inputs)
         } else if let Some(inputs) = &self.sync {
             let queue = self.queue.unwrap_or(10);
-            let policy = match &self.tolerance {
-                Some(t) => SyncPolicy::Approximate(
+            let policy = match (&self.tolerance, self.sync_policy.as_deref()) {
+                (Some(t), None | Some("approximate")) => SyncPolicy::Approximate(
                     ApproximateConfig::default()
                         .queue_size(queue)
-                        .max_interval_duration(duration(t).context("tolerance")?),
+                        .tolerance(duration(t).context("tolerance")?),
                 ),
-                None => SyncPolicy::Exact(ExactConfig::default().queue_size(queue)),
+                (Some(t), Some("epsilon")) => SyncPolicy::Epsilon(
+                    EpsilonConfig::default()
+                        .queue_size(queue)
+                        .tolerance(duration(t).context("tolerance")?),
+                ),
+                (None, None | Some("exact")) => {
+                    SyncPolicy::Exact(ExactConfig::default().queue_size(queue))
+                }
+                (None, Some(p @ ("approximate" | "epsilon"))) => {
+                    bail!("trajectory `{}`: sync_policy `{p}` needs a tolerance", self.name)
+                }
+                (_, Some(other)) => bail!(
+                    "trajectory `{}`: unknown sync_policy `{other}` (exact, approximate or epsilon)",
+                    self.name
+                ),
             };
             TrajectorySpec::sync(&self.name, inputs.clone(), policy)
         } else {
@@ -286,7 +306,7 @@ fn absolute(field: &str, s: &str) -> anyhow::Result<Time> {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used)]
+    #![allow(clippy::unwrap_used, clippy::panic)]
 
     use esgm_core::esgm::TrajectoryKind;
 
@@ -306,6 +326,37 @@ mod tests {
             let decl = TypeDecl { name: "Scan".into(), attributes: vec![bad.into()] };
             assert!(decl.to_type().is_err(), "{bad}");
         }
+    }
+
+    /// One name for the tolerance, and the sync policy by name.
+    #[test]
+    fn sync_policies_by_name_with_one_tolerance() {
+        let sync = |tolerance: Option<&str>, policy: Option<&str>| {
+            TrajectoryDecl {
+                name: "pair".into(),
+                sync: Some(vec!["a".into(), "b".into()]),
+                tolerance: tolerance.map(Into::into),
+                sync_policy: policy.map(Into::into),
+                ..Default::default()
+            }
+            .to_spec()
+        };
+        let policy = |spec: TrajectorySpec| match spec.source {
+            esgm_core::esgm::TrajectorySource::Sync { policy, .. } => policy,
+            other => panic!("not a sync: {other:?}"),
+        };
+        let ms20 = 20_000_000;
+        assert!(matches!(policy(sync(None, None).unwrap()), SyncPolicy::Exact(_)));
+        assert!(matches!(
+            policy(sync(Some("20ms"), None).unwrap()),
+            SyncPolicy::Approximate(c) if c.tolerance == Some(ms20)
+        ));
+        assert!(matches!(
+            policy(sync(Some("20ms"), Some("epsilon")).unwrap()),
+            SyncPolicy::Epsilon(c) if c.tolerance == ms20
+        ));
+        assert!(sync(None, Some("epsilon")).is_err(), "epsilon needs a tolerance");
+        assert!(sync(Some("20ms"), Some("closest")).is_err());
     }
 
     #[test]
