@@ -8,7 +8,9 @@
 mod cmd;
 mod config;
 mod dashboard;
+mod external;
 mod policy_args;
+mod progress;
 mod series;
 mod session;
 mod show;
@@ -86,6 +88,9 @@ enum Command {
     Top(cmd::top::Args),
     /// Attributes of a trajectory over valid time, as a PNG chart.
     Plot(cmd::plot::Args),
+    /// The domain live in Foxglove: a WebSocket server (runs `esgm-view`).
+    #[command(disable_help_flag = true)]
+    View(cmd::view::Args),
     /// The dataflow: sensors, units and trajectories.
     Graph(cmd::graph::Args),
     /// Policy violations of a trajectory as they happen.
@@ -129,6 +134,11 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         // `esgm compare` found differences: its report said so, no error line.
         Err(e) if e.is::<cmd::compare::Differ>() => ExitCode::FAILURE,
+        // An external subcommand (`esgm view`): its own exit code (it printed its error).
+        Err(e) if e.is::<external::Exited>() => {
+            let code = e.downcast_ref::<external::Exited>().map_or(1, |x| x.code);
+            ExitCode::from(u8::try_from(code).unwrap_or(1))
+        }
         Err(e) => {
             // One line: the error and its causes, never a backtrace.
             eprintln!("esgm: {}", esgm_shm::process::one_line(e.chain()));

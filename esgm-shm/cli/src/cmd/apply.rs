@@ -35,11 +35,16 @@ pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
 
 /// Applies a checked plan, printing each outcome (as JSON lines with `json`).
 pub fn apply_plan(domain: &str, plan: &Plan, json: bool) -> anyhow::Result<()> {
-    config::apply::apply(domain, plan, &mut |o| {
-        if json {
-            println!("{}", serde_json::to_string(&o).unwrap_or_default());
+    // A large file takes a while (every declaration is a coordinator round trip).
+    let progress = crate::progress::ApplyProgress::start(json, plan.items().len());
+    let result = config::apply::apply(domain, plan, &mut |o| {
+        let line = if json {
+            serde_json::to_string(&o).unwrap_or_default()
         } else {
-            println!("{:<10} {:<20} {:<10} (line {})", o.kind, o.name, o.change, o.line);
-        }
-    })
+            format!("{:<10} {:<20} {:<10} (line {})", o.kind, o.name, o.change, o.line)
+        };
+        progress.println(&line);
+    });
+    progress.finish();
+    result
 }

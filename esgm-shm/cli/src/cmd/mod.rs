@@ -24,6 +24,7 @@ pub mod supervise;
 pub mod top;
 pub mod traj;
 pub mod types;
+pub mod view;
 pub mod up;
 pub mod violations;
 pub mod worker;
@@ -68,6 +69,7 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Push(a) => push::run(domain, json, a),
         Command::Top(a) => top::run(domain, json, a),
         Command::Plot(a) => plot::run(domain, json, a),
+        Command::View(a) => view::run(domain, a),
         Command::Graph(a) => graph::run(domain, json, a),
         Command::Violations(a) => violations::run(domain, json, a),
         Command::Record(a) => record::run(domain, json, a),

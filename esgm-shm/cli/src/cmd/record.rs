@@ -104,8 +104,10 @@ pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
     let started = Instant::now();
     let until = a.duration.map(|d| started + d);
     let mut last_ping = Instant::now();
+    let mut progress = crate::progress::RecordProgress::start(json, &a.output);
     let why = loop {
         std::thread::sleep(Duration::from_millis(50));
+        progress.tick(|| recorder.stats());
         if interrupted.load(Ordering::Acquire) {
             break "interrupted";
         }
@@ -122,6 +124,7 @@ pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
             }
         }
     };
+    progress.finish();
     let (summary, stats) = recorder.stop()?;
     let seconds = started.elapsed().as_secs_f64();
     if json {

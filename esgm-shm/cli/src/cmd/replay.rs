@@ -88,7 +88,7 @@ pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
         computed: if a.as_recorded { ComputedMode::AsRecorded } else { ComputedMode::Recompute },
         ..ReplayOptions::default()
     };
-    if !a.max && !(a.rate > 0.0 && a.rate.is_finite()) {
+    if !(a.max || a.rate > 0.0 && a.rate.is_finite()) {
         bail!("--rate must be a positive number (or use --max)");
     }
     let esgm = connect(domain)?;
@@ -96,7 +96,14 @@ pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
     let flag = Arc::clone(&stop);
     ctrlc::set_handler(move || flag.store(true, Ordering::Release))
         .context("cannot install the Ctrl-C handler")?;
-    let report = esgm_recording::replay::replay(&esgm, &rec, &options, &stop)?;
+    let span = rec
+        .valid_range()
+        .map(|(lo, hi)| (options.start.unwrap_or(lo).max(lo), options.end.unwrap_or(hi).min(hi)));
+    let progress =
+        crate::progress::ReplayProgress::start(json, span, (!a.max && !a.looped).then_some(a.rate));
+    let report = esgm_recording::replay::replay(&esgm, &rec, &options, &stop);
+    progress.finish();
+    let report = report?;
     // Let the last structures reach their readers before the connection closes.
     std::thread::sleep(Duration::from_millis(200));
     if json {

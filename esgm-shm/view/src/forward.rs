@@ -1,0 +1,134 @@
+//! One watched trajectory: a thread that subscribes to it while Foxglove does, and logs
+//! each structure on the trajectory's channel at its valid time.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use esgm_core::store::RecvError;
+use esgm_core::{EntityTrajectoryStructure, Esgm, SubscribeOptions};
+use esgm_shm::ShmEsgm;
+use foxglove::{PartialMetadata, RawChannel};
+
+use crate::encoding::Encoding;
+
+/// How often a forwarder looks at its stop flag while nothing arrives.
+const POLL: Duration = Duration::from_millis(100);
+
+/// What forwarders report to the server: the latest valid time sent (Foxglove's time)
+/// and the messages sent, dropped for not fitting the view.
+#[derive(Debug, Default)]
+pub struct Counters {
+    /// The latest valid time forwarded, ns (0 before the first).
+    pub latest_valid_time: AtomicU64,
+    /// Messages logged.
+    pub sent: AtomicU64,
+    /// Structures that could not be encoded (logged once per forwarder).
+    pub unencodable: AtomicU64,
+}
+
+/// A running forwarder; dropping it stops the thread and closes the subscription.
+#[derive(Debug)]
+pub struct Forwarder {
+    stop: Arc<AtomicBool>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl Forwarder {
+    /// Starts forwarding `trajectory` onto `channel`, beginning with its latest sample.
+    pub fn start(
+        esgm: ShmEsgm,
+        trajectory: String,
+        encoding: Encoding,
+        channel: Arc<RawChannel>,
+        counters: Arc<Counters>,
+    ) -> Self {
+        let stop = Arc::new(AtomicBool::new(false));
+        let flag = Arc::clone(&stop);
+        let thread = std::thread::Builder::new()
+            .name(format!("esgm-view-{trajectory}"))
+            .spawn(move || run(&esgm, &trajectory, encoding, &channel, &counters, &flag));
+        let thread = match thread {
+            Ok(t) => Some(t),
+            Err(e) => {
+                tracing::error!("cannot start a forwarding thread: {e}");
+                None
+            }
+        };
+        Self { stop, thread }
+    }
+}
+
+impl Forwarder {
+    /// Tells the thread to stop: nothing is logged after this returns, even before the
+    /// thread has ended (dropping the forwarder waits for that).
+    pub fn stop(&self) {
+        self.stop.store(true, Ordering::Release);
+    }
+}
+
+impl Drop for Forwarder {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Release);
+        // The thread only ends its loop; a panic in it was already reported.
+        if let Some(t) = self.thread.take()
+            && t.join().is_err()
+        {
+            tracing::error!("a forwarding thread panicked");
+        }
+    }
+}
+
+fn run(
+    esgm: &ShmEsgm,
+    name: &str,
+    encoding: Encoding,
+    channel: &RawChannel,
+    counters: &Counters,
+    stop: &AtomicBool,
+) {
+    let span = tracing::info_span!("forward", trajectory = %name);
+    let _entered = span.enter();
+    let t = match esgm.get_entity_trajectory_structure(name) {
+        Ok(t) => t,
+        Err(e) => {
+            tracing::warn!("not forwarded: {e}");
+            return;
+        }
+    };
+    let sub = match t.subscribe(SubscribeOptions::default().last(1)) {
+        Ok(s) => s,
+        Err(e) => {
+            tracing::warn!("not forwarded: {e}");
+            return;
+        }
+    };
+    let mut buf = Vec::new();
+    while !stop.load(Ordering::Acquire) {
+        let sample = match sub.recv_timeout(POLL) {
+            Ok(s) => s,
+            Err(RecvError::Timeout) => continue,
+            Err(e) => {
+                tracing::info!("subscription ended: {e}");
+                return;
+            }
+        };
+        if stop.load(Ordering::Acquire) {
+            return;
+        }
+        buf.clear();
+        let es = &sample.structure;
+        if let Err(e) = encoding.encode(es, name, &mut buf) {
+            if counters.unencodable.fetch_add(1, Ordering::Relaxed) == 0 {
+                tracing::warn!("a structure does not fit its Foxglove view (counted): {e}");
+            }
+            continue;
+        }
+        // Foxglove's times are unsigned: a valid time before 1970 is shown at 0.
+        let valid = u64::try_from(es.valid_time).unwrap_or(0);
+        channel.log_with_meta(&buf, PartialMetadata { log_time: Some(valid) });
+        counters.sent.fetch_add(1, Ordering::Relaxed);
+        counters.latest_valid_time.fetch_max(valid, Ordering::Relaxed);
+    }
+}
