@@ -29,6 +29,9 @@ use crate::writer::{RecordError, RecordingWriter, TrajectoryId, WriteSummary};
 /// Structures a recorded trajectory's subscription buffers before the oldest is
 /// dropped (and counted): a second of a 65 kHz stream.
 pub const DEFAULT_BUFFER: usize = 1 << 16;
+/// Structures a recording thread takes from its subscription and writes under one
+/// lock of the writer, at most (what is queued, never waiting for more).
+const WRITE_BATCH: usize = 64;
 /// How often quiet trajectories are checked for losses and the file is flushed.
 const TICK: Duration = Duration::from_millis(100);
 
@@ -267,14 +270,29 @@ fn record_one<T: EntityTrajectoryStructure>(
     let mut overflow_seen = 0;
     let mut lost_seen = trajectory.stats().map(|s| s.dropped_for(DropCause::Lost)).unwrap_or(0);
     let mut last_check = Instant::now();
+    let mut batch: Vec<(Sample, i64)> = Vec::with_capacity(WRITE_BATCH);
     loop {
         let stopping = shared.stop.load(Ordering::Acquire);
         let sample = if stopping { samples.try_recv() } else { samples.recv_timeout(TICK).ok() };
         let got = sample.is_some();
         if let Some(sample) = sample {
-            let recorded = clock.now();
-            shared.with_writer(|w| w.write(id, &sample.structure, sample.add_time, recorded));
-            shared.count(name, |c| c.recorded += 1);
+            // What else is queued goes under the same lock of the writer and of the
+            // counts: a burst costs two locks, not two per structure.
+            batch.push((sample, clock.now()));
+            while batch.len() < WRITE_BATCH {
+                let Some(next) = samples.try_recv() else { break };
+                batch.push((next, clock.now()));
+            }
+            let mut written = 0;
+            shared.with_writer(|w| {
+                for (s, recorded) in &batch {
+                    w.write(id, &s.structure, s.add_time, *recorded)?;
+                    written += 1;
+                }
+                Ok(())
+            });
+            batch.clear();
+            shared.count(name, |c| c.recorded += written);
         }
         // Keep draining while there is more: losses are checked between bursts.
         if got && last_check.elapsed() < TICK {

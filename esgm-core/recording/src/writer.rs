@@ -352,7 +352,7 @@ impl RecordingWriter {
                 file.write_to_known_channel(&header, &self.view_scratch)
                     .map_err(|source| RecordError::Mcap { path: path.clone(), source })?;
                 let n = self.view_scratch.len() as u64;
-                *self.summary.view_bytes.entry(name.clone()).or_default() += n;
+                add_to(&mut self.summary.view_bytes, name, n);
                 self.file_bytes += n;
             }
         }
@@ -384,8 +384,8 @@ impl RecordingWriter {
         file.write_to_known_channel(&header, &self.scratch)
             .map_err(|source| RecordError::Mcap { path: path.clone(), source })?;
         let n = self.scratch.len() as u64;
-        *self.summary.lossless_bytes.entry(name.clone()).or_default() += n;
-        *self.summary.structures.entry(name.clone()).or_default() += 1;
+        add_to(&mut self.summary.lossless_bytes, name, n);
+        add_to(&mut self.summary.structures, name, 1);
         self.file_bytes += n;
         self.flush_if_due()
     }
@@ -561,6 +561,17 @@ pub fn split_path(path: &Path, index: usize) -> PathBuf {
     let ext =
         path.extension().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "mcap".into());
     path.with_file_name(format!("{stem}_{index:03}.{ext}"))
+}
+
+/// Adds `n` to `name`'s count, allocating its key only the first time (this runs for
+/// every structure written).
+fn add_to(counts: &mut BTreeMap<String, u64>, name: &str, n: u64) {
+    match counts.get_mut(name) {
+        Some(c) => *c += n,
+        None => {
+            counts.insert(name.to_owned(), n);
+        }
+    }
 }
 
 fn closed(path: &Path) -> RecordError {
