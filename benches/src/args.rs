@@ -35,8 +35,9 @@ pub struct Args {
     #[arg(long)]
     pub pin: bool,
 
-    /// Run only the scenarios whose name contains this text.
-    #[arg(long, value_name = "NAME-SUBSTRING")]
+    /// Run only the scenarios whose name contains this text, or one of several texts
+    /// separated by commas (`record,file-write,replay`).
+    #[arg(long, value_name = "NAME-SUBSTRING[,…]")]
     pub only: Option<String>,
 
     /// Samples per scenario and wait strategy, overriding the defaults (a sampled

@@ -54,6 +54,10 @@ pub enum Method {
     SystemClock,
     /// The duration of one call in one thread (a query, a unit's computation).
     Call,
+    /// Time per item of a batch handled back to back: the batch's time (from the first
+    /// item handed over to the last one done) over its items. A throughput, as
+    /// nanoseconds per structure or frame.
+    PerItem,
 }
 
 impl Method {
@@ -65,6 +69,7 @@ impl Method {
             Method::Lateness => "late",
             Method::SystemClock => "clock",
             Method::Call => "call",
+            Method::PerItem => "per-item",
         }
     }
 
@@ -80,6 +85,9 @@ impl Method {
                 "stamped in one process, read in another, on the host's system clock"
             }
             Method::Call => "duration of one call, timed in the calling thread",
+            Method::PerItem => {
+                "a batch's time (first item handed over -> last one done) / its items: a throughput"
+            }
         }
     }
 }

@@ -11,9 +11,13 @@ use crate::pin::pin_to_core;
 use crate::report::Report;
 use crate::scenario::{Context, Scenario};
 
-/// The scenarios of `all` whose name contains `only` (all of them without a filter).
+/// The scenarios of `all` whose name contains `only`, or one of its comma-separated
+/// parts (all of them without a filter), in run order.
 pub fn select<'a>(all: &'a [Box<dyn Scenario>], only: Option<&str>) -> Vec<&'a dyn Scenario> {
-    all.iter().map(AsRef::as_ref).filter(|s| only.is_none_or(|o| s.name().contains(o))).collect()
+    let matches = |name: &str| {
+        only.is_none_or(|o| o.split(',').any(|part| !part.is_empty() && name.contains(part)))
+    };
+    all.iter().map(AsRef::as_ref).filter(|s| matches(s.name())).collect()
 }
 
 /// Runs the scenarios of `all` that `config` selects, telling `progress` what it is

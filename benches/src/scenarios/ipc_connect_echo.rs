@@ -269,7 +269,7 @@ pub fn echo(role: &PeerRole, kind: Kind) -> anyhow::Result<Vec<String>> {
 }
 
 /// Connects to the coordinator of `domain` as `host`.
-fn connect(domain: &str, host: &str) -> anyhow::Result<ShmEsgm> {
+pub fn connect(domain: &str, host: &str) -> anyhow::Result<ShmEsgm> {
     ShmEsgm::builder()
         .domain(domain)
         .host(host)
@@ -278,14 +278,14 @@ fn connect(domain: &str, host: &str) -> anyhow::Result<ShmEsgm> {
 }
 
 /// Creates primitive trajectory `name` of `kind`, written by this process.
-fn create(esgm: &ShmEsgm, name: &str, kind: Kind) -> anyhow::Result<InProcessTrajectory> {
+pub fn create(esgm: &ShmEsgm, name: &str, kind: Kind) -> anyhow::Result<InProcessTrajectory> {
     let policy = FluentStreamPolicy::default().cache(CacheConstraint::Elements(CACHE));
     esgm.create_trajectory(TrajectorySpec::primitive(name, kind.type_name()).policy(policy))
         .with_context(|| format!("could not create trajectory {name}"))
 }
 
 /// Subscribes to trajectory `name`, which exists.
-fn subscribe(esgm: &ShmEsgm, name: &str) -> anyhow::Result<Subscription<Sample>> {
+pub fn subscribe(esgm: &ShmEsgm, name: &str) -> anyhow::Result<Subscription<Sample>> {
     esgm.get_entity_trajectory_structure(name)
         .with_context(|| format!("no trajectory {name}"))?
         .subscribe(SubscribeOptions::default())
@@ -313,7 +313,7 @@ fn subscribe_when_created(
 /// The `i`-th structure for `trajectory`, as its producer makes it: an image's pixels
 /// are written once, into the trajectory's own buffer (a loan of its shared memory,
 /// [`InProcessTrajectory::image_buffer`]), as a camera renders a frame.
-fn make_for(trajectory: &InProcessTrajectory, kind: Kind, i: u64) -> EntityStructure {
+pub fn make_for(trajectory: &InProcessTrajectory, kind: Kind, i: u64) -> EntityStructure {
     let Kind::Image = kind else { return kind.make(i) };
     let Some(mut buffer) = trajectory.image_buffer(IMAGE_WIDTH, IMAGE_HEIGHT, IMAGE_FORMAT) else {
         return kind.make(i);
@@ -332,14 +332,14 @@ fn make_for(trajectory: &InProcessTrajectory, kind: Kind, i: u64) -> EntityStruc
 }
 
 /// `es` with sequence `seq` as its valid and create time.
-fn stamped(mut es: EntityStructure, seq: i64) -> EntityStructure {
+pub fn stamped(mut es: EntityStructure, seq: i64) -> EntityStructure {
     es.valid_time = seq;
     es.create_time = seq;
     es
 }
 
 /// Adds `es` to `trajectory`, which this process writes: it must be admitted.
-fn add(trajectory: &InProcessTrajectory, es: EntityStructure) -> anyhow::Result<()> {
+pub fn add(trajectory: &InProcessTrajectory, es: EntityStructure) -> anyhow::Result<()> {
     let seq = es.valid_time;
     match trajectory.add(es) {
         Ok(AddOutcome::Added) => Ok(()),
@@ -349,7 +349,7 @@ fn add(trajectory: &InProcessTrajectory, es: EntityStructure) -> anyhow::Result<
 }
 
 /// The next sample within `slice`, if one comes.
-fn received(sub: &Subscription<Sample>, slice: Duration) -> anyhow::Result<Option<Sample>> {
+pub fn received(sub: &Subscription<Sample>, slice: Duration) -> anyhow::Result<Option<Sample>> {
     match sub.recv_timeout(slice) {
         Ok(sample) => Ok(Some(sample)),
         Err(RecvError::Timeout) => Ok(None),
@@ -358,7 +358,7 @@ fn received(sub: &Subscription<Sample>, slice: Duration) -> anyhow::Result<Optio
 }
 
 /// The next sample, waiting as `mode` says.
-fn next(
+pub fn next(
     sub: &Subscription<Sample>,
     mode: WaitMode,
     patience: &mut Patience<'_>,

@@ -39,8 +39,20 @@
 //! - [`ipc_pipeline`]: `pipeline-<stage>`, the tutorial across six processes;
 //! - [`ipc_memory`]: resident and shared memory, into the report's `memory` section.
 //!
+//! The recordings issue (14) adds, after `pipeline-*` (before `memory`):
+//! - [`record_small`]: `record-small`, `record-small-none`, `RobotState`s from another
+//!   process recorded by the `Recorder` (zstd, none): structures/s in batches, losses
+//!   with their causes;
+//! - [`file_write_image`]: `file-write-image`, the baseline of `record-image`: the same
+//!   bytes per frame through a plain `std::fs::File` loop;
+//! - [`record_image`]: `record-image`, 640×480 RGB frames rendered into loans and
+//!   recorded uncompressed: MB/s, against `file-write-image`;
+//! - [`replay_max`]: `replay-max`, `replay-max-connect`, a 10^6-structure recording
+//!   replayed as fast as possible into an in-process ESGM and a `connect` domain.
+//!
 //! `BENCHMARKS.md` at the repository root has a run's results and what they mean.
 
+pub mod file_write_image;
 pub mod inproc_chain3;
 pub mod inproc_echo;
 pub mod inproc_floor_crossbeam;
@@ -63,6 +75,9 @@ pub mod ipc_uds_echo;
 pub mod ipc_uds_frames;
 pub mod ipc_uds_image;
 pub mod ipc_uds_small;
+pub mod record_image;
+pub mod record_small;
+pub mod replay_max;
 pub mod ros1_peer;
 #[cfg(feature = "zenoh")]
 pub mod zenoh_echo;
@@ -94,6 +109,10 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(ipc_query::Query::THOUSAND),
         Box::new(ipc_query::Query::MILLION),
         Box::new(ipc_pipeline::Pipeline),
+        Box::new(record_small::RecordSmall),
+        Box::new(file_write_image::FileWriteImage),
+        Box::new(record_image::RecordImage),
+        Box::new(replay_max::ReplayMax),
         Box::new(ipc_memory::Memory),
     ]
 }
