@@ -41,20 +41,37 @@ pub fn run(
     }
     let ctx = Context::new(config);
     let mut report = Report::default();
-    for scenario in selected {
+    let (total, run_started) = (selected.len(), Instant::now());
+    for (done, scenario) in selected.into_iter().enumerate() {
         // Progress lines are a courtesy; a closed stderr must not stop the run.
-        let _ = write!(progress, "{:<26} ", scenario.name());
+        let _ = write!(progress, "[{}/{total}] {:<26} ", done + 1, scenario.name());
         let _ = progress.flush();
         let started = Instant::now();
         let rows =
             scenario.run(&ctx).with_context(|| format!("scenario {} failed", scenario.name()))?;
-        let _ = writeln!(progress, "{:>6.1} s", started.elapsed().as_secs_f64());
+        let eta = eta(run_started.elapsed(), done + 1, total);
+        let _ = writeln!(progress, "{:>6.1} s{eta}", started.elapsed().as_secs_f64());
         report.add_rows(rows);
         report.memory.extend(ctx.take_memory());
         report.skipped.extend(ctx.take_skipped());
         report.targets.extend(scenario.targets());
     }
     Ok(report)
+}
+
+/// `  (ETA 1m 20s)`: the time left if the remaining scenarios take as long as the
+/// finished ones did on average; empty after the last one.
+fn eta(elapsed: std::time::Duration, done: usize, total: usize) -> String {
+    if done == 0 || done >= total {
+        return String::new();
+    }
+    let left = elapsed.as_secs_f64() / done as f64 * (total - done) as f64;
+    let secs = left.round() as u64;
+    if secs >= 60 {
+        format!("  (ETA {}m {:02}s)", secs / 60, secs % 60)
+    } else {
+        format!("  (ETA {secs}s)")
+    }
 }
 
 /// Runs as the peer process `role` describes (see [`crate::peer_role`]): the peer side
@@ -70,4 +87,18 @@ pub fn run_peer(role: &PeerRole, all: &[Box<dyn Scenario>]) -> anyhow::Result<Ve
     scenario
         .run_peer(role)
         .with_context(|| format!("peer of {} ({})", role.scenario, role.wait.arg()))
+}
+
+#[cfg(test)]
+mod tests {
+    use std::time::Duration;
+
+    use super::eta;
+
+    #[test]
+    fn eta_is_the_average_so_far_times_what_is_left() {
+        assert_eq!(eta(Duration::from_secs(30), 1, 3), "  (ETA 1m 00s)");
+        assert_eq!(eta(Duration::from_secs(10), 2, 3), "  (ETA 5s)");
+        assert_eq!(eta(Duration::from_secs(10), 3, 3), "");
+    }
 }
