@@ -327,3 +327,49 @@ fn the_demo_leaves_no_file_in_shared_memory() {
     let extra: Vec<&&str> = left.iter().filter(|f| !f.ends_with(".global_mgmt")).collect();
     assert!(extra.is_empty(), "the demo left files behind: {extra:?}");
 }
+
+#[test]
+fn a_supervised_coordinator_comes_back_by_itself() {
+    let _one = ONE_SYSTEM.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let sys = System::new("crash-super");
+    let up = sys.ok(&["up", "--detach", "--supervise"]);
+    let supervisor: u32 = up
+        .split("(pid ")
+        .nth(1)
+        .and_then(|r| r.split(')').next())
+        .and_then(|p| p.parse().ok())
+        .unwrap_or_else(|| panic!("no pid in: {up}"));
+    sys.ok(&["apply", TUTORIAL]);
+    let before = sys.wait_for_pids(Duration::from_secs(60));
+    let first = coordinator_pid(&sys.domain);
+    assert!(Command::new("kill").args(["-9", &first.to_string()]).status().unwrap().success());
+    // A new coordinator serves, by itself.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let second = loop {
+        let answer = ControlClient::connect(&sys.domain, Duration::from_secs(2))
+            .and_then(|c| c.call(&Request::Ping));
+        if let Ok(Response::Pong { pid, .. }) = answer {
+            if pid != first {
+                break pid;
+            }
+        }
+        assert!(Instant::now() < deadline, "no coordinator came back");
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    assert!(alive(second));
+    let after = sys.wait_for_pids(Duration::from_secs(30));
+    for ((name, pid, _), (_, pid2, restarts)) in before.iter().zip(&after) {
+        assert_eq!((pid, *restarts), (pid2, 0), "{name} was not adopted");
+    }
+    sys.ok(&["down"]);
+    for (name, pid, _) in &after {
+        assert!(!alive(pid.unwrap()), "{name} still runs after `esgm down`");
+    }
+    assert!(!alive(second), "the coordinator still runs after `esgm down`");
+    // An orderly stop ends the supervisor too.
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while alive(supervisor) {
+        assert!(Instant::now() < deadline, "the supervisor still runs after `esgm down`");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}

@@ -81,16 +81,26 @@ impl Registry {
             .types()
             .names()
             .into_iter()
-            .filter_map(|n| {
-                let t = self.catalog.types().get_entity_structure_type(&n).ok()?;
-                Some((n, t.as_ref().clone()))
+            .filter_map(|n| match self.catalog.types().get_entity_structure_type(&n) {
+                Ok(t) => Some((n, t.as_ref().clone())),
+                Err(e) => {
+                    tracing::error!(type_name = %n, error = %e, "a listed type is missing; not saved");
+                    None
+                }
             })
             .collect();
         let mut trajectories: Vec<SavedTrajectory> = self
             .placement
             .iter()
             .filter_map(|(name, p)| {
-                let info = self.catalog.trajectory(name).ok()?.clone();
+                let info = match self.catalog.trajectory(name) {
+                    Ok(info) => info.clone(),
+                    Err(e) => {
+                        tracing::error!(trajectory = %name, error = %e,
+                            "a placed trajectory is not in the catalog; not saved");
+                        return None;
+                    }
+                };
                 Some(SavedTrajectory {
                     info,
                     spec: p.spec.clone(),

@@ -60,7 +60,8 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
     // A state directory of its own, removed at the end: the demo leaves nothing.
     let state = StateDir::at(std::env::temp_dir().join(format!("esgm-{domain}")));
     // The coordinator's log (worker restarts among it) goes to this terminal.
-    let mut coordinator = super::up::spawn_detached(&domain, Some(state.path()), Stdio::inherit())?;
+    let mut coordinator =
+        super::up::spawn_detached(&domain, Some(state.path()), false, Stdio::inherit())?;
     let result = drive(&domain, a, &plan);
     let processes: Vec<ProcessRecord> = match super::ps::processes(&domain) {
         Ok(p) => p,

@@ -41,6 +41,10 @@ pub struct Args {
     /// Print nothing but warnings (for a coordinator another command started).
     #[arg(long, hide = true)]
     pub quiet: bool,
+    /// Restart the coordinator if it crashes (it comes back with the registry and
+    /// adopts the running workers); an orderly stop (`esgm down`) ends it.
+    #[arg(long)]
+    pub supervise: bool,
     /// Keep the registry and the processes' logs here (default:
     /// `$XDG_STATE_HOME/esgm/<domain>`, else `~/.local/state/esgm/<domain>`).
     #[arg(long, value_name = "DIR")]
@@ -76,7 +80,8 @@ pub fn run(domain: &str, args: &Args) -> anyhow::Result<()> {
             .append(true)
             .open(&log_path)
             .with_context(|| format!("cannot open {}", log_path.display()))?;
-        let pid = spawn_detached(domain, Some(state.path()), Stdio::from(log))?.id();
+        let pid =
+            spawn_detached(domain, Some(state.path()), args.supervise, Stdio::from(log))?.id();
         println!("coordinator of `{domain}` serving (pid {pid}); stop it with `esgm down`");
         if let Some(plan) = &plan {
             if let Err(e) = super::apply::apply_plan(domain, plan, false) {
@@ -88,7 +93,57 @@ pub fn run(domain: &str, args: &Args) -> anyhow::Result<()> {
         }
         return Ok(());
     }
+    if args.supervise {
+        return supervise_coordinator(domain, args, &state);
+    }
     serve(domain, plan, args.quiet, state)
+}
+
+/// `esgm up --supervise`: runs the coordinator as a child process and starts it again
+/// (with backoff) whenever it ends other than by an orderly stop. The state directory
+/// makes each new one the old one: registry restored, workers adopted.
+fn supervise_coordinator(domain: &str, args: &Args, state: &StateDir) -> anyhow::Result<()> {
+    const FIRST_BACKOFF: Duration = Duration::from_millis(100);
+    const MAX_BACKOFF: Duration = Duration::from_secs(5);
+    /// A coordinator that ends this soon, this many times in a row, cannot start (a
+    /// bad state file, another coordinator holding the domain): give up.
+    const FAST_EXIT: Duration = Duration::from_secs(2);
+    const FAST_EXITS: u32 = 5;
+    let exe = std::env::current_exe().context("cannot find the esgm executable")?;
+    let (mut backoff, mut fast_exits, mut first) = (FIRST_BACKOFF, 0, true);
+    loop {
+        let mut command = Command::new(&exe);
+        command.args(["up", "--domain", domain]).arg("--state-dir").arg(state.path());
+        if args.quiet || !first {
+            command.arg("--quiet");
+        }
+        if let (true, Some(config)) = (first, &args.config) {
+            command.arg("--config").arg(config);
+        }
+        first = false;
+        let started = Instant::now();
+        let status = command
+            .stdin(Stdio::null())
+            .status()
+            .context("cannot start the coordinator process")?;
+        if status.success() {
+            return Ok(());
+        }
+        if started.elapsed() < FAST_EXIT {
+            fast_exits += 1;
+            if fast_exits >= FAST_EXITS {
+                bail!(
+                    "the coordinator of `{domain}` cannot start ({status}, {fast_exits} times in a row)"
+                );
+            }
+        } else {
+            fast_exits = 0;
+            backoff = FIRST_BACKOFF;
+        }
+        tracing::warn!(domain, %status, ?backoff, "the coordinator ended; restarting it");
+        std::thread::sleep(backoff);
+        backoff = (backoff * 2).min(MAX_BACKOFF);
+    }
 }
 
 /// The foreground coordinator: serves until asked to stop.
@@ -176,6 +231,7 @@ pub fn shutdown(domain: &str) -> anyhow::Result<()> {
 pub fn spawn_detached(
     domain: &str,
     state_dir: Option<&Path>,
+    supervise: bool,
     stderr: Stdio,
 ) -> anyhow::Result<std::process::Child> {
     let exe = std::env::current_exe().context("cannot find the esgm executable")?;
@@ -187,6 +243,9 @@ pub fn spawn_detached(
     }
     if let Some(dir) = state_dir {
         command.arg("--state-dir").arg(dir);
+    }
+    if supervise {
+        command.arg("--supervise");
     }
     let mut child = command
         .stdin(Stdio::null())
