@@ -92,6 +92,9 @@ fn top_once_prints_every_trajectory_and_the_coordinator() {
     let pid: u32 = coordinator.split_whitespace().nth(1).unwrap().parse().unwrap();
     assert!(pid > 0, "{coordinator}");
     assert!(coordinator.contains("MiB") || coordinator.contains("KiB"), "rss: {coordinator}");
+    // The statistics are the writer's (this test process), across processes.
+    assert!(out.contains("memory: "), "the system's memory: {out}");
+    assert!(!out.contains("unavailable"), "{out}");
 
     // The filter and JSON.
     let filtered = ok(&["--domain", &d, "top", "--once", "--filter", "nothing-like-it"]);

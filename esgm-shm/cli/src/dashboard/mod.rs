@@ -1,9 +1,10 @@
 //! `esgm top`'s data: what a running system looks like at one moment, per trajectory
 //! and per process, and how it is sorted, filtered and shown.
 //!
-//! - this file: [`Sampler`], which keeps a handle on every trajectory across refreshes
-//!   (a replica receives the writer's samples, so rates and delays are live) and reads
-//!   a [`Snapshot`];
+//! - this file: [`Sampler`], which reads a [`Snapshot`]: each trajectory's statistics
+//!   from the process that writes it (E7 across the domain), the memory of every
+//!   process, and the processes; it keeps a handle on every trajectory between
+//!   refreshes for the size of its latest sample;
 //! - [`procfs`]: CPU % and resident memory from `/proc`;
 //! - [`table`]: sort keys, the filter, and the plain-text table (`--once`, or stdout not
 //!   a terminal);
@@ -16,6 +17,7 @@ pub mod tui;
 use std::collections::{BTreeMap, HashSet};
 
 use anyhow::bail;
+use esgm_core::esgm::MemoryStats;
 use esgm_core::{DropCause, EntityTrajectoryStructure, Esgm, InProcessTrajectory, Time};
 use esgm_shm::ShmEsgm;
 use esgm_shm::control::{Request, Response};
@@ -84,6 +86,12 @@ pub struct Snapshot {
     pub trajectories: Vec<TrajectoryRow>,
     /// The coordinator, then every declared process.
     pub processes: Vec<ProcessRow>,
+    /// The memory of every connected process's trajectories, added up (`None` when the
+    /// processes did not answer).
+    pub memory: Option<MemoryStats>,
+    /// Why the statistics are this process's replicas' rather than the writers' (the
+    /// domain's processes did not answer), if they are.
+    pub note: Option<String>,
 }
 
 /// Reads snapshots of one system, keeping a handle on each trajectory between reads.
@@ -130,10 +138,24 @@ impl Sampler {
     pub fn snapshot(&mut self) -> anyhow::Result<Snapshot> {
         self.follow_trajectories()?;
         let infos = self.esgm.trajectories();
+        // Each trajectory's writer's statistics (what was offered, dropped and why, its
+        // subscribers); this process's replicas' where the writers do not answer.
+        let (writers, note) = match self.esgm.domain_stats() {
+            Ok(s) => (Some(s), None),
+            Err(e) => (
+                None,
+                Some(format!(
+                    "the writers' statistics are unavailable ({e}); these are this process's replicas'"
+                )),
+            ),
+        };
+        let memory = self.esgm.domain_memory().ok();
         let mut trajectories = Vec::with_capacity(infos.len());
         for info in infos {
             let Some(t) = self.handles.get(&info.name) else { continue };
-            let Ok(s) = t.stats() else { continue };
+            let from_writer =
+                writers.as_ref().and_then(|w| w.get(&info.name)).map(|r| r.stats.clone());
+            let Some(s) = from_writer.or_else(|| t.stats().ok()) else { continue };
             let mut losses = BTreeMap::new();
             let mut violations = BTreeMap::new();
             for (cause, n) in &s.dropped {
@@ -169,7 +191,7 @@ impl Sampler {
             });
         }
         let processes = self.processes()?;
-        Ok(Snapshot { trajectories, processes })
+        Ok(Snapshot { trajectories, processes, memory, note })
     }
 
     fn processes(&mut self) -> anyhow::Result<Vec<ProcessRow>> {

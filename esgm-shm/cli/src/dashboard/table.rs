@@ -208,11 +208,33 @@ pub fn plain(snapshot: &Snapshot, shape: &Shape) -> String {
     let trajectories: Vec<_> =
         shape.trajectories(snapshot).into_iter().map(trajectory_cells).collect();
     let processes: Vec<_> = shape.processes(snapshot).into_iter().map(process_cells).collect();
-    format!(
-        "{}\n{}",
-        aligned(TRAJECTORY_HEADER, &trajectories, 3),
-        aligned(PROCESS_HEADER, &processes, 1)
-    )
+    let mut out = aligned(TRAJECTORY_HEADER, &trajectories, 3);
+    if let Some(line) = summary(snapshot) {
+        out.push_str(&line);
+        out.push('\n');
+    }
+    out.push('\n');
+    out.push_str(&aligned(PROCESS_HEADER, &processes, 1));
+    out
+}
+
+/// `memory: 120 samples stored, 1.5 MiB (all processes)`, and why the figures are a
+/// replica's if they are.
+pub fn summary(snapshot: &Snapshot) -> Option<String> {
+    let memory = snapshot.memory.map(|m| {
+        format!(
+            "memory: {} samples stored, {} held for reordering, {} (all processes)",
+            m.stored_samples,
+            m.held_samples,
+            bytes(m.approx_bytes as u64)
+        )
+    });
+    match (memory, &snapshot.note) {
+        (Some(m), Some(n)) => Some(format!("{m}; {n}")),
+        (Some(m), None) => Some(m),
+        (None, Some(n)) => Some(n.clone()),
+        (None, None) => None,
+    }
 }
 
 #[cfg(test)]
@@ -247,6 +269,13 @@ mod tests {
                 restarts: 0,
                 last_exit: None,
             }],
+            memory: Some(esgm_core::esgm::MemoryStats {
+                trajectories: 3,
+                stored_samples: 30,
+                held_samples: 0,
+                approx_bytes: 6144,
+            }),
+            note: None,
         }
     }
 
@@ -285,6 +314,10 @@ mod tests {
         assert!(text.contains("2.0 KiB"), "{text}");
         assert!(text.contains("coordinator") && text.contains("3.0 MiB"), "{text}");
         assert!(text.contains("1.50"), "p50 in ms: {text}");
+        assert!(
+            text.contains("memory: 30 samples stored, 0 held for reordering, 6.0 KiB"),
+            "{text}"
+        );
     }
 
     #[test]

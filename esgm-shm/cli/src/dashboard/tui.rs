@@ -39,6 +39,8 @@ struct Ui {
     error: Option<String>,
     /// Seconds since the last snapshot arrived, for the title.
     updated: Option<std::time::Instant>,
+    /// Show the memory line instead of the keys (`m` toggles).
+    show_summary: bool,
 }
 
 impl Ui {
@@ -64,6 +66,7 @@ impl Ui {
             KeyCode::Char('r') => self.shape.reverse = !self.shape.reverse,
             KeyCode::Char('/') => self.editing = true,
             KeyCode::Char('c') => self.shape.filter.clear(),
+            KeyCode::Char('m') => self.show_summary = !self.show_summary,
             _ => {}
         }
         true
@@ -183,6 +186,7 @@ fn draw(f: &mut Frame, domain: &str, snapshot: &Snapshot, ui: &Ui) {
     f.render_widget(table(" processes ".into(), table::PROCESS_HEADER, processes), bottom);
     let help_text = match (&ui.error, ui.editing) {
         (Some(e), _) => format!("error: {e}"),
+        (None, false) if ui.show_summary => table::summary(snapshot).unwrap_or_default(),
         (None, true) => format!("filter: {}▏ (Enter: done, Backspace: erase)", shape.filter),
         (None, false) if !shape.filter.is_empty() => format!(
             "filter: {} — q: quit  s: sort ({})  r: reverse  /: filter  c: clear filter",
@@ -190,7 +194,7 @@ fn draw(f: &mut Frame, domain: &str, snapshot: &Snapshot, ui: &Ui) {
             SortKey::next(shape.sort).as_str()
         ),
         (None, false) => format!(
-            "q: quit  s: sort (next: {})  r: reverse  /: filter",
+            "q: quit  s: sort (next: {})  r: reverse  /: filter  m: memory",
             SortKey::next(shape.sort).as_str()
         ),
     };
@@ -229,6 +233,8 @@ mod tests {
                 restarts: 1,
                 last_exit: None,
             }],
+            memory: None,
+            note: None,
         }
     }
 
