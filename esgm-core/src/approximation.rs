@@ -2,10 +2,14 @@
 //! at a time-point with no sample, and how several samples at one time-point become one.
 //!
 //! Numeric attributes (integers, floats, times, and the geometric tuples) are
-//! interpolated or averaged component-wise; nested frames recursively; every other
-//! attribute takes the most recent value. Angles are interpolated linearly without
-//! wrap-around (a heading of 350° to 10° passes through 180°); interpolate a unit
-//! vector instead where that matters.
+//! interpolated, averaged and given a median component-wise; nested frames attribute
+//! by attribute; every other attribute takes the most recent value (and a generator
+//! refuses an average or median merge over a type with such an attribute, naming it).
+//! Rotations merge as rotations: the average is the normalised mean of their
+//! quaternions, the median the member with the least summed angular distance to the
+//! others. Interpolation of angles is still linear without wrap-around (a heading of
+//! 350° to 10° passes through 180°); interpolate a unit vector instead where that
+//! matters.
 
 use crate::frame::{AttributeValuePair, EntityFrame, EntityStructure};
 use crate::time::Time;
@@ -39,9 +43,11 @@ pub enum MergeRule {
     /// The sample created last.
     #[default]
     KeepLast,
-    /// The average of numeric attributes (others from the last created).
+    /// The average of numeric attributes, component-wise; rotations by quaternion
+    /// (others from the last created).
     Average,
-    /// The median of numeric attributes (others from the last created).
+    /// The median of numeric attributes, component-wise; of rotations, the member
+    /// nearest all others (others from the last created).
     Median,
 }
 
@@ -166,8 +172,9 @@ pub fn merge(group: &[&EntityStructure], rule: MergeRule) -> Option<EntityStruct
             for (k, e) in group.iter().enumerate().skip(1) {
                 acc = lerp_attributes(&acc, &lift(&e.attributes), 1.0 / (k as f64 + 1.0));
             }
-            let mean = lower(acc, &last.attributes);
-            Some(with_attributes(last, fill_non_numeric(mean, &last.attributes)))
+            let mut mean = fill_non_numeric(lower(acc, &last.attributes), &last.attributes);
+            mean_rotations(&mut mean, group);
+            Some(with_attributes(last, mean))
         }
         MergeRule::Median => {
             let attributes = last
@@ -276,21 +283,191 @@ fn median_f(mut xs: Vec<f64>) -> f64 {
     }
 }
 
-/// Median of one attribute over a group; scalars only (tuples and others take the
-/// last created value, `last`).
+/// Median of one attribute over a group: scalars as numbers; positions, 2-D points
+/// and vectors component-wise; a rotation is the member with the least summed angular
+/// distance to the others (a median of angles component-wise would not be a rotation
+/// of the group); nested frames attribute by attribute. Values of another sort than
+/// `last`'s are left out; any other sort takes the last created value, `last`.
 fn median_value(last: &Value, values: &[&Value]) -> Value {
-    let nums: Option<Vec<f64>> = values.iter().map(|v| scalar(v, last)).collect();
-    match (last, nums) {
-        (Value::Long(_), Some(xs)) => Value::Long(median_f(xs).round() as i64),
-        (Value::Time(_), Some(xs)) => Value::Time(median_f(xs).round() as i64),
-        (Value::Double(_), Some(xs)) => Value::Double(median_f(xs)),
-        (Value::Altitude(_), Some(xs)) => Value::Altitude(median_f(xs)),
+    let same: Vec<&Value> = values.iter().copied().filter(|v| v.sort() == last.sort()).collect();
+    let med =
+        |f: &dyn Fn(&Value) -> Option<f64>| median_f(same.iter().filter_map(|v| f(v)).collect());
+    match last {
+        Value::Long(_) => Value::Long(med(&|v| v.as_double()).round() as i64),
+        Value::Time(_) => Value::Time(med(&|v| v.as_double()).round() as i64),
+        Value::Double(_) => Value::Double(med(&|v| v.as_double())),
+        Value::Altitude(_) => Value::Altitude(med(&|v| v.as_double())),
+        Value::Pos2(_) => Value::Pos2(Pos2 {
+            x: med(&|v| match v {
+                Value::Pos2(p) => Some(p.x),
+                _ => None,
+            }),
+            y: med(&|v| match v {
+                Value::Pos2(p) => Some(p.y),
+                _ => None,
+            }),
+        }),
+        Value::Vec(_) => Value::Vec(Vec3 {
+            x: med(&|v| if let Value::Vec(p) = v { Some(p.x) } else { None }),
+            y: med(&|v| if let Value::Vec(p) = v { Some(p.y) } else { None }),
+            z: med(&|v| if let Value::Vec(p) = v { Some(p.z) } else { None }),
+        }),
+        Value::Position(_) => Value::Position(median_position(&same, |v| match v {
+            Value::Position(p) => Some(*p),
+            _ => None,
+        })),
+        Value::Rotation(r) => Value::Rotation(
+            rotation_medoid(&same.iter().filter_map(|v| rotation_in(v)).collect::<Vec<_>>())
+                .unwrap_or(*r),
+        ),
+        Value::PositionAltitude(_) => Value::PositionAltitude(PositionAltitude {
+            position: median_position(&same, |v| match v {
+                Value::PositionAltitude(p) => Some(p.position),
+                _ => None,
+            }),
+            altitude: med(&|v| match v {
+                Value::PositionAltitude(p) => Some(p.altitude),
+                _ => None,
+            }),
+        }),
+        Value::PositionAltitudeRotation(par) => {
+            let rotations: Vec<Rotation> = same
+                .iter()
+                .filter_map(|v| match v {
+                    Value::PositionAltitudeRotation(p) => Some(p.rotation),
+                    _ => None,
+                })
+                .collect();
+            Value::PositionAltitudeRotation(PositionAltitudeRotation {
+                position: median_position(&same, |v| match v {
+                    Value::PositionAltitudeRotation(p) => Some(p.position),
+                    _ => None,
+                }),
+                altitude: med(&|v| match v {
+                    Value::PositionAltitudeRotation(p) => Some(p.altitude),
+                    _ => None,
+                }),
+                rotation: rotation_medoid(&rotations).unwrap_or(par.rotation),
+            })
+        }
+        Value::EntityFrame(f) => {
+            let frames: Vec<&EntityFrame> = same.iter().filter_map(|v| v.as_frame()).collect();
+            Value::EntityFrame(Box::new(EntityFrame {
+                name: f.name.clone(),
+                attributes: f
+                    .attributes
+                    .iter()
+                    .map(|p| {
+                        let values: Vec<&Value> =
+                            frames.iter().filter_map(|fr| fr.get(&p.name)).collect();
+                        AttributeValuePair {
+                            name: p.name.clone(),
+                            value: median_value(&p.value, &values),
+                        }
+                    })
+                    .collect(),
+            }))
+        }
         _ => last.clone(),
     }
 }
 
-fn scalar(v: &Value, like: &Value) -> Option<f64> {
-    (v.sort() == like.sort()).then(|| v.as_double()).flatten()
+fn median_position(values: &[&Value], get: impl Fn(&Value) -> Option<Position>) -> Position {
+    let ps: Vec<Position> = values.iter().filter_map(|v| get(v)).collect();
+    Position {
+        north: median_f(ps.iter().map(|p| p.north).collect()),
+        east: median_f(ps.iter().map(|p| p.east).collect()),
+    }
+}
+
+/// A rotation as a unit quaternion `[w, x, y, z]` (roll about x, pitch about y, yaw
+/// about z, applied yaw first: the aerospace ZYX convention).
+fn quaternion(r: &Rotation) -> [f64; 4] {
+    let (sr, cr) = (r.roll / 2.0).sin_cos();
+    let (sp, cp) = (r.pitch / 2.0).sin_cos();
+    let (sy, cy) = (r.yaw / 2.0).sin_cos();
+    [
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    ]
+}
+
+fn rotation_of(q: [f64; 4]) -> Rotation {
+    let [w, x, y, z] = q;
+    let sin_pitch = (2.0 * (w * y - z * x)).clamp(-1.0, 1.0);
+    Rotation {
+        roll: (2.0 * (w * x + y * z)).atan2(1.0 - 2.0 * (x * x + y * y)),
+        pitch: sin_pitch.asin(),
+        yaw: (2.0 * (w * z + x * y)).atan2(1.0 - 2.0 * (y * y + z * z)),
+    }
+}
+
+fn dot(a: [f64; 4], b: [f64; 4]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// The angle between two rotations (radians, 0..=π).
+fn angular_distance(a: &Rotation, b: &Rotation) -> f64 {
+    2.0 * dot(quaternion(a), quaternion(b)).abs().min(1.0).acos()
+}
+
+/// The mean of rotations: their quaternions on one hemisphere (q and −q are one
+/// rotation), averaged and normalised. `None` for none, or ones that cancel out.
+pub fn rotation_mean(rotations: &[Rotation]) -> Option<Rotation> {
+    let first = quaternion(rotations.first()?);
+    let mut sum = [0.0; 4];
+    for r in rotations {
+        let q = quaternion(r);
+        let sign = if dot(q, first) < 0.0 { -1.0 } else { 1.0 };
+        for (s, c) in sum.iter_mut().zip(q) {
+            *s += sign * c;
+        }
+    }
+    let norm = dot(sum, sum).sqrt();
+    (norm > 1e-12).then(|| rotation_of(sum.map(|c| c / norm)))
+}
+
+/// The median of rotations: the member with the least summed angular distance to the
+/// others (of equal ones, the first).
+pub fn rotation_medoid(rotations: &[Rotation]) -> Option<Rotation> {
+    let cost = |r: &Rotation| rotations.iter().map(|o| angular_distance(r, o)).sum::<f64>();
+    rotations.iter().map(|r| (cost(r), *r)).min_by(|a, b| a.0.total_cmp(&b.0)).map(|(_, r)| r)
+}
+
+/// Replaces the component-wise mean of every rotation among `attributes` (top level,
+/// and inside a position-altitude-rotation) by the quaternion mean of the group's.
+fn mean_rotations(attributes: &mut [AttributeValuePair], group: &[&EntityStructure]) {
+    for p in attributes.iter_mut() {
+        let of = |f: &dyn Fn(&Value) -> Option<Rotation>| -> Vec<Rotation> {
+            group.iter().filter_map(|e| e.get(&p.name)).filter_map(f).collect()
+        };
+        match &mut p.value {
+            Value::Rotation(r) => {
+                if let Some(m) = rotation_mean(&of(&rotation_in)) {
+                    *r = m;
+                }
+            }
+            Value::PositionAltitudeRotation(par) => {
+                let rotations = of(&|v| match v {
+                    Value::PositionAltitudeRotation(x) => Some(x.rotation),
+                    _ => None,
+                });
+                if let Some(m) = rotation_mean(&rotations) {
+                    par.rotation = m;
+                }
+            }
+            _ => {}
+        }
+    }
+}
+
+fn rotation_in(v: &Value) -> Option<Rotation> {
+    match v {
+        Value::Rotation(r) => Some(*r),
+        _ => None,
+    }
 }
 
 #[cfg(test)]
@@ -299,6 +476,85 @@ mod tests {
 
     fn es(vt: Time, ct: Time, x: f64, n: i64, label: &str) -> EntityStructure {
         EntityStructure::new("r", vt, ct).with("x", x).with("n", n).with("label", label)
+    }
+
+    fn at(vt: Time, ct: Time) -> EntityStructure {
+        EntityStructure::new("r", vt, ct)
+    }
+
+    fn yaw(y: f64) -> Rotation {
+        Rotation { roll: 0.0, pitch: 0.0, yaw: y }
+    }
+
+    #[test]
+    fn positions_and_points_merge_component_wise() {
+        let g = [
+            at(5, 1)
+                .with("p", Value::Pos2(Pos2 { x: 0.0, y: 10.0 }))
+                .with("q", Value::Position(Position { north: 1.0, east: 9.0 })),
+            at(5, 2)
+                .with("p", Value::Pos2(Pos2 { x: 2.0, y: 0.0 }))
+                .with("q", Value::Position(Position { north: 3.0, east: 0.0 })),
+            at(5, 3)
+                .with("p", Value::Pos2(Pos2 { x: 9.0, y: 5.0 }))
+                .with("q", Value::Position(Position { north: 2.0, east: 1.0 })),
+        ];
+        let g: Vec<&EntityStructure> = g.iter().collect();
+        let med = merge(&g, MergeRule::Median).unwrap();
+        assert_eq!(med.get("p"), Some(&Value::Pos2(Pos2 { x: 2.0, y: 5.0 })));
+        assert_eq!(med.get("q"), Some(&Value::Position(Position { north: 2.0, east: 1.0 })));
+        let avg = merge(&g, MergeRule::Average).unwrap();
+        let Some(Value::Pos2(p)) = avg.get("p") else { panic!("{avg:?}") };
+        assert!((p.x - 11.0 / 3.0).abs() < 1e-9 && (p.y - 5.0).abs() < 1e-9, "{p:?}");
+    }
+
+    #[test]
+    fn rotations_average_as_quaternions_and_the_median_is_a_member() {
+        let deg = std::f64::consts::PI / 180.0;
+        // 350° and 10°: the mean heading is 0°, not the 180° of averaging angles.
+        let g = [
+            at(5, 1).with("r", Value::Rotation(yaw(350.0 * deg))),
+            at(5, 2).with("r", Value::Rotation(yaw(10.0 * deg))),
+        ];
+        let g: Vec<&EntityStructure> = g.iter().collect();
+        let Some(Value::Rotation(r)) = merge(&g, MergeRule::Average).unwrap().get("r").cloned()
+        else {
+            panic!("not a rotation")
+        };
+        assert!(r.yaw.abs() < 1e-9 && r.roll.abs() < 1e-9 && r.pitch.abs() < 1e-9, "{r:?}");
+        let m = rotation_mean(&[yaw(0.3), yaw(0.5)]).unwrap();
+        assert!((m.yaw - 0.4).abs() < 1e-9, "{m:?}");
+        // The member closest to all others: 0.1 rad, not the outlier.
+        let g = [
+            at(5, 1).with("r", Value::Rotation(yaw(0.0))),
+            at(5, 2).with("r", Value::Rotation(yaw(0.1))),
+            at(5, 3).with("r", Value::Rotation(yaw(3.0))),
+        ];
+        let g: Vec<&EntityStructure> = g.iter().collect();
+        assert_eq!(
+            merge(&g, MergeRule::Median).unwrap().get("r"),
+            Some(&Value::Rotation(yaw(0.1)))
+        );
+        // Euler angles come back as they went in.
+        let r = Rotation { roll: 0.2, pitch: -0.3, yaw: 1.1 };
+        let back = rotation_of(quaternion(&r));
+        assert!((back.roll - 0.2).abs() < 1e-9 && (back.pitch + 0.3).abs() < 1e-9);
+        assert!((back.yaw - 1.1).abs() < 1e-9);
+    }
+
+    #[test]
+    fn nested_frames_take_the_median_attribute_by_attribute() {
+        let frame = |x: f64, label: &str| EntityFrame::new("f").with("x", x).with("label", label);
+        let g = [
+            at(5, 1).with("f", frame(1.0, "a")),
+            at(5, 2).with("f", frame(7.0, "b")),
+            at(5, 3).with("f", frame(3.0, "c")),
+        ];
+        let g: Vec<&EntityStructure> = g.iter().collect();
+        let med = merge(&g, MergeRule::Median).unwrap();
+        let f = med.get("f").and_then(|v| v.as_frame()).unwrap();
+        assert_eq!(f.get("x"), Some(&Value::Double(3.0)));
+        assert_eq!(f.get("label"), Some(&Value::from("c")), "the last created");
     }
 
     #[test]

@@ -328,6 +328,41 @@ impl Catalog {
         }
     }
 
+    /// An average or median merge needs every attribute of the input's type to have a
+    /// mean or a median (numbers, times, geometric values, nested frames; an average
+    /// also number sequences): a string or an image would only take the last value,
+    /// so the rule is refused here, naming the attribute.
+    fn check_merge_rule(
+        &self,
+        input: &str,
+        type_name: &str,
+        rule: crate::approximation::MergeRule,
+    ) -> Result<(), CreateError> {
+        use crate::approximation::MergeRule;
+        use crate::value::ValueSort;
+        let what = match rule {
+            MergeRule::Average => "mean",
+            MergeRule::Median => "median",
+            MergeRule::KeepFirst | MergeRule::KeepLast => return Ok(()),
+        };
+        let Ok(ty) = self.types.get_entity_structure_type(type_name) else { return Ok(()) };
+        for a in &ty.attributes {
+            let ok = a.sort.is_numeric()
+                || a.sort == ValueSort::EntityFrame
+                || (rule == MergeRule::Average
+                    && matches!(a.sort, ValueSort::LongSeq | ValueSort::DoubleSeq));
+            if !ok {
+                let reason = format!(
+                    "attribute `{}` of `{input}` is a {:?}, which has no {what}; merge it with \
+                     keep-first or keep-last",
+                    a.name, a.sort
+                );
+                return Err(PolicyError::illegal("merge", format!("{rule:?}"), &reason).into());
+            }
+        }
+        Ok(())
+    }
+
     fn checker(&self, type_name: &str) -> Result<TypeChecker, CreateError> {
         TypeChecker::new(&self.types, type_name).map_err(no_such_type)
     }
@@ -424,7 +459,10 @@ impl Catalog {
                 policy.create::<Sample>(inputs.len())?;
                 (self.state_checker(&name, &inputs, true)?, Some("sync".into()))
             }
-            TrajectorySource::SampledGenerators { sample_period, unit, .. } => {
+            TrajectorySource::SampledGenerators { sample_period, unit, inputs: gens, .. } => {
+                for ((input, type_name), (_, g)) in inputs.iter().zip(gens) {
+                    self.check_merge_rule(input, type_name, g.merge)?;
+                }
                 if *sample_period <= 0 {
                     return Err(PolicyError::illegal(
                         "sample_period",

@@ -151,6 +151,7 @@ macro_rules! conformance_tests {
             operators::sync_exact,
             operators::sync_approximate,
             operators::sync_epsilon,
+            operators::merge_rules_are_checked_against_the_type,
             operators::merge_interleaves_inputs,
             operators::merge_keeps_add_order_across_inputs,
             operators::sampled_generator_and_state,

@@ -289,3 +289,33 @@ pub fn sampled_temporal_function<H: Harness>(h: &H) {
     assert!(g_seen.get_latest().is_err());
     assert!(matches!(e.remove_comp_unit("sum"), Err(esgm_core::RegistrationError::InUse { .. })));
 }
+
+/// G1: an average or median merge over a type with an attribute that has no mean or
+/// median (a string) is refused when the generator is created, on either side, with
+/// an error naming the attribute; keep-last takes it, and numbers and geometric
+/// values take an average.
+pub fn merge_rules_are_checked_against_the_type<H: Harness>(h: &H) {
+    let e = h.esgm();
+    e.create_type(
+        esgm_core::EntityStructureType::new("Tagged")
+            .attr("x", esgm_core::ValueSort::Double)
+            .attr("label", esgm_core::ValueSort::String),
+    )
+    .unwrap();
+    e.create_primitive_entity_trajectory_structure("t", "Tagged").unwrap();
+    e.create_primitive_entity_trajectory_structure("pose", "RobotState").unwrap();
+    let policy = |merge| GeneratorPolicy { approximation: ValueApproximation::MostRecent, merge };
+    for side in [e, h.reader()] {
+        for rule in [MergeRule::Average, MergeRule::Median] {
+            let spec = TrajectorySpec::sampled_generators("g", [("t", policy(rule))], millis(10));
+            let err = side.create_trajectory(spec).unwrap_err().to_string();
+            assert!(err.contains("`label`") && err.contains("String"), "{err}");
+        }
+    }
+    let spec =
+        TrajectorySpec::sampled_generators("g", [("t", policy(MergeRule::KeepLast))], millis(10));
+    e.create_trajectory(spec).unwrap();
+    let spec =
+        TrajectorySpec::sampled_generators("p", [("pose", policy(MergeRule::Median))], millis(10));
+    e.create_trajectory(spec).unwrap();
+}
