@@ -116,9 +116,7 @@ macro_rules! conformance_tests {
             primitive::types_create_get_destroy,
             primitive::primitive_add_and_query,
             primitive::primitive_policy_is_enforced,
-            primitive::stats_agree_across_locations
-                [shm: "a replica counts only drops the writer publishes (violations); \
-                       stats across processes are issue 17's E7"],
+            primitive::stats_agree_across_locations,
             primitive::subscriptions_in_add_order_with_replay,
             primitive::violations_are_delivered_and_counted,
             primitive::held_samples_are_released_on_time,
