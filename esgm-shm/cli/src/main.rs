@@ -30,6 +30,10 @@ struct Cli {
     /// Print data as JSON (one object per line for streams).
     #[arg(long, global = true)]
     json: bool,
+    /// Answer latest, nth, between, at and closest from the domain's bridge on another
+    /// host, at this Zenoh endpoint (e.g. `tcp/10.0.0.2:7447`; runs `esgm-bridge`).
+    #[arg(long, global = true, value_name = "ENDPOINT")]
+    remote: Option<String>,
     #[command(subcommand)]
     command: Command,
 }
@@ -105,6 +109,9 @@ enum Command {
     Compare(cmd::compare::Args),
     /// Make a recording's trajectories queryable in the domain.
     Load(cmd::load::Args),
+    /// Carry trajectories to and from other hosts over Zenoh (runs `esgm-bridge`).
+    #[command(disable_help_flag = true)]
+    Bridge(cmd::bridge::Args),
     /// Run one of the system's processes (started by `esgm demo`; also by hand).
     #[command(subcommand, hide = true)]
     Worker(cmd::worker::Role),

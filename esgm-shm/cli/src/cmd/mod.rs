@@ -1,6 +1,7 @@
 //! One file per subcommand.
 
 pub mod apply;
+pub mod bridge;
 pub mod compare;
 pub mod demo;
 pub mod down;
@@ -44,6 +45,9 @@ pub fn process_name(c: &Command) -> String {
 /// Runs the command line's command.
 pub fn run(cli: &Cli) -> anyhow::Result<()> {
     let (domain, json) = (cli.domain.as_str(), cli.json);
+    if let Some(endpoint) = &cli.remote {
+        return remote(domain, json, endpoint, &cli.command);
+    }
     match &cli.command {
         Command::Up(a) => up::run(domain, a),
         Command::Down => down::run(domain),
@@ -77,6 +81,21 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Replay(a) => replay::run(domain, json, a),
         Command::Compare(a) => compare::run(json, a),
         Command::Load(a) => load::run(domain, json, a),
+        Command::Bridge(a) => bridge::run(domain, json, a),
         Command::Worker(role) => worker::run(domain, role),
     }
+}
+
+/// `--remote`: the queries another host's bridge answers.
+fn remote(domain: &str, json: bool, endpoint: &str, c: &Command) -> anyhow::Result<()> {
+    use bridge::Remote;
+    let q = match c {
+        Command::Latest(a) => Remote::Latest(a),
+        Command::Nth(a) => Remote::Nth(a),
+        Command::Between(a) => Remote::Between(a),
+        Command::At(a) => Remote::At(a, false),
+        Command::Closest(a) => Remote::At(a, true),
+        _ => anyhow::bail!("--remote works with latest, nth, between, at and closest"),
+    };
+    bridge::remote(domain, json, endpoint, q)
 }
