@@ -102,6 +102,18 @@
 //!
 //! How a sample crosses with one wake-up, and how images are written once, by their
 //! producer, where every reader reads them: see [`client`].
+//!
+//! ## The coordinator is not a single point of failure
+//! The coordinator ([`control`]) is a registry and a supervisor; samples never pass
+//! through it. If it dies, the processes that run keep exchanging samples, and workers
+//! wait for a new one ([`control::attach`] tells a slow coordinator from a gone one).
+//! A new coordinator comes back whole from a **persisted state file**, not from the
+//! processes re-registering: the registry holds what no live process holds in full
+//! (types and trajectories declared by processes that have left, the process table
+//! with pids and restarts) and each trajectory's generation, which every process
+//! compares with what it mirrors once a second — a registry rebuilt piecemeal would
+//! make readers drop what they read. The file is replaced atomically after every
+//! change, in a per-domain directory ([`control::state`] says where and why).
 #![deny(missing_docs)]
 
 pub mod client;

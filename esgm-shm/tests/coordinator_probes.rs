@@ -35,7 +35,8 @@ fn client_churn_does_not_stall_the_next_call() {
     let _c = coordinator(&d);
     let first = ping(&d);
     let churn = Instant::now();
-    for _ in 0..40 {
+    // The probe: 20 clients made and dropped made the next ping take 1.8 s.
+    for _ in 0..20 {
         let c = ControlClient::connect(&d, DEADLINE).unwrap();
         c.call(&Request::Ping).unwrap();
     }
@@ -43,7 +44,7 @@ fn client_churn_does_not_stall_the_next_call() {
     // The next call answers (within the deadline, or the test fails).
     let after = ping(&d);
     eprintln!(
-        "first ping {first:?}; 40 clients made and dropped in {churn:?}; next ping {after:?}"
+        "first ping {first:?}; 20 clients made and dropped in {churn:?}; next ping {after:?}"
     );
 }
 
