@@ -10,6 +10,12 @@
 //! every connected process — or its deadline passes (an error naming how many
 //! answered). Answers are addressed to the asker; the others drop them.
 //!
+//! A process killed without leaving still counts as a subscriber until the
+//! coordinator's dead-node cleanup removes its ports; until then a question waits its
+//! whole deadline and fails as [`AdminError::Incomplete`] (E7's `reset`, `stats` and
+//! `memory_stats` log it and answer with what arrived or this process's own view;
+//! `reset_blocking`, `flush` and the `_domain` methods return it).
+//!
 //! Why not the coordinator: it knows trajectories, not what each process holds, and a
 //! reset must reach the writer's store and every replica, in the processes that hold
 //! them. The coordinator stays out of the data's way.
