@@ -12,9 +12,9 @@
 //!
 //! A process killed without leaving still counts as a subscriber until the
 //! coordinator's dead-node cleanup removes its ports; until then a question waits its
-//! whole deadline and fails as [`AdminError::Incomplete`] (E7's `reset`, `stats` and
-//! `memory_stats` log it and answer with what arrived or this process's own view;
-//! `reset_blocking`, `flush` and the `_domain` methods return it).
+//! whole deadline and fails as [`AdminError::Incomplete`] (E7's `reset` logs it;
+//! `stats` and `memory_stats` log it and answer with this process's own view;
+//! `reset_blocking`, `flush` and the `domain_*` methods return it).
 //!
 //! Why not the coordinator: it knows trajectories, not what each process holds, and a
 //! reset must reach the writer's store and every replica, in the processes that hold
