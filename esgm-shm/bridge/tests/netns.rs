@@ -1,7 +1,8 @@
 //! Two hosts that share nothing but a network: two network namespaces joined by a veth
 //! pair (private 10.x addresses this test gives them), each with its own `/dev/shm`
-//! and `/tmp` (a mount namespace), so iceoryx2 cannot connect them and only Zenoh
-//! can. Each "host" is this test binary run again inside its namespaces
+//! and `/tmp/iceoryx2` (a mount namespace; the rest of `/tmp` stays visible, because
+//! a checkout and its test binaries may live there), so iceoryx2 cannot connect them
+//! and only Zenoh can. Each "host" is this test binary run again inside its namespaces
 //! ([`netns_host`]): a coordinator, a bridge (restarted when it dies, like a
 //! supervisor would), and on host A a writer, on host B a checker.
 //!
@@ -140,7 +141,7 @@ impl Host {
             .args([
                 "sh",
                 "-c",
-                "mount -t tmpfs tmpfs /dev/shm && mount -t tmpfs tmpfs /tmp && exec \"$@\"",
+                "mount -t tmpfs tmpfs /dev/shm && mkdir -p /tmp/iceoryx2 && mount -t tmpfs tmpfs /tmp/iceoryx2 && exec \"$@\"",
                 "sh",
             ])
             .arg(&me)
