@@ -133,7 +133,16 @@ pub fn rerun(
     plan: &RerunPlan,
     mut out: Option<RecordingWriter>,
 ) -> Result<RerunReport, RerunError> {
-    let start = rec.trajectories.iter().filter_map(|t| t.add_range.map(|r| r.0)).min().unwrap_or(0);
+    // The clock starts before anything recorded, valid or added: a trajectory whose
+    // duration starts "when created" (from = 0) then admits the first recorded
+    // structure, as the live one, created before it, did.
+    let start = rec
+        .trajectories
+        .iter()
+        .flat_map(|t| [t.add_range.map(|r| r.0), t.valid_range.map(|r| r.0)])
+        .flatten()
+        .min()
+        .map_or(0, |t| t.saturating_sub(1));
     let clock = SimClock::shared(start);
     let esgm = InProcessEsgm::builder().clock(clock.clone()).create();
     let plan_err = |trajectory: &str, reason: String| RerunError::Plan {

@@ -284,7 +284,8 @@ fn down_stops_a_system_whose_coordinator_crashed() {
     assert!(nodes.is_empty(), "nodes left behind: {nodes:?}");
 }
 
-/// The demo in a private `/dev/shm` and `/tmp` (a user namespace): afterwards only
+/// The demo in a private `/dev/shm` and `/tmp/iceoryx2` (a user namespace; the rest of
+/// `/tmp` stays visible, where a checkout and its binaries may live): afterwards only
 /// iceoryx2's own global counter file may remain, nothing of the demo.
 #[test]
 fn the_demo_leaves_no_file_in_shared_memory() {
@@ -295,9 +296,10 @@ fn the_demo_leaves_no_file_in_shared_memory() {
         return;
     }
     let script = format!(
-        "mount -t tmpfs tmpfs /dev/shm && mount -t tmpfs tmpfs /tmp && \
-         {ESGM} demo --seconds 6 >/tmp/demo.out 2>&1; rc=$?; \
-         if [ $rc -ne 0 ]; then cat /tmp/demo.out; exit $rc; fi; \
+        "mkdir -p /tmp/iceoryx2 && mount -t tmpfs tmpfs /dev/shm && \
+         mount -t tmpfs tmpfs /tmp/iceoryx2 && out=$(mktemp) && \
+         {ESGM} demo --seconds 6 >$out 2>&1; rc=$?; \
+         if [ $rc -ne 0 ]; then cat $out; rm -f $out; exit $rc; fi; rm -f $out; \
          echo LEFT; ls -A /dev/shm; find /tmp/iceoryx2 -type f 2>/dev/null; true"
     );
     let mut child = Command::new("unshare")
