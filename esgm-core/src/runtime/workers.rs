@@ -180,20 +180,28 @@ pub(crate) fn unit(
                 };
                 WorkerCounters::bump(&c.counters.calls);
                 let qtime = clock.now();
-                match guarded(&c, "compute", || cu.compute(&args, qtime)) {
-                    Some(Ok(es)) => emit(&c, Arc::new(es)),
-                    Some(Err(ComputeError::ValueNotAvailable)) => {
-                        WorkerCounters::bump(&c.counters.no_value)
-                    }
-                    Some(Err(e)) => {
-                        WorkerCounters::bump(&c.counters.failures);
-                        tracing::warn!(trajectory = %c.info.name, error = %e, "unit failed");
-                    }
-                    None => {}
-                }
+                emit_computed(&c, "unit", guarded(&c, "compute", || cu.compute(&args, qtime)));
             },
         );
     })
+}
+
+/// Emits what a unit computed, counting an answer of "no value" and a failure (logged
+/// as `what` failed); `None` is a panic `guarded` already counted.
+fn emit_computed(
+    cell: &TrajectoryCell,
+    what: &str,
+    result: Option<Result<EntityStructure, ComputeError>>,
+) {
+    match result {
+        Some(Ok(es)) => emit(cell, Arc::new(es)),
+        Some(Err(ComputeError::ValueNotAvailable)) => WorkerCounters::bump(&cell.counters.no_value),
+        Some(Err(e)) => {
+            WorkerCounters::bump(&cell.counters.failures);
+            tracing::warn!(trajectory = %cell.info.name, error = %e, "{what} failed");
+        }
+        None => {}
+    }
 }
 
 /// A state: one frame per input, named after the input trajectory.
@@ -343,17 +351,11 @@ pub(crate) fn sampled_generators(
             }
             if let Some(cu) = &cu {
                 // A temporal function: the unit estimates the value at exactly `t`.
-                match guarded(&c, "compute_at", || cu.compute_at(&values, t)) {
-                    Some(Ok(es)) => emit(&c, Arc::new(es)),
-                    Some(Err(ComputeError::ValueNotAvailable)) => {
-                        WorkerCounters::bump(&c.counters.no_value)
-                    }
-                    Some(Err(e)) => {
-                        WorkerCounters::bump(&c.counters.failures);
-                        tracing::warn!(trajectory = %c.info.name, error = %e, "compute_at failed");
-                    }
-                    None => {}
-                }
+                emit_computed(
+                    &c,
+                    "compute_at",
+                    guarded(&c, "compute_at", || cu.compute_at(&values, t)),
+                );
                 return;
             }
             let es = match values.as_slice() {
