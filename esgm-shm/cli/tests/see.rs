@@ -4,59 +4,17 @@
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
-use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use esgm_core::esgm::TrajectorySpec;
 use esgm_core::{EntityStructure, EntityTrajectoryStructure, Esgm};
 
-const ESGM: &str = env!("CARGO_BIN_EXE_esgm");
+mod common;
 
-struct Output {
-    code: Option<i32>,
-    stdout: String,
-    stderr: String,
-}
-
-/// Runs `esgm args…`, killing it (and failing) after `limit`.
-fn esgm(args: &[&str], limit: Duration) -> Output {
-    let mut child = Command::new(ESGM)
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("run esgm");
-    let deadline = Instant::now() + limit;
-    while child.try_wait().unwrap().is_none() {
-        if Instant::now() > deadline {
-            child.kill().unwrap();
-            child.wait().unwrap();
-            panic!("`esgm {}` did not finish within {limit:?}", args.join(" "));
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    let out = child.wait_with_output().unwrap();
-    Output {
-        code: out.status.code(),
-        stdout: String::from_utf8_lossy(&out.stdout).into(),
-        stderr: String::from_utf8_lossy(&out.stderr).into(),
-    }
-}
+use common::{StopOnDrop as Down, esgm};
 
 fn ok(args: &[&str]) -> String {
-    let o = esgm(args, Duration::from_secs(60));
-    assert_eq!(o.code, Some(0), "`esgm {}` failed:\n{}\n{}", args.join(" "), o.stdout, o.stderr);
-    o.stdout
-}
-
-/// Stops a test's coordinator when the test ends, also when it fails.
-struct Down(String);
-
-impl Drop for Down {
-    fn drop(&mut self) {
-        let _ = esgm(&["--domain", &self.0, "down"], Duration::from_secs(30));
-    }
+    common::ok_within(args, Duration::from_secs(60))
 }
 
 #[test]

@@ -64,7 +64,13 @@ pub fn finish(mut child: Child, limit: Duration, what: &str) -> Output {
 /// Runs `esgm args…` within [`PATIENCE`], failing the test unless it exits 0;
 /// returns its stdout.
 pub fn ok(args: &[&str]) -> String {
-    let o = esgm(args, PATIENCE);
+    ok_within(args, PATIENCE)
+}
+
+/// Runs `esgm args…` within `limit`, failing the test unless it exits 0; returns its
+/// stdout.
+pub fn ok_within(args: &[&str], limit: Duration) -> String {
+    let o = esgm(args, limit);
     assert_eq!(o.code, Some(0), "`esgm {}` failed:\n{}\n{}", args.join(" "), o.stdout, o.stderr);
     o.stdout
 }
