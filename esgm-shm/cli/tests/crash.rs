@@ -220,6 +220,18 @@ fn a_killed_coordinator_leaves_data_flowing_and_comes_back_whole() {
     }
     // The registry is kept for the next coordinator.
     assert!(sys.state_dir().join("registry.json").exists());
+    // Each worker notices on its own (a ping overstays its deadline, the coordinator's
+    // pid is gone) and says so in its log, before anyone starts a new coordinator: one
+    // started earlier would answer the pending ping and the crash would go unseen.
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        let camera = sys.ok(&["logs", "camera-camera"]);
+        if camera.contains("the coordinator is gone; serving on") {
+            break;
+        }
+        assert!(Instant::now() < deadline, "the camera did not notice the crash:\n{camera}");
+        std::thread::sleep(Duration::from_millis(250));
+    }
 
     // A new coordinator starts while the old workers live, recovers the registry and
     // adopts them: same pids, no restart.
@@ -251,8 +263,6 @@ fn a_killed_coordinator_leaves_data_flowing_and_comes_back_whole() {
     for name in ["coordinator", "camera-camera", "robot-robot_state"] {
         assert!(logs.contains(name), "no log of {name}:\n{logs}");
     }
-    let camera = sys.ok(&["logs", "camera-camera"]);
-    assert!(camera.contains("the coordinator is gone; serving on"), "{camera}");
 
     sys.ok(&["down"]);
     for (name, pid, _) in &after {
