@@ -95,6 +95,29 @@ fn a_primitive_written_here_is_read_there_with_history_violations_and_reset() {
     assert!(matches!(there.add(wrong), Err(AddError::InvalidType { .. })));
 }
 
+/// A reader that connects to a trajectory nobody adds to any more (a loaded recording,
+/// a sensor that stopped) answers its very first query from the writer's history: it
+/// asks the writer for it when it subscribes, instead of waiting for a next sample
+/// that never comes.
+#[test]
+fn a_late_reader_of_a_quiet_trajectory_answers_its_first_query_from_the_history() {
+    let c = coordinator("loc-quiet");
+    let a = location(&c, "a");
+    let robot = a.create_trajectory(TrajectorySpec::primitive("robot", "RobotState")).unwrap();
+    for i in 1..=3 {
+        robot.add(state(i * 10, i as f64)).unwrap();
+    }
+    // Quiet: past the writer's periodic maintenance, nothing new is sent.
+    std::thread::sleep(Duration::from_millis(600));
+    for host in ["b", "c", "d"] {
+        let reader = location(&c, host);
+        let there = reader.get_entity_trajectory_structure("robot").unwrap();
+        // No waiting: the first answer is already the writer's.
+        assert_eq!(there.get_latest().map(|s| x(&s)), Ok(3.0), "reader {host}");
+        assert_eq!(there.get_between(0, 100).unwrap().len(), 3, "reader {host}");
+    }
+}
+
 #[test]
 fn sampling_runs_where_the_sensor_is_and_units_where_they_are() {
     let c = coordinator("loc-placement");

@@ -93,9 +93,6 @@ fn compare_exits_0_when_recordings_match_and_1_when_they_differ() {
 }
 
 #[test]
-#[ignore = "open bug (issue 14): on a quiet machine, `esgm load` reports 10 added, yet after it exits \
-            the writer on esgm-system has none; passed under load in a clean-clone run. Run it with \
-            `cargo test -p esgm-cli --test compare_load -- --ignored`"]
 fn a_loaded_recording_answers_queries_after_esgm_load_exits() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("run.mcap");

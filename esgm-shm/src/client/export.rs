@@ -26,7 +26,7 @@ use parking_lot::Mutex;
 
 use super::blocking_add::{AddServer, BlockingAddError};
 use super::image_loans::{LoanAllocator, as_loan, loaned_image};
-use super::settings::{generation_domain, handle_qos, inbox_domain, inbox_qos};
+use super::settings::{generation_domain, handle_qos, inbox_domain, inbox_qos, join_service};
 use super::shared_node::SharedNode;
 use crate::control::protocol::TrajectoryRecord;
 use crate::holdings::{HoldingOwner, Holdings};
@@ -212,6 +212,8 @@ pub(crate) struct Export {
     blocking: Option<AddServer>,
     /// The inbox's wake-up service, for the receiver thread.
     inbox_wake: Option<ServiceName>,
+    /// The join service new readers ring for their history, for the receiver thread.
+    join: ServiceName,
 }
 
 impl Drop for Export {
@@ -285,6 +287,7 @@ impl Export {
             ),
             false => None,
         };
+        let join = join_service(domain, &name).map_err(OpenError::from)?;
         // One borrow stays free to receive into.
         let own = own.map(|o| (o, holdings.owner(qos.max_borrowed_samples.saturating_sub(1))));
         let outlet = Arc::new(Mutex::new(Outlet { publisher, violations, own, failures: 0 }));
@@ -311,12 +314,38 @@ impl Export {
                 id
             })
             .map_err(|_| ExportError::Gone { trajectory: name.clone() })?;
-        Ok(Self { generation, outlet, handle: handle.clone(), tap, inbox, blocking, inbox_wake })
+        Ok(Self {
+            generation,
+            outlet,
+            handle: handle.clone(),
+            tap,
+            inbox,
+            blocking,
+            inbox_wake,
+            join,
+        })
     }
 
-    /// The wake-up services other processes' adds to this trajectory notify (its inbox).
+    /// The wake-up services other processes ring for this trajectory: its inbox (their
+    /// adds) and its join service (a new reader's request for its history).
     pub fn wake_services(&self) -> Vec<ServiceName> {
-        self.inbox_wake.iter().cloned().collect()
+        self.inbox_wake.iter().copied().chain([self.join]).collect()
+    }
+
+    /// The join service new readers ring.
+    pub fn join_service(&self) -> &ServiceName {
+        &self.join
+    }
+
+    /// Hands readers that connected since the last send their history now and wakes
+    /// them, so a reader that rang the join service answers its first query with the
+    /// whole history, also on a trajectory nobody adds to any more.
+    pub fn welcome(&self) {
+        let outlet = self.outlet.lock();
+        if let Err(e) = outlet.publisher.welcome() {
+            tracing::debug!(trajectory = %outlet.publisher.trajectory(), error = %e,
+                "cannot hand new readers their history");
+        }
     }
 
     /// Hands readers that connected since the last send the history now, not only at

@@ -14,6 +14,7 @@
 //! replication.
 
 use std::sync::{Arc, Weak};
+use std::time::Duration;
 
 use esgm_core::esgm::TrajectoryKind;
 use esgm_core::{
@@ -26,7 +27,7 @@ use parking_lot::Mutex;
 
 use super::blocking_add::AddClient;
 use super::mirrors::SharedMirrors;
-use super::settings::{bridge_qos, generation_domain, inbox_domain, inbox_qos};
+use super::settings::{bridge_qos, generation_domain, inbox_domain, inbox_qos, join_service};
 use super::shared_node::SharedNode;
 use crate::control::protocol::TrajectoryRecord;
 use crate::holdings::{HoldingOwner, Holdings};
@@ -36,7 +37,7 @@ use crate::service::{OpenError, ShmService, open_event_service};
 use crate::service_name::{NameError, TrajectoryServiceNames};
 use crate::subscriber::{ReceiveError, TrajectorySubscriber};
 use crate::violations::{ViolationSubscriber, violation_service_name};
-use crate::wait::WaitStrategy;
+use crate::wait::{WaitStrategy, timed_wait};
 
 /// Where an import is made: the connection's node, domain, holdings and mirrors.
 #[derive(Debug, Clone, Copy)]
@@ -103,9 +104,14 @@ impl Import {
                 .create(node)?;
             Ok::<_, OpenError>((subscriber, violations))
         })?;
+        let sample_wake = *TrajectoryServiceNames::new(domain, &name)?.wake();
+        if let Err(e) = join(node, domain, &name, &sample_wake) {
+            tracing::debug!(trajectory = %name, error = %e,
+                "the writer did not hand over its history at once; it comes with its next sample or maintenance");
+        }
         let violations_wake = violation_service_name(domain, &name);
         let wakes = vec![
-            *TrajectoryServiceNames::new(domain, &name)?.wake(),
+            sample_wake,
             ServiceName::new(&violations_wake).map_err(|_| NameError::TooLong {
                 service: violations_wake.clone(),
                 max: ServiceName::max_len(),
@@ -374,6 +380,44 @@ impl FeedWaiter for ImportWaiter {
                 false
             }
         }
+    }
+}
+
+/// The longest a new reader waits for the writer to hand it the history.
+const JOIN_TIMEOUT: Duration = Duration::from_secs(1);
+
+/// Asks the writer of `trajectory` for the history of a subscriber just connected, and
+/// waits until its queue holds it: rings the trajectory's join service, which the
+/// writer answers by handing new subscribers their history and waking the readers
+/// ([`super::export::Export::welcome`]). Any wake-up counts, since a send hands new
+/// subscribers their history first. Without this, the history would arrive at the
+/// writer's next sample or maintenance tick, and a first query on a trajectory
+/// nobody adds to any more (a loaded recording) would answer "empty".
+fn join(
+    node: &SharedNode,
+    domain: &str,
+    trajectory: &str,
+    sample_wake: &ServiceName,
+) -> Result<(), String> {
+    let join = join_service(domain, trajectory).map_err(|e| e.to_string())?;
+    let (listener, bell) = node.with(|node| {
+        let listener = open_event_service(node, sample_wake)
+            .map_err(|e| e.to_string())?
+            .listener_builder()
+            .create()
+            .map_err(|e| format!("cannot listen to the writer: {e:?}"))?;
+        let bell = open_event_service(node, &join)
+            .map_err(|e| e.to_string())?
+            .notifier_builder()
+            .create()
+            .map_err(|e| format!("cannot ring the writer: {e:?}"))?;
+        Ok::<_, String>((listener, bell))
+    })?;
+    bell.notify().map_err(|e| format!("cannot ring the writer: {e:?}"))?;
+    match timed_wait(&listener, JOIN_TIMEOUT) {
+        Ok(0) => Err(format!("no answer within {JOIN_TIMEOUT:?}")),
+        Ok(_) => Ok(()),
+        Err(e) => Err(format!("cannot wait for the writer: {e:?}")),
     }
 }
 

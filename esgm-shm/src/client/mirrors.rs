@@ -38,6 +38,16 @@ impl Mirrors {
             .collect()
     }
 
+    /// Hands their history to the readers that rang the join services in `rung`
+    /// (all of them with `None`: rings that came before the receiver listened).
+    pub fn welcome(&self, rung: Option<&[ServiceName]>) {
+        for e in self.exports.values() {
+            if rung.is_none_or(|r| r.contains(e.join_service())) {
+                e.welcome();
+            }
+        }
+    }
+
     /// Takes everything other processes sent: adds to the inboxes of the exports,
     /// samples, resets and violations of the imports; returns how many there were.
     pub fn pump(&mut self) -> usize {

@@ -107,7 +107,10 @@ fn run(node_name: &NodeName, doorbell: &ServiceName, mirrors: &SharedMirrors) {
         services.push(*doorbell);
         let listeners = listen(&node, &services);
         // What arrived before these listeners existed would not wake them.
-        mirrors.lock().pump();
+        let mut locked = mirrors.lock();
+        locked.welcome(None);
+        locked.pump();
+        drop(locked);
         wait_while_unchanged(mirrors, generation, &listeners);
     }
 }
@@ -128,14 +131,14 @@ fn poll(mirrors: &SharedMirrors) {
 
 /// One listener per service; a service that cannot be listened to is pumped at every
 /// [`RECHECK`] only (logged once per list).
-fn listen(node: &ShmNode, services: &[ServiceName]) -> Vec<Listener<ShmService>> {
+fn listen(node: &ShmNode, services: &[ServiceName]) -> Vec<(ServiceName, Listener<ShmService>)> {
     let mut listeners = Vec::with_capacity(services.len());
     for service in services {
         let listener = open_event_service(node, service)
             .map_err(|e| e.to_string())
             .and_then(|s| s.listener_builder().create().map_err(|e| format!("{e:?}")));
         match listener {
-            Ok(l) => listeners.push(l),
+            Ok(l) => listeners.push((*service, l)),
             Err(e) => tracing::warn!(service = service.as_str(), error = %e,
                 "cannot listen to a service; what it carries is polled every {RECHECK:?}"),
         }
@@ -148,7 +151,7 @@ fn listen(node: &ShmNode, services: &[ServiceName]) -> Vec<Listener<ShmService>>
 fn wait_while_unchanged(
     mirrors: &SharedMirrors,
     generation: u64,
-    listeners: &[Listener<ShmService>],
+    listeners: &[(ServiceName, Listener<ShmService>)],
 ) {
     let waitset = match WaitSetBuilder::new()
         .signal_handling_mode(SignalHandlingMode::Disabled)
@@ -169,13 +172,14 @@ fn wait_while_unchanged(
         .enumerate()
         .filter_map(|(i, l)| {
             waitset
-                .attach_notification(l)
+                .attach_notification(&l.1)
                 .map(|g| (i, g))
                 .map_err(|e| tracing::warn!(error = ?e, "cannot attach a listener; polling it"))
                 .ok()
         })
         .collect();
     let mut fired = Vec::with_capacity(listeners.len());
+    let mut rung = Vec::with_capacity(listeners.len());
     while !mirrors.stopped() && mirrors.generation() == generation {
         fired.clear();
         let waited = waitset.wait_and_process_once_with_timeout(
@@ -190,14 +194,21 @@ fn wait_while_unchanged(
             std::thread::sleep(RECHECK);
         }
         // Consume the notifications, so that the next notify wakes again.
+        rung.clear();
         for &i in &fired {
-            if let Some(l) = listeners.get(i) {
+            if let Some((service, l)) = listeners.get(i) {
+                rung.push(*service);
                 if let Err(e) = l.try_wait(|_| {}) {
                     tracing::debug!(error = ?e, "cannot consume a notification");
                 }
             }
         }
-        mirrors.lock().pump();
+        let mut locked = mirrors.lock();
+        if !rung.is_empty() {
+            locked.welcome(Some(&rung));
+        }
+        locked.pump();
+        drop(locked);
         if mirrors.panic_requested() {
             #[allow(clippy::panic, reason = "test support: a panic asked for")]
             {

@@ -7,7 +7,10 @@ use esgm_core::{
     CacheConstraint, EntityStructureType, EntityTrajectoryStructure, InProcessTrajectory,
 };
 
+use iceoryx2::prelude::ServiceName;
+
 use crate::qos::{DEFAULT_MAX_HISTORY, TrajectoryQos, history_bound, history_qos};
+use crate::service_name::{NameError, TrajectoryServiceNames};
 
 /// The most samples of a trajectory carrying octets (images, blobs of bytes) kept in
 /// shared memory for late readers when its cache has no element bound: every kept
@@ -72,6 +75,14 @@ pub(crate) fn generation_domain(domain: &str, generation: u64) -> String {
 /// The domain of inbox services: other processes' adds to a primitive trajectory.
 pub(crate) fn inbox_domain(domain: &str) -> String {
     format!("{domain}:inbox")
+}
+
+/// The join service of `trajectory` in `domain` (`<domain>:join`): an event service a
+/// reader rings once it has subscribed, and the writer answers by handing it the
+/// history at once ([`super::export::Export::welcome`]) instead of at its next
+/// maintenance tick or sample.
+pub(crate) fn join_service(domain: &str, trajectory: &str) -> Result<ServiceName, NameError> {
+    Ok(*TrajectoryServiceNames::new(&format!("{domain}:join"), trajectory)?.wake())
 }
 
 /// Inbox services keep nothing for late subscribers (an add is delivered once) and

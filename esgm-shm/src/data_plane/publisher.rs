@@ -304,6 +304,15 @@ impl TrajectoryPublisher {
         self.port.update_connections().map_err(PublishError::Connections)
     }
 
+    /// Hands subscribers that connected since the last send their history now, then
+    /// wakes every reader: a reader that asked for its history (it rang the
+    /// trajectory's join service) knows, once woken, that its queue holds it.
+    pub fn welcome(&self) -> Result<(), PublishError> {
+        self.update_connections()?;
+        self.wake();
+        Ok(())
+    }
+
     /// Encodes `es` into shared memory and sends it to every subscriber.
     ///
     /// The structure is not type-checked here: the caller (the runtime) checks it
