@@ -532,8 +532,48 @@ merge = ["large_blob", "smooth_blob"]
         &["order"],
     );
     fails_with(&["--domain", &d, "traj", "create", "y"], &["needs a source"]);
+    // Fluent generators (G4): one gives its values, several their state, every period.
+    let args = ["traj", "create", "blob_10hz", "--generate", "current_blob", "--period", "100ms"];
+    let created = ok(&[&["--domain", d.as_str()][..], &args[..]].concat());
+    assert!(created.contains("sampled-generators trajectory `blob_10hz`"), "{created}");
+    let args = ["traj", "create", "both", "--generate", "current_blob,images", "--period", "200ms"];
+    ok(&[&["--domain", d.as_str()][..], &args[..]].concat());
+    fails_with(
+        &[
+            "--domain",
+            &d,
+            "traj",
+            "create",
+            "y",
+            "--generate",
+            "images:closest:avg",
+            "--period",
+            "1s",
+        ],
+        &["unknown merge `avg`", "average"],
+    );
+    fails_with(
+        &["--domain", &d, "traj", "create", "y", "--generate", "images::median", "--period", "1s"],
+        &["unknown approximation ``"],
+    );
+    fails_with(
+        &[
+            "--domain",
+            &d,
+            "traj",
+            "create",
+            "y",
+            "--generate",
+            "images:closest:median",
+            "--period",
+            "1s",
+        ],
+        &["image_data", "no median"],
+    );
     wait_for_sample(&d, "blobs_again", Duration::from_secs(30));
     wait_for_sample(&d, "pair", Duration::from_secs(30));
+    wait_for_sample(&d, "blob_10hz", Duration::from_secs(30));
+    wait_for_sample(&d, "both", Duration::from_secs(30));
 
     // `esgm down` stops the coordinator and every process it started.
     ok(&["--domain", &d, "down"]);

@@ -254,7 +254,9 @@ impl Registry {
                     TrajectorySource::Sampled { sensor, .. } => {
                         self.catalog.sensor(sensor).map(|s| s.host.clone()).unwrap_or(host)
                     }
-                    TrajectorySource::Computed { unit, .. } => {
+                    // A temporal function runs where its unit is, as a unit's compute.
+                    TrajectorySource::Computed { unit, .. }
+                    | TrajectorySource::SampledGenerators { unit: Some(unit), .. } => {
                         self.catalog.unit(unit).map(|u| u.host.clone()).unwrap_or(host)
                     }
                     _ => host,

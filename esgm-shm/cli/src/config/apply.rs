@@ -250,7 +250,10 @@ fn check(system: &System, plan: &Plan) -> anyhow::Result<Vec<usize>> {
             TrajectorySource::Sampled { sensor, .. } => {
                 known(plan, *line, "sensor", sensor, &sensors)?
             }
-            TrajectorySource::Computed { unit, .. } => known(plan, *line, "unit", unit, &units)?,
+            TrajectorySource::Computed { unit, .. }
+            | TrajectorySource::SampledGenerators { unit: Some(unit), .. } => {
+                known(plan, *line, "unit", unit, &units)?
+            }
             _ => {}
         }
         for input in &what.inputs {

@@ -12,6 +12,7 @@ use esgm_core::value::ValueSort;
 use esgm_core::{Attr, EntityStructureType, Time};
 use serde::Deserialize;
 
+use super::generate::parse_generator;
 use crate::policy_args::{PolicyArgs, duration};
 use crate::time_arg::TimeArg;
 
@@ -139,7 +140,8 @@ fn driving_direction() -> String {
 }
 
 /// `[[trajectory]]` / `esgm traj create`: a trajectory, its source and its policy.
-/// Exactly one source: `primitive`, `sampled`, `computed`, `sync` or `merge`.
+/// Exactly one source: `primitive`, `sampled`, `computed`, `sync`, `merge` or
+/// `generate`.
 #[derive(Debug, Clone, Default, clap::Args, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TrajectoryDecl {
@@ -160,17 +162,26 @@ pub struct TrajectoryDecl {
     /// Every sample of these trajectories (one type), as they come.
     #[arg(long, value_delimiter = ',', value_name = "TRAJ,TRAJ")]
     pub merge: Option<Vec<String>>,
+    /// Sampled every `period` from fluent generators over these trajectories, each
+    /// `TRAJ[:APPROXIMATION[:MERGE]]` (approximation: none, closest, most-recent,
+    /// linear; merge: keep-first, keep-last, average, median). Several give their state.
+    #[arg(long, value_delimiter = ',', value_name = "TRAJ[:APPROX[:MERGE]],…")]
+    pub generate: Option<Vec<String>>,
+    /// Generate: sample this unit's temporal function (`compute_at`) of the generators'
+    /// values instead of the values themselves.
+    #[arg(long, value_name = "UNIT")]
+    pub function: Option<String>,
     /// Inputs of a computed trajectory, in the unit's order.
     #[arg(long, value_delimiter = ',', value_name = "TRAJ,TRAJ")]
     pub inputs: Option<Vec<String>>,
-    /// Sampled: time between samples (`100ms`).
+    /// Sampled or generate: time between samples (`100ms`).
     #[arg(long)]
     pub period: Option<String>,
-    /// Sampled: first sample time (ns or RFC 3339; 0 = now).
+    /// Sampled or generate: first sample time (ns or RFC 3339; 0 = now).
     #[arg(long = "start", value_name = "TIME")]
     #[serde(rename = "start")]
     pub start: Option<String>,
-    /// Sampled: last sample time (ns or RFC 3339; 0 = forever).
+    /// Sampled or generate: last sample time (ns or RFC 3339; 0 = forever).
     #[arg(long = "stop", value_name = "TIME")]
     #[serde(rename = "stop")]
     pub stop: Option<String>,
@@ -207,6 +218,10 @@ impl TrajectoryDecl {
         for list in [&self.sync, &self.merge, &self.inputs].into_iter().flatten() {
             out.extend(list.iter().cloned());
         }
+        for entry in self.generate.iter().flatten() {
+            // A malformed entry is reported by `to_spec`; its name part is still read.
+            out.push(entry.split(':').next().unwrap_or_default().trim().to_owned());
+        }
         out
     }
 
@@ -218,15 +233,18 @@ impl TrajectoryDecl {
             self.computed.is_some(),
             self.sync.is_some(),
             self.merge.is_some(),
+            self.generate.is_some(),
         ];
         match sources.iter().filter(|s| **s).count() {
             1 => {}
             0 => bail!(
-                "trajectory `{}` needs a source: primitive, sampled, computed, sync or merge",
+                "trajectory `{}` needs a source: primitive, sampled, computed, sync, merge or \
+                 generate",
                 self.name
             ),
             _ => bail!(
-                "trajectory `{}` has more than one source (primitive, sampled, computed, sync, merge)",
+                "trajectory `{}` has more than one source (primitive, sampled, computed, sync, \
+                 merge, generate)",
                 self.name
             ),
         }
@@ -236,25 +254,46 @@ impl TrajectoryDecl {
             }
             Ok(())
         };
-        only_for(self.sampled.is_none() && self.period.is_some(), "period", "sampled")?;
-        only_for(self.sampled.is_none() && self.start.is_some(), "start", "sampled")?;
-        only_for(self.sampled.is_none() && self.stop.is_some(), "stop", "sampled")?;
+        let periodic = self.sampled.is_some() || self.generate.is_some();
+        let sampled_or_generate = "sampled and generate";
+        only_for(!periodic && self.period.is_some(), "period", sampled_or_generate)?;
+        only_for(!periodic && self.start.is_some(), "start", sampled_or_generate)?;
+        only_for(!periodic && self.stop.is_some(), "stop", sampled_or_generate)?;
+        only_for(self.generate.is_none() && self.function.is_some(), "function", "generate")?;
         only_for(self.computed.is_none() && self.inputs.is_some(), "inputs", "computed")?;
         only_for(self.sync.is_none() && self.tolerance.is_some(), "tolerance", "sync")?;
         only_for(self.sync.is_none() && self.sync_policy.is_some(), "sync_policy", "sync")?;
         only_for(self.sync.is_none() && self.queue.is_some(), "queue", "sync")?;
         only_for(self.primitive.is_none() && self.writer.is_some(), "writer", "primitive")?;
 
-        let mut spec = if let Some(t) = &self.primitive {
-            TrajectorySpec::primitive(&self.name, t)
-        } else if let Some(sensor) = &self.sampled {
+        let period = || -> anyhow::Result<Time> {
             let period = self.period.as_deref().with_context(|| {
                 format!("sampled trajectory `{}` needs a period, e.g. 100ms", self.name)
             })?;
-            let period = duration(period).context("period")?;
-            let start = self.start.as_deref().map_or(Ok(0), |s| absolute("start", s))?;
-            let stop = self.stop.as_deref().map_or(Ok(0), |s| absolute("stop", s))?;
-            TrajectorySpec::sampled(&self.name, sensor, period)?.between(start, stop)
+            duration(period).context("period")
+        };
+        let start = self.start.as_deref().map_or(Ok(0), |s| absolute("start", s))?;
+        let stop = self.stop.as_deref().map_or(Ok(0), |s| absolute("stop", s))?;
+        let mut spec = if let Some(t) = &self.primitive {
+            TrajectorySpec::primitive(&self.name, t)
+        } else if let Some(sensor) = &self.sampled {
+            TrajectorySpec::sampled(&self.name, sensor, period()?)?.between(start, stop)
+        } else if let Some(entries) = &self.generate {
+            if entries.is_empty() {
+                bail!("trajectory `{}`: `generate` needs at least one trajectory", self.name);
+            }
+            let generators = entries
+                .iter()
+                .map(|e| parse_generator(e))
+                .collect::<anyhow::Result<Vec<_>>>()
+                .with_context(|| format!("trajectory `{}`", self.name))?;
+            let spec = match &self.function {
+                Some(unit) => {
+                    TrajectorySpec::sampled_function(&self.name, unit, generators, period()?)
+                }
+                None => TrajectorySpec::sampled_generators(&self.name, generators, period()?),
+            };
+            spec.between(start, stop)
         } else if let Some(unit) = &self.computed {
             let inputs = self.inputs.clone().unwrap_or_default();
             if inputs.is_empty() {
@@ -380,6 +419,43 @@ mod tests {
         };
         assert!(format!("{:#}", stray.to_spec().unwrap_err()).contains("only for sampled"));
         let no_period = TrajectoryDecl { period: None, ..sampled };
+        assert!(format!("{:#}", no_period.to_spec().unwrap_err()).contains("period"));
+        let function = TrajectoryDecl {
+            name: "b".into(),
+            merge: Some(vec!["a".into()]),
+            function: Some("Steer".into()),
+            ..Default::default()
+        };
+        let e = format!("{:#}", function.to_spec().unwrap_err());
+        assert!(e.contains("`function` is only for generate"), "{e}");
+    }
+
+    #[test]
+    fn generators_give_their_values_their_state_or_a_temporal_function() {
+        use esgm_core::approximation::{MergeRule, ValueApproximation};
+        use esgm_core::esgm::TrajectorySource;
+        let decl = TrajectoryDecl {
+            name: "pose".into(),
+            generate: Some(vec!["robot_state:linear".into(), "alt:closest:median".into()]),
+            function: Some("Fuse".into()),
+            period: Some("100ms".into()),
+            start: Some("5".into()),
+            ..Default::default()
+        };
+        assert_eq!(decl.inputs(), ["robot_state", "alt"]);
+        let spec = decl.to_spec().unwrap();
+        let TrajectorySource::SampledGenerators { inputs, unit, from, sample_period, .. } =
+            &spec.source
+        else {
+            panic!("{spec:?}")
+        };
+        assert_eq!(unit.as_deref(), Some("Fuse"));
+        assert_eq!((*from, *sample_period), (5, 100_000_000));
+        assert_eq!(inputs[0].1.approximation, ValueApproximation::Linear);
+        assert_eq!(inputs[1].1.merge, MergeRule::Median);
+        let empty = TrajectoryDecl { generate: Some(vec![]), function: None, ..decl.clone() };
+        assert!(format!("{:#}", empty.to_spec().unwrap_err()).contains("at least one"));
+        let no_period = TrajectoryDecl { period: None, ..decl };
         assert!(format!("{:#}", no_period.to_spec().unwrap_err()).contains("period"));
     }
 }

@@ -19,11 +19,16 @@
 //!
 //! [[robot]]                      # the tutorial's robot (pushes robot_state)
 //!
-//! [[trajectory]]                 # exactly one of primitive/sampled/computed/sync/merge
-//! name = "images"
+//! [[trajectory]]                 # exactly one of primitive/sampled/computed/sync/
+//! name = "images"                #   merge/generate
 //! sampled = "camera"
 //! period = "250ms"
 //! policy = { cache = 5, order = "monotone", delay = "100ms" }
+//!
+//! [[trajectory]]                 # fluent generators sampled every period (G4)
+//! name = "pose_10hz"
+//! generate = ["robot_state:linear"]   # TRAJ[:APPROXIMATION[:MERGE]], one or more
+//! period = "100ms"               # function = "UNIT": its temporal function of them
 //! ```
 //!
 //! Every error names the file and line of the declaration it is about. A file is
@@ -33,6 +38,7 @@
 
 pub mod apply;
 pub mod decl;
+pub mod generate;
 
 use std::path::{Path, PathBuf};
 
