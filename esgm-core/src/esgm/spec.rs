@@ -62,6 +62,13 @@ pub enum TrajectorySource {
         to: Time,
         /// Time between samples.
         sample_period: Time,
+        /// How far behind its sample time each value is taken: at sample time `t` the
+        /// generators are read at `t − lag`, which is the structure's valid time. A
+        /// linear approximation needs a sample after the time it is asked for, which a
+        /// live stream has only some time later (as tf2 looks up transforms in the
+        /// past); 0 reads at the sample time itself.
+        #[serde(default)]
+        lag: Time,
     },
 }
 
@@ -156,6 +163,7 @@ impl TrajectorySpec {
                 from: 0,
                 to: 0,
                 sample_period,
+                lag: 0,
             },
         )
     }
@@ -173,6 +181,16 @@ impl TrajectorySpec {
             *u = Some(unit.into());
         }
         s
+    }
+
+    /// Reads the generators `lag` behind each sample time (see
+    /// [`TrajectorySource::SampledGenerators`]); other sources ignore it.
+    #[must_use]
+    pub fn lag(mut self, lag: Time) -> Self {
+        if let TrajectorySource::SampledGenerators { lag: l, .. } = &mut self.source {
+            *l = lag;
+        }
+        self
     }
 
     /// Sets the policy.

@@ -439,7 +439,14 @@ impl InProcessEsgm {
                 *cell.counters.flush_sender.lock() = Some(fan_in.sender());
                 Some(workers::merge(cell, fan_in))
             }
-            TrajectorySource::SampledGenerators { inputs: gens, unit, from, to, sample_period } => {
+            TrajectorySource::SampledGenerators {
+                inputs: gens,
+                unit,
+                from,
+                to,
+                sample_period,
+                lag,
+            } => {
                 let schedule = self.schedule(*from, *to, *sample_period);
                 let cu = unit.as_ref().and_then(|u| self.inner.units.read().get(u).cloned());
                 let with_policies = inputs
@@ -447,7 +454,7 @@ impl InProcessEsgm {
                     .zip(gens)
                     .map(|((d, _), (_, g))| (Arc::clone(d), g.clone()))
                     .collect();
-                Some(workers::sampled_generators(cell, clock, with_policies, cu, schedule))
+                Some(workers::sampled_generators(cell, clock, with_policies, cu, schedule, *lag))
             }
         })
     }

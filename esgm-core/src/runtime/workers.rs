@@ -320,19 +320,21 @@ pub(crate) fn merge(cell: &Arc<TrajectoryCell>, fan_in: FanIn<Sample>) -> Worker
     })
 }
 
-/// A trajectory sampled from generators (G4): at each sample time `t`, each input's
-/// generator value at `t`; one input gives its value re-stamped at `t`, several give a
-/// state.
+/// A trajectory sampled from generators (G4): at each sample time, each input's
+/// generator value at `t`, `lag` before it; one input gives its value re-stamped at
+/// `t`, several give a state.
 pub(crate) fn sampled_generators(
     cell: &Arc<TrajectoryCell>,
     clock: SharedClock,
     inputs: Vec<(Arc<Descriptor>, GeneratorPolicy)>,
     cu: Option<Arc<dyn CompUnit>>,
     schedule: periodic::Schedule,
+    lag: Time,
 ) -> Worker {
     let c = Arc::clone(cell);
     spawn("generator", cell, move |stop, _wake| {
-        periodic::run(&clock, &stop, schedule, missed(&c), |t| {
+        periodic::run(&clock, &stop, schedule, missed(&c), |sample_time| {
+            let t = sample_time.saturating_sub(lag);
             WorkerCounters::bump(&c.counters.calls);
             let mut values = Vec::with_capacity(inputs.len());
             for (d, policy) in &inputs {

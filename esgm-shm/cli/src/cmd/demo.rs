@@ -61,7 +61,7 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
     let state = StateDir::at(std::env::temp_dir().join(format!("esgm-{domain}")));
     // The coordinator's log (worker restarts among it) goes to this terminal.
     let mut coordinator =
-        super::up::spawn_detached(&domain, Some(state.path()), false, Stdio::inherit())?;
+        super::up::spawn_detached(&domain, Some(state.path()), false, Stdio::inherit(), false)?;
     let result = drive(&domain, a, &plan);
     let processes: Vec<ProcessRecord> = match super::ps::processes(&domain) {
         Ok(p) => p,

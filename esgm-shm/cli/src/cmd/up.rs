@@ -81,7 +81,8 @@ pub fn run(domain: &str, args: &Args) -> anyhow::Result<()> {
             .open(&log_path)
             .with_context(|| format!("cannot open {}", log_path.display()))?;
         let pid =
-            spawn_detached(domain, Some(state.path()), args.supervise, Stdio::from(log))?.id();
+            spawn_detached(domain, Some(state.path()), args.supervise, Stdio::from(log), true)?
+                .id();
         println!("coordinator of `{domain}` serving (pid {pid}); stop it with `esgm down`");
         if let Some(plan) = &plan {
             if let Err(e) = super::apply::apply_plan(domain, plan, false) {
@@ -227,12 +228,16 @@ pub fn shutdown(domain: &str) -> anyhow::Result<()> {
 }
 
 /// Starts `esgm up` for `domain` as a background process (its log lines go to
-/// `stderr`) and waits until it answers.
+/// `stderr`) and waits until it answers. An `outliving` coordinator gets a process
+/// group of its own, so the signals of the terminal it was started from (Ctrl-C in a
+/// later command, a hang-up) do not reach the system it now runs; the demo's stays in
+/// the demo's group, so a Ctrl-C stops both.
 pub fn spawn_detached(
     domain: &str,
     state_dir: Option<&Path>,
     supervise: bool,
     stderr: Stdio,
+    outliving: bool,
 ) -> anyhow::Result<std::process::Child> {
     let exe = std::env::current_exe().context("cannot find the esgm executable")?;
     let mut command = Command::new(exe);
@@ -246,6 +251,9 @@ pub fn spawn_detached(
     }
     if supervise {
         command.arg("--supervise");
+    }
+    if outliving {
+        std::os::unix::process::CommandExt::process_group(&mut command, 0);
     }
     let mut child = command
         .stdin(Stdio::null())

@@ -171,6 +171,11 @@ pub struct TrajectoryDecl {
     /// values instead of the values themselves.
     #[arg(long, value_name = "UNIT")]
     pub function: Option<String>,
+    /// Generate: read the generators this long before each sample time, which becomes
+    /// the valid time (`100ms`): a `linear` generator needs a sample after the time it
+    /// is read at, which a live stream has only later.
+    #[arg(long)]
+    pub lag: Option<String>,
     /// Inputs of a computed trajectory, in the unit's order.
     #[arg(long, value_delimiter = ',', value_name = "TRAJ,TRAJ")]
     pub inputs: Option<Vec<String>>,
@@ -260,6 +265,7 @@ impl TrajectoryDecl {
         only_for(!periodic && self.start.is_some(), "start", sampled_or_generate)?;
         only_for(!periodic && self.stop.is_some(), "stop", sampled_or_generate)?;
         only_for(self.generate.is_none() && self.function.is_some(), "function", "generate")?;
+        only_for(self.generate.is_none() && self.lag.is_some(), "lag", "generate")?;
         only_for(self.computed.is_none() && self.inputs.is_some(), "inputs", "computed")?;
         only_for(self.sync.is_none() && self.tolerance.is_some(), "tolerance", "sync")?;
         only_for(self.sync.is_none() && self.sync_policy.is_some(), "sync_policy", "sync")?;
@@ -293,7 +299,8 @@ impl TrajectoryDecl {
                 }
                 None => TrajectorySpec::sampled_generators(&self.name, generators, period()?),
             };
-            spec.between(start, stop)
+            let lag = self.lag.as_deref().map_or(Ok(0), duration).context("lag")?;
+            spec.between(start, stop).lag(lag)
         } else if let Some(unit) = &self.computed {
             let inputs = self.inputs.clone().unwrap_or_default();
             if inputs.is_empty() {
@@ -440,16 +447,18 @@ mod tests {
             function: Some("Fuse".into()),
             period: Some("100ms".into()),
             start: Some("5".into()),
+            lag: Some("50ms".into()),
             ..Default::default()
         };
         assert_eq!(decl.inputs(), ["robot_state", "alt"]);
         let spec = decl.to_spec().unwrap();
-        let TrajectorySource::SampledGenerators { inputs, unit, from, sample_period, .. } =
+        let TrajectorySource::SampledGenerators { inputs, unit, from, sample_period, lag, .. } =
             &spec.source
         else {
             panic!("{spec:?}")
         };
         assert_eq!(unit.as_deref(), Some("Fuse"));
+        assert_eq!(*lag, 50_000_000);
         assert_eq!((*from, *sample_period), (5, 100_000_000));
         assert_eq!(inputs[0].1.approximation, ValueApproximation::Linear);
         assert_eq!(inputs[1].1.merge, MergeRule::Median);
