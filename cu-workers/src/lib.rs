@@ -94,10 +94,10 @@ mod unit_test_support {
 
     /// `value` as a sample valid (and created and added) at `valid_time`.
     pub(crate) fn sample<T: Entity>(value: &T, valid_time: Time) -> Sample {
-        Sample {
-            structure: Arc::new(value.to_structure("input", valid_time, valid_time)),
-            add_time: valid_time,
-            query_time: valid_time,
-        }
+        Sample::new(
+            Arc::new(value.to_structure("input", valid_time, valid_time)),
+            valid_time,
+            valid_time,
+        )
     }
 }

@@ -11,7 +11,10 @@
 //! 350° to 10° passes through 180°); interpolate a unit vector instead where that
 //! matters.
 
+use std::sync::Arc;
+
 use crate::frame::{AttributeValuePair, EntityFrame, EntityStructure};
+use crate::sample::Sample;
 use crate::time::Time;
 use crate::value::{
     Pos2, Position, PositionAltitude, PositionAltitudeRotation, Rotation, Value, Vec3,
@@ -30,8 +33,17 @@ pub enum ValueApproximation {
     MostRecent,
     /// These attribute values, valid at `t`, created at the query time.
     Default(Vec<AttributeValuePair>),
-    /// Linear interpolation between the closest samples before and after `t`.
+    /// Linear interpolation between the closest samples before and after `t`:
+    /// numbers, times, geometric values, number sequences, and sequences of points,
+    /// vectors and frames element-wise when both have the same length. An attribute
+    /// that cannot be interpolated holds the value before `t`: strings, images and
+    /// other values without a linear mean by their nature, unmarked; sequences whose
+    /// lengths differ and values of different sorts marked in the answer
+    /// ([`Sample::not_interpolated`]).
     Linear,
+    /// [`Self::Linear`], but an answer with an attribute that could not be interpolated
+    /// (a marked one) is refused with `ValueNotAvailable`, naming the attribute.
+    LinearStrict,
 }
 
 /// How several samples with one valid time become one value (the seed's merge
@@ -52,35 +64,77 @@ pub enum MergeRule {
 }
 
 /// Interpolates between structures `a` (valid before `t`) and `b` (valid after `t`),
-/// producing a structure valid at `t` created at `query_time`.
+/// producing a structure valid at `t` created at `query_time` (see
+/// [`ValueApproximation::Linear`] for what is interpolated).
 pub fn interpolate(
     a: &EntityStructure,
     b: &EntityStructure,
     t: Time,
     query_time: Time,
 ) -> EntityStructure {
+    interpolate_marked(a, b, t, query_time).0
+}
+
+/// [`interpolate`], and the paths of the attributes that could not be interpolated and
+/// hold `a`'s value (sequences of different lengths, values of different sorts).
+pub fn interpolate_marked(
+    a: &EntityStructure,
+    b: &EntityStructure,
+    t: Time,
+    query_time: Time,
+) -> (EntityStructure, Vec<String>) {
     // Differences in i128 (extreme i64 times overflow i64), then f64: converting the
     // absolute times first would lose the nanoseconds of wall-clock times (~1.7e18).
     let span = (i128::from(b.valid_time) - i128::from(a.valid_time)) as f64;
     let offset = (i128::from(t) - i128::from(a.valid_time)) as f64;
     let f = if span > 0.0 { offset / span } else { 0.0 };
-    EntityStructure {
+    let mut held = Vec::new();
+    let es = EntityStructure {
         name: a.name.clone(),
         valid_time: t,
         create_time: query_time,
-        attributes: lerp_attributes(&a.attributes, &b.attributes, f),
+        attributes: lerp_attributes(&a.attributes, &b.attributes, f, "", &mut held),
+    };
+    (es, held)
+}
+
+/// The answer of a linear query between `a` and `b` at `t` under `rule` (`Linear` or
+/// `LinearStrict`), or why it is refused.
+pub fn interpolated(
+    a: &EntityStructure,
+    b: &EntityStructure,
+    t: Time,
+    query_time: Time,
+    rule: &ValueApproximation,
+) -> Result<Sample, String> {
+    let (es, held) = interpolate_marked(a, b, t, query_time);
+    let mut sample = Sample::new(Arc::new(es), query_time, query_time);
+    if !held.is_empty() {
+        if *rule == ValueApproximation::LinearStrict {
+            return Err(format!(
+                "linear: {} cannot be interpolated (sequences of different lengths or \
+                 values of different sorts on either side)",
+                held.iter().map(|p| format!("`{p}`")).collect::<Vec<_>>().join(", ")
+            ));
+        }
+        sample.not_interpolated = Some(held.into());
     }
+    Ok(sample)
 }
 
 fn lerp_attributes(
     a: &[AttributeValuePair],
     b: &[AttributeValuePair],
     f: f64,
+    prefix: &str,
+    held: &mut Vec<String>,
 ) -> Vec<AttributeValuePair> {
     a.iter()
         .map(|pa| {
+            let path =
+                if prefix.is_empty() { pa.name.clone() } else { format!("{prefix}.{}", pa.name) };
             let value = match b.iter().find(|pb| pb.name == pa.name) {
-                Some(pb) => lerp_value(&pa.value, &pb.value, f),
+                Some(pb) => lerp(&pa.value, &pb.value, f, &path, held),
                 None => pa.value.clone(),
             };
             AttributeValuePair { name: pa.name.clone(), value }
@@ -112,6 +166,25 @@ fn lvec(a: &Vec3, b: &Vec3, f: f64) -> Vec3 {
 /// Interpolates two values of the same numeric sort at fraction `f` (0 = `a`,
 /// 1 = `b`); any other pair yields `a` (the most recent value before `t`).
 pub fn lerp_value(a: &Value, b: &Value, f: f64) -> Value {
+    lerp(a, b, f, "", &mut Vec::new())
+}
+
+/// True for sorts with no linear mean: they hold the earlier value by their nature.
+fn steps(v: &Value) -> bool {
+    matches!(
+        v,
+        Value::NoValue
+            | Value::Bool(_)
+            | Value::String(_)
+            | Value::Symbol(_)
+            | Value::OctetSeq(_)
+            | Value::SymbolSeq(_)
+    )
+}
+
+/// [`lerp_value`], recording in `held` the path of a value that should have been
+/// interpolated but could not (it holds `a`).
+fn lerp(a: &Value, b: &Value, f: f64, path: &str, held: &mut Vec<String>) -> Value {
     match (a, b) {
         (Value::Long(x), Value::Long(y)) => Value::Long(li(*x, *y, f)),
         (Value::Time(x), Value::Time(y)) => Value::Time(li(*x, *y, f)),
@@ -143,12 +216,42 @@ pub fn lerp_value(a: &Value, b: &Value, f: f64) -> Value {
             Value::DoubleSeq(x.iter().zip(y).map(|(a, b)| l(*a, *b, f)).collect())
         }
         (Value::EntityFrame(x), Value::EntityFrame(y)) => {
-            Value::EntityFrame(Box::new(EntityFrame {
-                name: x.name.clone(),
-                attributes: lerp_attributes(&x.attributes, &y.attributes, f),
-            }))
+            Value::EntityFrame(Box::new(lerp_frame(x, y, f, path, held)))
         }
-        _ => a.clone(),
+        (Value::Pos2Seq(x), Value::Pos2Seq(y)) if x.len() == y.len() => Value::Pos2Seq(
+            x.iter().zip(y).map(|(p, q)| Pos2 { x: l(p.x, q.x, f), y: l(p.y, q.y, f) }).collect(),
+        ),
+        (Value::VecSeq(x), Value::VecSeq(y)) if x.len() == y.len() => {
+            Value::VecSeq(x.iter().zip(y).map(|(p, q)| lvec(p, q, f)).collect())
+        }
+        (Value::EntityFrameSeq(x), Value::EntityFrameSeq(y)) if x.len() == y.len() => {
+            Value::EntityFrameSeq(
+                x.iter()
+                    .zip(y)
+                    .enumerate()
+                    .map(|(i, (p, q))| lerp_frame(p, q, f, &format!("{path}[{i}]"), held))
+                    .collect(),
+            )
+        }
+        _ => {
+            if !(steps(a) && a.sort() == b.sort()) {
+                held.push(path.to_owned());
+            }
+            a.clone()
+        }
+    }
+}
+
+fn lerp_frame(
+    x: &EntityFrame,
+    y: &EntityFrame,
+    f: f64,
+    path: &str,
+    held: &mut Vec<String>,
+) -> EntityFrame {
+    EntityFrame {
+        name: x.name.clone(),
+        attributes: lerp_attributes(&x.attributes, &y.attributes, f, path, held),
     }
 }
 
@@ -170,7 +273,13 @@ pub fn merge(group: &[&EntityStructure], rule: MergeRule) -> Option<EntityStruct
             // after k samples, mean_k = lerp(mean_{k-1}, x_k, 1/k).
             let mut acc = lift(&group[0].attributes);
             for (k, e) in group.iter().enumerate().skip(1) {
-                acc = lerp_attributes(&acc, &lift(&e.attributes), 1.0 / (k as f64 + 1.0));
+                acc = lerp_attributes(
+                    &acc,
+                    &lift(&e.attributes),
+                    1.0 / (k as f64 + 1.0),
+                    "",
+                    &mut Vec::new(),
+                );
             }
             let mut mean = fill_non_numeric(lower(acc, &last.attributes), &last.attributes);
             mean_rotations(&mut mean, group);

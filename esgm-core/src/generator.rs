@@ -3,7 +3,7 @@
 
 use std::sync::Arc;
 
-use crate::approximation::{MergeRule, ValueApproximation, interpolate, merge};
+use crate::approximation::{MergeRule, ValueApproximation, interpolated, merge};
 use crate::frame::EntityStructure;
 use crate::sample::Sample;
 use crate::store::{QueryError, TrajectoryStore};
@@ -45,11 +45,7 @@ impl FluentGenerator<'_> {
     /// the merged neighbours. The answer is stamped with the query time.
     pub fn value_at(&self, t: Time) -> Result<Sample, QueryError> {
         let now = self.store.clock().now();
-        let wrap = |es: EntityStructure| Sample {
-            structure: Arc::new(es),
-            add_time: now,
-            query_time: now,
-        };
+        let wrap = |es: EntityStructure| Sample::new(Arc::new(es), now, now);
         if let Some(es) = self.group_at(t) {
             return Ok(wrap(es));
         }
@@ -58,10 +54,12 @@ impl FluentGenerator<'_> {
         let after = h.after(t).and_then(|e| self.group_at(e.vt));
         let fail = |why: &str| self.store.not_available(format!("value_at({t}): {why}"));
         match &self.policy.approximation {
-            ValueApproximation::Linear => match (before, after) {
-                (Some(b), Some(a)) => Ok(wrap(interpolate(&b, &a, t, now))),
-                _ => Err(fail("linear needs samples on both sides")),
-            },
+            rule @ (ValueApproximation::Linear | ValueApproximation::LinearStrict) => {
+                match (before, after) {
+                    (Some(b), Some(a)) => interpolated(&b, &a, t, now, rule).map_err(|w| fail(&w)),
+                    _ => Err(fail("linear needs samples on both sides")),
+                }
+            }
             ValueApproximation::MostRecent => {
                 before.map(wrap).ok_or_else(|| fail("nothing before"))
             }

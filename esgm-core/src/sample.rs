@@ -21,9 +21,22 @@ pub struct Sample {
     /// When the query this sample answers was asked (Definition 3.3.6). For a sample
     /// delivered to a subscriber, the add time.
     pub query_time: Time,
+    /// For an answer interpolated by [`crate::ValueApproximation::Linear`]: the
+    /// attributes that could not be interpolated (sequences whose lengths differ, a
+    /// value of another sort on one side) and hold the most recent value before the
+    /// query time instead, by path (`blobs`, `pose.points`). `None` for a stored sample
+    /// and for an answer interpolated throughout, so a caller can tell the two apart;
+    /// [`crate::ValueApproximation::LinearStrict`] refuses such an answer instead.
+    pub not_interpolated: Option<Arc<[String]>>,
 }
 
 impl Sample {
+    /// A stored (or delivered) structure: added at `add_time`, answering a query asked
+    /// at `query_time`.
+    pub fn new(structure: Arc<EntityStructure>, add_time: Time, query_time: Time) -> Self {
+        Self { structure, add_time, query_time, not_interpolated: None }
+    }
+
     /// Delay between the valid time and the add time: what a delay constraint bounds.
     pub fn add_delay(&self) -> Time {
         self.add_time - self.structure.valid_time

@@ -209,11 +209,7 @@ mod tests {
 
     #[test]
     fn a_sample_is_stamped_by_its_valid_time() {
-        let sample = Sample {
-            structure: Arc::new(EntityStructure::new("car", 42, 45)),
-            add_time: 50,
-            query_time: 50,
-        };
+        let sample = Sample::new(Arc::new(EntityStructure::new("car", 42, 45)), 50, 50);
         assert_eq!(sample.stamp(), 42);
     }
 

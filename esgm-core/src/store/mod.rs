@@ -425,11 +425,7 @@ impl TrajectoryStore {
         let backlog: Vec<Sample> = self
             .history
             .last_n(options.last)
-            .map(|e| Sample {
-                structure: Arc::clone(&e.es),
-                add_time: e.add_time,
-                query_time: e.add_time,
-            })
+            .map(|e| Sample::new(Arc::clone(&e.es), e.add_time, e.add_time))
             .collect();
         // A replay longer than the buffer keeps its newest samples; the rest count as
         // overflow, like any sample a subscriber had no room for.
@@ -680,7 +676,7 @@ impl TrajectoryStore {
         // back the structure to keep instead (see `StoreTap::entering`).
         let es = match &mut self.tap {
             Some((_, tap)) => {
-                let entering = Sample { structure: es, add_time: now, query_time: now };
+                let entering = Sample::new(es, now, now);
                 tap.entering(&entering).unwrap_or(entering.structure)
             }
             None => es,
@@ -707,7 +703,7 @@ impl TrajectoryStore {
             },
         };
         self.stats.record_evicted(evicted);
-        let sample = Sample { structure: es, add_time: now, query_time: now };
+        let sample = Sample::new(es, now, now);
         let overflow = self.subscribers.publish(&sample);
         self.stats.record_overflow(overflow);
     }

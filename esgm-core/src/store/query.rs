@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use super::TrajectoryStore;
 use super::history::Entry;
-use crate::approximation::{ValueApproximation, interpolate};
+use crate::approximation::{ValueApproximation, interpolated};
 use crate::frame::EntityStructure;
 use crate::sample::Sample;
 use crate::time::Time;
@@ -58,7 +58,7 @@ impl TrajectoryStore {
     }
 
     pub(crate) fn sample_of(&self, e: &Entry, now: Time) -> Sample {
-        Sample { structure: Arc::clone(&e.es), add_time: e.add_time, query_time: now }
+        Sample::new(Arc::clone(&e.es), e.add_time, now)
     }
 
     /// Number of stored samples.
@@ -176,16 +176,16 @@ impl TrajectoryStore {
                     create_time: now,
                     attributes: attributes.clone(),
                 };
-                Ok(Sample { structure: Arc::new(es), add_time: now, query_time: now })
+                Ok(Sample::new(Arc::new(es), now, now))
             }
-            ValueApproximation::Linear => match (self.history.before(t), self.history.after(t)) {
-                (Some(b), Some(a)) => {
-                    let es = interpolate(&b.es, &a.es, t, now);
-                    Ok(Sample { structure: Arc::new(es), add_time: now, query_time: now })
+            ValueApproximation::Linear | ValueApproximation::LinearStrict => {
+                match (self.history.before(t), self.history.after(t)) {
+                    (Some(b), Some(a)) => interpolated(&b.es, &a.es, t, now, aprx)
+                        .map_err(|why| self.not_available(q(&why))),
+                    (None, _) => Err(self.not_available(q("linear: nothing before it"))),
+                    (_, None) => Err(self.not_available(q("linear: nothing after it"))),
                 }
-                (None, _) => Err(self.not_available(q("linear: nothing before it"))),
-                (_, None) => Err(self.not_available(q("linear: nothing after it"))),
-            },
+            }
         }
     }
 

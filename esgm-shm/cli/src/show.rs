@@ -40,14 +40,18 @@ fn frame_json(f: &EntityFrame) -> serde_json::Value {
 
 /// A sample as one JSON object.
 pub fn sample_json(trajectory: &str, s: &Sample) -> serde_json::Value {
-    json!({
+    let mut v = json!({
         "trajectory": trajectory,
         "name": s.structure.name,
         "valid_time": s.structure.valid_time,
         "create_time": s.structure.create_time,
         "add_time": s.add_time,
         "attributes": attributes_json(&s.structure.attributes),
-    })
+    });
+    if let Some(held) = &s.not_interpolated {
+        v["not_interpolated"] = json!(held.as_ref());
+    }
+    v
 }
 
 /// A sample as one line of text: valid time, entity, attributes, add delay.
@@ -58,8 +62,12 @@ pub fn sample_line(s: &Sample) -> String {
         .iter()
         .map(|a| format!("{}={}", a.name, value_json(&a.value)))
         .collect();
+    let held = match &s.not_interpolated {
+        Some(held) => format!("  (not interpolated, most recent value: {})", held.join(", ")),
+        None => String::new(),
+    };
     format!(
-        "{}  {}  {}  (add delay {:.3} ms)",
+        "{}  {}  {}  (add delay {:.3} ms){held}",
         display(s.structure.valid_time),
         s.structure.name,
         attrs.join(" "),

@@ -124,6 +124,7 @@ macro_rules! conformance_tests {
             primitive::blocking_adds_through_the_reader_get_the_writers_outcome,
             queries::the_reader_answers_every_query_as_the_writer,
             queries::extreme_valid_times_are_queried,
+            queries::linear_interpolates_sequences_element_wise_or_says_it_did_not,
             sampled::sampling_periods_and_from_to,
             sampled::one_sensor_many_periods,
             sampled::sensor_errors_and_panics_are_counted,

@@ -233,3 +233,57 @@ pub fn extreme_valid_times_are_queried<H: Harness>(h: &H) {
     assert_eq!((r.start_time(), r.end_time()), (Ok(Time::MIN), Ok(Time::MAX)));
     assert_same_answers(&w, &r);
 }
+
+/// Linear interpolation covers sequences of points, vectors and frames element-wise
+/// when both sides have the same length. Where they differ, the answer holds the most
+/// recent value and says so (`not_interpolated`), or the strict rule refuses it naming
+/// the attribute; a string holds the earlier value by its nature, unmarked.
+pub fn linear_interpolates_sequences_element_wise_or_says_it_did_not<H: Harness>(h: &H) {
+    use esgm_core::{EntityFrame, Pos2, Value, ValueSort, Vec3};
+    let e = h.esgm();
+    let path = esgm_core::EntityStructureType::new("Path")
+        .attr("points", ValueSort::Pos2Seq)
+        .attr("normals", ValueSort::VecSeq)
+        .attr("stops", ValueSort::EntityFrameSeq)
+        .attr("label", ValueSort::String);
+    e.create_entity_structure_type("Path", path).unwrap();
+    let frame = |x: f64| EntityFrame::new("stop").with("x", x);
+    let at = |vt: Time, k: f64, n: usize| {
+        EntityStructure::new("p", vt, vt)
+            .with("points", Value::Pos2Seq(vec![Pos2 { x: k, y: -k }; n]))
+            .with("normals", Value::VecSeq(vec![Vec3 { x: 0.0, y: k, z: 1.0 }; n]))
+            .with("stops", Value::EntityFrameSeq(vec![frame(k); 2]))
+            .with("label", if k == 0.0 { "start" } else { "end" })
+    };
+    let w = e.create_primitive_entity_trajectory_structure("path", "Path").unwrap();
+    let r = read(h, "path");
+    w.add(at(0, 0.0, 2)).unwrap();
+    w.add(at(100, 10.0, 2)).unwrap();
+    w.add(at(200, 20.0, 3)).unwrap();
+    wait_visible(&w, &r);
+
+    let mid = r.get_at_approximating(25, &ValueApproximation::Linear).unwrap();
+    assert_eq!(mid.not_interpolated, None, "same lengths: interpolated throughout");
+    assert_eq!(mid.get("points"), Some(&Value::Pos2Seq(vec![Pos2 { x: 2.5, y: -2.5 }; 2])));
+    assert_eq!(mid.get("normals"), Some(&Value::VecSeq(vec![Vec3 { x: 0.0, y: 2.5, z: 1.0 }; 2])));
+    assert_eq!(mid.get("stops"), Some(&Value::EntityFrameSeq(vec![frame(2.5); 2])));
+    assert_eq!(mid.get("label").and_then(|v| v.as_str()), Some("start"));
+    let strict = r.get_at_approximating(25, &ValueApproximation::LinearStrict).unwrap();
+    assert_eq!(strict.structure, mid.structure);
+
+    // 2 points before, 3 after: the points and normals hold the value at 100, marked;
+    // the frames (2 on both sides) are interpolated.
+    let held = r.get_at_approximating(150, &ValueApproximation::Linear).unwrap();
+    let marked: Vec<&str> =
+        held.not_interpolated.as_deref().unwrap_or_default().iter().map(String::as_str).collect();
+    assert_eq!(marked, ["points", "normals"]);
+    assert_eq!(held.get("points"), Some(&Value::Pos2Seq(vec![Pos2 { x: 10.0, y: -10.0 }; 2])));
+    assert_eq!(held.get("stops"), Some(&Value::EntityFrameSeq(vec![frame(15.0); 2])));
+    let refused = r.get_at_approximating(150, &ValueApproximation::LinearStrict).unwrap_err();
+    assert!(refused.to_string().contains("`points`"), "{refused}");
+    assert_eq!(
+        w.get_at_approximating(150, &ValueApproximation::Linear).unwrap().not_interpolated,
+        held.not_interpolated,
+        "the writer answers the same"
+    );
+}

@@ -53,8 +53,11 @@ pub enum Method {
     Closest,
     /// The latest sample valid before the time.
     MostRecent,
-    /// Linear interpolation of numeric attributes.
+    /// Linear interpolation of numeric attributes (one that cannot be interpolated,
+    /// such as sequences of different lengths, holds the most recent value, marked).
     Linear,
+    /// Linear, but refused if an attribute cannot be interpolated.
+    LinearStrict,
 }
 
 /// A trajectory, a time and an approximation.
@@ -125,6 +128,7 @@ pub fn approx(domain: &str, json: bool, a: &Approx) -> anyhow::Result<()> {
         Method::Closest => ValueApproximation::Closest,
         Method::MostRecent => ValueApproximation::MostRecent,
         Method::Linear => ValueApproximation::Linear,
+        Method::LinearStrict => ValueApproximation::LinearStrict,
     };
     print_sample(json, &a.trajectory, &t.get_at_approximating(time, &method)?);
     Ok(())

@@ -13,11 +13,12 @@ use esgm_core::type_registry::closest_name;
 /// The approximation rules by the words a file uses (the seed's
 /// `ValueApproximationConstraint`; `default` needs attribute values, so only Rust can
 /// give it).
-const APPROXIMATIONS: [(&str, ValueApproximation); 4] = [
+const APPROXIMATIONS: [(&str, ValueApproximation); 5] = [
     ("none", ValueApproximation::None),
     ("closest", ValueApproximation::Closest),
     ("most-recent", ValueApproximation::MostRecent),
     ("linear", ValueApproximation::Linear),
+    ("linear-strict", ValueApproximation::LinearStrict),
 ];
 
 /// The merge rules by the words a file uses (the seed's merge constraint).
