@@ -33,6 +33,7 @@ pub mod catalog;
 pub mod clock;
 pub mod codec;
 pub mod entity;
+pub mod entity_view;
 pub mod esgm;
 pub mod filter;
 pub mod frame;
@@ -55,6 +56,7 @@ pub mod value;
 pub use approximation::{MergeRule, ValueApproximation};
 pub use clock::{Clock, SharedClock, SimClock, SystemClock};
 pub use entity::{AttributeField, Entity, FromEntityError};
+pub use entity_view::{ViewError, ViewField, ViewSource, view_field};
 pub use esgm::{
     CompUnit, ComputeError, CreateError, EntityTrajectoryStructure, Esgm, FlushError, InputType,
     LookupError, RegistrationError, SensorError, SensorInterface, TrajectorySpec,

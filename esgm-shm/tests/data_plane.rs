@@ -216,6 +216,11 @@ fn pixels_written_into_an_image_loan_are_read_in_place() {
         let shm = sample.archive_bytes().as_ptr_range();
         assert!(shm.contains(&px.as_ptr()) && px.len() == 921_600);
         check_pattern(px, frame);
+        // The same through the typed view (M5): the pixels as `&[u8]`, in place.
+        let view = Image::view(archived).unwrap();
+        assert_eq!((view.width(), view.height(), view.format()), (640, 480, RGB8));
+        assert!(shm.contains(&view.image_data().as_ptr()), "the view's pixels are a copy");
+        assert_eq!(view.image_data().len(), 921_600);
         let owned = Image::from_structure(&sample.to_owned().unwrap()).unwrap();
         assert_eq!((owned.width, owned.height, owned.format), (640, 480, RGB8));
         check_pattern(&owned.image_data, frame);

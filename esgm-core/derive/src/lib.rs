@@ -55,13 +55,40 @@ fn expand(input: &DeriveInput) -> syn::Result<proc_macro2::TokenStream> {
     }
     let type_name = entity_attr(&input.attrs, "name")?.unwrap_or_else(|| ident.to_string());
 
+    let vis = &input.vis;
+    let view = quote::format_ident!("{}View", ident);
+    let view_doc = format!(
+        "A typed view of a `{type_name}` structure, read in place (see \
+         `esgm_core::entity_view`): made by [`{ident}::view`]."
+    );
+    let make_doc = format!(
+        "Reads a `{type_name}` structure in place: an archived one (shared memory, a \
+         file) without decoding it, or an owned one or a sample. Every attribute is \
+         found and checked once, here."
+    );
     let mut attrs = Vec::new();
     let mut to = Vec::new();
     let mut from = Vec::new();
+    let mut view_fields = Vec::new();
+    let mut view_reads = Vec::new();
+    let mut view_getters = Vec::new();
     for f in &fields.named {
         let Some(fid) = f.ident.as_ref() else { continue };
         let ty = &f.ty;
         let name = entity_attr(&f.attrs, "rename")?.unwrap_or_else(|| fid.to_string());
+        let getter_doc = format!("Attribute `{name}`.");
+        view_fields.push(quote! {
+            #fid: <#ty as ::esgm_core::ViewField>::View<'a>
+        });
+        view_reads.push(quote! {
+            #fid: ::esgm_core::view_field::<#ty>(source, #type_name, #name)?
+        });
+        view_getters.push(quote! {
+            #[doc = #getter_doc]
+            #vis fn #fid(&self) -> <#ty as ::esgm_core::ViewField>::View<'a> {
+                ::std::clone::Clone::clone(&self.#fid)
+            }
+        });
         attrs.push(quote! {
             ::esgm_core::Attr {
                 name: ::std::string::String::from(#name),
@@ -100,6 +127,41 @@ fn expand(input: &DeriveInput) -> syn::Result<proc_macro2::TokenStream> {
                 attributes: &[::esgm_core::AttributeValuePair],
             ) -> ::std::result::Result<Self, ::esgm_core::FromEntityError> {
                 ::std::result::Result::Ok(Self { #(#from),* })
+            }
+        }
+
+        #[doc = #view_doc]
+        #[derive(Clone)]
+        #vis struct #view<'a> {
+            #(#view_fields),*
+        }
+
+        impl<'a> #view<'a> {
+            #(#view_getters)*
+        }
+
+        impl #ident {
+            #[doc = #make_doc]
+            #vis fn view<'a>(
+                source: impl ::std::convert::Into<::esgm_core::ViewSource<'a>>,
+            ) -> ::std::result::Result<#view<'a>, ::esgm_core::ViewError> {
+                let source = source.into();
+                ::std::result::Result::Ok(#view { #(#view_reads),* })
+            }
+        }
+
+        /// A typed entity nested in another is decoded once when a view is made.
+        impl ::esgm_core::ViewField for #ident {
+            type View<'a> = ::std::sync::Arc<#ident>;
+            fn view_archived(
+                value: &::esgm_core::codec::ArchivedValue,
+            ) -> ::std::option::Option<::std::sync::Arc<#ident>> {
+                ::esgm_core::entity_view::view_nested_archived(value)
+            }
+            fn view_value(
+                value: &::esgm_core::Value,
+            ) -> ::std::option::Option<::std::sync::Arc<#ident>> {
+                ::esgm_core::entity_view::view_nested(value)
             }
         }
 

@@ -277,6 +277,16 @@ pub fn decode(archived: &ArchivedEntityStructure) -> Result<EntityStructure, Cod
     deserialize(archived, &mut rkyv::de::Pool::new())
 }
 
+/// Turns one archived value back into an owned one (octets copied): what a typed view
+/// ([`crate::entity_view`]) does for a compound field.
+pub fn decode_value(archived: &ArchivedValue) -> Result<crate::value::Value, CodecError> {
+    rkyv::api::deserialize_using::<crate::value::Value, _, BoxedError>(
+        archived,
+        &mut rkyv::de::Pool::new(),
+    )
+    .map_err(|e| CodecError::Malformed { len: 0, reason: e.to_string() })
+}
+
 /// Deserializes with `octets` deciding where octet sequences go ([`HoldOctets`]).
 fn deserialize<D: HoldOctets>(
     archived: &ArchivedEntityStructure,
