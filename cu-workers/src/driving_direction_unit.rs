@@ -60,6 +60,18 @@ impl CompUnit for DrivingDirectionUnit {
             .ok_or(ComputeError::ValueNotAvailable)?;
         Ok(direction.to_structure(Self::STRUCTURE_NAME, robot_sample.valid_time, qtime))
     }
+
+    /// The temporal function (E6): the direction at `t` from the robot state and the
+    /// blob as their generators give them at `t` (interpolated, most recent, …), so a
+    /// stream sampled at a fixed period steers from values that hold at one instant.
+    /// The synchronization rule does not apply: both inputs are valid at `t`.
+    fn compute_at(&self, inputs: &[Sample], t: Time) -> Result<EntityStructure, ComputeError> {
+        let [robot_sample, blob_sample] = exactly(Self::NAME, inputs).map_err(failed)?;
+        let robot: RobotState = read(Self::NAME, 0, robot_sample).map_err(failed)?;
+        let blob: Blob = read(Self::NAME, 1, blob_sample).map_err(failed)?;
+        let created = robot_sample.create_time.max(blob_sample.create_time);
+        Ok(self.unit.compute(&robot, &blob).to_structure(Self::STRUCTURE_NAME, t, created))
+    }
 }
 
 #[cfg(test)]
@@ -78,6 +90,15 @@ mod tests {
         let direction = DrivingDirection::from_structure(&es).unwrap();
         assert_eq!(direction, ComputeDirection::default().compute(&ROBOT, &RIGHT_BLOB));
         assert!(direction.dir < ROBOT.dir, "a blob right of centre turns right: {direction:?}");
+    }
+
+    #[test]
+    fn the_temporal_function_steers_from_both_values_at_its_time() {
+        let unit = DrivingDirectionUnit::default();
+        let es = unit.compute_at(&[sample(&ROBOT, 499), sample(&RIGHT_BLOB, 500)], 450).unwrap();
+        assert_eq!((es.valid_time, es.create_time), (450, 500));
+        let direction = DrivingDirection::from_structure(&es).unwrap();
+        assert_eq!(direction, ComputeDirection::default().compute(&ROBOT, &RIGHT_BLOB));
     }
 
     #[test]

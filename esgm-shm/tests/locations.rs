@@ -118,6 +118,61 @@ fn a_late_reader_of_a_quiet_trajectory_answers_its_first_query_from_the_history(
     }
 }
 
+/// A temporal function (E6): `x` of the generator's value at `t`, plus the time in
+/// seconds, stamped at `t`.
+struct Drift;
+
+impl esgm_core::CompUnit for Drift {
+    fn compute(&self, _: &[Sample], _: Time) -> Result<EntityStructure, ComputeError> {
+        Err(ComputeError::OperationNotSupported)
+    }
+    fn compute_at(&self, inputs: &[Sample], t: Time) -> Result<EntityStructure, ComputeError> {
+        Ok(state(t, x(&inputs[0]) + 1.0))
+    }
+}
+
+/// A trajectory sampled from a unit's temporal function of generators is written where
+/// the unit runs (its `compute_at` is there), whoever asks for it, and reads the
+/// generators `lag` behind each sample time.
+#[test]
+fn a_temporal_function_is_sampled_where_its_unit_runs() {
+    let c = coordinator("loc-temporal");
+    let robot = location(&c, "robot");
+    let planner = location(&c, "planner");
+    let user = location(&c, "user");
+    let states = robot.create_trajectory(TrajectorySpec::primitive("robot", "RobotState")).unwrap();
+    planner
+        .add_comp_unit(
+            "drift",
+            "RobotState",
+            vec![InputType::Type("RobotState".into())],
+            Arc::new(Drift),
+        )
+        .unwrap();
+    let generator = esgm_core::GeneratorPolicy {
+        approximation: ValueApproximation::Linear,
+        merge: esgm_core::MergeRule::KeepLast,
+    };
+    // The robot's states are 0, 1, 2, … every 10 ms from 1 s ago to 1 s ahead, so
+    // every sample time minus the lag (500 ms) falls between two of them.
+    let now = esgm_core::Clock::now(&esgm_core::SystemClock);
+    for i in 0..=200 {
+        states.add(state(now - millis(1000) + i * millis(10), i as f64)).unwrap();
+    }
+    let spec =
+        TrajectorySpec::sampled_function("drifting", "drift", [("robot", generator)], millis(5))
+            .lag(millis(500));
+    let drifting = user.create_trajectory(spec).unwrap();
+    assert!(wait_for(|| drifting.stats().map(|s| s.stored >= 3).unwrap_or(false)));
+    // Written in the unit's process: it holds the trajectory, the others mirror it.
+    let writes = |e: &ShmEsgm| e.local().stats().trajectories.contains_key("drifting");
+    assert!(writes(&planner));
+    let s = drifting.get_latest().unwrap();
+    // Interpolated along x = (t - (now - 1 s)) / 10 ms, then + 1 by the unit.
+    let expected = (s.structure.valid_time - (now - millis(1000))) as f64 / millis(10) as f64;
+    assert!((x(&s) - (expected + 1.0)).abs() < 1e-6, "{} vs {}", x(&s), expected + 1.0);
+}
+
 #[test]
 fn sampling_runs_where_the_sensor_is_and_units_where_they_are() {
     let c = coordinator("loc-placement");
