@@ -10,6 +10,8 @@
 //! - **One palette** ([`color`]), so a series looks the same in every esgm chart.
 #![deny(missing_docs)]
 
+pub mod graph;
+
 pub use plotters;
 
 use plotters::coord::Shift;

@@ -575,6 +575,22 @@ merge = ["large_blob", "smooth_blob"]
     wait_for_sample(&d, "blob_10hz", Duration::from_secs(30));
     wait_for_sample(&d, "both", Duration::from_secs(30));
 
+    // The dataflow with rates and delays: a single-input stage has its own delay.
+    let graph = ok(&["--domain", &d, "graph"]);
+    let stage = graph.lines().find(|l| l.contains("-> blobs_again")).unwrap_or_default();
+    assert!(stage.contains(" Hz") && stage.contains("images: BlobDetection"), "{graph}");
+    assert!(stage.contains(" ms"), "no stage delay: {graph}");
+    let json = ok(&["--domain", &d, "--json", "graph"]);
+    let blobs: serde_json::Value = json
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .find(|v| v["trajectory"] == "blobs_again")
+        .unwrap();
+    assert!(blobs["inputs"][0]["rate_hz"].as_f64().unwrap() > 0.0, "{blobs}");
+    let png = dir.path().join("graph.png");
+    ok(&["--domain", &d, "graph", "--png", png.to_str().unwrap()]);
+    assert!(std::fs::read(&png).unwrap().starts_with(b"\x89PNG"));
+
     // `esgm down` stops the coordinator and every process it started.
     ok(&["--domain", &d, "down"]);
     assert!(coordinator_is_gone(&d));
