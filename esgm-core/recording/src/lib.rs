@@ -46,7 +46,9 @@ pub use layout::{EventKind, RecordHeader, RecordedEvent, TypeSchema};
 pub use load::{LoadError, LoadOptions, LoadReport, LoadedTrajectory, Relaxation, load, load_with};
 pub use reader::{Damage, ReadError, RecordedSample, RecordedTrajectory, Recording, Samples};
 pub use recorder::{Recorder, RecorderError, RecorderStats};
-pub use replay::{ComputedMode, Pace, ReplayError, ReplayOptions, ReplayReport, TimeMode};
+pub use replay::{
+    ComputedMode, Pace, ReplayError, ReplayOptions, ReplayPosition, ReplayReport, TimeMode,
+};
 pub use rerun::{RerunError, RerunPlan, RerunReport, RerunUnit, rerun};
 pub use type_diff::TypeDifference;
 pub use writer::{

@@ -18,7 +18,8 @@
 //! replaying process writes the trajectory, as a live camera's frames are.
 
 use std::collections::{BTreeMap, BinaryHeap};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use esgm_core::esgm::{TrajectoryInfo, TrajectoryKind};
@@ -87,6 +88,45 @@ pub struct ReplayOptions {
     /// trajectories back in add order; the recording's own
     /// [`max_lateness`](Recording::max_lateness) is used when longer.
     pub reorder_window: Duration,
+    /// Where the replay is, updated after every structure, for a progress display.
+    pub position: Option<Arc<ReplayPosition>>,
+}
+
+/// Where a running replay is: shared with a progress display, which reads it while
+/// [`replay`] runs on another thread.
+#[derive(Debug)]
+pub struct ReplayPosition {
+    valid_time: AtomicI64,
+    published: AtomicU64,
+    passes: AtomicU64,
+}
+
+impl Default for ReplayPosition {
+    fn default() -> Self {
+        Self {
+            valid_time: AtomicI64::new(Time::MIN),
+            published: AtomicU64::new(0),
+            passes: AtomicU64::new(0),
+        }
+    }
+}
+
+impl ReplayPosition {
+    /// The recorded valid time of the structure published last (`None` before the
+    /// first).
+    pub fn valid_time(&self) -> Option<Time> {
+        Some(self.valid_time.load(Ordering::Relaxed)).filter(|t| *t != Time::MIN)
+    }
+
+    /// Structures published so far, over all passes.
+    pub fn published(&self) -> u64 {
+        self.published.load(Ordering::Relaxed)
+    }
+
+    /// Passes started (1 for a replay without `looped`).
+    pub fn passes(&self) -> u64 {
+        self.passes.load(Ordering::Relaxed)
+    }
 }
 
 impl Default for ReplayOptions {
@@ -100,6 +140,7 @@ impl Default for ReplayOptions {
             times: TimeMode::default(),
             computed: ComputedMode::default(),
             reorder_window: Duration::from_secs(2),
+            position: None,
         }
     }
 }
@@ -335,6 +376,9 @@ where
     let mut pass_offset: Time = 0;
     loop {
         report.passes += 1;
+        if let Some(p) = &options.position {
+            p.passes.fetch_add(1, Ordering::Relaxed);
+        }
         let started = Instant::now();
         let mut first_add: Option<Time> = None;
         let mut last_valid = Time::MIN;
@@ -379,7 +423,12 @@ where
             if into_own_buffer(handle, &mut es) {
                 counts.images_in_place += 1;
             }
-            match handle.add(es) {
+            let added = handle.add(es);
+            if let Some(p) = &options.position {
+                p.valid_time.store(v, Ordering::Relaxed);
+                p.published.fetch_add(1, Ordering::Relaxed);
+            }
+            match added {
                 Ok(AddOutcome::Added) => counts.added += 1,
                 Ok(AddOutcome::Held { .. }) => counts.held += 1,
                 Ok(AddOutcome::Dropped(v)) => {

@@ -59,11 +59,20 @@ fn a_replay_publishes_every_recorded_structure_in_add_order() {
     record(&path);
     let rec = Recording::open(&path).unwrap();
     let esgm = InProcessEsgm::default();
-    let options =
-        ReplayOptions { pace: Pace::Max, times: TimeMode::Keep, ..ReplayOptions::default() };
+    let position = std::sync::Arc::new(esgm_recording::ReplayPosition::default());
+    assert_eq!(position.valid_time(), None);
+    let options = ReplayOptions {
+        pace: Pace::Max,
+        times: TimeMode::Keep,
+        position: Some(std::sync::Arc::clone(&position)),
+        ..ReplayOptions::default()
+    };
     let report = replay(&esgm, &rec, &options, &AtomicBool::new(false)).unwrap();
     assert_eq!(report.published["robot_state"].added, 10, "{report:?}");
     assert_eq!(report.published["pose"].added, 10, "{report:?}");
+    // The position a progress display reads: all 20, the last one's recorded valid time.
+    assert_eq!((position.published(), position.passes()), (20, 1));
+    assert_eq!(position.valid_time(), Some(1_009_005));
     assert_eq!(report.created.len(), 2);
     let t = esgm.get_entity_trajectory_structure("pose").unwrap();
     let all = t.get_between(0, Time::MAX).unwrap();

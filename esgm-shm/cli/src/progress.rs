@@ -7,10 +7,11 @@
 
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use esgm_core::Time;
-use esgm_recording::RecorderStats;
+use esgm_recording::{RecorderStats, ReplayPosition};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 /// True when a bar may be drawn.
@@ -88,28 +89,22 @@ impl RecordProgress {
     }
 }
 
-/// `esgm replay`: the position in the recording's valid time.
-///
-/// The replay runs inside esgm-recording without a progress hook, so the position is
-/// the clock's: elapsed time × rate, capped at the recording's length (with `--max`,
-/// only the elapsed time is shown).
+/// `esgm replay`: the position in the recording's valid time, as the replay reports
+/// it after every structure ([`ReplayPosition`]).
 #[derive(Debug)]
 pub struct ReplayProgress {
     bar: ProgressBar,
 }
 
 impl ReplayProgress {
-    /// A bar over `span` (the recording's valid times, first to last) replayed at
-    /// `rate` × the recorded pace (`None`: as fast as possible).
-    pub fn start(json: bool, span: Option<(Time, Time)>, rate: Option<f64>) -> Self {
+    /// A bar over `span` (the valid times replayed, first to last), following
+    /// `position`.
+    pub fn start(json: bool, span: Option<(Time, Time)>, position: Arc<ReplayPosition>) -> Self {
         let length_ms = span.map(|(a, b)| u64::try_from((b - a) / 1_000_000).unwrap_or(0));
-        let bar = match (length_ms, rate) {
-            (Some(ms), Some(rate)) if ms > 0 => {
+        let bar = match length_ms {
+            Some(ms) if ms > 0 => {
                 let bar = new_bar(json, Some(ms));
-                bar.set_style(style(
-                    "{elapsed_precise} [{bar:30}] {msg} (by the clock; ETA {eta})",
-                ));
-                bar.set_message(format!("x{rate}"));
+                bar.set_style(style("{elapsed_precise} [{bar:30}] {msg} (ETA {eta})"));
                 bar
             }
             _ => {
@@ -120,20 +115,29 @@ impl ReplayProgress {
         };
         if !bar.is_hidden() {
             let ticker = bar.clone();
-            let started = Instant::now();
+            let first = span.map_or(0, |s| s.0);
             std::thread::spawn(move || {
                 while !ticker.is_finished() {
-                    let at = started.elapsed().as_secs_f64() * rate.unwrap_or(0.0) * 1000.0;
-                    if let Some(len) = ticker.length() {
-                        let pos = (at as u64).min(len);
-                        ticker.set_position(pos);
-                        ticker.set_message(format!(
-                            "{:.1} of {:.1} s",
-                            pos as f64 / 1000.0,
-                            len as f64 / 1000.0
-                        ));
-                    } else {
-                        ticker.tick();
+                    let at = position.valid_time().map_or(0, |t| (t - first).max(0) / 1_000_000);
+                    let pass = match position.passes() {
+                        0 | 1 => String::new(),
+                        n => format!(", pass {n}"),
+                    };
+                    let done = format!("{} structures{pass}", position.published());
+                    match ticker.length() {
+                        Some(len) => {
+                            let pos = (at as u64).min(len);
+                            ticker.set_position(pos);
+                            ticker.set_message(format!(
+                                "{:.1} of {:.1} s, {done}",
+                                pos as f64 / 1000.0,
+                                len as f64 / 1000.0
+                            ));
+                        }
+                        None => {
+                            ticker.set_message(done);
+                            ticker.tick();
+                        }
                     }
                     std::thread::sleep(Duration::from_millis(250));
                 }

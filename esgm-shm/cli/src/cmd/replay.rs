@@ -10,8 +10,8 @@ use anyhow::{Context, bail};
 use esgm_core::TrajectorySpec;
 use esgm_recording::rerun::RerunUnit;
 use esgm_recording::{
-    ComputedMode, Pace, RecordOptions, Recording, RecordingWriter, ReplayOptions, RerunPlan,
-    TimeMode,
+    ComputedMode, Pace, RecordOptions, Recording, RecordingWriter, ReplayOptions, ReplayPosition,
+    RerunPlan, TimeMode,
 };
 
 use crate::cmd::worker::builtin_unit;
@@ -86,6 +86,7 @@ pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
         end: a.end.as_ref().map(|t| t.resolve(first)).transpose()?,
         times: if a.keep_times { TimeMode::Keep } else { TimeMode::ShiftToNow },
         computed: if a.as_recorded { ComputedMode::AsRecorded } else { ComputedMode::Recompute },
+        position: Some(Arc::new(ReplayPosition::default())),
         ..ReplayOptions::default()
     };
     if !(a.max || a.rate > 0.0 && a.rate.is_finite()) {
@@ -99,8 +100,8 @@ pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
     let span = rec
         .valid_range()
         .map(|(lo, hi)| (options.start.unwrap_or(lo).max(lo), options.end.unwrap_or(hi).min(hi)));
-    let progress =
-        crate::progress::ReplayProgress::start(json, span, (!a.max && !a.looped).then_some(a.rate));
+    let position = options.position.clone().unwrap_or_default();
+    let progress = crate::progress::ReplayProgress::start(json, span, position);
     let report = esgm_recording::replay::replay(&esgm, &rec, &options, &stop);
     progress.finish();
     let report = report?;
