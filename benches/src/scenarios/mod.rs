@@ -52,6 +52,7 @@
 //!
 //! `BENCHMARKS.md` at the repository root has a run's results and what they mean.
 
+pub mod bridge;
 pub mod file_write_image;
 pub mod inproc_chain3;
 pub mod inproc_echo;
@@ -104,6 +105,8 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(ros1_peer::Ros1::IMAGE),
         Box::new(ipc_connect::Connect::SMALL),
         Box::new(ipc_connect::Connect::IMAGE),
+        Box::new(bridge::Bridge::SMALL),
+        Box::new(bridge::Bridge::IMAGE),
         Box::new(ipc_throughput::Throughput::ONE),
         Box::new(ipc_throughput::Throughput::FOUR),
         Box::new(ipc_query::Query::THOUSAND),

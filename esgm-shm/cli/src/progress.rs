@@ -186,7 +186,8 @@ mod tests {
     fn bars_are_hidden_for_json_and_off_a_terminal() {
         // Under `cargo test` stdout is captured: not a terminal.
         assert!(RecordProgress::start(false, Path::new("x")).bar.is_hidden());
-        assert!(ReplayProgress::start(true, Some((0, 1_000_000_000)), Some(1.0)).bar.is_hidden());
+        let position = Arc::new(ReplayPosition::default());
+        assert!(ReplayProgress::start(true, Some((0, 1_000_000_000)), position).bar.is_hidden());
         let apply = ApplyProgress::start(true, 3);
         assert!(apply.bar.is_hidden());
         apply.finish();

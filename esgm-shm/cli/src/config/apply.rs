@@ -161,8 +161,11 @@ fn wait_for_registrations(
     report: &mut dyn FnMut(Outcome),
 ) -> anyhow::Result<()> {
     let deadline = Instant::now() + REGISTER_WITHIN;
-    let mut pending: Vec<&Item<super::Worker>> =
-        plan.workers.iter().filter(|w| !matches!(w.what.serves, Serves::Pushes(_))).collect();
+    let mut pending: Vec<&Item<super::Worker>> = plan
+        .workers
+        .iter()
+        .filter(|w| !matches!(w.what.serves, Serves::Pushes(_) | Serves::Bridge(_)))
+        .collect();
     while !pending.is_empty() {
         let sensors = system.sensors()?;
         let units = system.units()?;
@@ -170,7 +173,7 @@ fn wait_for_registrations(
             let (kind, name, done) = match &w.what.serves {
                 Serves::Sensor(n) => ("sensor", n, sensors.iter().any(|s| s.name == *n)),
                 Serves::Unit(n) => ("unit", n, units.iter().any(|u| u.name == *n)),
-                Serves::Pushes(_) => return false,
+                Serves::Pushes(_) | Serves::Bridge(_) => return false,
             };
             if done {
                 report(Outcome { kind, name: name.clone(), change: "registered", line: w.line });
@@ -232,7 +235,7 @@ fn check(system: &System, plan: &Plan) -> anyhow::Result<Vec<usize>> {
         match &w.what.serves {
             Serves::Sensor(n) => sensors.insert(n.clone()),
             Serves::Unit(n) => units.insert(n.clone()),
-            Serves::Pushes(_) => false,
+            Serves::Pushes(_) | Serves::Bridge(_) => false,
         };
     }
     let existing: BTreeMap<String, TrajectoryInfo> =

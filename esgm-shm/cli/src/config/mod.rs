@@ -37,6 +37,7 @@
 //! running system as it was.
 
 pub mod apply;
+pub mod bridge;
 pub mod decl;
 pub mod generate;
 
@@ -65,6 +66,8 @@ struct SystemFile {
     robots: Vec<Spanned<RobotDecl>>,
     #[serde(default, rename = "trajectory")]
     trajectories: Vec<Spanned<TrajectoryDecl>>,
+    #[serde(default, rename = "bridge")]
+    bridges: Vec<Spanned<bridge::BridgeDecl>>,
 }
 
 /// Something wrong in a configuration file, at a line.
@@ -97,6 +100,9 @@ pub enum Serves {
     Unit(String),
     /// Structures pushed into this trajectory.
     Pushes(String),
+    /// Trajectories carried to and from other hosts, by this bridge (nothing to
+    /// register: its imports appear when the other host sends).
+    Bridge(String),
 }
 
 /// A process the system keeps running and what it serves.
@@ -206,6 +212,16 @@ pub fn parse(file: &str, text: &str, base: &Path) -> Result<Plan, ConfigError> {
         let worker =
             robot_worker(r.get_ref(), &esgm).map_err(|e| plan.error(line, format!("{e:#}")))?;
         plan.workers.push(Item { line, what: worker });
+    }
+    if !parsed.bridges.is_empty() {
+        let line = line_of(parsed.bridges[0].span().start);
+        let program = bridge::bridge_program().map_err(|e| plan.error(line, format!("{e:#}")))?;
+        for b in &parsed.bridges {
+            let line = line_of(b.span().start);
+            let worker = bridge::bridge_worker(b.get_ref(), &program, base)
+                .map_err(|e| plan.error(line, format!("{e:#}")))?;
+            plan.workers.push(Item { line, what: worker });
+        }
     }
     for t in &parsed.trajectories {
         let line = line_of(t.span().start);
