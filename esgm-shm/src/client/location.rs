@@ -322,9 +322,14 @@ impl Location {
     ) -> Result<InProcessTrajectory, CreateError> {
         let built = self.build_inner(spec, record);
         if built.is_err() && undo_on_failure && !spec.replace {
-            let _ = self
+            // The registry still lists a trajectory nobody writes: say so if it stays.
+            let undo = self
                 .control
                 .call(&Request::DestroyEntityTrajectoryStructure { name: spec.name.clone() });
+            if let Err(e) = undo {
+                tracing::warn!(trajectory = %spec.name, error = %e,
+                    "a trajectory that could not be built stays registered; destroy it by hand");
+            }
         }
         built
     }
@@ -482,7 +487,12 @@ impl Location {
 pub(crate) fn install(local: &InProcessEsgm, types: &[(String, EntityStructureType)]) {
     for (name, t) in types {
         if local.get_entity_structure_type(name).is_err() {
-            let _ = local.create_entity_structure_type(name, t.clone());
+            // Another thread may have registered it meanwhile (the same definition, from
+            // the same registry); anything else leaves the type unknown here, and the
+            // operation that needs it fails naming it.
+            if let Err(e) = local.create_entity_structure_type(name, t.clone()) {
+                tracing::debug!(type_name = %name, error = %e, "a type from the registry not installed");
+            }
         }
     }
 }
