@@ -73,7 +73,7 @@ pub use runtime::{InProcessEsgm, InProcessTrajectory};
 pub use sample::Sample;
 pub use store::{
     AddError, AddForwarder, AddOutcome, DropCause, FeedWaiter, PolicyViolation, QueryError,
-    ReplicaFeed, ResetForwarder, StoreEvent, StoreTap, SubscribeOptions, Subscription,
+    Rejection, ReplicaFeed, ResetForwarder, StoreEvent, StoreTap, SubscribeOptions, Subscription,
     SubscriptionId, TapId, TrajectoryStats, TrajectoryStore,
 };
 pub use time::{TIMEUNITS_PER_MILLI_SECOND, TIMEUNITS_PER_SECOND, Time, micros, millis, secs};

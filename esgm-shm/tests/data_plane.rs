@@ -15,15 +15,12 @@ use esgm_core::codec::{self, CodecError, ENVELOPE_LEN};
 use esgm_core::library::Image;
 use esgm_core::{Entity, EntityFrame, EntityStructure, Octets, Pos2, Value, Vec3};
 use esgm_shm::image_layout::{IMAGE_NAME_MAX, IMAGE_PIXELS_OFFSET};
-use esgm_shm::payload::{Block16, blocks_for};
-use esgm_shm::service_name::data_service_name;
 use esgm_shm::{
     Delivery, ImageError, OpenError, PublishError, ReceiveError, SampleHeader, SampleSizing,
     SubscriberStats, TrajectoryPublisher, TrajectoryQos, TrajectorySubscriber, Validation,
     WaitStrategy, type_id, unique_domain,
 };
 use iceoryx2::port::LoanError;
-use iceoryx2::prelude::ServiceName;
 
 fn publisher(
     domain: &str,
@@ -370,46 +367,6 @@ fn a_structure_of_another_type_is_rejected_and_counted() {
         other => panic!("expected a type mismatch, got {other:?}"),
     }
     assert_eq!(s.stats(), SubscriberStats { received: 1, malformed: 0, type_mismatch: 1 });
-}
-
-/// Raw iceoryx2 access to a trajectory's data service, to write what esgm never would.
-struct RawPublisher {
-    port: iceoryx2::port::publisher::Publisher<esgm_shm::ShmService, [Block16], SampleHeader>,
-}
-
-impl RawPublisher {
-    fn new(node: &esgm_shm::ShmNode, domain: &str, trajectory: &str) -> Self {
-        let name = ServiceName::new(&data_service_name(domain, trajectory)).unwrap();
-        let service = node
-            .service_builder(&name)
-            .publish_subscribe::<[Block16]>()
-            .user_header::<SampleHeader>()
-            .open()
-            .unwrap();
-        let port = service.publisher_builder().initial_max_slice_len(4096).create().unwrap();
-        Self { port }
-    }
-
-    fn send(&self, payload: &[u8], header: SampleHeader) {
-        let mut blocks = vec![Block16::default(); blocks_for(payload.len()).max(1)];
-        bytemuck::cast_slice_mut::<Block16, u8>(&mut blocks)[..payload.len()]
-            .copy_from_slice(payload);
-        let mut sample =
-            self.port.loan_slice_uninit(blocks.len()).unwrap().write_from_slice(&blocks);
-        *sample.user_header_mut() = header;
-        sample.send().unwrap();
-    }
-}
-
-fn header_for(payload_len: usize, valid_time: i64, create_time: i64) -> SampleHeader {
-    SampleHeader {
-        valid_time,
-        create_time,
-        archive_len: payload_len as u64,
-        type_id: type_id("RobotState"),
-        kind: SampleHeader::KIND_STRUCTURE,
-        ..SampleHeader::default()
-    }
 }
 
 #[test]

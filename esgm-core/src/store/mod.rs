@@ -55,7 +55,7 @@ pub use subscription::{
     CallbackHandle, FanIn, FeedWaiter, RecvError, ReplicaFeed, SubscribeOptions, Subscription,
     SubscriptionId,
 };
-pub use violation::{AddError, AddForwarder, AddOutcome, DropCause, PolicyViolation};
+pub use violation::{AddError, AddForwarder, AddOutcome, DropCause, PolicyViolation, Rejection};
 
 /// A sample waiting in the reorder buffer, ordered by (valid time, add sequence).
 #[derive(Debug)]
@@ -722,6 +722,12 @@ impl TrajectoryStore {
         for _ in 0..n {
             self.stats.record_dropped(DropCause::Lost);
         }
+    }
+
+    /// Counts bytes that arrived on a replicated trajectory's service and were not a
+    /// valid sample of it ([`DropCause::Rejected`]).
+    pub fn replicate_rejection(&mut self, why: Rejection) {
+        self.stats.record_dropped(DropCause::Rejected(why));
     }
 
     /// Reports a violation the writer of a replicated trajectory found: counted and

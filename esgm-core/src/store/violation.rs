@@ -57,6 +57,36 @@ pub enum DropCause {
     /// but this process never received it (its queue was overwritten while it fell
     /// behind). Counted from the gap in the writer's sequence numbers.
     Lost,
+    /// In a replica: bytes that arrived on the trajectory's service were not a valid
+    /// sample of it, and were dropped unread (see [`Rejection`]).
+    Rejected(Rejection),
+}
+
+/// Why a replica dropped bytes that arrived on its trajectory's service: hostile or
+/// broken input from another process, counted by cause (`esgm stats`).
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
+pub enum Rejection {
+    /// The archive failed validation (bad offsets, lengths, nesting, values).
+    Malformed,
+    /// The header's type id is not the trajectory's type.
+    WrongType,
+    /// The header names a kind of sample this version does not know.
+    UnknownKind,
+    /// The header says more archive bytes than the sample holds.
+    Truncated,
+}
+
+impl fmt::Display for Rejection {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Rejection::Malformed => "rejected_malformed",
+            Rejection::WrongType => "rejected_wrong_type",
+            Rejection::UnknownKind => "rejected_unknown_kind",
+            Rejection::Truncated => "rejected_truncated",
+        })
+    }
 }
 
 impl fmt::Display for DropCause {
@@ -66,6 +96,7 @@ impl fmt::Display for DropCause {
             DropCause::InvalidType => f.write_str("invalid_type"),
             DropCause::Reset => f.write_str("reset"),
             DropCause::Lost => f.write_str("lost"),
+            DropCause::Rejected(r) => r.fmt(f),
         }
     }
 }

@@ -19,7 +19,7 @@ use std::time::Duration;
 use esgm_core::esgm::TrajectoryKind;
 use esgm_core::{
     AddError, AddForwarder, AddOutcome, EntityStructure, EntityStructureType,
-    EntityTrajectoryStructure, FeedWaiter, InProcessTrajectory, ReplicaFeed,
+    EntityTrajectoryStructure, FeedWaiter, InProcessTrajectory, Rejection, ReplicaFeed,
 };
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::ServiceName;
@@ -236,11 +236,26 @@ impl Import {
     }
 
     fn reject(&mut self, e: &ReceiveError) {
+        let why = match e {
+            ReceiveError::Malformed(_) => Some(Rejection::Malformed),
+            ReceiveError::TypeMismatch { .. } => Some(Rejection::WrongType),
+            ReceiveError::UnknownKind { .. } => Some(Rejection::UnknownKind),
+            ReceiveError::Truncated { .. } => Some(Rejection::Truncated),
+            // Not a sample: the port could not receive (logged, retried at the next wake).
+            _ => None,
+        };
+        let Some(why) = why else {
+            tracing::debug!(trajectory = %self.subscriber.trajectory(), error = %e,
+                "cannot receive from the writer now");
+            return;
+        };
         self.rejected += 1;
         if self.rejected == 1 {
             tracing::warn!(trajectory = %self.subscriber.trajectory(), error = %e,
-                "sample from another process rejected (later ones are only counted)");
+                "sample from another process rejected (later ones are only counted in its stats)");
         }
+        // A replica destroyed meanwhile counts nothing.
+        let _destroyed = self.replica.with_store(|s| s.replicate_rejection(why));
     }
 }
 

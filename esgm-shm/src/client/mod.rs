@@ -412,6 +412,9 @@ impl ShmEsgm {
         let answers = self.inner.admin.ask(AdminOp::Stats, self.inner.timeout)?;
         let mut stats = EsgmStats::default();
         let mut from_writer = std::collections::BTreeSet::new();
+        // What readers dropped on their side (lost on the way, rejected bytes): theirs
+        // alone, added to the writer's report so every sample is accounted for.
+        let mut at_readers: Vec<(String, esgm_core::DropCause, u64)> = Vec::new();
         for (_, answer) in answers {
             let AdminAnswer::Stats(reports) = answer else { continue };
             for (writes, report) in reports {
@@ -419,10 +422,31 @@ impl ShmEsgm {
                 if writes {
                     from_writer.insert(name.clone());
                     stats.trajectories.insert(name, report);
-                } else if !from_writer.contains(&name) {
-                    stats.trajectories.entry(name).or_insert(report);
+                } else {
+                    for (cause, n) in &report.stats.dropped {
+                        if matches!(
+                            cause,
+                            esgm_core::DropCause::Lost | esgm_core::DropCause::Rejected(_)
+                        ) {
+                            at_readers.push((name.clone(), *cause, *n));
+                        }
+                    }
+                    if !from_writer.contains(&name) {
+                        stats.trajectories.entry(name).or_insert(report);
+                    }
                 }
             }
+        }
+        for (name, cause, n) in at_readers {
+            let Some(report) = stats.trajectories.get_mut(&name) else { continue };
+            if !from_writer.contains(&name) {
+                continue; // the report is a reader's own, already counting it
+            }
+            match report.stats.dropped.iter_mut().find(|(c, _)| *c == cause) {
+                Some((_, total)) => *total += n,
+                None => report.stats.dropped.push((cause, n)),
+            }
+            report.stats.dropped_total += n;
         }
         Ok(stats)
     }

@@ -6,7 +6,10 @@ use std::time::Duration;
 use esgm_core::codec::{ArchivedEntityStructure, ArchivedValue};
 use esgm_core::library::{Image, RobotState};
 use esgm_core::{Entity, EntityStructure};
-use esgm_shm::ShmNode;
+use esgm_shm::payload::{Block16, blocks_for};
+use esgm_shm::service_name::data_service_name;
+use esgm_shm::{SampleHeader, ShmNode, type_id};
+use iceoryx2::prelude::ServiceName;
 use iceoryx2::prelude::{LogLevel, NodeBuilder, set_log_level};
 
 /// Every wait in the tests: long enough for a loaded CI machine, short enough that a
@@ -139,5 +142,45 @@ pub fn reap(
             panic!("child process did not finish within {timeout:?}");
         }
         std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
+/// Raw iceoryx2 access to a trajectory's data service, to write what esgm never would.
+pub struct RawPublisher {
+    port: iceoryx2::port::publisher::Publisher<esgm_shm::ShmService, [Block16], SampleHeader>,
+}
+
+impl RawPublisher {
+    pub fn new(node: &esgm_shm::ShmNode, domain: &str, trajectory: &str) -> Self {
+        let name = ServiceName::new(&data_service_name(domain, trajectory)).unwrap();
+        let service = node
+            .service_builder(&name)
+            .publish_subscribe::<[Block16]>()
+            .user_header::<SampleHeader>()
+            .open()
+            .unwrap();
+        let port = service.publisher_builder().initial_max_slice_len(4096).create().unwrap();
+        Self { port }
+    }
+
+    pub fn send(&self, payload: &[u8], header: SampleHeader) {
+        let mut blocks = vec![Block16::default(); blocks_for(payload.len()).max(1)];
+        bytemuck::cast_slice_mut::<Block16, u8>(&mut blocks)[..payload.len()]
+            .copy_from_slice(payload);
+        let mut sample =
+            self.port.loan_slice_uninit(blocks.len()).unwrap().write_from_slice(&blocks);
+        *sample.user_header_mut() = header;
+        sample.send().unwrap();
+    }
+}
+
+pub fn header_for(payload_len: usize, valid_time: i64, create_time: i64) -> SampleHeader {
+    SampleHeader {
+        valid_time,
+        create_time,
+        archive_len: payload_len as u64,
+        type_id: type_id("RobotState"),
+        kind: SampleHeader::KIND_STRUCTURE,
+        ..SampleHeader::default()
     }
 }

@@ -8,19 +8,41 @@ use serde_json::json;
 use crate::session::{connect, trajectory};
 use crate::show::ms;
 
-/// Prints one line (or JSON object) per trajectory.
+/// Prints one line (or JSON object) per trajectory, then every drop by cause.
+///
+/// The figures are the domain's (E7 through `connect`): each trajectory's writer's,
+/// plus what its readers in every process lost on the way or rejected as malformed.
+/// If some process does not answer, each trajectory's figures as this process reads
+/// them instead.
 pub fn run(domain: &str, json: bool) -> anyhow::Result<()> {
     let esgm = connect(domain)?;
     let list = esgm.trajectories();
+    let domain_stats = match esgm.domain_stats() {
+        Ok(s) => Some(s),
+        Err(e) => {
+            eprintln!("esgm: not every process answered ({e}); figures as this process reads them");
+            None
+        }
+    };
     if !json {
         println!(
-            "{:<20} {:<10} {:>7} {:>7} {:>8} {:>11} {:>11}",
-            "trajectory", "kind", "seen", "stored", "rate Hz", "p50 lag ms", "p99 lag ms"
+            "{:<20} {:<10} {:>7} {:>7} {:>7} {:>8} {:>11} {:>11}",
+            "trajectory",
+            "kind",
+            "seen",
+            "stored",
+            "dropped",
+            "rate Hz",
+            "p50 lag ms",
+            "p99 lag ms"
         );
     }
+    let mut drops = Vec::new();
     for info in list {
-        let t = trajectory(&esgm, &info.name)?;
-        let s = t.stats()?;
+        let s = match domain_stats.as_ref().and_then(|d| d.get(&info.name)) {
+            Some(report) => report.stats.clone(),
+            None => trajectory(&esgm, &info.name)?.stats()?,
+        };
         if json {
             println!(
                 "{}",
@@ -28,15 +50,25 @@ pub fn run(domain: &str, json: bool) -> anyhow::Result<()> {
             );
         } else {
             println!(
-                "{:<20} {:<10} {:>7} {:>7} {:>8.2} {:>11} {:>11}",
+                "{:<20} {:<10} {:>7} {:>7} {:>7} {:>8.2} {:>11} {:>11}",
                 info.name,
                 info.kind.name(),
                 s.added,
                 s.stored,
+                s.dropped_total,
                 s.rate_hz,
                 ms(s.add_delay_p50),
                 ms(s.add_delay_p99)
             );
+            for (cause, n) in &s.dropped {
+                drops.push(format!("{}: {n} dropped: {cause}", info.name));
+            }
+        }
+    }
+    if !drops.is_empty() {
+        println!();
+        for line in drops {
+            println!("{line}");
         }
     }
     let processes = super::ps::processes(domain)?;
