@@ -1,7 +1,8 @@
 //! `bridge-small` and `bridge-image`: a structure added in domain A until a subscriber
 //! in domain B holds it, through both domains' bridges (`esgm-bridge`, Zenoh over
-//! loopback TCP). Compared with `zenoh-small` and `zenoh-image`, raw Zenoh between two
-//! processes, in the same run.
+//! loopback TCP). Compared with `zenoh-tcp-small` and `zenoh-tcp-image`, raw Zenoh
+//! between two processes with its shared memory off (every payload through the TCP
+//! link, as between two hosts, which the bridge is for), in the same run.
 //!
 //! The measuring process runs both domains' coordinators on threads of its own, and
 //! connects to both: it writes A's primitive trajectory `bench` (the Image through the
@@ -69,10 +70,12 @@ impl Bridge {
     /// The image.
     pub const IMAGE: Bridge = Bridge { name: "bridge-image", kind: Kind::Image };
 
+    /// Raw Zenoh between two processes with shared memory off: what crosses between
+    /// hosts, as the bridge's payloads do.
     fn zenoh_row(&self) -> &'static str {
         match self.kind {
-            Kind::Small => zenoh_peer::Zenoh::SMALL.name(),
-            Kind::Image => zenoh_peer::Zenoh::IMAGE.name(),
+            Kind::Small => zenoh_peer::Zenoh::TCP_SMALL.name(),
+            Kind::Image => zenoh_peer::Zenoh::TCP_IMAGE.name(),
         }
     }
 
@@ -215,6 +218,7 @@ impl Scenario for Bridge {
             }
             std::thread::sleep(Duration::from_millis(20));
         }
+        let reader = esgm_b.get_entity_trajectory_structure(TRAJECTORY)?;
         let sub = subscribe(&esgm_b, TRAJECTORY)?;
         let payload_bytes = esgm_core::codec::encoded_len(&self.kind.make(0))? as u64;
         let (samples, burst) = self.counts(ctx);
@@ -258,7 +262,7 @@ impl Scenario for Bridge {
                      in domain B (this process); both coordinators on threads of this process",
                 );
             if mode == WaitMode::Block {
-                row = self.burst(row, &writer, &sub, &mut importer, burst, &mut seq)?;
+                row = self.burst(row, &writer, &reader, &sub, &mut importer, burst, &mut seq)?;
             }
             rows.push(row);
         }
@@ -278,6 +282,7 @@ impl Bridge {
         &self,
         row: Measurement,
         writer: &esgm_core::InProcessTrajectory,
+        reader: &esgm_core::InProcessTrajectory,
         sub: &esgm_core::Subscription<esgm_core::Sample>,
         importer: &mut BridgeProcess,
         n: u64,
@@ -310,13 +315,15 @@ impl Bridge {
         let secs = last_at.duration_since(started).as_secs_f64().max(1e-9);
         let rate = arrived as f64 / secs;
         let lost = importer.import_counters().map(|c| c["lost"].clone());
+        let overflow = reader.stats().map(|s| s.subscriber_overflow).unwrap_or_default();
         let unit = match self.kind {
             Kind::Small => "structures/s",
             Kind::Image => "frames/s",
         };
         Ok(row.throughput(rate, n - arrived).note(format!(
             "burst: {n} added back to back in A, {arrived} held by B's subscriber at {rate:.0} \
-             {unit}; the importer's loss counters: {}",
+             {unit}; the importer's loss counters: {}; B's subscription overflowed {overflow} \
+             times in all (this process reading slower than they came)",
             lost.map_or_else(|| "not reported".to_owned(), |l| l.to_string())
         )))
     }

@@ -101,6 +101,8 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(ipc_uds_image::UdsImage),
         Box::new(zenoh_peer::Zenoh::SMALL),
         Box::new(zenoh_peer::Zenoh::IMAGE),
+        Box::new(zenoh_peer::Zenoh::TCP_SMALL),
+        Box::new(zenoh_peer::Zenoh::TCP_IMAGE),
         Box::new(ros1_peer::Ros1::SMALL),
         Box::new(ros1_peer::Ros1::IMAGE),
         Box::new(ipc_connect::Connect::SMALL),

@@ -44,14 +44,17 @@ fn zerr(e: impl std::fmt::Display) -> anyhow::Error {
     anyhow!("zenoh: {e}")
 }
 
-/// A session listening on (`listen`) or connecting to loopback `port`.
-fn session(port: u16, listen: bool) -> anyhow::Result<zenoh::Session> {
+/// A session listening on (`listen`) or connecting to loopback `port`, with Zenoh's
+/// shared-memory transport or (`shm` false) every payload through the TCP link, as
+/// between two hosts.
+fn session(port: u16, listen: bool, shm: bool) -> anyhow::Result<zenoh::Session> {
     let mut config = zenoh::Config::default();
     let endpoint = format!(r#"["tcp/127.0.0.1:{port}"]"#);
     let key = if listen { "listen/endpoints" } else { "connect/endpoints" };
     config.insert_json5(key, &endpoint).map_err(zerr)?;
     config.insert_json5("scouting/multicast/enabled", "false").map_err(zerr)?;
-    config.insert_json5("transport/shared_memory/enabled", "true").map_err(zerr)?;
+    let shm = if shm { "true" } else { "false" };
+    config.insert_json5("transport/shared_memory/enabled", shm).map_err(zerr)?;
     zenoh::open(config).wait().map_err(zerr)
 }
 
@@ -64,11 +67,12 @@ struct Ends {
 fn ends(
     port: u16,
     listen: bool,
+    shm: bool,
     domain: &str,
     send_on: &str,
     receive_on: &str,
 ) -> anyhow::Result<Ends> {
-    let session = session(port, listen)?;
+    let session = session(port, listen, shm)?;
     let publisher =
         session.declare_publisher(format!("esgm-bench/{domain}/{send_on}")).wait().map_err(zerr)?;
     let subscriber = session
@@ -93,7 +97,19 @@ fn receive(ends: &Ends, patience: &mut Patience<'_>, mode: WaitMode) -> anyhow::
 fn read(kind: Kind, payload: &ZBytes) -> anyhow::Result<(i64, bool)> {
     let shared = payload.as_shm().is_some();
     let bytes = payload.to_bytes();
-    let archived = codec::access(&bytes).context("validating a zenoh payload")?;
+    // Bytes from the TCP link sit wherever the receive buffer put them: an archive is
+    // read in place only on its alignment, so a misaligned one is copied first (as the
+    // bridge does with what it receives).
+    let aligned: Vec<u128>;
+    let bytes: &[u8] = if (bytes.as_ptr() as usize) % codec::ARCHIVE_ALIGNMENT == 0 {
+        &bytes
+    } else {
+        let mut words = vec![0u128; bytes.len().div_ceil(16)];
+        bytemuck::cast_slice_mut::<u128, u8>(&mut words)[..bytes.len()].copy_from_slice(&bytes);
+        aligned = words;
+        &bytemuck::cast_slice::<u128, u8>(&aligned)[..bytes.len()]
+    };
+    let archived = codec::access(bytes).context("validating a zenoh payload")?;
     if archived.valid_time.to_native() >= HELLO {
         black_box(kind.read(archived)?);
     }
@@ -106,12 +122,13 @@ pub fn measure(
     name: &str,
     kind: Kind,
     esgm_row: &str,
+    shm: bool,
 ) -> anyhow::Result<Vec<Measurement>> {
     let mut rows = Vec::new();
     for mode in WaitMode::SPIN_AND_BLOCK {
         // A peer outside this project failing is a finding for the table, not a reason
         // to lose the rest of the run.
-        let (one_way, write, bytes, shared) = match ping_pong(ctx, name, kind, mode) {
+        let (one_way, write, bytes, shared) = match ping_pong(ctx, name, kind, mode, shm) {
             Ok(run) => run,
             Err(e) => {
                 ctx.skip(name, format!("the Zenoh pair failed ({}): {e:#}", mode.label()));
@@ -125,13 +142,17 @@ pub fn measure(
                 .method(Method::HalfRoundTrip)
                 .wait_strategy(mode.label())
                 .baseline(esgm_row)
-                .producer_write_p50_ns(write.quantile(0.5))
-                .note("the producer's write: allocate a Zenoh shared-memory buffer, encode the structure into it");
-            row = row.note(if shared == one_way.len() {
-                "every payload arrived in a Zenoh shared-memory buffer".to_owned()
+                .producer_write_p50_ns(write.quantile(0.5));
+            row = if shm {
+                row.note("the producer's write: allocate a Zenoh shared-memory buffer, encode the structure into it")
+                    .note(if shared == one_way.len() {
+                        "every payload arrived in a Zenoh shared-memory buffer".to_owned()
+                    } else {
+                        format!("only {shared} of {} payloads arrived in shared memory", one_way.len())
+                    })
             } else {
-                format!("only {shared} of {} payloads arrived in shared memory", one_way.len())
-            });
+                row.note("the producer's write: encode the structure into a buffer; shared memory off, every payload crosses the loopback TCP link as between two hosts")
+            };
             rows.push(row);
         }
     }
@@ -143,6 +164,7 @@ fn ping_pong(
     name: &str,
     kind: Kind,
     mode: WaitMode,
+    shm: bool,
 ) -> anyhow::Result<(Latency, Latency, u64, u64)> {
     let (full, quick) = kind.samples();
     let samples = ctx.samples(full, quick);
@@ -152,15 +174,18 @@ fn ping_pong(
         .and_then(|l| l.local_addr())
         .context("finding a free loopback port")?
         .port();
-    let ends = ends(port, true, &domain, "ping", "pong")?;
+    let ends = ends(port, true, shm, &domain, "ping", "pong")?;
     let mut peer = ctx.spawn_peer_process_as(name, mode, &domain, Some(&port.to_string()))?;
     let mut patience = Patience::for_peer(&mut peer);
 
     let template = kind.make(0);
     let len = codec::encoded_len(&template).context("sizing the structure")?;
-    // 16-byte aligned buffers, as the codec's archives need, from a segment aligned
-    // the same.
-    let align = AllocAlignment::new(4).map_err(zerr)?;
+    // Buffers aligned as the codec's archives need (16 bytes), from a segment aligned
+    // the same. Zenoh wants a layout's size to be a multiple of its alignment, and the
+    // buffer holds exactly the archive (its envelope states the length): a structure
+    // whose encoding is not a multiple of 16 bytes gets the largest power of two
+    // dividing it, at least 8 (its 64-bit fields' alignment).
+    let align = AllocAlignment::new(len.trailing_zeros().clamp(3, 4) as u8).map_err(zerr)?;
     // Room for 32 buffers in flight: a buffer is free again only once both processes
     // dropped it, which Zenoh learns asynchronously.
     let segment = MemoryLayout::new((len * 32).next_multiple_of(4096), align).map_err(zerr)?;
@@ -172,6 +197,9 @@ fn ping_pong(
     let mut prepare = |seq: i64| -> anyhow::Result<ZBytes> {
         es.valid_time = seq;
         es.create_time = seq;
+        if !shm {
+            return Ok(ZBytes::from(codec::encode(&es).context("encoding")?.to_vec()));
+        }
         let mut buffer = layout
             .alloc()
             .with_policy::<zenoh::shm::BlockOn<zenoh::shm::GarbageCollect>>()
@@ -223,9 +251,9 @@ fn ping_pong(
 }
 
 /// The peer: answers every ping with the buffer it received, until the stop.
-pub fn echo(role: &PeerRole, kind: Kind) -> anyhow::Result<Vec<String>> {
+pub fn echo(role: &PeerRole, kind: Kind, shm: bool) -> anyhow::Result<Vec<String>> {
     let port: u16 = role.arg.as_deref().and_then(|p| p.parse().ok()).context("--peer-arg port")?;
-    let ends = ends(port, false, &role.domain, "pong", "ping")?;
+    let ends = ends(port, false, shm, &role.domain, "pong", "ping")?;
     let mut patience = Patience::alone();
     loop {
         let sample = receive(&ends, &mut patience, role.wait)?;

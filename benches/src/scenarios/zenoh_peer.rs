@@ -25,13 +25,20 @@ pub const HOW: &str = "built without the `zenoh` feature (cargo run --release -p
 pub struct Zenoh {
     name: &'static str,
     kind: Kind,
+    /// Zenoh's shared-memory transport on; off, every payload crosses the TCP link.
+    shm: bool,
 }
 
 impl Zenoh {
     /// The small structure.
-    pub const SMALL: Zenoh = Zenoh { name: "zenoh-small", kind: Kind::Small };
+    pub const SMALL: Zenoh = Zenoh { name: "zenoh-small", kind: Kind::Small, shm: true };
     /// The image.
-    pub const IMAGE: Zenoh = Zenoh { name: "zenoh-image", kind: Kind::Image };
+    pub const IMAGE: Zenoh = Zenoh { name: "zenoh-image", kind: Kind::Image, shm: true };
+    /// The small structure with shared memory off: what crosses between hosts (the
+    /// bridge's baseline).
+    pub const TCP_SMALL: Zenoh = Zenoh { name: "zenoh-tcp-small", kind: Kind::Small, shm: false };
+    /// The image with shared memory off.
+    pub const TCP_IMAGE: Zenoh = Zenoh { name: "zenoh-tcp-image", kind: Kind::Image, shm: false };
 
     fn esgm_row(&self) -> &'static str {
         match self.kind {
@@ -47,12 +54,20 @@ impl Scenario for Zenoh {
     }
 
     fn summary(&self) -> &'static str {
-        match self.kind {
-            Kind::Small => {
+        match (self.kind, self.shm) {
+            (Kind::Small, false) => {
+                "the ~120-byte RobotState through Zenoh pub/sub over loopback TCP, shared memory \
+                 off, process -> process (feature `zenoh`)"
+            }
+            (Kind::Image, false) => {
+                "the 921,600-byte Image through Zenoh pub/sub over loopback TCP, shared memory \
+                 off, process -> process (feature `zenoh`)"
+            }
+            (Kind::Small, true) => {
                 "the ~120-byte RobotState through Zenoh pub/sub with shared memory, process -> \
                  process (feature `zenoh`)"
             }
-            Kind::Image => {
+            (Kind::Image, true) => {
                 "the 921,600-byte Image through Zenoh pub/sub with shared memory, process -> \
                  process (feature `zenoh`)"
             }
@@ -61,7 +76,7 @@ impl Scenario for Zenoh {
 
     #[cfg(feature = "zenoh")]
     fn run(&self, ctx: &Context) -> anyhow::Result<Vec<Measurement>> {
-        super::zenoh_echo::measure(ctx, self.name, self.kind, self.esgm_row())
+        super::zenoh_echo::measure(ctx, self.name, self.kind, self.esgm_row(), self.shm)
     }
 
     #[cfg(not(feature = "zenoh"))]
@@ -70,14 +85,18 @@ impl Scenario for Zenoh {
         Ok(Vec::new())
     }
 
-    /// esgm is to be faster than Zenoh at every size: Zenoh's row over esgm's ≥ 1.
+    /// esgm is to be faster than Zenoh at every size: Zenoh's row over esgm's ≥ 1
+    /// (with shared memory, as esgm's rows are; the TCP rows are the bridge's baseline).
     fn targets(&self) -> Vec<Target> {
+        if !self.shm {
+            return Vec::new();
+        }
         Wait::BOTH.iter().map(|&w| Target::at_least(self.name, self.esgm_row(), w, 1.0)).collect()
     }
 
     #[cfg(feature = "zenoh")]
     fn run_peer(&self, role: &PeerRole) -> anyhow::Result<Vec<String>> {
-        super::zenoh_echo::echo(role, self.kind)
+        super::zenoh_echo::echo(role, self.kind, self.shm)
     }
 
     #[cfg(not(feature = "zenoh"))]
