@@ -262,7 +262,9 @@ impl Scenario for Bridge {
                      in domain B (this process); both coordinators on threads of this process",
                 );
             if mode == WaitMode::Block {
-                row = self.burst(row, &writer, &reader, &sub, &mut importer, burst, &mut seq)?;
+                let ends =
+                    Ends { writer: &writer, reader: &reader, sub: &sub, importer: &mut importer };
+                row = self.burst(row, ends, burst, &mut seq)?;
             }
             rows.push(row);
         }
@@ -275,19 +277,25 @@ impl Scenario for Bridge {
     }
 }
 
+/// Both ends of the measured path: A's trajectory, B's, B's subscription, B's bridge.
+struct Ends<'a> {
+    writer: &'a esgm_core::InProcessTrajectory,
+    reader: &'a esgm_core::InProcessTrajectory,
+    sub: &'a esgm_core::Subscription<esgm_core::Sample>,
+    importer: &'a mut BridgeProcess,
+}
+
 impl Bridge {
     /// Adds `n` structures back to back and notes what arrived in B per second, and
     /// what the importer counted lost.
     fn burst(
         &self,
         row: Measurement,
-        writer: &esgm_core::InProcessTrajectory,
-        reader: &esgm_core::InProcessTrajectory,
-        sub: &esgm_core::Subscription<esgm_core::Sample>,
-        importer: &mut BridgeProcess,
+        ends: Ends<'_>,
         n: u64,
         seq: &mut i64,
     ) -> anyhow::Result<Measurement> {
+        let Ends { writer, reader, sub, importer } = ends;
         drop(sub.drain());
         let first = *seq + 1;
         let started = Instant::now();
