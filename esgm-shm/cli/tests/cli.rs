@@ -538,38 +538,14 @@ merge = ["large_blob", "smooth_blob"]
     assert!(created.contains("sampled-generators trajectory `blob_10hz`"), "{created}");
     let args = ["traj", "create", "both", "--generate", "current_blob,images", "--period", "200ms"];
     ok(&[&["--domain", d.as_str()][..], &args[..]].concat());
-    fails_with(
-        &[
-            "--domain",
-            &d,
-            "traj",
-            "create",
-            "y",
-            "--generate",
-            "images:closest:avg",
-            "--period",
-            "1s",
-        ],
-        &["unknown merge `avg`", "average"],
-    );
-    fails_with(
-        &["--domain", &d, "traj", "create", "y", "--generate", "images::median", "--period", "1s"],
-        &["unknown approximation ``"],
-    );
-    fails_with(
-        &[
-            "--domain",
-            &d,
-            "traj",
-            "create",
-            "y",
-            "--generate",
-            "images:closest:median",
-            "--period",
-            "1s",
-        ],
-        &["image_data", "no median"],
-    );
+    for (generator, needles) in [
+        ("images:closest:avg", &["unknown merge `avg`", "average"][..]),
+        ("images::median", &["unknown approximation ``"][..]),
+        ("images:closest:median", &["image_data", "no median"][..]),
+    ] {
+        let args = ["traj", "create", "y", "--generate", generator, "--period", "1s"];
+        fails_with(&[&["--domain", d.as_str()][..], &args[..]].concat(), needles);
+    }
     wait_for_sample(&d, "blobs_again", Duration::from_secs(30));
     wait_for_sample(&d, "pair", Duration::from_secs(30));
     wait_for_sample(&d, "blob_10hz", Duration::from_secs(30));
