@@ -273,6 +273,110 @@ fn a_killed_coordinator_leaves_data_flowing_and_comes_back_whole() {
     assert!(nodes.is_empty(), "nodes left behind: {nodes:?}");
 }
 
+/// `kill -9` of each worker kind in turn — the camera, each unit, the robot — and of a
+/// CLI subscriber: the killed worker is restarted, its trajectory resumes, every other
+/// process keeps its pid, the subscriber and a recorder keep running, and `esgm down`
+/// leaves nothing behind.
+#[test]
+fn every_process_kind_survives_kill_9_of_any_other() {
+    let _one = ONE_SYSTEM.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let sys = System::new("crash-each");
+    sys.ok(&["up", "--detach"]);
+    sys.ok(&["apply", TUTORIAL]);
+    let before = sys.wait_for_pids(Duration::from_secs(60));
+    sys.latest_valid_time("driving_direction", Duration::from_secs(60));
+    let recording = sys.state_home.join("run.mcap");
+    let mut recorder = sys
+        .command(&["record", "-o", recording.to_str().unwrap(), "robot_state", "images"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let mut echo = sys
+        .command(&["echo", "robot_state"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let lines = lines_of(&mut echo);
+    lines.recv_timeout(Duration::from_secs(30)).expect("the subscriber receives");
+
+    let workers = [
+        ("camera-camera", "images"),
+        ("unit-BlobDetection", "blobs"),
+        ("unit-BlobSelection", "current_blob"),
+        ("unit-DrivingDirection", "driving_direction"),
+        ("robot-robot_state", "robot_state"),
+    ];
+    let mut pids: std::collections::BTreeMap<String, u32> =
+        before.iter().map(|(n, p, _)| (n.clone(), p.unwrap())).collect();
+    for (process, trajectory) in workers {
+        let old = pids[process];
+        let t0 = sys.latest_valid_time(trajectory, Duration::from_secs(60));
+        assert!(Command::new("kill").args(["-9", &old.to_string()]).status().unwrap().success());
+        // Restarted by the supervisor, with a new pid; the others untouched.
+        let deadline = Instant::now() + Duration::from_secs(60);
+        let new = loop {
+            let now = sys.processes();
+            let me = now.iter().find(|(n, _, _)| n == process).unwrap();
+            if let (Some(pid), restarts) = (me.1, me.2) {
+                if pid != old && restarts >= 1 {
+                    break pid;
+                }
+            }
+            assert!(Instant::now() < deadline, "{process} was not restarted: {now:?}");
+            std::thread::sleep(Duration::from_millis(100));
+        };
+        for (name, pid) in &pids {
+            if name != process {
+                assert!(alive(*pid), "{name} died when {process} was killed");
+            }
+        }
+        pids.insert(process.to_owned(), new);
+        // Its trajectory resumes.
+        let deadline = Instant::now() + Duration::from_secs(60);
+        while sys.latest_valid_time(trajectory, Duration::from_secs(30)) <= t0 {
+            assert!(Instant::now() < deadline, "`{trajectory}` did not resume after {process}");
+            std::thread::sleep(Duration::from_millis(200));
+        }
+        // The subscriber and the recorder live on.
+        while lines.try_recv().is_ok() {}
+        lines
+            .recv_timeout(Duration::from_secs(30))
+            .unwrap_or_else(|_| panic!("the subscriber stopped after {process} was killed"));
+        assert!(recorder.try_wait().unwrap().is_none(), "the recorder ended with {process}");
+    }
+
+    // The subscriber itself: nobody else notices, and a new one receives.
+    echo.kill().unwrap();
+    echo.wait().unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    for (name, pid) in &pids {
+        assert!(alive(*pid), "{name} died with the subscriber");
+    }
+    let again = sys.ok(&["--json", "echo", "robot_state", "--count", "3"]);
+    assert_eq!(again.lines().count(), 3, "{again}");
+
+    // The recorder stops on Ctrl-C and its file holds structures from before and after.
+    assert!(
+        Command::new("kill").args(["-INT", &recorder.id().to_string()]).status().unwrap().success()
+    );
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while recorder.try_wait().unwrap().is_none() {
+        assert!(Instant::now() < deadline, "the recorder did not stop on Ctrl-C");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    let info = sys.ok(&["--json", "info", recording.to_str().unwrap()]);
+    assert!(info.contains("robot_state") && info.contains("images"), "{info}");
+
+    sys.ok(&["down"]);
+    for (name, pid) in &pids {
+        assert!(!alive(*pid), "{name} still runs after `esgm down`");
+    }
+    let nodes = esgm_shm::nodes_of(&sys.domain).expect("cannot list nodes");
+    assert!(nodes.is_empty(), "nodes left behind: {nodes:?}");
+}
+
 #[test]
 fn down_stops_a_system_whose_coordinator_crashed() {
     let _one = ONE_SYSTEM.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
