@@ -116,6 +116,14 @@ impl System {
         }
     }
 
+    /// `esgm up --detach` and the tutorial applied; every worker's `(name, pid,
+    /// restarts)` once all run.
+    fn tutorial(&self) -> Vec<(String, Option<u32>, u64)> {
+        self.ok(&["up", "--detach"]);
+        self.ok(&["apply", TUTORIAL]);
+        self.wait_for_pids(Duration::from_secs(60))
+    }
+
     /// The valid time of the latest sample of `traj`, polled until there is one.
     fn latest_valid_time(&self, traj: &str, limit: Duration) -> i64 {
         let deadline = Instant::now() + limit;
@@ -149,6 +157,21 @@ impl Drop for System {
     }
 }
 
+/// `kill -9 pid`.
+fn kill9(pid: u32) {
+    assert!(Command::new("kill").args(["-9", &pid.to_string()]).status().unwrap().success());
+}
+
+/// Every one of `pids` has exited and the domain has no iceoryx2 node left (a listing
+/// that fails, fails the test).
+fn nothing_left<'a>(domain: &str, pids: impl IntoIterator<Item = (&'a str, u32)>) {
+    for (name, pid) in pids {
+        assert!(!alive(pid), "{name} still runs");
+    }
+    let nodes = esgm_shm::nodes_of(domain).expect("cannot list nodes");
+    assert!(nodes.is_empty(), "nodes left behind: {nodes:?}");
+}
+
 fn alive(pid: u32) -> bool {
     std::fs::read_to_string(Path::new("/proc").join(pid.to_string()).join("stat"))
         .is_ok_and(|s| s.rsplit_once(')').is_some_and(|(_, r)| !r.trim_start().starts_with('Z')))
@@ -180,9 +203,7 @@ fn lines_of(child: &mut Child) -> mpsc::Receiver<String> {
 fn a_killed_coordinator_leaves_data_flowing_and_comes_back_whole() {
     let _one = ONE_SYSTEM.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     let sys = System::new("crash-coord");
-    sys.ok(&["up", "--detach"]);
-    sys.ok(&["apply", TUTORIAL]);
-    let before = sys.wait_for_pids(Duration::from_secs(60));
+    let before = sys.tutorial();
     sys.latest_valid_time("driving_direction", Duration::from_secs(60));
 
     // A subscriber in the middle of the stream.
@@ -196,8 +217,7 @@ fn a_killed_coordinator_leaves_data_flowing_and_comes_back_whole() {
     lines.recv_timeout(Duration::from_secs(30)).expect("the subscriber receives");
 
     let coordinator = coordinator_pid(&sys.domain);
-    let killed = Command::new("kill").args(["-9", &coordinator.to_string()]).status().unwrap();
-    assert!(killed.success());
+    kill9(coordinator);
     let killed_at = Instant::now();
     while alive(coordinator) {
         assert!(killed_at.elapsed() < Duration::from_secs(10), "the coordinator did not die");
@@ -265,12 +285,8 @@ fn a_killed_coordinator_leaves_data_flowing_and_comes_back_whole() {
     }
 
     sys.ok(&["down"]);
-    for (name, pid, _) in &after {
-        assert!(!alive(pid.unwrap()), "{name} still runs after `esgm down`");
-    }
     assert!(!sys.state_dir().join("registry.json").exists(), "an orderly stop forgets");
-    let nodes = esgm_shm::nodes_of(&sys.domain).expect("cannot list nodes");
-    assert!(nodes.is_empty(), "nodes left behind: {nodes:?}");
+    nothing_left(&sys.domain, after.iter().map(|(n, p, _)| (n.as_str(), p.unwrap())));
 }
 
 /// `kill -9` of each worker kind in turn — the camera, each unit, the robot — and of a
@@ -281,9 +297,7 @@ fn a_killed_coordinator_leaves_data_flowing_and_comes_back_whole() {
 fn every_process_kind_survives_kill_9_of_any_other() {
     let _one = ONE_SYSTEM.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     let sys = System::new("crash-each");
-    sys.ok(&["up", "--detach"]);
-    sys.ok(&["apply", TUTORIAL]);
-    let before = sys.wait_for_pids(Duration::from_secs(60));
+    let before = sys.tutorial();
     sys.latest_valid_time("driving_direction", Duration::from_secs(60));
     let recording = sys.state_home.join("run.mcap");
     let mut recorder = sys
@@ -313,7 +327,7 @@ fn every_process_kind_survives_kill_9_of_any_other() {
     for (process, trajectory) in workers {
         let old = pids[process];
         let t0 = sys.latest_valid_time(trajectory, Duration::from_secs(60));
-        assert!(Command::new("kill").args(["-9", &old.to_string()]).status().unwrap().success());
+        kill9(old);
         // Restarted by the supervisor, with a new pid; the others untouched.
         let deadline = Instant::now() + Duration::from_secs(60);
         let new = loop {
@@ -370,32 +384,19 @@ fn every_process_kind_survives_kill_9_of_any_other() {
     assert!(info.contains("robot_state") && info.contains("images"), "{info}");
 
     sys.ok(&["down"]);
-    for (name, pid) in &pids {
-        assert!(!alive(*pid), "{name} still runs after `esgm down`");
-    }
-    let nodes = esgm_shm::nodes_of(&sys.domain).expect("cannot list nodes");
-    assert!(nodes.is_empty(), "nodes left behind: {nodes:?}");
+    nothing_left(&sys.domain, pids.iter().map(|(n, p)| (n.as_str(), *p)));
 }
 
 #[test]
 fn down_stops_a_system_whose_coordinator_crashed() {
     let _one = ONE_SYSTEM.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     let sys = System::new("crash-down");
-    sys.ok(&["up", "--detach"]);
-    sys.ok(&["apply", TUTORIAL]);
-    let workers = sys.wait_for_pids(Duration::from_secs(60));
-    let coordinator = coordinator_pid(&sys.domain);
-    assert!(
-        Command::new("kill").args(["-9", &coordinator.to_string()]).status().unwrap().success()
-    );
+    let workers = sys.tutorial();
+    kill9(coordinator_pid(&sys.domain));
     let out = sys.run(&["down"], Duration::from_secs(60));
     assert_eq!(out.code, Some(0), "{}\n{}", out.stdout, out.stderr);
     assert!(out.stderr.contains("crashed"), "{}", out.stderr);
-    for (name, pid, _) in &workers {
-        assert!(!alive(pid.unwrap()), "{name} still runs");
-    }
-    let nodes = esgm_shm::nodes_of(&sys.domain).expect("cannot list nodes");
-    assert!(nodes.is_empty(), "nodes left behind: {nodes:?}");
+    nothing_left(&sys.domain, workers.iter().map(|(n, p, _)| (n.as_str(), p.unwrap())));
 }
 
 /// The demo in a private `/dev/shm` and `/tmp/iceoryx2` (a user namespace; the rest of
@@ -458,7 +459,7 @@ fn a_supervised_coordinator_comes_back_by_itself() {
     sys.ok(&["apply", TUTORIAL]);
     let before = sys.wait_for_pids(Duration::from_secs(60));
     let first = coordinator_pid(&sys.domain);
-    assert!(Command::new("kill").args(["-9", &first.to_string()]).status().unwrap().success());
+    kill9(first);
     // A new coordinator serves, by itself.
     let deadline = Instant::now() + Duration::from_secs(60);
     let second = loop {
