@@ -147,4 +147,6 @@ pub use type_id::type_id;
 pub use violations::{ViolationPublisher, ViolationRecord, ViolationSubscriber};
 pub use wait::WaitStrategy;
 
-pub use client::{ConnectError, DOMAIN_ENV, ShmEsgm, ShmEsgmBuilder, WORKER_ENV, connect};
+pub use client::{
+    ConnectError, DOMAIN_ENV, ShmEsgm, ShmEsgmBuilder, WORKER_ENV, connect, trajectory_qos,
+};

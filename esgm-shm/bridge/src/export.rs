@@ -16,13 +16,9 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use esgm_core::value::ValueSort;
-use esgm_core::{CacheConstraint, EntityStructureType};
+use esgm_core::EntityStructureType;
 use esgm_shm::control::protocol::{Request, Response, TrajectoryRecord};
-use esgm_shm::{
-    DEFAULT_MAX_HISTORY, ReceiveError, ShmEsgm, ShmService, TrajectoryQos, TrajectorySubscriber,
-    history_bound, history_qos,
-};
+use esgm_shm::{ReceiveError, ShmEsgm, ShmService, TrajectorySubscriber};
 use iceoryx2::prelude::NodeBuilder;
 use parking_lot::Mutex;
 use zenoh::Wait as _;
@@ -35,10 +31,6 @@ use crate::wire::{self, Header, Kind, Meta};
 
 /// How often an exporter checks that its trajectory is still the same generation.
 const RECHECK: Duration = Duration::from_secs(1);
-/// The most samples of a trajectory of images kept for late readers when its cache has
-/// no element bound: esgm-shm's writer keeps the same (`settings::MAX_OCTET_HISTORY`),
-/// and the subscriber must not ask for more history than the service has.
-const MAX_OCTET_HISTORY: usize = 16;
 
 /// One trajectory to export, with its flow options.
 #[derive(Debug, Clone, PartialEq)]
@@ -94,18 +86,6 @@ pub fn lookup(esgm: &ShmEsgm, name: &str) -> anyhow::Result<TrajectoryRecord> {
     }
 }
 
-/// The samples of history the writer keeps in shared memory for a trajectory with
-/// this cache and type (what esgm-shm's writer derives from the same inputs).
-fn history_len(cache: CacheConstraint, entity_type: Option<&EntityStructureType>) -> usize {
-    let octets =
-        entity_type.is_some_and(|t| t.attributes.iter().any(|a| a.sort == ValueSort::OctetSeq));
-    match cache {
-        CacheConstraint::Elements(n) if n > 0 => n,
-        _ if octets => MAX_OCTET_HISTORY,
-        _ => history_bound(cache, DEFAULT_MAX_HISTORY),
-    }
-}
-
 /// Folds iceoryx2's 128-bit publisher id into the header's 64 bits.
 fn writer_id(id: u128) -> u64 {
     (id as u64) ^ ((id >> 64) as u64)
@@ -139,9 +119,15 @@ fn export_generation(site: &ExportSite, options: &ExportOptions) -> anyhow::Resu
     let name = &options.name;
     let record = lookup(&site.esgm, name)?;
     let type_name = record.info.type_name.clone();
-    let entity_type = record.types.iter().find(|(n, _)| *n == type_name).map(|(_, t)| t);
-    let bound = history_len(record.info.policy.cache, entity_type);
-    let qos = history_qos(bound, TrajectoryQos::default());
+    let entity_type = record
+        .types
+        .iter()
+        .find(|(n, _)| *n == type_name)
+        .map_or_else(|| EntityStructureType::new(""), |(_, t)| t.clone());
+    // The writer's and every reader's settings: whoever opens the service first
+    // creates it with them, and the others' requests fit.
+    let qos = esgm_shm::trajectory_qos(&record.info.policy, &entity_type);
+    let bound = qos.history_size;
     let node = NodeBuilder::new()
         .name(&esgm_shm::node_name(
             &site.domain,
@@ -314,18 +300,5 @@ impl Flow {
             self.queue.clear();
         }
         self.queue.push_back(wire::encode(&header, bytes));
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn history_follows_the_writer() {
-        let image = EntityStructureType::new("Image").attr("image_data", ValueSort::OctetSeq);
-        assert_eq!(history_len(CacheConstraint::Elements(5), Some(&image)), 5);
-        assert_eq!(history_len(CacheConstraint::All, Some(&image)), MAX_OCTET_HISTORY);
-        assert_eq!(history_len(CacheConstraint::All, None), DEFAULT_MAX_HISTORY);
     }
 }

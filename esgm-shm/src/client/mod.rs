@@ -94,6 +94,7 @@ use location::{Command, Location, install};
 use mirrors::SharedMirrors;
 use receiver::Receiver as SampleReceiver;
 pub use receiver::ReceiverError;
+pub use settings::bridge_qos as trajectory_qos;
 use shared_node::SharedNode;
 
 /// How long a control call may take by default (the coordinator answers in

@@ -23,15 +23,15 @@ pub(crate) const MAX_OCTET_HISTORY: usize = 16;
 /// [`crate::holdings`]). Past it, images are copied (and counted).
 pub(crate) const HOLD_SLACK: usize = 8;
 
-/// The service settings both ends of a bridged trajectory use: the publisher keeps
-/// the cache's bound of samples, so a replica made late starts with the writer's view,
-/// and a replica may borrow that many plus [`HOLD_SLACK`], so the images it holds stay
-/// in shared memory. A trajectory of `entity_type` with octets and no element bound
-/// keeps [`MAX_OCTET_HISTORY`] (both ends derive the same bound from the same inputs).
-pub(crate) fn bridge_qos(
-    policy: &FluentStreamPolicy,
-    entity_type: &EntityStructureType,
-) -> TrajectoryQos {
+/// The service settings every process opens a trajectory's data service with, writer
+/// and readers alike (iceoryx2 refuses an opener that asks for more than the creator
+/// set, and any of them may come first): the publisher keeps the cache's bound of
+/// samples, so a replica made late starts with the writer's view, and a replica may
+/// borrow that many plus [`HOLD_SLACK`], so the images it holds stay in shared memory.
+/// A trajectory of `entity_type` with octets and no element bound keeps
+/// [`MAX_OCTET_HISTORY`]. Public for readers outside a connection (esgm-bridge's
+/// exporter), which must ask for the same.
+pub fn bridge_qos(policy: &FluentStreamPolicy, entity_type: &EntityStructureType) -> TrajectoryQos {
     let octets = entity_type.attributes.iter().any(|a| a.sort == ValueSort::OctetSeq);
     let bound = match policy.cache {
         CacheConstraint::Elements(n) if n > 0 => n,
