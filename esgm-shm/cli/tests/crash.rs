@@ -116,6 +116,19 @@ impl System {
         }
     }
 
+    /// `esgm echo traj` running, with its lines as they come, once it has received one.
+    fn subscriber(&self, traj: &str) -> (Child, mpsc::Receiver<String>) {
+        let mut echo = self
+            .command(&["echo", traj])
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let lines = lines_of(&mut echo);
+        lines.recv_timeout(Duration::from_secs(30)).expect("the subscriber receives");
+        (echo, lines)
+    }
+
     /// `esgm up --detach` and the tutorial applied; every worker's `(name, pid,
     /// restarts)` once all run.
     fn tutorial(&self) -> Vec<(String, Option<u32>, u64)> {
@@ -207,14 +220,7 @@ fn a_killed_coordinator_leaves_data_flowing_and_comes_back_whole() {
     sys.latest_valid_time("driving_direction", Duration::from_secs(60));
 
     // A subscriber in the middle of the stream.
-    let mut echo = sys
-        .command(&["echo", "robot_state"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let lines = lines_of(&mut echo);
-    lines.recv_timeout(Duration::from_secs(30)).expect("the subscriber receives");
+    let (mut echo, lines) = sys.subscriber("robot_state");
 
     let coordinator = coordinator_pid(&sys.domain);
     kill9(coordinator);
@@ -306,14 +312,7 @@ fn every_process_kind_survives_kill_9_of_any_other() {
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let mut echo = sys
-        .command(&["echo", "robot_state"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let lines = lines_of(&mut echo);
-    lines.recv_timeout(Duration::from_secs(30)).expect("the subscriber receives");
+    let (mut echo, lines) = sys.subscriber("robot_state");
 
     let workers = [
         ("camera-camera", "images"),
