@@ -124,8 +124,8 @@ pub mod process;
 // The data plane's modules keep their paths at the crate root (`esgm_shm::publisher`).
 pub(crate) use data_plane::sequence_gaps;
 pub use data_plane::{
-    image_layout, image_loan, payload, publisher, qos, received, service, service_name, size_hint,
-    structure_loan, subscriber, type_id, violations, wait,
+    image_layout, image_loan, payload, publisher, qos, received, sample_check, service, service_name,
+    size_hint, structure_loan, subscriber, type_id, violations, wait,
 };
 // What connected processes hold in shared memory, with its old path.
 pub use client::holdings;
@@ -139,6 +139,7 @@ pub use payload::{Block16, SampleHeader};
 pub use publisher::{PublishError, Published, SampleSizing, TrajectoryPublisher};
 pub use qos::{DEFAULT_MAX_HISTORY, Delivery, TrajectoryQos, history_bound, history_qos};
 pub use received::ReceivedSample;
+pub use sample_check::{SampleVerdict, check_sample};
 pub use service::{OpenError, ShmNode, ShmService};
 pub use service_name::{NameError, TrajectoryServiceNames, node_name, nodes_of, unique_domain};
 pub use structure_loan::StructureLoan;

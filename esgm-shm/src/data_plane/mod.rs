@@ -2,8 +2,8 @@
 //! history — its iceoryx2 services and their names ([`service`], [`service_name`]),
 //! the sample layout ([`payload`]), the writing end ([`publisher`], with structures
 //! encoded ahead of sending in [`structure_loan`] and images written in place in
-//! [`image_loan`]) and the reading end ([`subscriber`], [`received`], [`wait`]), and
-//! the violations service. Trajectories with policy and history are built on it by the
+//! [`image_loan`]) and the reading end ([`subscriber`], [`received`], [`wait`], and
+//! every sample's checks in [`sample_check`]), and the violations service. Trajectories with policy and history are built on it by the
 //! client ([`crate::client`]).
 
 pub mod image_layout;
@@ -12,6 +12,7 @@ pub mod payload;
 pub mod publisher;
 pub mod qos;
 pub mod received;
+pub mod sample_check;
 pub(crate) mod sequence_gaps;
 pub mod service;
 pub mod service_name;

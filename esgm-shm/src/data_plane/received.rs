@@ -11,6 +11,7 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::sample::Sample;
 
 use crate::payload::{Block16, SampleHeader, as_bytes};
+use crate::sample_check::validate;
 
 /// The iceoryx2 sample type of a trajectory.
 pub(crate) type RawSample = Sample<ShmService, [Block16], SampleHeader>;
@@ -155,23 +156,4 @@ impl ReceivedSample {
     pub fn to_owned(&self) -> Result<EntityStructure, CodecError> {
         codec::decode(self.structure()?)
     }
-}
-
-/// Full validation of `bytes`, and the header's times must be the archive's: filters
-/// and time lookups read the header, so a header that lies is as bad as a bad archive.
-pub(crate) fn validate<'a>(
-    bytes: &'a [u8],
-    header: &SampleHeader,
-) -> Result<&'a ArchivedEntityStructure, CodecError> {
-    let archived = codec::access(bytes)?;
-    if archived.valid_time != header.valid_time || archived.create_time != header.create_time {
-        return Err(CodecError::Malformed {
-            len: bytes.len(),
-            reason: format!(
-                "header times ({}, {}) differ from the archive's ({}, {})",
-                header.valid_time, header.create_time, archived.valid_time, archived.create_time
-            ),
-        });
-    }
-    Ok(archived)
 }

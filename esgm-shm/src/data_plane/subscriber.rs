@@ -1,11 +1,9 @@
 //! The reading end of a trajectory: takes samples from shared memory, rejects and
 //! counts bad ones, and waits with a [`WaitStrategy`].
 //!
-//! Checks, in the order they cost:
-//! 1. the header's type id against the subscriber's type (no payload access);
-//! 2. the header's kind and archive length against the payload actually delivered;
-//! 3. with [`Validation::InPlace`] (the default), the archive itself: envelope, rkyv
-//!    bytecheck, and the header's times against the archive's.
+//! Every sample goes through [`check_sample`] (the header's type id, kind and archive
+//! length, then with [`Validation::InPlace`], the default, the archive itself); see
+//! [`crate::sample_check`] for the order and why it is one pure function.
 //!
 //! A sample failing any check is returned to iceoryx2 at once and reported as a typed
 //! [`ReceiveError`]; the counters in [`SubscriberStats`] say how often. Nothing a peer
@@ -15,15 +13,16 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
-use esgm_core::codec::{CodecError, ENVELOPE_LEN};
+use esgm_core::codec::CodecError;
 use iceoryx2::identifiers::UniquePublisherId;
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::service::port_factory::PortFactory;
 
-use crate::payload::{SampleHeader, as_bytes};
+use crate::payload::as_bytes;
 use crate::qos::TrajectoryQos;
 use crate::received::SubscriberPort;
-use crate::received::{Checked, Counters, ReceivedSample, validate};
+use crate::received::{Checked, Counters, ReceivedSample};
+use crate::sample_check::{SampleVerdict, check_sample};
 use crate::service::{DataService, OpenError, ShmNode, open_data_service, open_wake_service};
 use crate::service_name::{DEFAULT_DOMAIN, TrajectoryServiceNames};
 use crate::type_id::type_id;
@@ -256,60 +255,46 @@ impl TrajectorySubscriber {
         let c = &self.counters;
         c.received.fetch_add(1, Ordering::Relaxed);
         let header = *sample.user_header();
-
-        if header.type_id != self.expected_type_id {
-            if c.type_mismatch.fetch_add(1, Ordering::Relaxed) == 0 {
-                tracing::warn!(trajectory = %self.trajectory, expected = %self.type_name,
-                    found = header.type_id, "dropping a sample of another type");
-            }
-            return Err(ReceiveError::TypeMismatch {
-                expected: self.expected_type_id,
-                found: header.type_id,
-            });
-        }
-        let rejected = |e: ReceiveError| {
-            if c.count_malformed() {
-                tracing::warn!(trajectory = %self.trajectory, error = %e,
-                    "dropping a malformed sample (later ones are only counted)");
-            }
-            Err(e)
-        };
-        if header.kind == SampleHeader::KIND_RESET {
-            return Err(ReceiveError::Reset {
-                sequence: header.sequence,
-                publisher: sample.header().publisher_id(),
-            });
-        }
-        if header.kind != SampleHeader::KIND_STRUCTURE {
-            return rejected(ReceiveError::UnknownKind { kind: header.kind });
-        }
-        let payload_len = as_bytes(sample.payload()).len();
-        let archive_len = match usize::try_from(header.archive_len) {
-            Ok(n) if (ENVELOPE_LEN..=payload_len).contains(&n) => n,
-            _ => {
-                return rejected(ReceiveError::Truncated {
-                    archive_len: header.archive_len,
-                    payload_len,
+        let checked = check_sample(
+            &header,
+            as_bytes(sample.payload()),
+            self.expected_type_id,
+            self.validation,
+        );
+        let (archive_len, validated) = match checked {
+            Ok(SampleVerdict::Structure { bytes, archived }) => (bytes.len(), archived.is_some()),
+            Ok(SampleVerdict::Reset { sequence }) => {
+                return Err(ReceiveError::Reset {
+                    sequence,
+                    publisher: sample.header().publisher_id(),
                 });
             }
-        };
-
-        match self.validation {
-            Validation::InPlace => {
-                let bytes = &as_bytes(sample.payload())[..archive_len];
-                if let Err(e) = validate(bytes, &header) {
-                    return rejected(ReceiveError::Malformed(e));
+            Err(e @ ReceiveError::TypeMismatch { .. }) => {
+                if c.type_mismatch.fetch_add(1, Ordering::Relaxed) == 0 {
+                    tracing::warn!(trajectory = %self.trajectory, expected = %self.type_name,
+                        found = header.type_id, "dropping a sample of another type");
                 }
-                Ok(Some(ReceivedSample::new(sample, &self.port, archive_len, Checked::Valid, None)))
+                return Err(e);
             }
-            Validation::OnAccess => Ok(Some(ReceivedSample::new(
+            Err(e) => {
+                if c.count_malformed() {
+                    tracing::warn!(trajectory = %self.trajectory, error = %e,
+                        "dropping a malformed sample (later ones are only counted)");
+                }
+                return Err(e);
+            }
+        };
+        Ok(Some(if validated {
+            ReceivedSample::new(sample, &self.port, archive_len, Checked::Valid, None)
+        } else {
+            ReceivedSample::new(
                 sample,
                 &self.port,
                 archive_len,
                 Checked::No,
                 Some(Arc::clone(&self.counters)),
-            ))),
-        }
+            )
+        }))
     }
 
     /// Waits up to `timeout` for the next sample, with the subscriber's
