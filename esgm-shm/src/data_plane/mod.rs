@@ -3,8 +3,9 @@
 //! the sample layout ([`payload`]), the writing end ([`publisher`], with structures
 //! encoded ahead of sending in [`structure_loan`] and images written in place in
 //! [`image_loan`]) and the reading end ([`subscriber`], [`received`], [`wait`], and
-//! every sample's checks in [`sample_check`]), and the violations service. Trajectories with policy and history are built on it by the
-//! client ([`crate::client`]).
+//! every sample's checks in [`sample_check`]), and the violations service.
+//! Trajectories with policy and history are built on it by the client
+//! ([`crate::client`]).
 
 pub mod image_layout;
 pub mod image_loan;

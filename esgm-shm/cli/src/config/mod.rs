@@ -458,49 +458,6 @@ mod tests {
         assert_eq!(robot_state.what.writer.as_deref(), Some("robot-robot_state"));
     }
 
-    /// What a plan starts is what `esgm worker` (the publishers' own arguments) takes.
-    #[test]
-    fn planned_workers_parse_as_esgm_worker() {
-        use clap::Parser;
-
-        use crate::cmd::worker::Role;
-
-        let base = tempfile::tempdir().unwrap();
-        std::fs::create_dir(base.path().join("frames")).unwrap();
-        let text = "[[sensor]]\nname = \"cam\"\ncamera = \"frames\"\nframe_period = \"250000000\"\n\
-                    [[robot]]\ntrajectory = \"rs\"\nfollow = \"dd\"\nperiod = \"1.5s\"\n";
-        let mut plan = parse("f.toml", text, base.path()).unwrap();
-        plan.workers.extend(
-            parse("tutorial.toml", include_str!("../../tutorial.toml"), Path::new("."))
-                .unwrap()
-                .workers,
-        );
-        for worker in &plan.workers {
-            let args = &worker.what.spec.args;
-            let cli = crate::Cli::try_parse_from(
-                std::iter::once("esgm").chain(args.iter().map(String::as_str)),
-            )
-            .unwrap_or_else(|e| panic!("{args:?}: {e}"));
-            let crate::Command::Worker(role) = cli.command else { panic!("{args:?}") };
-            match (worker.what.spec.name.as_str(), role) {
-                ("camera-cam", Role::Camera(camera)) => {
-                    assert_eq!(camera.dir, Some(base.path().join("frames")));
-                    assert_eq!(camera.frame_period, std::time::Duration::from_millis(250));
-                }
-                ("robot-rs", Role::Robot(robot)) => {
-                    assert_eq!((robot.trajectory.as_str(), robot.follow.as_str()), ("rs", "dd"));
-                    assert_eq!(robot.period, std::time::Duration::from_millis(1500));
-                }
-                ("robot-robot_state", Role::Robot(robot)) => {
-                    assert_eq!(robot.period, std::time::Duration::from_millis(100));
-                }
-                ("camera-camera", Role::Camera(camera)) => assert_eq!(camera.dir, None),
-                (_, Role::Unit { .. }) => {}
-                (name, role) => panic!("{name} runs {role:?}"),
-            }
-        }
-    }
-
     #[test]
     fn errors_point_at_the_line() {
         let text = "[[trajectory]]\nname = \"a\"\nprimitive = \"Blob\"\n\n[[trajectory]]\nname = \"b\"\nprimitive = \"Blob\"\npolicy = { cahce = 3 }\n";

@@ -1,0 +1,15 @@
+//! The parts of the `esgm` command other programs reuse: the configuration parser
+//! ([`config`]) with the policy and time words it reads ([`policy_args`],
+//! [`time_arg`]), and how external subcommands are found ([`external`]).
+//!
+//! They are a library so that the fuzzer (`esgm-fuzz`) parses hostile configuration
+//! files with the very parser `esgm apply` runs, not a copy. The `esgm` binary uses
+//! them from here; everything else of the command (its subcommands, dashboard and
+//! sessions) stays in the binary.
+
+#![deny(missing_docs)]
+
+pub mod config;
+pub mod external;
+pub mod policy_args;
+pub mod time_arg;
