@@ -173,40 +173,6 @@ fn a_temporal_function_is_sampled_where_its_unit_runs() {
     assert!((x(&s) - (expected + 1.0)).abs() < 1e-6, "{} vs {}", x(&s), expected + 1.0);
 }
 
-/// Bytes another process writes straight into a trajectory's data service are
-/// rejected by the readers, counted by cause in their stats and in the domain's
-/// (`esgm stats`), and the valid samples keep flowing.
-#[test]
-fn forged_bytes_in_a_live_trajectory_are_rejected_counted_and_survived() {
-    use esgm_shm::control::{Request, Response};
-    let c = coordinator("loc-forged");
-    let a = location(&c, "a");
-    let b = location(&c, "b");
-    let robot = a.create_trajectory(TrajectorySpec::primitive("robot", "RobotState")).unwrap();
-    robot.add(state(10, 1.0)).unwrap();
-    let there = b.get_entity_trajectory_structure("robot").unwrap();
-    assert!(wait_for(|| there.get_latest().is_ok()));
-    let Ok(Response::Trajectory(record)) =
-        a.control(Request::GetEntityTrajectoryStructure { name: "robot".into() })
-    else {
-        panic!("no record of `robot`")
-    };
-    let service_domain = format!("{}.g{}", c.domain(), record.generation);
-    let raw = common::RawPublisher::new(&common::node(), &service_domain, "robot");
-    raw.send(&[0xAB; 96], common::header_for(96, 20, 20));
-    raw.send(&[0; 64], esgm_shm::SampleHeader { type_id: 7, ..common::header_for(64, 21, 21) });
-    robot.add(state(30, 3.0)).unwrap();
-    assert!(wait_for(|| there.get_latest().map(|s| x(&s)) == Ok(3.0)), "valid samples flow");
-    let rejected =
-        |s: &esgm_core::TrajectoryStats, why| s.dropped_for(esgm_core::DropCause::Rejected(why));
-    let mine = there.stats().unwrap();
-    assert_eq!(rejected(&mine, esgm_core::Rejection::Malformed), 1, "{mine:?}");
-    assert_eq!(rejected(&mine, esgm_core::Rejection::WrongType), 1, "{mine:?}");
-    let domain = a.domain_stats().unwrap();
-    let all = &domain.get("robot").unwrap().stats;
-    assert!(rejected(all, esgm_core::Rejection::Malformed) >= 1, "{all:?}");
-}
-
 #[test]
 fn sampling_runs_where_the_sensor_is_and_units_where_they_are() {
     let c = coordinator("loc-placement");

@@ -76,6 +76,14 @@ pub enum Rejection {
     UnknownKind,
     /// The header says more archive bytes than the sample holds.
     Truncated,
+    /// A well-formed sample (or reset) from a publisher port that is not the one the
+    /// registry names as the trajectory's writer: only the writer's gate admits
+    /// structures, so anything else on the service bypassed it.
+    NotWriter,
+    /// A well-formed sample whose attributes do not match the trajectory's type (an
+    /// attribute missing from the type, of another sort, or assigned twice), though
+    /// its header names the type.
+    WrongLayout,
 }
 
 impl fmt::Display for Rejection {
@@ -85,6 +93,8 @@ impl fmt::Display for Rejection {
             Rejection::WrongType => "rejected_wrong_type",
             Rejection::UnknownKind => "rejected_unknown_kind",
             Rejection::Truncated => "rejected_truncated",
+            Rejection::NotWriter => "rejected_not_writer",
+            Rejection::WrongLayout => "rejected_wrong_layout",
         })
     }
 }

@@ -81,7 +81,7 @@ pub struct ExportSite {
 /// The trajectory's registry record, if it exists.
 pub fn lookup(esgm: &ShmEsgm, name: &str) -> anyhow::Result<TrajectoryRecord> {
     match esgm.control(Request::GetEntityTrajectoryStructure { name: name.to_owned() })? {
-        Response::Trajectory(record) => Ok(record),
+        Response::Trajectory(record) => Ok(*record),
         other => anyhow::bail!("unexpected answer from the coordinator: {other:?}"),
     }
 }

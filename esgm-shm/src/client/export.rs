@@ -227,6 +227,12 @@ impl Drop for Export {
 }
 
 impl Export {
+    /// The id of the publisher port this export writes with (`UniquePublisherId`'s
+    /// value), which the writer registers ([`crate::control::Request::ReportWriter`]).
+    pub fn publisher(&self) -> u128 {
+        self.outlet.lock().publisher.id().value()
+    }
+
     /// Publishes `handle`'s stream (the trajectory of `record`) from now on (and its current content, so readers
     /// that connect later receive the history). A `repointed` name starts with a reset
     /// marker: readers elsewhere forget the stream the name denoted before.

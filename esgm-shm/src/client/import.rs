@@ -8,11 +8,19 @@
 //! told from there, with no other thread in between. Images stay in the writer's
 //! chunk, owned by the values that read them ([`crate::holdings`]).
 //!
+//! Only the writer writes: a sample or reset is entered only if it comes from the
+//! publisher port the registry names as the writer ([`TrajectoryRecord::port`]) and
+//! its attributes match the trajectory's type. Anything else on the service bypassed
+//! the writer's gate, and is rejected and counted. Until the registry names the port
+//! (a writer just started or restarted), what arrives is held, in order, and the
+//! location thread asks ([`Import::set_writer`]).
+//!
 //! Adding to a replica of a primitive trajectory forwards the structure, after the
 //! type check, to the writer's *inbox* (`<domain>:inbox`), published inline by the
 //! adding thread; the writer's gate decides, and the structure comes back through
 //! replication.
 
+use std::collections::VecDeque;
 use std::sync::{Arc, Weak};
 use std::time::Duration;
 
@@ -20,7 +28,9 @@ use esgm_core::esgm::TrajectoryKind;
 use esgm_core::{
     AddError, AddForwarder, AddOutcome, EntityStructure, EntityStructureType,
     EntityTrajectoryStructure, FeedWaiter, InProcessTrajectory, Rejection, ReplicaFeed,
+    TypeChecker,
 };
+use iceoryx2::identifiers::UniquePublisherId;
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::ServiceName;
 use parking_lot::Mutex;
@@ -73,6 +83,37 @@ pub(crate) struct Import {
     /// receiver thread does not listen to its samples (the worker feeds the replica
     /// each time it wakes), so a sample wakes one thread in this process, not two.
     workers: Arc<std::sync::atomic::AtomicUsize>,
+    /// The writer's publisher port as the registry names it; `None` until it does.
+    writer: Option<u128>,
+    /// What arrived from a port the registry does not name (yet), in order: entered
+    /// or rejected once it does ([`Import::set_writer`]).
+    unverified: VecDeque<Arrival>,
+    /// Checks each structure's attributes against the trajectory's type; `None` if
+    /// the record's definitions do not resolve (logged at the start).
+    checker: Option<TypeChecker>,
+}
+
+/// The most arrivals an import holds while it waits for the registry to name the
+/// writer's port: past it, the oldest is rejected as [`Rejection::NotWriter`]. A
+/// restarted writer is named within a maintenance tick, so this bounds only what a
+/// process that is not the writer can make a reader hold.
+const MAX_UNVERIFIED: usize = 1024;
+
+/// A sample or reset taken from the trajectory's service, with the port it came from.
+#[derive(Debug)]
+enum Arrival {
+    /// A structure, decoded (its images stay in shared memory, held).
+    Entry { publisher: UniquePublisherId, sequence: u64, es: EntityStructure, add_time: i64 },
+    /// A reset marker.
+    Reset { publisher: UniquePublisherId, sequence: u64 },
+}
+
+impl Arrival {
+    fn publisher(&self) -> UniquePublisherId {
+        match self {
+            Arrival::Entry { publisher, .. } | Arrival::Reset { publisher, .. } => *publisher,
+        }
+    }
 }
 
 impl Import {
@@ -88,6 +129,14 @@ impl Import {
         let generation = record.generation;
         let domain = &generation_domain(domain, generation);
         let name = replica.name().to_owned();
+        let checker = match TypeChecker::from_definitions(type_name, record.types.clone()) {
+            Ok(c) => Some(c),
+            Err(e) => {
+                tracing::warn!(trajectory = %name, error = %e,
+                    "the trajectory's type does not resolve here; attributes are not checked");
+                None
+            }
+        };
         let entity_type = replica.entity_type().unwrap_or_else(|_| EntityStructureType::new(""));
         let qos = bridge_qos(policy, &entity_type);
         // Nobody waits on these ports: the receiver thread waits on their wake-up
@@ -145,6 +194,9 @@ impl Import {
             rejected: 0,
             gaps: SequenceGaps::default(),
             workers: Arc::default(),
+            writer: record.port.map(|p| p.publisher),
+            unverified: VecDeque::new(),
+            checker,
             lost: 0,
             // One borrow stays free to receive into.
             owner: holdings.owner(qos.max_borrowed_samples.saturating_sub(1)),
@@ -174,22 +226,17 @@ impl Import {
             match self.subscriber.receive() {
                 Ok(Some(sample)) => {
                     n += 1;
-                    self.count_gap(sample.publisher_id(), sample.header().sequence);
-                    let add_time = sample.header().add_time;
+                    let publisher = sample.publisher_id();
+                    let (sequence, add_time) = (sample.header().sequence, sample.header().add_time);
                     match self.owner.decode(sample) {
-                        Ok(es) => {
-                            let es = Arc::new(es);
-                            // A replica destroyed meanwhile needs nothing more.
-                            let _destroyed = self.replica.with_store(|s| s.replicate(es, add_time));
-                        }
+                        Ok(es) => self.arrive(Arrival::Entry { publisher, sequence, es, add_time }),
                         Err(e) => self.reject(&ReceiveError::Malformed(e)),
                     }
                 }
                 Ok(None) => break,
                 Err(ReceiveError::Reset { sequence, publisher }) => {
                     n += 1;
-                    self.count_gap(publisher, sequence);
-                    let _destroyed = self.replica.with_store(|s| s.reset());
+                    self.arrive(Arrival::Reset { publisher, sequence });
                 }
                 Err(e) => {
                     n += 1;
@@ -217,6 +264,71 @@ impl Import {
             }
         }
         n
+    }
+
+    /// Enters what the writer sent; holds what another port sent until the registry
+    /// names the writer's.
+    fn arrive(&mut self, arrival: Arrival) {
+        if self.writer == Some(arrival.publisher().value()) {
+            return self.enter(arrival);
+        }
+        if self.unverified.len() >= MAX_UNVERIFIED {
+            if let Some(oldest) = self.unverified.pop_front() {
+                self.not_writer(&oldest);
+            }
+        }
+        self.unverified.push_back(arrival);
+    }
+
+    /// Enters a sample or reset of the writer's into the replica, if its attributes
+    /// match the trajectory's type.
+    fn enter(&mut self, arrival: Arrival) {
+        match arrival {
+            Arrival::Entry { publisher, sequence, es, add_time } => {
+                if let Some(Err(e)) = self.checker.as_ref().map(|c| c.check(&es.attributes)) {
+                    return self.count_rejection(Rejection::WrongLayout, &e);
+                }
+                self.count_gap(publisher, sequence);
+                // A replica destroyed meanwhile needs nothing more.
+                let _destroyed = self.replica.with_store(|s| s.replicate(Arc::new(es), add_time));
+            }
+            Arrival::Reset { publisher, sequence } => {
+                self.count_gap(publisher, sequence);
+                let _destroyed = self.replica.with_store(|s| s.reset());
+            }
+        }
+    }
+
+    /// True while samples wait for the registry to name the writer's port.
+    pub fn awaits_writer(&self) -> bool {
+        !self.unverified.is_empty()
+    }
+
+    /// The registry names `port` as the writer's (`None`: not yet): what was held from
+    /// it is entered, in order, and what was held from any other port is rejected.
+    pub fn set_writer(&mut self, port: Option<u128>) {
+        let Some(port) = port else { return };
+        self.writer = Some(port);
+        for arrival in std::mem::take(&mut self.unverified) {
+            if arrival.publisher().value() == port {
+                self.enter(arrival);
+            } else {
+                self.not_writer(&arrival);
+            }
+        }
+    }
+
+    fn not_writer(&mut self, arrival: &Arrival) {
+        let what = match arrival {
+            Arrival::Entry { .. } => "a sample",
+            Arrival::Reset { .. } => "a reset",
+        };
+        let detail = format!(
+            "{what} from publisher {:#x}, not the writer's ({})",
+            arrival.publisher().value(),
+            self.writer.map_or_else(|| "not named".to_owned(), |w| format!("{w:#x}"))
+        );
+        self.count_rejection(Rejection::NotWriter, &detail);
     }
 
     /// Counts the samples of `publisher` skipped before `sequence` as lost in the
@@ -249,9 +361,14 @@ impl Import {
                 "cannot receive from the writer now");
             return;
         };
+        self.count_rejection(why, e);
+    }
+
+    /// Counts one rejected sample in the replica's stats (the first is logged).
+    fn count_rejection(&mut self, why: Rejection, detail: &dyn std::fmt::Display) {
         self.rejected += 1;
         if self.rejected == 1 {
-            tracing::warn!(trajectory = %self.subscriber.trajectory(), error = %e,
+            tracing::warn!(trajectory = %self.subscriber.trajectory(), cause = %why, error = %detail,
                 "sample from another process rejected (later ones are only counted in its stats)");
         }
         // A replica destroyed meanwhile counts nothing.

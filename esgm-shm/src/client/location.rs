@@ -69,7 +69,7 @@ pub(crate) fn trajectory_record(
     answer: Result<Response, ControlClientError>,
 ) -> Result<TrajectoryRecord, LookupError> {
     match answer.map_err(lookup_error)? {
-        Response::Trajectory(r) => Ok(r),
+        Response::Trajectory(r) => Ok(*r),
         other => Err(LookupError::Unavailable { reason: format!("{other:?}") }),
     }
 }
@@ -153,26 +153,34 @@ impl Location {
         };
         let now: std::collections::BTreeMap<_, _> =
             placements.iter().map(|p| (p.name.as_str(), p)).collect();
-        let (stale, moved): (Vec<String>, Vec<String>) = {
-            let mirrors = self.mirrors.lock();
-            let (mut stale, mut moved) = (Vec::new(), Vec::new());
+        let (stale, moved, unreported) = {
+            let mut mirrors = self.mirrors.lock();
+            let (mut stale, mut moved, mut unreported) = (Vec::new(), Vec::new(), Vec::new());
             for (name, e) in &mirrors.exports {
                 let current = now.get(name.as_str());
                 if current.is_none_or(|p| p.generation != e.generation || p.writer != self.host) {
                     stale.push(name.clone());
+                } else if current.and_then(|p| p.port).map(|w| w.publisher) != Some(e.publisher()) {
+                    // A recovered coordinator that lost it, or a report that failed.
+                    unreported.push((name.clone(), e.generation, e.publisher()));
                 }
             }
-            for (name, i) in &mirrors.imports {
+            for (name, i) in &mut mirrors.imports {
                 match now.get(name.as_str()) {
-                    Some(p) if p.generation == i.generation => {}
+                    Some(p) if p.generation == i.generation => {
+                        i.set_writer(p.port.map(|w| w.publisher));
+                    }
                     Some(p) if p.type_name == i.type_name && p.writer != self.host => {
                         moved.push(name.clone());
                     }
                     _ => stale.push(name.clone()),
                 }
             }
-            (stale, moved)
+            (stale, moved, unreported)
         };
+        for (name, generation, publisher) in unreported {
+            self.report_writer(&name, generation, publisher);
+        }
         for name in &moved {
             self.reimport(name);
         }
@@ -266,6 +274,7 @@ impl Location {
         for e in self.mirrors.lock().exports.values() {
             e.update_connections();
         }
+        self.verify_writers();
         self.report_holdings();
     }
 
@@ -295,7 +304,7 @@ impl Location {
     fn create(&mut self, spec: &TrajectorySpec) -> Result<InProcessTrajectory, CreateError> {
         let request = Request::CreateTrajectory { spec: spec.clone(), host: self.host.clone() };
         let record = match self.control.call(&request) {
-            Ok(Response::Trajectory(r)) => r,
+            Ok(Response::Trajectory(r)) => *r,
             Ok(other) => return Err(unexpected(&other)),
             Err(ControlClientError::Remote(ControlError::Create(e))) => return Err(e),
             Err(e) => return Err(CreateError::Unavailable { reason: e.to_string() }),
@@ -366,9 +375,49 @@ impl Location {
             Ok(())
         })?;
         if let Some(export) = export {
+            self.report_writer(&spec.name, record.generation, export.publisher());
             self.mirrors.change(|m| m.exports.insert(spec.name.clone(), export));
         }
         Ok(handle)
+    }
+
+    /// Names this process's publisher port as the writer's of `name`, so that readers
+    /// accept its samples ([`super::import`]). A failure is logged; the next audit
+    /// reports again.
+    fn report_writer(&mut self, name: &str, generation: u64, publisher: u128) {
+        let request = Request::ReportWriter { trajectory: name.to_owned(), generation, publisher };
+        if let Err(e) = self.control.call(&request) {
+            tracing::warn!(trajectory = %name, error = %e,
+                "cannot register as the writer; readers hold its samples until it can");
+        }
+    }
+
+    /// Asks the registry whose port the samples are that readers here hold unverified
+    /// (a writer that just started or restarted), and lets them enter or be rejected.
+    fn verify_writers(&mut self) {
+        let waiting: Vec<String> = {
+            let mirrors = self.mirrors.lock();
+            mirrors
+                .imports
+                .iter()
+                .filter(|(_, i)| i.awaits_writer())
+                .map(|(n, _)| n.clone())
+                .collect()
+        };
+        for name in waiting {
+            let record = match self.record(&name) {
+                Ok(r) => r,
+                Err(e) => {
+                    tracing::debug!(trajectory = %name, error = %e, "cannot ask who writes");
+                    continue;
+                }
+            };
+            if let Some(import) = self.mirrors.lock().imports.get_mut(&name) {
+                if import.generation == record.generation {
+                    import.set_writer(record.port.map(|p| p.publisher));
+                }
+            }
+        }
     }
 
     /// Makes `name` readable here: local already, or mirrored from its writer.

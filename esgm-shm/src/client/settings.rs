@@ -31,6 +31,11 @@ pub(crate) const HOLD_SLACK: usize = 8;
 /// A trajectory of `entity_type` with octets and no element bound keeps
 /// [`MAX_OCTET_HISTORY`]. Public for readers outside a connection (esgm-bridge's
 /// exporter), which must ask for the same.
+///
+/// One publisher: the writer's. Every other process adds through the writer's inbox
+/// and gate, so a second publisher could only be one that bypasses the gate; while
+/// the writer lives, no other process can open one. (A writer that crashed is
+/// removed by iceoryx2's dead-node cleanup when its successor's node is made.)
 pub fn bridge_qos(policy: &FluentStreamPolicy, entity_type: &EntityStructureType) -> TrajectoryQos {
     let octets = entity_type.attributes.iter().any(|a| a.sort == ValueSort::OctetSeq);
     let bound = match policy.cache {
@@ -39,7 +44,11 @@ pub fn bridge_qos(policy: &FluentStreamPolicy, entity_type: &EntityStructureType
         _ => history_bound(policy.cache, DEFAULT_MAX_HISTORY),
     };
     let qos = history_qos(bound, TrajectoryQos::default());
-    TrajectoryQos { max_borrowed_samples: qos.max_borrowed_samples + HOLD_SLACK, ..qos }
+    TrajectoryQos {
+        max_borrowed_samples: qos.max_borrowed_samples + HOLD_SLACK,
+        max_publishers: 1,
+        ..qos
+    }
 }
 
 /// The bridged history of `handle`'s trajectory, warning once where a cache without
@@ -110,5 +119,6 @@ mod tests {
         assert_eq!(bridge_qos(&all, &reading).history_size, DEFAULT_MAX_HISTORY);
         let hundred = FluentStreamPolicy::default().cache(CacheConstraint::Elements(100));
         assert_eq!(bridge_qos(&hundred, &image).history_size, 100, "an explicit bound is kept");
+        assert_eq!(bridge_qos(&all, &reading).max_publishers, 1, "the writer's alone");
     }
 }

@@ -62,7 +62,7 @@ pub fn look(esgm: &ShmEsgm, known_pid: &mut Option<u32>) -> CoordinatorSight {
 }
 
 /// True while process `pid` runs (a zombie has stopped).
-fn process_alive(pid: u32) -> bool {
+pub(crate) fn process_alive(pid: u32) -> bool {
     match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
         Ok(stat) => {
             stat.rsplit_once(')').is_some_and(|(_, rest)| !rest.trim_start().starts_with('Z'))

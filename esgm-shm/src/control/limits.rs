@@ -104,7 +104,8 @@ pub fn check_request(request: &Request) -> Result<(), ControlError> {
             check_name("host", host)
         }
         Request::GetEntityTrajectoryStructure { name }
-        | Request::DestroyEntityTrajectoryStructure { name } => check_name("trajectory", name),
+        | Request::DestroyEntityTrajectoryStructure { name }
+        | Request::ReportWriter { trajectory: name, .. } => check_name("trajectory", name),
         Request::ReportHoldings { host, .. } | Request::Assignments { host } => {
             check_name("host", host)
         }

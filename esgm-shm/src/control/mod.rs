@@ -23,7 +23,7 @@ pub mod state;
 
 pub use client::{ControlClient, ControlClientError};
 pub use processes::{ProcessError, ProcessRecord, ProcessSpec, ProcessStatus};
-pub use protocol::{Assignment, ControlError, Request, Response, TrajectoryRecord};
+pub use protocol::{Assignment, ControlError, Request, Response, TrajectoryRecord, WriterPort};
 pub use registry::{Origin, Registry};
 pub use server::{Coordinator, CoordinatorError, CoordinatorThread};
 pub use state::{StateDir, StateError};

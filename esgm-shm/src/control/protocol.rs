@@ -144,6 +144,34 @@ pub enum Request {
         /// What the supervisor saw.
         status: ProcessStatus,
     },
+    /// The writer of a trajectory names the iceoryx2 publisher port it writes with, so
+    /// readers accept samples from that port alone ([`WriterPort`]). Accepted from
+    /// the asking process (its pid is recorded with the port) while no other live
+    /// process holds the record.
+    ReportWriter {
+        /// The trajectory.
+        trajectory: String,
+        /// Its generation ([`TrajectoryRecord::generation`]): a report on a former
+        /// generation is refused.
+        generation: u64,
+        /// The publisher port's id (`UniquePublisherId::value`).
+        publisher: u128,
+    },
+}
+
+/// The one publisher port readers of a trajectory accept samples and resets from, and
+/// the process that holds it.
+///
+/// Why: a trajectory's data service is iceoryx2 shared memory that any process of the
+/// user can open. esgm creates it with room for one publisher, but a process that
+/// comes first can create it with more; so readers also check each sample's port
+/// against the one the writer registered, and the writer's gate stays the only way in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct WriterPort {
+    /// The publisher port's id (`UniquePublisherId::value`).
+    pub publisher: u128,
+    /// The pid of the process that reported it (iceoryx2's record of its client port).
+    pub pid: u32,
 }
 
 /// A trajectory a process must write, and how to build it.
@@ -169,6 +197,9 @@ pub struct TrajectoryRecord {
     pub writer: String,
     /// Changes each time the name is created or re-pointed (unique in the registry).
     pub generation: u64,
+    /// The writer's publisher port, once it has reported it ([`Request::ReportWriter`]).
+    #[serde(default)]
+    pub port: Option<WriterPort>,
 }
 
 /// Where one trajectory is written ([`Request::ListPlacements`]).
@@ -182,6 +213,9 @@ pub struct PlacementRecord {
     pub generation: u64,
     /// Its type's name.
     pub type_name: String,
+    /// The writer's publisher port, once reported ([`TrajectoryRecord::port`]).
+    #[serde(default)]
+    pub port: Option<WriterPort>,
 }
 
 /// A coordinator's answer.
@@ -204,8 +238,8 @@ pub enum Response {
     Names(Vec<String>),
     /// Type definitions, by name.
     Definitions(Vec<(String, EntityStructureType)>),
-    /// A trajectory.
-    Trajectory(TrajectoryRecord),
+    /// A trajectory (boxed: by far the largest answer, and a rare one).
+    Trajectory(Box<TrajectoryRecord>),
     /// Trajectories.
     Trajectories(Vec<TrajectoryInfo>),
     /// Sensors.

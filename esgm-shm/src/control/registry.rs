@@ -9,7 +9,7 @@ use esgm_core::{EntityStructureType, TypeChecker, TypeRegistry};
 
 use super::processes::ProcessTable;
 use super::protocol::{
-    Assignment, ControlError, PlacementRecord, Request, Response, TrajectoryRecord,
+    Assignment, ControlError, PlacementRecord, Request, Response, TrajectoryRecord, WriterPort,
 };
 use super::state::{SNAPSHOT_VERSION, SavedTrajectory, Snapshot};
 use crate::holdings::HoldingStats;
@@ -19,6 +19,8 @@ struct Placement {
     writer: String,
     generation: u64,
     spec: TrajectorySpec,
+    /// The writer's publisher port, once reported ([`Request::ReportWriter`]).
+    port: Option<WriterPort>,
 }
 
 /// Names, types, sensors, units and trajectories of one esgm system.
@@ -66,7 +68,7 @@ impl Registry {
     pub fn handle_from(&mut self, request: Request, origin: Origin) -> Response {
         let checked = super::limits::check_request(&request)
             .and_then(|()| check_origin(&request, origin))
-            .and_then(|()| self.apply(request));
+            .and_then(|()| self.apply(request, origin));
         match checked {
             Ok(r) => r,
             Err(e) => Response::Error(e),
@@ -106,6 +108,7 @@ impl Registry {
                     spec: p.spec.clone(),
                     writer: p.writer.clone(),
                     generation: p.generation,
+                    port: p.port,
                 })
             })
             .collect();
@@ -164,7 +167,12 @@ impl Registry {
             r.catalog.insert_trajectory(t.info);
             r.placement.insert(
                 name,
-                Placement { writer: t.writer, generation: t.generation, spec: t.spec },
+                Placement {
+                    writer: t.writer,
+                    generation: t.generation,
+                    spec: t.spec,
+                    port: t.port,
+                },
             );
         }
         r.next_generation = snapshot.next_generation;
@@ -186,9 +194,12 @@ impl Registry {
             // process needs to check the states it receives.
             Err(_) => self.state_definitions(&info),
         };
-        let (writer, generation) =
-            self.placement.get(name).map(|p| (p.writer.clone(), p.generation)).unwrap_or_default();
-        Ok(TrajectoryRecord { info, types, writer, generation })
+        let (writer, generation, port) = self
+            .placement
+            .get(name)
+            .map(|p| (p.writer.clone(), p.generation, p.port))
+            .unwrap_or_default();
+        Ok(TrajectoryRecord { info, types, writer, generation, port })
     }
 
     /// The pid a process reported for `name`, if any.
@@ -196,7 +207,7 @@ impl Registry {
         self.processes.list().into_iter().find(|p| p.spec.name == name).and_then(|p| p.status.pid)
     }
 
-    fn apply(&mut self, request: Request) -> Result<Response, ControlError> {
+    fn apply(&mut self, request: Request, origin: Origin) -> Result<Response, ControlError> {
         Ok(match request {
             Request::Ping => Response::Pong {
                 version: env!("CARGO_PKG_VERSION").to_owned(),
@@ -265,11 +276,12 @@ impl Registry {
                 let generation = self.next_generation;
                 self.next_generation += 1;
                 self.catalog.insert_trajectory(resolved.info);
-                self.placement.insert(name.clone(), Placement { writer, generation, spec });
-                Response::Trajectory(self.record(&name)?)
+                self.placement
+                    .insert(name.clone(), Placement { writer, generation, spec, port: None });
+                Response::Trajectory(Box::new(self.record(&name)?))
             }
             Request::GetEntityTrajectoryStructure { name } => {
-                Response::Trajectory(self.record(&name)?)
+                Response::Trajectory(Box::new(self.record(&name)?))
             }
             Request::DestroyEntityTrajectoryStructure { name } => {
                 self.catalog.remove_trajectory(&name)?;
@@ -293,6 +305,7 @@ impl Registry {
                         name: name.clone(),
                         writer: p.writer.clone(),
                         generation: p.generation,
+                        port: p.port,
                         type_name: self
                             .catalog
                             .trajectory(name)
@@ -325,7 +338,62 @@ impl Registry {
                 self.processes.report(&name, status)?;
                 Response::Done
             }
+            Request::ReportWriter { trajectory, generation, publisher } => {
+                self.report_writer(&trajectory, generation, publisher, origin)?;
+                Response::Done
+            }
         })
+    }
+
+    /// Records the publisher port `origin` writes `trajectory` with. Refused for a
+    /// former generation, from a process the coordinator cannot identify, and while
+    /// another live process holds the record: a process that comes second cannot make
+    /// readers take its samples for the writer's. A writer that died (a crash, a
+    /// restart) leaves its record to the next.
+    fn report_writer(
+        &mut self,
+        trajectory: &str,
+        generation: u64,
+        publisher: u128,
+        origin: Origin,
+    ) -> Result<(), ControlError> {
+        let pid = match origin {
+            Origin::Coordinator => std::process::id(),
+            Origin::Process(pid) => pid,
+            Origin::Unknown => {
+                return Err(ControlError::NotAllowed {
+                    reason: format!(
+                        "a process the coordinator cannot identify may not name the writer of `{trajectory}`"
+                    ),
+                });
+            }
+        };
+        self.catalog.trajectory(trajectory)?;
+        let Some(placement) = self.placement.get_mut(trajectory) else {
+            return Err(ControlError::NotAllowed {
+                reason: format!("`{trajectory}` has no writer placed"),
+            });
+        };
+        if placement.generation != generation {
+            return Err(ControlError::NotAllowed {
+                reason: format!(
+                    "`{trajectory}` is generation {}, not {generation}: the report is about a former trajectory",
+                    placement.generation
+                ),
+            });
+        }
+        if let Some(held) = placement.port {
+            if held.pid != pid && super::attach::process_alive(held.pid) {
+                return Err(ControlError::NotAllowed {
+                    reason: format!(
+                        "process {held_pid} writes `{trajectory}`; process {pid} may not take it over while it lives",
+                        held_pid = held.pid
+                    ),
+                });
+            }
+        }
+        placement.port = Some(WriterPort { publisher, pid });
+        Ok(())
     }
 
     fn state_definitions(&self, info: &TrajectoryInfo) -> Vec<(String, EntityStructureType)> {
@@ -592,6 +660,65 @@ mod tests {
         // ...but a process may report itself.
         assert!(matches!(r.handle_from(report(777), Origin::Process(777)), Response::Done));
         assert_eq!(r.process_pid("cam"), Some(777));
+    }
+
+    #[test]
+    fn the_writer_port_is_named_by_its_live_holder_alone() {
+        let mut r = registry();
+        let created = r.handle(Request::CreateTrajectory {
+            spec: TrajectorySpec::primitive("robot", "RobotState"),
+            host: "robot".into(),
+        });
+        let Response::Trajectory(t) = created else { panic!("{created:?}") };
+        assert_eq!(t.port, None, "nobody has reported yet");
+        let report = |generation, publisher| Request::ReportWriter {
+            trajectory: "robot".into(),
+            generation,
+            publisher,
+        };
+        let me = std::process::id();
+        let port = |r: &mut Registry| match r
+            .handle(Request::GetEntityTrajectoryStructure { name: "robot".into() })
+        {
+            Response::Trajectory(t) => t.port,
+            other => panic!("{other:?}"),
+        };
+        // iceoryx2's ids use all 128 bits, and cross the wire whole.
+        let wire = super::super::protocol::encode(&report(3, u128::MAX)).unwrap();
+        let back: Request = super::super::protocol::decode(&wire).unwrap();
+        assert!(matches!(back, Request::ReportWriter { publisher: u128::MAX, .. }), "{back:?}");
+        // Nobody the coordinator cannot identify, and no former generation.
+        let e = err(r.handle_from(report(t.generation, 7), Origin::Unknown));
+        assert!(matches!(e, ControlError::NotAllowed { .. }), "{e:?}");
+        let e = err(r.handle_from(report(t.generation + 1, 7), Origin::Process(me)));
+        assert!(matches!(e, ControlError::NotAllowed { .. }), "{e:?}");
+        assert!(matches!(
+            r.handle_from(report(t.generation, 7), Origin::Process(me)),
+            Response::Done
+        ));
+        assert_eq!(port(&mut r), Some(WriterPort { publisher: 7, pid: me }));
+        // The holder (this process, alive) may name another port; another process may
+        // not take it over while the holder lives...
+        assert!(matches!(
+            r.handle_from(report(t.generation, 8), Origin::Process(me)),
+            Response::Done
+        ));
+        let e = err(r.handle_from(report(t.generation, 9), Origin::Process(1)));
+        assert!(matches!(e, ControlError::NotAllowed { .. }), "{e:?}");
+        assert_eq!(port(&mut r), Some(WriterPort { publisher: 8, pid: me }));
+        // ...but once the holder is gone (a crash, a restart), the next one may.
+        let dead = u32::MAX - 1;
+        let mut r2 = registry();
+        r2.handle(Request::CreateTrajectory {
+            spec: TrajectorySpec::primitive("robot", "RobotState"),
+            host: "robot".into(),
+        });
+        assert!(matches!(r2.handle_from(report(0, 5), Origin::Process(dead)), Response::Done));
+        assert!(matches!(r2.handle_from(report(0, 6), Origin::Process(me)), Response::Done));
+        assert_eq!(port(&mut r2), Some(WriterPort { publisher: 6, pid: me }));
+        // A recovered coordinator still knows it.
+        let restored = Registry::restore(TypeRegistry::with_library(), r2.snapshot());
+        assert_eq!(port(&mut restored.unwrap()), Some(WriterPort { publisher: 6, pid: me }));
     }
 
     #[test]

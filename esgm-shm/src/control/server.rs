@@ -352,7 +352,9 @@ impl Coordinator {
                     Ok(request) => {
                         let persist = changes_registry(&request);
                         let origin = match &request {
-                            Request::ReportProcess { .. } => self.origin(&active),
+                            Request::ReportProcess { .. } | Request::ReportWriter { .. } => {
+                                self.origin(&active)
+                            }
                             _ => Origin::Unknown,
                         };
                         let response = self.registry.handle_from(request, origin);

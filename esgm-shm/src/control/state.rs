@@ -60,6 +60,10 @@ pub struct SavedTrajectory {
     pub writer: String,
     /// Its generation.
     pub generation: u64,
+    /// Its writer's publisher port: the writer a recovered coordinator adopts keeps
+    /// writing with it, and readers that join later must know it.
+    #[serde(default)]
+    pub port: Option<super::protocol::WriterPort>,
 }
 
 /// Everything the registry holds that a new coordinator needs.

@@ -288,6 +288,13 @@ impl TrajectoryPublisher {
         &self.type_name
     }
 
+    /// This publisher's iceoryx2 port: what every sample it sends carries
+    /// ([`crate::ReceivedSample::publisher_id`]), and what a writer registers so that
+    /// readers accept its samples alone.
+    pub fn id(&self) -> iceoryx2::identifiers::UniquePublisherId {
+        self.port.id()
+    }
+
     /// Subscribers currently connected to the trajectory (for start-up handshakes).
     pub fn subscriber_count(&self) -> usize {
         self.service.dynamic_config().number_of_subscribers()

@@ -151,16 +151,83 @@ pub struct RawPublisher {
 }
 
 impl RawPublisher {
+    /// Opens a publisher on a trajectory's existing data service.
     pub fn new(node: &esgm_shm::ShmNode, domain: &str, trajectory: &str) -> Self {
+        Self::try_open(node, domain, trajectory).unwrap()
+    }
+
+    /// Opens a publisher on a trajectory's existing data service, or says why not.
+    pub fn try_open(
+        node: &esgm_shm::ShmNode,
+        domain: &str,
+        trajectory: &str,
+    ) -> Result<Self, String> {
         let name = ServiceName::new(&data_service_name(domain, trajectory)).unwrap();
         let service = node
             .service_builder(&name)
             .publish_subscribe::<[Block16]>()
             .user_header::<SampleHeader>()
+            .max_publishers(1)
             .open()
+            .map_err(|e| format!("{e:?}"))?;
+        let port = service
+            .publisher_builder()
+            .initial_max_slice_len(4096)
+            .create()
+            .map_err(|e| format!("{e:?}"))?;
+        Ok(Self { port })
+    }
+
+    /// Creates the data service before esgm does, with room for more publishers and
+    /// everything esgm's writer and readers ask of it: a process that comes first.
+    pub fn create_first(node: &esgm_shm::ShmNode, domain: &str, trajectory: &str) -> Self {
+        let name = ServiceName::new(&data_service_name(domain, trajectory)).unwrap();
+        let service = node
+            .service_builder(&name)
+            .publish_subscribe::<[Block16]>()
+            .user_header::<SampleHeader>()
+            .history_size(4096)
+            .subscriber_max_buffer_size(4096)
+            .subscriber_max_borrowed_samples(4096)
+            .max_publishers(4)
+            .max_subscribers(16)
+            .max_nodes(32)
+            .enable_safe_overflow(true)
+            .create()
             .unwrap();
         let port = service.publisher_builder().initial_max_slice_len(4096).create().unwrap();
         Self { port }
+    }
+
+    /// This port's id, as a writer would register it.
+    pub fn id(&self) -> u128 {
+        self.port.id().value()
+    }
+
+    /// Sends a well-formed structure with a header that matches it.
+    pub fn send_structure(&self, es: &EntityStructure, type_name: &str, sequence: u64) {
+        let bytes = esgm_core::codec::encode(es).unwrap();
+        let header = SampleHeader {
+            valid_time: es.valid_time,
+            create_time: es.create_time,
+            archive_len: bytes.len() as u64,
+            type_id: type_id(type_name),
+            kind: SampleHeader::KIND_STRUCTURE,
+            sequence,
+            ..SampleHeader::default()
+        };
+        self.send(&bytes, header);
+    }
+
+    /// Sends a reset marker, as a writer's reset would.
+    pub fn send_reset(&self, type_name: &str, sequence: u64) {
+        let header = SampleHeader {
+            type_id: type_id(type_name),
+            kind: SampleHeader::KIND_RESET,
+            sequence,
+            ..SampleHeader::default()
+        };
+        self.send(&[0; 16], header);
     }
 
     pub fn send(&self, payload: &[u8], header: SampleHeader) {
