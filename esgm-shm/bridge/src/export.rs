@@ -165,6 +165,9 @@ fn export_generation(site: &ExportSite, options: &ExportOptions) -> anyhow::Resu
 
     let interval = options.max_rate.filter(|r| *r > 0.0).map(|r| Duration::from_secs_f64(1.0 / r));
     let mut flow = Flow {
+        writer_port: record.port.map(|p| p.publisher),
+        unverified: VecDeque::new(),
+        not_writer: 0,
         throttled: options.latest_only || interval.is_some(),
         queue: VecDeque::new(),
         last_seen: None,
@@ -179,10 +182,17 @@ fn export_generation(site: &ExportSite, options: &ExportOptions) -> anyhow::Resu
         if site.stop.load(Ordering::Relaxed) {
             return Ok(());
         }
-        if checked.elapsed() >= RECHECK {
+        // A sample from a port the registry has not named yet (a writer that just
+        // started or restarted) is held, and the registry asked soon.
+        let recheck = if flow.unverified.is_empty() { RECHECK } else { VERIFY_WRITER };
+        if checked.elapsed() >= recheck {
             checked = Instant::now();
             match lookup(&site.esgm, name) {
-                Ok(r) if r.generation == record.generation => {}
+                Ok(r) if r.generation == record.generation => {
+                    flow.set_writer(r.port.map(|p| p.publisher));
+                    let not_writer = flow.not_writer;
+                    site.stats.with("export", &site.domain, name, |c| c.not_writer = not_writer);
+                }
                 _ => {
                     site.catalog.lock().remove(name);
                     anyhow::bail!("trajectory `{name}` was destroyed or re-pointed");
@@ -240,8 +250,22 @@ fn export_generation(site: &ExportSite, options: &ExportOptions) -> anyhow::Resu
     }
 }
 
+/// How soon an exporter holding samples from an unnamed port asks the registry again.
+const VERIFY_WRITER: Duration = Duration::from_millis(100);
+
+/// The most samples an exporter holds from ports the registry has not named; past it
+/// the oldest is dropped as not the writer's.
+const MAX_UNVERIFIED: usize = 1024;
+
 /// What an exporter has taken from shared memory and not sent yet.
 struct Flow {
+    /// The writer's publisher port as the registry names it; `None` until it does.
+    /// Only its samples are sent (esgm-shm's readers check the same).
+    writer_port: Option<u128>,
+    /// Messages from a port the registry has not named (yet), with the port, in order.
+    unverified: VecDeque<(u128, Vec<u8>)>,
+    /// Samples and resets dropped as not the writer's.
+    not_writer: u64,
     /// `--latest-only` or `--max-rate`: only the newest waiting message is sent.
     throttled: bool,
     /// Messages made, oldest first (the codec bytes are copied out of shared memory at
@@ -257,7 +281,43 @@ struct Flow {
 }
 
 impl Flow {
+    /// The registry names `port` as the writer's (`None`: not yet): held messages from
+    /// it are queued, in order, the others dropped and counted.
+    fn set_writer(&mut self, port: Option<u128>) {
+        let Some(port) = port else { return };
+        self.writer_port = Some(port);
+        for (from, message) in std::mem::take(&mut self.unverified) {
+            if from == port {
+                self.queue_message(message);
+            } else {
+                self.drop_not_writer(from);
+            }
+        }
+    }
+
+    fn drop_not_writer(&mut self, from: u128) {
+        self.not_writer += 1;
+        if self.not_writer == 1 {
+            tracing::warn!(publisher = %format!("{from:#x}"),
+                "a sample from a port that is not the writer's was not exported (later ones are counted)");
+        }
+    }
+
+    /// Queues a message of the writer's (a reset clears what waits before it).
+    fn queue_message(&mut self, message: Vec<u8>) {
+        if wire::is_reset(&message) {
+            // A reset is never skipped: what came before it is gone everywhere.
+            self.queue.clear();
+        }
+        self.queue.push_back(message);
+    }
+
     fn take(&mut self, received: Result<Option<esgm_shm::ReceivedSample>, ReceiveError>) {
+        let port = match &received {
+            Ok(Some(sample)) => sample.publisher_id().value(),
+            Err(ReceiveError::Reset { publisher, .. }) => publisher.value(),
+            _ => 0,
+        };
         let (writer, sequence, add_time, kind, bytes) = match &received {
             Ok(Some(sample)) => (
                 writer_id(sample.publisher_id().value()),
@@ -275,7 +335,8 @@ impl Flow {
                 return;
             }
         };
-        if self.throttled {
+        let from_writer = self.writer_port == Some(port);
+        if self.throttled && from_writer {
             // Samples the shared-memory queue overwrote while waiting were not sent by
             // choice too.
             if let Some((w, s)) = self.last_seen {
@@ -284,7 +345,9 @@ impl Flow {
                 }
             }
         }
-        self.last_seen = Some((writer, sequence));
+        if from_writer {
+            self.last_seen = Some((writer, sequence));
+        }
         let header = Header {
             session: self.session,
             writer,
@@ -295,10 +358,15 @@ impl Flow {
             type_name: self.type_name.clone(),
             kind,
         };
-        if kind == Kind::Reset {
-            // A reset is never skipped: what came before it is gone everywhere.
-            self.queue.clear();
+        let message = wire::encode(&header, bytes);
+        if from_writer {
+            return self.queue_message(message);
         }
-        self.queue.push_back(wire::encode(&header, bytes));
+        if self.unverified.len() >= MAX_UNVERIFIED {
+            if let Some((from, _)) = self.unverified.pop_front() {
+                self.drop_not_writer(from);
+            }
+        }
+        self.unverified.push_back((port, message));
     }
 }

@@ -40,6 +40,9 @@ pub struct TrajectoryCounters {
     pub skipped: u64,
     /// Importer: messages rejected as malformed (header or archive).
     pub malformed: u64,
+    /// Exporter: samples and resets not sent because they came from a publisher port
+    /// that is not the one the registry names as the writer's (they bypassed its gate).
+    pub not_writer: u64,
     /// Importer: structures the local trajectory's gate dropped (type or policy).
     pub dropped: u64,
     /// Importer: messages refused because the type conflicts with a local one.
