@@ -1,0 +1,42 @@
+//! esgm-fuzz: a fuzzer for everything esgm decodes from another process — the codec's
+//! validation and access, a sample's header and payload as a reader checks them, the
+//! control protocol's requests and answers, and the configuration parser. Run it as
+//! `esgm-fuzz --seconds N`.
+//!
+//! # Design
+//! - **The code under test is the code that runs.** Each target calls the function a
+//!   reader, the coordinator, a client or `esgm apply` calls
+//!   ([`esgm_core::codec::access`], [`esgm_shm::check_sample`],
+//!   [`esgm_shm::control::protocol::decode`] and the coordinator's
+//!   [`esgm_shm::control::Registry`], [`esgm_cli::config::parse`]), never a copy.
+//! - **Inputs** start from valid ones (encodings of the library's types, a compound of
+//!   every value sort, nesting up to the bound; a sample per structure and a reset;
+//!   requests of every kind and the registry's answers; the tutorial and a file with
+//!   every declaration) and are mutated ([`mutate`], [`text`]): bit flips, byte sets,
+//!   truncation, extension, splicing, 4- and 8-byte length and offset fields set to
+//!   boundary values, deep nesting, long strings. Some are generated (random
+//!   structures, nesting past the bound) or random bytes. A hand-written SplitMix64
+//!   ([`rng`]) keeps a case repeatable from its seed and index alone.
+//! - **A finding** is a panic, a hang (one case over `--hang-ms`), an abort (the
+//!   process died: stack overflow, failed allocation) or a broken promise
+//!   ([`target::Broken`]: an accepted archive must decode, a valid encoding must be
+//!   accepted, an answer must be readable). A decoder's typed error is not one.
+//! - **Isolation.** A stack overflow or an abort cannot be caught inside a process, so
+//!   each target runs in a child process ([`runner`]); the parent ([`supervise`])
+//!   finds the case that killed a child, saves it and goes on after it.
+//! - No coverage feedback: cargo-fuzz and libFuzzer need a nightly toolchain. The
+//!   mutations aim at the formats' fields instead.
+
+#![deny(missing_docs)]
+
+pub mod buffer;
+pub mod event;
+pub mod mutate;
+pub mod report;
+pub mod rng;
+pub mod runner;
+pub mod structures;
+pub mod supervise;
+pub mod target;
+pub mod targets;
+pub mod text;

@@ -1,0 +1,191 @@
+//! The codec: [`codec::access`] (envelope and full validation), [`codec::decode`],
+//! [`codec::decode_value`] and [`codec::decode_bytes`] on bytes at any alignment.
+//!
+//! Promises checked beyond "no panic": what `access` accepts decodes (every attribute
+//! value too), re-encodes, and the re-encoding is accepted and encodes the same again;
+//! `decode_bytes` on a misaligned copy agrees with `access` on an aligned one; every
+//! seed is accepted.
+
+use esgm_core::EntityStructure;
+use esgm_core::codec::{self, ARCHIVE_ALIGNMENT, ENVELOPE_LEN, FORMAT_VERSION};
+
+use esgm_shm::Block16;
+use esgm_shm::payload::blocks_for;
+
+use crate::buffer::Blocks;
+use crate::mutate::mutate;
+use crate::rng::Rng;
+use crate::structures;
+use crate::target::{Broken, Target};
+
+/// The codec target.
+#[derive(Debug)]
+pub struct Codec {
+    seeds: Vec<Vec<u8>>,
+}
+
+impl Codec {
+    /// Encodes the seed structures, and an image written in place as a camera does.
+    pub fn new() -> Result<Self, Broken> {
+        let mut seeds = Vec::new();
+        for es in structures::valid() {
+            seeds.push(encode(&es)?);
+        }
+        seeds.push(in_place_image()?);
+        Ok(Self { seeds })
+    }
+}
+
+fn encode(es: &EntityStructure) -> Result<Vec<u8>, Broken> {
+    codec::encode(es).map(|b| b.to_vec()).map_err(|e| Broken::new("a structure encodes", e))
+}
+
+/// An image as [`codec::encode_image_into`] lays it out in a camera's shared memory.
+fn in_place_image() -> Result<Vec<u8>, Broken> {
+    let pixels = 4 * 4 * 3;
+    let mut out = vec![Block16::default(); blocks_for(pixels + codec::IMAGE_OVERHEAD_MAX)];
+    let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut out);
+    let n = codec::encode_image_into("camera", 5, 6, 4, 4, 0, pixels, bytes)
+        .map_err(|e| Broken::new("an image encodes in place", e))?;
+    Ok(bytes[..n].to_vec())
+}
+
+/// Makes the envelope right for `data`'s length, so mutations reach rkyv's validation
+/// instead of stopping at the length check.
+pub fn fix_envelope(data: &mut [u8]) {
+    if data.len() >= ENVELOPE_LEN {
+        let len = (data.len() - ENVELOPE_LEN) as u64;
+        data[..4].copy_from_slice(b"ESGM");
+        data[4..8].copy_from_slice(&FORMAT_VERSION.to_le_bytes());
+        data[8..16].copy_from_slice(&len.to_le_bytes());
+    }
+}
+
+/// A codec input: mostly a mutated seed with its envelope made right again, else a
+/// random structure (nesting past the bound now and then) or random bytes.
+pub fn codec_input(rng: &mut Rng, seeds: &[Vec<u8>]) -> Vec<u8> {
+    match rng.below(20) {
+        0 => {
+            let n = rng.len(4096);
+            let mut data = rng.bytes(n);
+            if rng.chance(50) {
+                fix_envelope(&mut data);
+            }
+            data
+        }
+        1 | 2 => {
+            let es = structures::random(rng);
+            let mut data = codec::encode(&es).map(|b| b.to_vec()).unwrap_or_default();
+            if rng.chance(50) {
+                mutate(rng, &mut data, seeds);
+                fix_envelope(&mut data);
+            }
+            data
+        }
+        _ => {
+            let mut data = rng.pick(seeds).clone();
+            mutate(rng, &mut data, seeds);
+            if rng.chance(80) {
+                fix_envelope(&mut data);
+            }
+            data
+        }
+    }
+}
+
+/// Runs the codec's reading paths on `input`; see the module docs for the promises.
+pub fn check_codec(input: &[u8]) -> Result<Option<EntityStructure>, Broken> {
+    let buffer = Blocks::aligned(input);
+    let accepted = codec::access(buffer.bytes());
+    // The same bytes misaligned by 1 to 15, as a request payload or a file may be.
+    let shifted = Blocks::shifted(input, 1 + input.len() % (ARCHIVE_ALIGNMENT - 1));
+    let anywhere = codec::decode_bytes(shifted.bytes());
+    let archived = match (accepted, anywhere) {
+        (Err(_), Err(_)) => return Ok(None),
+        (Ok(archived), Ok(_)) => archived,
+        (Ok(_), Err(e)) => {
+            return Err(Broken::new("decode_bytes agrees with access at any alignment", e));
+        }
+        (Err(e), Ok(_)) => {
+            return Err(Broken::new("access agrees with decode_bytes at any alignment", e));
+        }
+    };
+    let owned =
+        codec::decode(archived).map_err(|e| Broken::new("an accepted archive decodes", e))?;
+    for pair in archived.attributes.iter() {
+        codec::decode_value(&pair.value)
+            .map_err(|e| Broken::new("an accepted archive's values decode", e))?;
+    }
+    let again =
+        codec::encode(&owned).map_err(|e| Broken::new("a decoded structure encodes again", e))?;
+    let reread = codec::access(&again)
+        .and_then(codec::decode)
+        .map_err(|e| Broken::new("a re-encoded structure is accepted", e))?;
+    let third =
+        codec::encode(&reread).map_err(|e| Broken::new("a decoded structure encodes again", e))?;
+    if third[..] != again[..] {
+        return Err(Broken::new(
+            "decoding and encoding again is stable",
+            format!("{} bytes became {}", again.len(), third.len()),
+        ));
+    }
+    Ok(Some(owned))
+}
+
+impl Target for Codec {
+    fn name(&self) -> &'static str {
+        "codec"
+    }
+
+    fn about(&self) -> &'static str {
+        "codec::access, decode, decode_value, decode_bytes on archives"
+    }
+
+    fn seeds(&self) -> &[Vec<u8>] {
+        &self.seeds
+    }
+
+    fn input(&self, rng: &mut Rng) -> Vec<u8> {
+        codec_input(rng, &self.seeds)
+    }
+
+    fn run(&self, input: &[u8]) -> Result<(), Broken> {
+        check_codec(input).map(|_| ())
+    }
+
+    fn accepts(&self, seed: &[u8]) -> Result<(), Broken> {
+        match check_codec(seed)? {
+            Some(_) => Ok(()),
+            None => {
+                let why = codec::access(Blocks::aligned(seed).bytes()).err();
+                Err(Broken::new(
+                    "a valid encoding is accepted",
+                    why.map_or_else(String::new, |e| e.to_string()),
+                ))
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn seeds_are_accepted_and_some_mutants_too() {
+        let target = Codec::new().map_err(|e| e.to_string()).unwrap_or_else(|e| panic!("{e}"));
+        for seed in target.seeds() {
+            assert_eq!(target.accepts(seed), Ok(()));
+        }
+        let mut accepted = 0;
+        for i in 0..500 {
+            let input = target.input(&mut Rng::for_case(2, i));
+            match check_codec(&input) {
+                Ok(Some(_)) => accepted += 1,
+                Ok(None) => {}
+                Err(broken) => panic!("case {i}: {broken}"),
+            }
+        }
+        assert!(accepted > 25, "{accepted} of 500 accepted");
+    }
+}
