@@ -5,7 +5,10 @@
 //! programs of one system: they log alike (to stderr, `RUST_LOG` or warnings,
 //! iceoryx2's own log cut to errors, since its warnings — no config file, defaults
 //! used — are not news) and report a failure alike (one line naming what was wrong,
-//! never a backtrace; STYLE habit 6).
+//! never a backtrace; STYLE habit 6). They also share their domain's shared memory
+//! alike: privately unless the domain was started to allow others ([`share_domain`]).
+
+pub mod access;
 
 use std::sync::OnceLock;
 
@@ -40,6 +43,19 @@ pub fn init_logging() {
         tracing::warn!("init_logging called twice; the first filter stays reloadable");
     }
     iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
+}
+
+/// Opens this process's files of `domain` to the users [`access::ACCESS_ENV`] admits,
+/// for as long as the returned [`access::Widener`] lives; `None` when the domain is
+/// private (the default: iceoryx2's files are its owner's alone, and nothing needs
+/// doing). The coordinator sets the variable on every worker it starts, so a domain
+/// started with `esgm up --allow-group` or `--allow-others` stays open while its
+/// workers run; a second user's process sets it to publish into such a domain.
+///
+/// A library user's program (`esgm_shm::connect`) is not changed behind its back: it
+/// calls this itself, or [`access::Widener::start`] with the access it chooses.
+pub fn share_domain(domain: &str) -> Result<Option<access::Widener>, access::AccessError> {
+    access::Widener::start(domain, access::ShmAccess::from_env()?)
 }
 
 /// Makes `level` this process's log filter (every target at that level), if

@@ -123,6 +123,20 @@ fn main() -> ExitCode {
     let span = tracing::info_span!("esgm", process = %process);
     let _entered = span.enter();
 
+    // A domain started to allow others: this process opens its own files of the domain
+    // too (`ESGM_SHM_ACCESS`; a worker gets it from the coordinator). `up` opens the
+    // domain as its flags say.
+    let _sharing = match &cli.command {
+        Command::Up(_) => None,
+        _ => match esgm_shm::process::share_domain(&cli.domain) {
+            Ok(widener) => widener,
+            Err(e) => {
+                eprintln!("esgm: {}", esgm_shm::process::one_line(error_chain(&e)));
+                return ExitCode::FAILURE;
+            }
+        },
+    };
+
     // `esgm echo x | head`: a closed stdout ends the command quietly (println! panics
     // on a broken pipe; the panic unwinds, so every connection is closed properly).
     let default_hook = std::panic::take_hook();
@@ -151,6 +165,13 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// An error and its sources, outermost first.
+fn error_chain<'a>(
+    e: &'a (dyn std::error::Error + 'static),
+) -> impl Iterator<Item = &'a (dyn std::error::Error + 'static)> {
+    std::iter::successors(Some(e), |e| e.source())
 }
 
 /// True for the panic `println!` raises when stdout's reader has gone.

@@ -19,6 +19,7 @@ use std::time::{Duration, Instant};
 
 use esgm_shm::control::state::STATE_DIR_ENV;
 use esgm_shm::control::{ProcessRecord, ProcessSpec, ProcessStatus, StateDir};
+use esgm_shm::process::access::{ACCESS_ENV, ShmAccess};
 use esgm_shm::{DOMAIN_ENV, WORKER_ENV};
 
 const FIRST_BACKOFF: Duration = Duration::from_millis(100);
@@ -47,6 +48,8 @@ pub struct Supervisor {
     domain: String,
     /// The domain's state directory (passed to each process; its logs go there).
     state: Option<StateDir>,
+    /// Who may use the domain's shared memory.
+    access: ShmAccess,
     processes: BTreeMap<String, Supervised>,
 }
 
@@ -55,7 +58,19 @@ impl Supervisor {
     /// with the domain's state directory `state` (passed as `ESGM_STATE_DIR`; each
     /// process's output goes to its `logs/`).
     pub fn new(domain: &str, state: Option<StateDir>) -> Self {
-        Self { domain: domain.to_owned(), state, processes: BTreeMap::new() }
+        Self {
+            domain: domain.to_owned(),
+            state,
+            access: ShmAccess::Private,
+            processes: BTreeMap::new(),
+        }
+    }
+
+    /// Starts every process with the domain's shared memory open to `access` (passed
+    /// as `ESGM_SHM_ACCESS`; each process widens its own files, which only it can).
+    pub fn sharing(mut self, access: ShmAccess) -> Self {
+        self.access = access;
+        self
     }
 
     /// Makes the supervised set what the coordinator declares.
@@ -105,7 +120,7 @@ impl Supervisor {
     }
 
     fn start(&self, p: &mut Supervised, restart: bool) {
-        match spawn(&p.spec, &self.domain, self.state.as_ref()) {
+        match spawn(&p.spec, &self.domain, self.access, self.state.as_ref()) {
             Ok(child) => {
                 p.status.pid = Some(child.id());
                 p.child = Some(child);
@@ -308,13 +323,19 @@ pub fn log_file(state: &StateDir, name: &str) -> PathBuf {
     state.log_dir().join(format!("{name}.log"))
 }
 
-fn spawn(spec: &ProcessSpec, domain: &str, state: Option<&StateDir>) -> std::io::Result<Child> {
+fn spawn(
+    spec: &ProcessSpec,
+    domain: &str,
+    access: ShmAccess,
+    state: Option<&StateDir>,
+) -> std::io::Result<Child> {
     let mut command = Command::new(&spec.program);
     command
         .args(&spec.args)
         .envs(spec.env.iter().map(|(k, v)| (k.as_str(), v.as_str())))
         .env(DOMAIN_ENV, domain)
         .env(WORKER_ENV, &spec.name)
+        .env(ACCESS_ENV, access.as_str())
         .stdin(Stdio::null())
         .stdout(Stdio::null());
     if let Some(state) = state {

@@ -14,6 +14,11 @@
 //! If the coordinator crashes, its workers keep running and exchanging data; the next
 //! `esgm up` starts at once, restores the registry, takes over the control service,
 //! and adopts the running workers (same pids, no restart).
+//!
+//! A domain's shared memory is its user's alone unless started with `--allow-group`
+//! or `--allow-others` (see `esgm_shm::process::access` for why the files are widened
+//! after iceoryx2 creates them): the coordinator keeps its files open, and every worker
+//! it starts does the same with its own (`ESGM_SHM_ACCESS`).
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -24,6 +29,7 @@ use esgm_core::TypeRegistry;
 use esgm_shm::ShmEsgm;
 use esgm_shm::control::server::{cleanup_dead_nodes, log_cleanup};
 use esgm_shm::control::{ControlClient, Coordinator, Request, Response, StateDir};
+use esgm_shm::process::access::{ACCESS_ENV, ShmAccess, Widener};
 
 use super::supervise::Supervisor;
 use crate::config::apply::SYSTEM_HOST;
@@ -49,6 +55,27 @@ pub struct Args {
     /// `$XDG_STATE_HOME/esgm/<domain>`, else `~/.local/state/esgm/<domain>`).
     #[arg(long, value_name = "DIR")]
     pub state_dir: Option<PathBuf>,
+    /// Let the users of your group read and write the domain's shared memory (its
+    /// files become 0660/0440); by default only you can.
+    #[arg(long, conflicts_with = "allow_others")]
+    pub allow_group: bool,
+    /// Let every user of this host read and write the domain's shared memory (its
+    /// files become 0666/0444): any local process can then publish into it. Their
+    /// processes take part with `ESGM_SHM_ACCESS=others`.
+    #[arg(long)]
+    pub allow_others: bool,
+}
+
+impl Args {
+    /// Who may use the domain's shared memory: the flags, else `ESGM_SHM_ACCESS`
+    /// (a coordinator restarted by `--supervise` or a service manager), else its user.
+    pub fn access(&self) -> anyhow::Result<ShmAccess> {
+        Ok(match (self.allow_group, self.allow_others) {
+            (true, _) => ShmAccess::Group,
+            (_, true) => ShmAccess::Others,
+            _ => ShmAccess::from_env()?,
+        })
+    }
 }
 
 /// The state directory of `domain`: `dir` if given, else the default.
@@ -57,6 +84,18 @@ pub fn state_dir(domain: &str, dir: Option<&Path>) -> anyhow::Result<StateDir> {
         Some(d) => Ok(StateDir::at(d)),
         None => StateDir::default_for(domain).context("cannot choose a state directory"),
     }
+}
+
+/// Creates the state directory, and any missing parent, for its user alone (0700): it
+/// holds the registry and every process's log, which are nobody else's business
+/// whatever the domain's shared memory allows. A directory that exists keeps its mode.
+fn create_private(dir: &Path) -> anyhow::Result<()> {
+    use std::os::unix::fs::DirBuilderExt as _;
+    std::fs::DirBuilder::new()
+        .recursive(true)
+        .mode(0o700)
+        .create(dir)
+        .with_context(|| format!("cannot create the state directory {}", dir.display()))
 }
 
 /// How long a detached coordinator may take to serve: taking over from a crashed one
@@ -71,6 +110,8 @@ pub fn run(domain: &str, args: &Args) -> anyhow::Result<()> {
     // A configuration is checked before anything starts.
     let plan = args.config.as_deref().map(config::load).transpose()?;
     let state = state_dir(domain, args.state_dir.as_deref())?;
+    let access = args.access()?;
+    create_private(state.path())?;
     if args.detach {
         state.create().context("cannot create the state directory")?;
         std::fs::create_dir_all(state.log_dir()).context("cannot create the log directory")?;
@@ -80,10 +121,19 @@ pub fn run(domain: &str, args: &Args) -> anyhow::Result<()> {
             .append(true)
             .open(&log_path)
             .with_context(|| format!("cannot open {}", log_path.display()))?;
-        let pid =
-            spawn_detached(domain, Some(state.path()), args.supervise, Stdio::from(log), true)?
-                .id();
+        let pid = spawn_coordinator(
+            domain,
+            Some(state.path()),
+            args.supervise,
+            access,
+            Stdio::from(log),
+            true,
+        )?
+        .id();
         println!("coordinator of `{domain}` serving (pid {pid}); stop it with `esgm down`");
+        if access != ShmAccess::Private {
+            println!("its shared memory is open to {access} (ESGM_SHM_ACCESS={access})");
+        }
         if let Some(plan) = &plan {
             if let Err(e) = super::apply::apply_plan(domain, plan, false) {
                 if let Err(stop) = shutdown(domain) {
@@ -95,15 +145,20 @@ pub fn run(domain: &str, args: &Args) -> anyhow::Result<()> {
         return Ok(());
     }
     if args.supervise {
-        return supervise_coordinator(domain, args, &state);
+        return supervise_coordinator(domain, args, access, &state);
     }
-    serve(domain, plan, args.quiet, state)
+    serve(domain, plan, args.quiet, access, state)
 }
 
 /// `esgm up --supervise`: runs the coordinator as a child process and starts it again
 /// (with backoff) whenever it ends other than by an orderly stop. The state directory
 /// makes each new one the old one: registry restored, workers adopted.
-fn supervise_coordinator(domain: &str, args: &Args, state: &StateDir) -> anyhow::Result<()> {
+fn supervise_coordinator(
+    domain: &str,
+    args: &Args,
+    access: ShmAccess,
+    state: &StateDir,
+) -> anyhow::Result<()> {
     const FIRST_BACKOFF: Duration = Duration::from_millis(100);
     const MAX_BACKOFF: Duration = Duration::from_secs(5);
     /// A coordinator that ends this soon, this many times in a row, cannot start (a
@@ -115,6 +170,7 @@ fn supervise_coordinator(domain: &str, args: &Args, state: &StateDir) -> anyhow:
     loop {
         let mut command = Command::new(&exe);
         command.args(["up", "--domain", domain]).arg("--state-dir").arg(state.path());
+        command.env(ACCESS_ENV, access.as_str());
         if args.quiet || !first {
             command.arg("--quiet");
         }
@@ -148,7 +204,13 @@ fn supervise_coordinator(domain: &str, args: &Args, state: &StateDir) -> anyhow:
 }
 
 /// The foreground coordinator: serves until asked to stop.
-fn serve(domain: &str, plan: Option<Plan>, quiet: bool, state: StateDir) -> anyhow::Result<()> {
+fn serve(
+    domain: &str,
+    plan: Option<Plan>,
+    quiet: bool,
+    access: ShmAccess,
+    state: StateDir,
+) -> anyhow::Result<()> {
     let (coordinator, recovered) =
         Coordinator::spawn_recovering(domain, TypeRegistry::with_library(), state.clone())
             .with_context(|| {
@@ -164,6 +226,9 @@ fn serve(domain: &str, plan: Option<Plan>, quiet: bool, state: StateDir) -> anyh
         .connect()
         .context("cannot start the system's own location")?;
     system.serve_assignments();
+    // Before anything is applied: a second user's process may come as soon as we serve.
+    let sharing = Widener::start(domain, access)
+        .with_context(|| format!("cannot open the shared memory of `{domain}` to {access}"))?;
     if !quiet {
         eprintln!("coordinator of `{domain}` serving; stop it with `esgm down --domain {domain}`");
     }
@@ -182,7 +247,7 @@ fn serve(domain: &str, plan: Option<Plan>, quiet: bool, state: StateDir) -> anyh
         })
     });
 
-    let mut supervisor = Supervisor::new(domain, Some(state));
+    let mut supervisor = Supervisor::new(domain, Some(state)).sharing(access);
     // Failures to reach the own coordinator are logged once per streak.
     let mut failing = false;
     while !coordinator.is_finished() {
@@ -206,6 +271,7 @@ fn serve(domain: &str, plan: Option<Plan>, quiet: bool, state: StateDir) -> anyh
         }
         std::thread::sleep(SUPERVISE_EVERY);
     }
+    drop(sharing);
     drop(system);
     supervisor.wait_all(Duration::from_secs(10));
     drop(supervisor);
@@ -239,9 +305,21 @@ pub fn spawn_detached(
     stderr: Stdio,
     outliving: bool,
 ) -> anyhow::Result<std::process::Child> {
+    spawn_coordinator(domain, state_dir, supervise, ShmAccess::Private, stderr, outliving)
+}
+
+/// [`spawn_detached`] with the domain's shared memory open to `access`.
+fn spawn_coordinator(
+    domain: &str,
+    state_dir: Option<&Path>,
+    supervise: bool,
+    access: ShmAccess,
+    stderr: Stdio,
+    outliving: bool,
+) -> anyhow::Result<std::process::Child> {
     let exe = std::env::current_exe().context("cannot find the esgm executable")?;
     let mut command = Command::new(exe);
-    command.args(["up", "--quiet", "--domain", domain]);
+    command.args(["up", "--quiet", "--domain", domain]).env(ACCESS_ENV, access.as_str());
     if !matches!(std::env::var_os("NO_COLOR"), Some(v) if !v.is_empty()) {
         // Its log goes to a file (or the demo's terminal): plain text.
         command.env("NO_COLOR", "1");

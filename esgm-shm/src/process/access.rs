@@ -1,0 +1,570 @@
+//! Who may read and write a domain's shared memory.
+//!
+//! iceoryx2 0.10 creates every file of a service, port and node for its owner alone:
+//! data segments, connections, dynamic configurations and event sockets `0600`, static
+//! configurations and node files `0400`, its directories `0750`. It does so with an
+//! explicit `fchmod` after creation, so the process umask neither widens nor narrows
+//! them, and it has no run-time setting to share them: the only way it offers is the
+//! `dev_permissions` cargo feature, which makes every file of every domain on the host
+//! `0666` at build time. (One file is shared by design: the host-wide node-id counter
+//! `/dev/shm/iox2_*.global_mgmt`, `0666`, which holds no data of any domain.)
+//!
+//! So a domain is private to its user by default, and esgm keeps it so. A domain
+//! started to allow its group or everyone ([`ShmAccess`]; `esgm up --allow-group`,
+//! `--allow-others`) is shared by widening the modes of the domain's files after
+//! iceoryx2 created them: every process of the domain runs a [`Widener`], which
+//! repeatedly finds the files belonging to the domain's services and to the ports of
+//! its own nodes and mirrors the owner's read and write bits to the group (and to
+//! others). Each process widens the files it owns, since only the owner may change a
+//! mode; a process of a second user therefore takes part only when it runs with
+//! [`ACCESS_ENV`] set too. Files iceoryx2 is still initialising (a static
+//! configuration at `0600`, a dynamic one without the owner's read bit) are left
+//! alone: their mode is how iceoryx2 tells them from finished ones.
+//!
+//! Node files (details, monitors, tags) are never widened: another user's process
+//! does not need them to publish or subscribe, and they would let it tamper with the
+//! dead-node detection of this user's processes.
+
+use std::collections::HashSet;
+use std::os::unix::fs::{MetadataExt as _, PermissionsExt as _};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use iceoryx2::config::Config;
+use iceoryx2::node::{Node, NodeState, NodeView as _};
+use iceoryx2::prelude::CallbackProgression;
+use iceoryx2::service::Service as _;
+
+use crate::data_plane::service::ShmService;
+use crate::data_plane::service_name::SERVICE_PREFIX;
+
+/// The environment variable that makes an esgm process take part in sharing its
+/// domain: `private` (the default), `group` or `others`. The coordinator sets it on
+/// every worker it starts; a second user's process sets it itself.
+pub const ACCESS_ENV: &str = "ESGM_SHM_ACCESS";
+
+/// Where iceoryx2 keeps the shared-memory segments (POSIX shared memory on Linux).
+const SHM_DIR: &str = "/dev/shm";
+
+/// How often a [`Widener`] looks for new files: a port another user's process
+/// connects to must become readable before its connection attempt gives up.
+const WIDEN_EVERY: Duration = Duration::from_millis(100);
+
+/// Who may read and write a domain's shared memory.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum ShmAccess {
+    /// Only the user that runs the domain (iceoryx2's own modes, `0600`/`0400`).
+    #[default]
+    Private,
+    /// The owner's group too (`0660`/`0440`): for processes of several users that
+    /// share a group, such as a robot's service accounts.
+    Group,
+    /// Every user of the host (`0666`/`0444`). Any local process can then publish
+    /// into the domain's services; use it only on a host whose users are all trusted.
+    Others,
+}
+
+impl ShmAccess {
+    /// The value of [`ACCESS_ENV`] for this access.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ShmAccess::Private => "private",
+            ShmAccess::Group => "group",
+            ShmAccess::Others => "others",
+        }
+    }
+
+    /// The access [`ACCESS_ENV`] asks for: [`ShmAccess::Private`] when unset or empty.
+    pub fn from_env() -> Result<Self, AccessError> {
+        match std::env::var(ACCESS_ENV) {
+            Ok(v) if v.is_empty() => Ok(ShmAccess::Private),
+            Ok(v) => v.parse(),
+            Err(std::env::VarError::NotPresent) => Ok(ShmAccess::Private),
+            Err(std::env::VarError::NotUnicode(v)) => {
+                Err(AccessError::Unknown { value: v.to_string_lossy().into_owned() })
+            }
+        }
+    }
+
+    /// The mode bits to add to a file whose owner bits are `owner` (`0o600`, `0o400`,
+    /// …): the owner's read and write bits, mirrored to the classes this access
+    /// admits. Execute bits are never added to files.
+    fn widen(self, owner: u32) -> u32 {
+        let rw = owner & 0o600;
+        match self {
+            ShmAccess::Private => 0,
+            ShmAccess::Group => rw >> 3,
+            ShmAccess::Others => (rw >> 3) | (rw >> 6),
+        }
+    }
+
+    /// The mode bits to add to iceoryx2's shared directories, so the admitted users
+    /// can create their own nodes and services in them; sticky, as `/tmp` is, so
+    /// nobody removes another user's files.
+    fn widen_dir(self) -> u32 {
+        match self {
+            ShmAccess::Private => 0,
+            ShmAccess::Group => 0o1070,
+            ShmAccess::Others => 0o1077,
+        }
+    }
+}
+
+impl std::fmt::Display for ShmAccess {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl std::str::FromStr for ShmAccess {
+    type Err = AccessError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "private" => Ok(ShmAccess::Private),
+            "group" => Ok(ShmAccess::Group),
+            "others" => Ok(ShmAccess::Others),
+            other => Err(AccessError::Unknown { value: other.to_owned() }),
+        }
+    }
+}
+
+/// Sharing a domain's shared memory failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum AccessError {
+    /// [`ACCESS_ENV`] holds something else than `private`, `group` or `others`; fix it.
+    #[error("{ACCESS_ENV}=`{value}` is not one of private, group, others")]
+    Unknown {
+        /// The value found.
+        value: String,
+    },
+    /// iceoryx2's nodes could not be listed (its node directory is unreadable): the
+    /// domain's ports are unknown, so nothing was widened.
+    #[error("cannot list iceoryx2's nodes")]
+    CannotListNodes(#[source] iceoryx2::node::NodeListFailure),
+    /// iceoryx2's services could not be listed (its service directory is unreadable).
+    #[error("cannot list iceoryx2's services")]
+    CannotListServices(#[source] iceoryx2::service::ServiceListError),
+    /// A directory holding the domain's files could not be read.
+    #[error("cannot read {}", dir.display())]
+    CannotReadDir {
+        /// The directory.
+        dir: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The thread that keeps the domain open could not be started.
+    #[error("cannot start the shared-memory access thread")]
+    CannotStartThread(#[source] std::io::Error),
+    /// A file's mode could not be changed. For iceoryx2's shared directories this means
+    /// another user created them first: only that user (or root) can open them to
+    /// others, for example with `chmod 1777`.
+    #[error("cannot change the mode of {}", path.display())]
+    CannotChangeMode {
+        /// The file or directory.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+/// What one pass of [`widen_domain`] did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Widened {
+    /// Files whose mode it changed.
+    pub changed: usize,
+    /// Files of the domain it found already wide enough, or still being initialised.
+    pub unchanged: usize,
+}
+
+/// Widens, once, the modes of the files of `domain` this process's user owns, as
+/// `access` admits (see the module documentation for which files). Does nothing for
+/// [`ShmAccess::Private`]. A file that disappears while it runs is not an error: ports
+/// come and go.
+pub fn widen_domain(domain: &str, access: ShmAccess) -> Result<Widened, AccessError> {
+    let mut widened = Widened::default();
+    if access == ShmAccess::Private {
+        return Ok(widened);
+    }
+    let me = effective_uid();
+    for dir in shared_dirs() {
+        widen_shared_dir(&dir, access, me)?;
+    }
+    for path in domain_files(domain)?.shared {
+        match widen_file(&path, access, me)? {
+            true => widened.changed += 1,
+            false => widened.unchanged += 1,
+        }
+    }
+    Ok(widened)
+}
+
+/// iceoryx2's directories that every domain and user of the host shares: its root,
+/// and the node and service directories in it.
+pub fn shared_dirs() -> [PathBuf; 3] {
+    let global = &Config::global_config().global;
+    [global.root_path(), &global.node_dir(), &global.service_dir()]
+        .map(|p| PathBuf::from(p.to_string()))
+}
+
+/// The files iceoryx2 made for a domain that this process's user owns.
+#[derive(Debug, Clone, Default)]
+pub struct DomainFiles {
+    /// The files of the domain's services and of its ports: static and dynamic
+    /// configurations, data segments, connections, event sockets. These are what
+    /// another user's process needs to publish or subscribe, and what
+    /// [`widen_domain`] widens.
+    pub shared: Vec<PathBuf>,
+    /// The files of the domain's nodes: their directories, details, tags and monitor
+    /// files. Never widened.
+    pub nodes: Vec<PathBuf>,
+}
+
+/// The files iceoryx2 made for `domain` that this user owns, found from the domain's
+/// services and nodes (iceoryx2 names its files by hashes and ids, never by service
+/// name). An error means they could not be listed; "none" is never answered for
+/// "unknown".
+pub fn domain_files(domain: &str) -> Result<DomainFiles, AccessError> {
+    let [root, node_dir, service_dir] = shared_dirs();
+    let me = effective_uid();
+    let ids = domain_ids(domain, &node_dir, me)?;
+    let mut files = DomainFiles::default();
+    for dir in [Path::new(SHM_DIR), root.as_path(), service_dir.as_path()] {
+        files
+            .shared
+            .extend(owned_entries(dir, me, |name| name.starts_with("iox2_") && ids.matches(name))?);
+    }
+    // `<nodes>/iox2_<node id>.node_monitor…`, and `<nodes>/<node id>/` with its files.
+    let node_ids: HashSet<String> = ids.nodes.iter().map(u128::to_string).collect();
+    files.nodes.extend(owned_entries(&node_dir, me, |name| {
+        name.split(['_', '.']).any(|part| node_ids.contains(part))
+    })?);
+    for node in &ids.nodes {
+        let dir = node_dir.join(node.to_string());
+        if dir.is_dir() {
+            files.nodes.extend(owned_entries(&dir, me, |_| true)?);
+        }
+    }
+    Ok(files)
+}
+
+/// The entries of `dir` this user owns whose names `wanted` accepts. Entries that
+/// vanish while listed (a port closed) are left out; a directory that vanished has
+/// none.
+fn owned_entries(
+    dir: &Path,
+    me: u32,
+    wanted: impl Fn(&str) -> bool,
+) -> Result<Vec<PathBuf>, AccessError> {
+    let gone = |e: &std::io::Error| e.kind() == std::io::ErrorKind::NotFound;
+    let failed = |source| AccessError::CannotReadDir { dir: dir.to_owned(), source };
+    let entries = match std::fs::read_dir(dir) {
+        Ok(entries) => entries,
+        Err(e) if gone(&e) => return Ok(Vec::new()),
+        Err(e) => return Err(failed(e)),
+    };
+    let mut out = Vec::new();
+    for entry in entries {
+        let entry = match entry {
+            Ok(entry) => entry,
+            Err(e) if gone(&e) => continue,
+            Err(e) => return Err(failed(e)),
+        };
+        let name = entry.file_name();
+        if !name.to_str().is_some_and(&wanted) {
+            continue;
+        }
+        match entry.metadata() {
+            Ok(m) if m.uid() == me => out.push(entry.path()),
+            Ok(_) => {}
+            Err(e) if gone(&e) => {}
+            Err(e) => return Err(failed(e)),
+        }
+    }
+    Ok(out)
+}
+
+/// The identifiers that name the files of a domain: its services' hashes (static
+/// configurations) and unique ids (dynamic configurations), and the port ids of this
+/// user's nodes of the domain (data segments, connections, event sockets).
+struct DomainIds {
+    tokens: HashSet<String>,
+    /// This user's nodes of the domain.
+    nodes: Vec<u128>,
+}
+
+impl DomainIds {
+    /// True if one of the `_`/`.`-separated parts of a file name is one of the ids.
+    fn matches(&self, name: &str) -> bool {
+        name.split(['_', '.']).any(|part| self.tokens.contains(part))
+    }
+}
+
+/// True if the service or node `name` is one of `domain`'s: `esgm/<domain>/…`, or one
+/// of the domain's derived namespaces, `esgm/<domain>.g<generation>/…` (a mirrored
+/// trajectory's generation) and `esgm/<domain>:<kind>/…` (inboxes, joins).
+fn belongs_to(domain: &str, name: &str) -> bool {
+    let Some(rest) = name.strip_prefix(SERVICE_PREFIX).and_then(|r| r.strip_prefix('/')) else {
+        return false;
+    };
+    let Some(rest) = rest.strip_prefix(domain) else { return false };
+    let Some((mut namespace, _)) = rest.split_once('/') else { return false };
+    // Each suffix once at most, generation first: `.g3`, `:add`, `.g3:add`.
+    let mut part = |tag: &str, allowed: fn(&u8) -> bool| {
+        let Some(tail) = namespace.strip_prefix(tag) else { return true };
+        let len = tail.bytes().take_while(allowed).count();
+        namespace = &tail[len..];
+        len > 0
+    };
+    part(".g", u8::is_ascii_digit) && part(":", u8::is_ascii_lowercase) && namespace.is_empty()
+}
+
+fn domain_ids(domain: &str, node_dir: &Path, me: u32) -> Result<DomainIds, AccessError> {
+    let config = Config::global_config();
+    let mut tokens = HashSet::new();
+
+    ShmService::list(config, |service| {
+        let s = &service.static_details;
+        if belongs_to(domain, s.name().as_str()) {
+            tokens.insert(s.service_hash().as_str().to_owned());
+            tokens.insert(s.unique_service_id().value().to_string());
+        }
+        CallbackProgression::Continue
+    })
+    .map_err(AccessError::CannotListServices)?;
+
+    let mut nodes = Vec::new();
+    Node::<ShmService>::list(config, |state| {
+        let view_of = |id: u128, details: Option<&iceoryx2::node::NodeDetails>| {
+            details.filter(|d| belongs_to(domain, d.name().as_str())).map(|_| id)
+        };
+        let id = match &state {
+            NodeState::Alive(v) => view_of(v.id().value(), v.details().as_ref()),
+            NodeState::Dead(v) => view_of(v.id().value(), v.details().as_ref()),
+            // Another user's node (no details readable) or one being set up.
+            _ => None,
+        };
+        nodes.extend(id);
+        CallbackProgression::Continue
+    })
+    .map_err(AccessError::CannotListNodes)?;
+
+    // A node's directory holds a tag file per port it owns: `iox2_<port id>.port_tag`.
+    let mut mine = Vec::new();
+    for node in nodes {
+        let dir = node_dir.join(node.to_string());
+        let gone = |e: &std::io::Error| e.kind() == std::io::ErrorKind::NotFound;
+        // The node ended since it was listed: nothing to widen.
+        let owner = match std::fs::metadata(&dir) {
+            Ok(m) => m.uid(),
+            Err(e) if gone(&e) => continue,
+            Err(source) => return Err(AccessError::CannotReadDir { dir, source }),
+        };
+        if owner != me {
+            continue;
+        }
+        mine.push(node);
+        let entries = match std::fs::read_dir(&dir) {
+            Ok(entries) => entries,
+            Err(e) if gone(&e) => continue,
+            Err(source) => return Err(AccessError::CannotReadDir { dir, source }),
+        };
+        for entry in entries {
+            let entry = match entry {
+                Ok(entry) => entry,
+                Err(e) if gone(&e) => continue,
+                Err(source) => return Err(AccessError::CannotReadDir { dir, source }),
+            };
+            let name = entry.file_name();
+            let Some(port) = name.to_str().and_then(|n| n.strip_suffix(".port_tag")) else {
+                continue;
+            };
+            if let Some(id) = port.strip_prefix("iox2_") {
+                tokens.insert(id.to_owned());
+            }
+        }
+    }
+    Ok(DomainIds { tokens, nodes: mine })
+}
+
+/// Opens one of iceoryx2's shared directories to the users `access` admits, if this
+/// user owns it. Another user's directory is left to that user: if it is not open, that
+/// user's domain was not started to allow others, and iceoryx2 refuses this process's
+/// nodes and ports with its own error.
+fn widen_shared_dir(dir: &Path, access: ShmAccess, me: u32) -> Result<(), AccessError> {
+    let meta = match std::fs::metadata(dir) {
+        Ok(m) => m,
+        // iceoryx2 creates it with the first node; the next pass widens it.
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(()),
+        Err(source) => return Err(AccessError::CannotReadDir { dir: dir.to_owned(), source }),
+    };
+    let mode = meta.permissions().mode() & 0o7777;
+    let wanted = mode | access.widen_dir();
+    if wanted == mode {
+        return Ok(());
+    }
+    if meta.uid() != me {
+        tracing::debug!(dir = %dir.display(), mode = format!("{mode:o}"),
+            "iceoryx2's directory belongs to another user; it opens it or not");
+        return Ok(());
+    }
+    set_mode(dir, wanted)
+}
+
+/// Widens one file of the domain if this user owns it and iceoryx2 finished it:
+/// `Ok(true)` if its mode changed.
+fn widen_file(path: &Path, access: ShmAccess, me: u32) -> Result<bool, AccessError> {
+    let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default();
+    let meta = match std::fs::symlink_metadata(path) {
+        Ok(m) => m,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(false),
+        Err(source) => return Err(AccessError::CannotReadDir { dir: path.to_owned(), source }),
+    };
+    if meta.uid() != me || meta.is_dir() {
+        return Ok(false);
+    }
+    let mode = meta.permissions().mode() & 0o7777;
+    let owner = mode & 0o700;
+    // Still being initialised: iceoryx2 reads "finished" from these modes (a static
+    // configuration drops to read-only, a dynamic one gains the owner's read bit).
+    let initialising = owner & 0o400 == 0 || (name.ends_with(".service") && owner & 0o200 != 0);
+    if initialising {
+        return Ok(false);
+    }
+    let wanted = mode | access.widen(owner);
+    if wanted == mode {
+        return Ok(false);
+    }
+    match set_mode(path, wanted) {
+        Ok(()) => Ok(true),
+        Err(AccessError::CannotChangeMode { source, .. })
+            if source.kind() == std::io::ErrorKind::NotFound =>
+        {
+            Ok(false)
+        }
+        Err(e) => Err(e),
+    }
+}
+
+fn set_mode(path: &Path, mode: u32) -> Result<(), AccessError> {
+    std::fs::set_permissions(path, std::fs::Permissions::from_mode(mode))
+        .map_err(|source| AccessError::CannotChangeMode { path: path.to_owned(), source })
+}
+
+fn effective_uid() -> u32 {
+    // SAFETY: geteuid has no preconditions and cannot fail.
+    unsafe { libc::geteuid() }
+}
+
+/// Keeps a domain's files as open as its [`ShmAccess`] says, for as long as it lives:
+/// a thread that runs [`widen_domain`] every 100 ms. A failure is logged once, when it
+/// starts (and again when a different one follows); the thread stops when dropped.
+#[derive(Debug)]
+pub struct Widener {
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Widener {
+    /// Starts widening `domain`'s files as `access` admits; `None` for
+    /// [`ShmAccess::Private`], which needs nothing done. The first pass runs before
+    /// this returns, so its failure is the caller's to report.
+    pub fn start(domain: &str, access: ShmAccess) -> Result<Option<Self>, AccessError> {
+        if access == ShmAccess::Private {
+            return Ok(None);
+        }
+        widen_domain(domain, access)?;
+        let stop = Arc::new(AtomicBool::new(false));
+        let (d, s) = (domain.to_owned(), Arc::clone(&stop));
+        let thread = std::thread::Builder::new()
+            .name("esgm-shm-access".into())
+            .spawn(move || {
+                let mut last_error = None::<String>;
+                while !s.load(Ordering::Relaxed) {
+                    std::thread::sleep(WIDEN_EVERY);
+                    match widen_domain(&d, access) {
+                        Ok(_) => last_error = None,
+                        Err(e) => {
+                            let line = crate::process::one_line(error_chain(&e));
+                            if last_error.as_deref() != Some(line.as_str()) {
+                                tracing::warn!(domain = %d, %access, error = %line,
+                                    "cannot open the domain's shared memory to others");
+                                last_error = Some(line);
+                            }
+                        }
+                    }
+                }
+            })
+            .map_err(AccessError::CannotStartThread)?;
+        Ok(Some(Self { stop, thread: Some(thread) }))
+    }
+}
+
+impl Drop for Widener {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(thread) = self.thread.take() {
+            if thread.join().is_err() {
+                tracing::warn!("the shared-memory access thread panicked");
+            }
+        }
+    }
+}
+
+fn error_chain<'a>(
+    e: &'a (dyn std::error::Error + 'static),
+) -> Vec<&'a (dyn std::error::Error + 'static)> {
+    std::iter::successors(Some(e), |e| e.source()).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn widening_mirrors_owner_bits_only() {
+        assert_eq!(ShmAccess::Private.widen(0o600), 0);
+        assert_eq!(ShmAccess::Group.widen(0o600), 0o060);
+        assert_eq!(ShmAccess::Others.widen(0o600), 0o066);
+        assert_eq!(ShmAccess::Others.widen(0o400), 0o044);
+        assert_eq!(ShmAccess::Others.widen(0o700), 0o066, "never execute");
+    }
+
+    #[test]
+    fn access_round_trips_and_rejects_typos() {
+        for a in [ShmAccess::Private, ShmAccess::Group, ShmAccess::Others] {
+            assert_eq!(a.as_str().parse::<ShmAccess>().ok(), Some(a));
+        }
+        assert!(matches!("other".parse::<ShmAccess>(), Err(AccessError::Unknown { .. })));
+    }
+
+    #[test]
+    fn services_of_a_domain_and_its_namespaces() {
+        assert!(belongs_to("lab", "esgm/lab/traj/x"));
+        assert!(belongs_to("lab", "esgm/lab.g12/traj/x"));
+        assert!(belongs_to("lab", "esgm/lab:inbox/traj/x"));
+        assert!(belongs_to("lab", "esgm/lab.g0:add/traj/x"));
+        assert!(!belongs_to("lab", "esgm/lab:add.g0/traj/x"));
+        assert!(!belongs_to("lab", "esgm/lab.g/traj/x"));
+        assert!(belongs_to("lab", "esgm/lab/control"));
+        assert!(!belongs_to("lab", "esgm/lab2/traj/x"));
+        assert!(!belongs_to("lab", "esgm/lab.gx/traj/x"));
+        assert!(!belongs_to("lab", "esgm/lab-b/traj/x"));
+        assert!(!belongs_to("lab", "other/lab/traj/x"));
+    }
+
+    #[test]
+    fn ids_match_whole_parts_of_names() {
+        let ids = DomainIds { tokens: ["123".to_owned()].into_iter().collect(), nodes: vec![] };
+        assert!(ids.matches("iox2_abc_123.data"));
+        assert!(ids.matches("iox2_abc_9_123.connection"));
+        assert!(ids.matches("iox2_abc_123__mgmt.data"));
+        assert!(!ids.matches("iox2_abc_1234.data"));
+    }
+}
