@@ -86,6 +86,17 @@ pub fn number_label(v: f64) -> String {
     }
 }
 
+/// The axis range of `values` with a little room, never empty: a flat or empty series
+/// still gets an axis (`esgm plot`, `esgm soak`).
+pub fn bounds(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (lo, hi) = values.fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    if lo > hi {
+        return (0.0, 1.0);
+    }
+    let pad = if hi > lo { (hi - lo) * 0.05 } else { lo.abs().max(1.0) * 0.5 };
+    (lo - pad, hi + pad)
+}
+
 /// Draws the legend at `position` and writes the picture: how every chart ends.
 pub fn finish<'a, CT: CoordTranslate>(
     chart: &mut ChartContext<'a, BitMapBackend<'a>, CT>,
@@ -114,6 +125,14 @@ mod tests {
         assert_eq!(number_label(2.0), "2");
         assert_eq!(number_label(-150.0), "-150");
         assert_eq!(color(0), color(10));
+    }
+
+    #[test]
+    fn axes_are_never_empty() {
+        assert_eq!(bounds(std::iter::empty()), (0.0, 1.0));
+        assert_eq!(bounds([2.0].into_iter()), (1.0, 3.0));
+        let (lo, hi) = bounds([0.0, 10.0].into_iter());
+        assert!(lo < 0.0 && hi > 10.0);
     }
 
     #[test]

@@ -51,6 +51,9 @@ enum Command {
     Logs(cmd::logs::Args),
     /// The seed's tutorial as separate processes: coordinator, camera, robot, units.
     Demo(cmd::demo::Args),
+    /// The tutorial run hard for minutes (camera 30 Hz, robot 1 kHz), watched for
+    /// memory growth and losses; writes soak.json and soak.png.
+    Soak(cmd::soak::Args),
     /// Entity structure types.
     #[command(subcommand)]
     Type(cmd::types::TypeCommand),

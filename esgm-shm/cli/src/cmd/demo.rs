@@ -71,16 +71,31 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
         }
     };
 
-    // Shut down: the coordinator goes, the workers notice and leave, `esgm up` waits
-    // for them and cleans up after anything that died.
-    if let Err(e) = super::up::shutdown(&domain) {
+    stop(&domain, &mut coordinator, &state)?;
+    let restarts: u32 = processes.iter().map(|p| p.status.restarts).sum();
+    println!("\nstopped: coordinator and {} workers ({restarts} restarts)", processes.len());
+    result
+}
+
+/// Stops a system this process started (`coordinator`, from
+/// [`super::up::spawn_detached`], with its own `state` directory) and leaves nothing
+/// of it: the coordinator goes, the workers notice and leave, `esgm up` waits for them
+/// and cleans up after anything that died; a coordinator that does not stop within
+/// 20 s is killed, the nodes of dead processes are cleaned and `state` is removed.
+/// Also used by `esgm soak`.
+pub fn stop(
+    domain: &str,
+    coordinator: &mut std::process::Child,
+    state: &StateDir,
+) -> anyhow::Result<()> {
+    if let Err(e) = super::up::shutdown(domain) {
         eprintln!("esgm: {e:#}");
     }
-    let stopped = wait_for_exit(&mut coordinator, Duration::from_secs(20))?;
+    let stopped = wait_for_exit(coordinator, Duration::from_secs(20))?;
     if !stopped {
-        eprintln!("esgm: the demo's coordinator did not stop within 20 s; killing it");
-        coordinator.kill().context("cannot kill the demo's coordinator")?;
-        coordinator.wait().context("cannot reap the demo's coordinator")?;
+        eprintln!("esgm: the coordinator of `{domain}` did not stop within 20 s; killing it");
+        coordinator.kill().context("cannot kill the coordinator")?;
+        coordinator.wait().context("cannot reap the coordinator")?;
     }
     let cleaned = cleanup_dead_nodes().context("cannot list nodes to clean up")?;
     if cleaned > 0 {
@@ -89,9 +104,7 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
     if let Err(e) = std::fs::remove_dir_all(state.path()) {
         eprintln!("esgm: cannot remove {}: {e}", state.path().display());
     }
-    let restarts: u32 = processes.iter().map(|p| p.status.restarts).sum();
-    println!("\nstopped: coordinator and {} workers ({restarts} restarts)", processes.len());
-    result
+    Ok(())
 }
 
 /// Waits up to `limit` for `child` to exit; true if it did.

@@ -20,6 +20,7 @@ pub mod record;
 pub mod registry;
 pub mod replay;
 pub mod reset;
+pub mod soak;
 pub mod stats;
 pub mod supervise;
 pub mod top;
@@ -37,6 +38,7 @@ pub fn process_name(c: &Command) -> String {
     match c {
         Command::Up(_) => "coordinator".into(),
         Command::Demo(_) => "demo".into(),
+        Command::Soak(_) => "soak".into(),
         Command::Worker(role) => role.process_name(),
         _ => "cli".into(),
     }
@@ -82,6 +84,7 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Compare(a) => compare::run(json, a),
         Command::Load(a) => load::run(domain, json, a),
         Command::Bridge(a) => bridge::run(domain, json, a),
+        Command::Soak(a) => soak::run(domain, a),
         Command::Worker(role) => worker::run(domain, role),
     }
 }

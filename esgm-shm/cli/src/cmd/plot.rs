@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use esgm_chart::plotters::prelude::*;
-use esgm_chart::{ChartError, FAMILY, SIZE, color, finish, number_label};
+use esgm_chart::{ChartError, FAMILY, SIZE, bounds, color, finish, number_label};
 use esgm_core::{EntityStructure, EntityTrajectoryStructure, Time};
 use esgm_recording::Recording;
 
@@ -193,28 +193,4 @@ fn draw(trajectory: &str, source: &Source, fields: &[Field], path: &Path) -> any
     }
     finish(&mut chart, &root, SeriesLabelPosition::UpperRight)?;
     Ok(points)
-}
-
-/// The range of `values` with a little room, never empty (a flat or empty series still
-/// gets an axis).
-fn bounds(values: impl Iterator<Item = f64>) -> (f64, f64) {
-    let (lo, hi) = values.fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
-    if lo > hi {
-        return (0.0, 1.0);
-    }
-    let pad = if hi > lo { (hi - lo) * 0.05 } else { lo.abs().max(1.0) * 0.5 };
-    (lo - pad, hi + pad)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::bounds;
-
-    #[test]
-    fn axes_are_never_empty() {
-        assert_eq!(bounds(std::iter::empty()), (0.0, 1.0));
-        assert_eq!(bounds([2.0].into_iter()), (1.0, 3.0));
-        let (lo, hi) = bounds([0.0, 10.0].into_iter());
-        assert!(lo < 0.0 && hi > 10.0);
-    }
 }
