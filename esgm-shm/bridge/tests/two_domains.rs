@@ -341,3 +341,59 @@ fn another_host_queries_a_domain_through_its_bridge() {
         println!("esgm --remote not checked: no esgm executable next to {BRIDGE}");
     }
 }
+
+/// A process that created `robot_state`'s service in A before its writer did (with
+/// room for more publishers) publishes a state one hour ahead. The exporting bridge
+/// sends the writer's samples alone: the forged one is counted as `not_writer`, and B
+/// never holds it.
+#[test]
+fn the_exporter_sends_the_writers_samples_alone() {
+    use esgm_shm::control::{Request, Response};
+    let _one = one_at_a_time();
+    let a = Domain::start("bridge-forge-a");
+    let b = Domain::start("bridge-forge-b");
+    // Generations count up across the registry: the next trajectory gets the probe's + 1.
+    primitive(a.esgm(), "probe", "RobotState", 1);
+    let generation =
+        match a.esgm().control(Request::GetEntityTrajectoryStructure { name: "probe".into() }) {
+            Ok(Response::Trajectory(r)) => r.generation + 1,
+            other => panic!("no record of the probe: {other:?}"),
+        };
+    let node = iceoryx2::prelude::NodeBuilder::new().create::<esgm_shm::ShmService>().unwrap();
+    let roomy = esgm_shm::TrajectoryQos {
+        history_size: 128,
+        subscriber_buffer_size: 128,
+        max_borrowed_samples: 128,
+        max_publishers: 4,
+        max_subscribers: 8,
+        max_nodes: 32,
+        ..esgm_shm::TrajectoryQos::default()
+    };
+    let forger = esgm_shm::TrajectoryPublisher::builder("robot_state", "RobotState")
+        .domain(format!("{}.g{generation}", a.name))
+        .qos(roomy)
+        .create(&node)
+        .unwrap();
+    primitive(a.esgm(), "robot_state", "RobotState", 100);
+    let states = a.esgm().get_entity_trajectory_structure("robot_state").unwrap();
+    let base = now();
+    let hour = 3_600_000_000_000;
+
+    let port = free_port();
+    let listen = format!("tcp/127.0.0.1:{port}");
+    let import_states = format!("{}/robot_state", a.name);
+    let mut bridge_b = Bridge::start(&b.name, &["--listen", &listen, "--import", &import_states]);
+    let mut bridge_a = Bridge::start(&a.name, &["--connect", &listen, "--export", "robot_state"]);
+    // While both bridges run: the writer's, the forger's, the writer's.
+    states.add_blocking(robot(0, base)).unwrap();
+    bridge_b.wait_counters("import", "robot_state", WAIT, |v| v["added"] == 1);
+    forger.publish(&robot(99, base + hour)).unwrap();
+    states.add_blocking(robot(1, base)).unwrap();
+    states.add_blocking(robot(2, base)).unwrap();
+    bridge_a.wait_counters("export", "robot_state", WAIT, |v| v["not_writer"] == 1);
+    bridge_b.wait_counters("import", "robot_state", WAIT, |v| v["added"] == 3);
+    let got = samples(b.esgm(), "robot_state", 3);
+    let times: Vec<i64> = got.iter().map(|s| s.valid_time).collect();
+    let want: Vec<i64> = (0..3).map(|i| robot(i, base).valid_time).collect();
+    assert_eq!(times, want, "the writer's three, not the forged one an hour ahead");
+}
