@@ -30,7 +30,7 @@ use std::os::unix::fs::{MetadataExt as _, PermissionsExt as _};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Duration;
+use std::time::{Duration, Instant, SystemTime};
 
 use iceoryx2::config::Config;
 use iceoryx2::node::{Node, NodeState, NodeView as _};
@@ -51,6 +51,13 @@ const SHM_DIR: &str = "/dev/shm";
 /// How often a [`Widener`] looks for new files: a port another user's process
 /// connects to must become readable before its connection attempt gives up.
 const WIDEN_EVERY: Duration = Duration::from_millis(100);
+
+/// How often a [`Widener`] looks at the domain's files even if the directories that
+/// hold them did not change (a port's tag lives in its node's own directory). A pass
+/// reads /dev/shm and stats the domain's files: every 100 ms in every process of the
+/// tutorial it cost 3–4 % of a core per process in a debug build; the directories'
+/// times tell when there is nothing new.
+const WIDEN_ALL_EVERY: Duration = Duration::from_secs(1);
 
 /// Who may read and write a domain's shared memory.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -188,21 +195,26 @@ pub struct Widened {
 /// [`ShmAccess::Private`]. A file that disappears while it runs is not an error: ports
 /// come and go.
 pub fn widen_domain(domain: &str, access: ShmAccess) -> Result<Widened, AccessError> {
-    let mut widened = Widened::default();
-    if access == ShmAccess::Private {
-        return Ok(widened);
-    }
-    let me = effective_uid();
-    for dir in shared_dirs() {
-        widen_shared_dir(&dir, access, me)?;
-    }
-    for path in domain_files(domain)?.shared {
-        match widen_file(&path, access, me)? {
-            true => widened.changed += 1,
-            false => widened.unchanged += 1,
+    DomainScan::new(domain).widen(access)
+}
+
+impl DomainScan {
+    fn widen(&mut self, access: ShmAccess) -> Result<Widened, AccessError> {
+        let mut widened = Widened::default();
+        if access == ShmAccess::Private {
+            return Ok(widened);
         }
+        for dir in shared_dirs() {
+            widen_shared_dir(&dir, access, self.me)?;
+        }
+        for (path, meta) in self.find(false)?.shared {
+            match widen_file(&path, &meta, access, self.me)? {
+                true => widened.changed += 1,
+                false => widened.unchanged += 1,
+            }
+        }
+        Ok(widened)
     }
-    Ok(widened)
 }
 
 /// iceoryx2's directories that every domain and user of the host shares: its root,
@@ -231,27 +243,146 @@ pub struct DomainFiles {
 /// name). An error means they could not be listed; "none" is never answered for
 /// "unknown".
 pub fn domain_files(domain: &str) -> Result<DomainFiles, AccessError> {
-    let [root, node_dir, service_dir] = shared_dirs();
-    let me = effective_uid();
-    let ids = domain_ids(domain, &node_dir, me)?;
-    let mut files = DomainFiles::default();
-    for dir in [Path::new(SHM_DIR), root.as_path(), service_dir.as_path()] {
-        files
-            .shared
-            .extend(owned_entries(dir, me, |name| name.starts_with("iox2_") && ids.matches(name))?);
+    let found = DomainScan::new(domain).find(true)?;
+    Ok(DomainFiles {
+        shared: found.shared.into_iter().map(|(p, _)| p).collect(),
+        nodes: found.nodes,
+    })
+}
+
+/// What a [`DomainScan`] found: the shared files with their metadata (read once).
+struct Found {
+    shared: Vec<(PathBuf, std::fs::Metadata)>,
+    nodes: Vec<PathBuf>,
+}
+
+/// How long after a directory last changed a listing of it is trusted while it does not
+/// change again: its modification time is coarse (a few ms), so an entry added in the
+/// same tick as the listing would go unnoticed.
+const SETTLE: Duration = Duration::from_millis(50);
+
+/// How long a listing of iceoryx2's services or nodes is trusted at most. iceoryx2
+/// finishes a service's static configuration by changing its mode, which does not
+/// change the directory: a service listed while being created is found again by this
+/// time at the latest. (A node is listable before its monitor file changes the node
+/// directory.) Listing every node and service of the host costs a debug build about
+/// 0.1 s of CPU with the tutorial running, so not every pass.
+const RELIST_EVERY: Duration = Duration::from_secs(5);
+
+/// A listing, and when it was made.
+struct Listed<T> {
+    value: T,
+    /// The listed directory's modification time when it was listed.
+    dir_modified: SystemTime,
+    /// When the directory's time was read: a change in the same tick after it would not
+    /// change that time.
+    checked_at: SystemTime,
+    listed_at: Instant,
+}
+
+impl<T> Listed<T> {
+    /// True if a new listing would say the same: the directory has not changed since,
+    /// it had settled before the listing, and the listing is not old.
+    fn fresh(&self, dir_modified: Option<SystemTime>) -> bool {
+        dir_modified == Some(self.dir_modified)
+            && self.checked_at.duration_since(self.dir_modified).is_ok_and(|d| d > SETTLE)
+            && self.listed_at.elapsed() < RELIST_EVERY
     }
-    // `<nodes>/iox2_<node id>.node_monitor…`, and `<nodes>/<node id>/` with its files.
-    let node_ids: HashSet<String> = ids.nodes.iter().map(u128::to_string).collect();
-    files.nodes.extend(owned_entries(&node_dir, me, |name| {
-        name.split(['_', '.']).any(|part| node_ids.contains(part))
-    })?);
-    for node in &ids.nodes {
-        let dir = node_dir.join(node.to_string());
-        if dir.is_dir() {
-            files.nodes.extend(owned_entries(&dir, me, |_| true)?);
+}
+
+/// Finds a domain's files, again and again: listing iceoryx2's services and nodes (every
+/// one of the host, each read and deserialised: about 0.1 s of a debug build's CPU for
+/// the tutorial) only when their directory changed, or every few seconds.
+struct DomainScan {
+    domain: String,
+    me: u32,
+    /// The domain's services' hashes and unique ids.
+    services: Option<Listed<HashSet<String>>>,
+    /// The domain's nodes (every user's whose details are readable).
+    nodes: Option<Listed<Vec<u128>>>,
+}
+
+/// When `dir` last changed; `None` if it does not exist (yet).
+fn modified(dir: &Path) -> Result<Option<SystemTime>, AccessError> {
+    match std::fs::metadata(dir).and_then(|m| m.modified()) {
+        Ok(t) => Ok(Some(t)),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(source) => Err(AccessError::CannotReadDir { dir: dir.to_owned(), source }),
+    }
+}
+
+impl DomainScan {
+    fn new(domain: &str) -> Self {
+        Self { domain: domain.to_owned(), me: effective_uid(), services: None, nodes: None }
+    }
+
+    /// The domain's files; its node files only if `with_nodes` (the widener never
+    /// touches them, and they are many: a tag per port).
+    fn find(&mut self, with_nodes: bool) -> Result<Found, AccessError> {
+        let [root, node_dir, service_dir] = shared_dirs();
+        let me = self.me;
+        let checked_at = SystemTime::now();
+        let services_modified = modified(&service_dir)?;
+        if !self.services.as_ref().is_some_and(|l| l.fresh(services_modified)) {
+            self.services = match services_modified {
+                Some(m) => Some(listed(service_tokens(&self.domain)?, m, checked_at)),
+                None => None,
+            };
         }
+        let checked_at = SystemTime::now();
+        let nodes_modified = modified(&node_dir)?;
+        if !self.nodes.as_ref().is_some_and(|l| l.fresh(nodes_modified)) {
+            self.nodes = match nodes_modified {
+                Some(m) => Some(listed(domain_nodes(&self.domain)?, m, checked_at)),
+                None => None,
+            };
+        }
+        let mut tokens = self.services.as_ref().map(|l| l.value.clone()).unwrap_or_default();
+        let all_nodes = self.nodes.as_ref().map(|l| l.value.as_slice()).unwrap_or_default();
+        let mine = port_tokens(all_nodes, &node_dir, me, &mut tokens)?;
+        let ids = DomainIds { tokens, nodes: mine };
+        self.collect(&ids, &root, &node_dir, &service_dir, with_nodes)
     }
-    Ok(files)
+
+    fn collect(
+        &self,
+        ids: &DomainIds,
+        root: &Path,
+        node_dir: &Path,
+        service_dir: &Path,
+        with_nodes: bool,
+    ) -> Result<Found, AccessError> {
+        let me = self.me;
+        let mut files = Found { shared: Vec::new(), nodes: Vec::new() };
+        for dir in [Path::new(SHM_DIR), root, service_dir] {
+            files.shared.extend(owned_entries(dir, me, |name| {
+                name.starts_with("iox2_") && ids.matches(name)
+            })?);
+        }
+        if !with_nodes {
+            return Ok(files);
+        }
+        // `<nodes>/iox2_<node id>.node_monitor…`, and `<nodes>/<node id>/` with its files.
+        let node_ids: HashSet<String> = ids.nodes.iter().map(u128::to_string).collect();
+        files.nodes.extend(
+            owned_entries(node_dir, me, |name| {
+                name.split(separator).any(|p| node_ids.contains(p))
+            })?
+            .into_iter()
+            .map(|(p, _)| p),
+        );
+        for node in &ids.nodes {
+            let dir = node_dir.join(node.to_string());
+            if dir.is_dir() {
+                files.nodes.extend(owned_entries(&dir, me, |_| true)?.into_iter().map(|(p, _)| p));
+            }
+        }
+        Ok(files)
+    }
+}
+
+fn listed<T>(value: T, dir_modified: SystemTime, checked_at: SystemTime) -> Listed<T> {
+    Listed { value, dir_modified, checked_at, listed_at: Instant::now() }
 }
 
 /// The entries of `dir` this user owns whose names `wanted` accepts. Entries that
@@ -261,7 +392,7 @@ fn owned_entries(
     dir: &Path,
     me: u32,
     wanted: impl Fn(&str) -> bool,
-) -> Result<Vec<PathBuf>, AccessError> {
+) -> Result<Vec<(PathBuf, std::fs::Metadata)>, AccessError> {
     let gone = |e: &std::io::Error| e.kind() == std::io::ErrorKind::NotFound;
     let failed = |source| AccessError::CannotReadDir { dir: dir.to_owned(), source };
     let entries = match std::fs::read_dir(dir) {
@@ -281,13 +412,18 @@ fn owned_entries(
             continue;
         }
         match entry.metadata() {
-            Ok(m) if m.uid() == me => out.push(entry.path()),
+            Ok(m) if m.uid() == me => out.push((entry.path(), m)),
             Ok(_) => {}
             Err(e) if gone(&e) => {}
             Err(e) => return Err(failed(e)),
         }
     }
     Ok(out)
+}
+
+/// What separates the ids in iceoryx2's file names: `iox2_<kind>_<id>_<id>.<suffix>`.
+fn separator(c: char) -> bool {
+    c == '_' || c == '.'
 }
 
 /// The identifiers that name the files of a domain: its services' hashes (static
@@ -302,7 +438,7 @@ struct DomainIds {
 impl DomainIds {
     /// True if one of the `_`/`.`-separated parts of a file name is one of the ids.
     fn matches(&self, name: &str) -> bool {
-        name.split(['_', '.']).any(|part| self.tokens.contains(part))
+        name.split(separator).any(|part| self.tokens.contains(part))
     }
 }
 
@@ -325,7 +461,9 @@ fn belongs_to(domain: &str, name: &str) -> bool {
     part(".g", u8::is_ascii_digit) && part(":", u8::is_ascii_lowercase) && namespace.is_empty()
 }
 
-fn domain_ids(domain: &str, node_dir: &Path, me: u32) -> Result<DomainIds, AccessError> {
+/// The hashes (static configurations) and unique ids (dynamic configurations) of the
+/// domain's services.
+fn service_tokens(domain: &str) -> Result<HashSet<String>, AccessError> {
     let config = Config::global_config();
     let mut tokens = HashSet::new();
 
@@ -338,7 +476,12 @@ fn domain_ids(domain: &str, node_dir: &Path, me: u32) -> Result<DomainIds, Acces
         CallbackProgression::Continue
     })
     .map_err(AccessError::CannotListServices)?;
+    Ok(tokens)
+}
 
+/// The domain's nodes, every user's whose details this user can read.
+fn domain_nodes(domain: &str) -> Result<Vec<u128>, AccessError> {
+    let config = Config::global_config();
     let mut nodes = Vec::new();
     Node::<ShmService>::list(config, |state| {
         let view_of = |id: u128, details: Option<&iceoryx2::node::NodeDetails>| {
@@ -354,10 +497,19 @@ fn domain_ids(domain: &str, node_dir: &Path, me: u32) -> Result<DomainIds, Acces
         CallbackProgression::Continue
     })
     .map_err(AccessError::CannotListNodes)?;
+    Ok(nodes)
+}
 
-    // A node's directory holds a tag file per port it owns: `iox2_<port id>.port_tag`.
+/// Adds the port ids of this user's nodes among `nodes` to `tokens` (a node's directory
+/// holds a tag file per port it owns: `iox2_<port id>.port_tag`); returns those nodes.
+fn port_tokens(
+    nodes: &[u128],
+    node_dir: &Path,
+    me: u32,
+    tokens: &mut HashSet<String>,
+) -> Result<Vec<u128>, AccessError> {
     let mut mine = Vec::new();
-    for node in nodes {
+    for &node in nodes {
         let dir = node_dir.join(node.to_string());
         let gone = |e: &std::io::Error| e.kind() == std::io::ErrorKind::NotFound;
         // The node ended since it was listed: nothing to widen.
@@ -390,7 +542,7 @@ fn domain_ids(domain: &str, node_dir: &Path, me: u32) -> Result<DomainIds, Acces
             }
         }
     }
-    Ok(DomainIds { tokens, nodes: mine })
+    Ok(mine)
 }
 
 /// Opens one of iceoryx2's shared directories to the users `access` admits, if this
@@ -419,13 +571,13 @@ fn widen_shared_dir(dir: &Path, access: ShmAccess, me: u32) -> Result<(), Access
 
 /// Widens one file of the domain if this user owns it and iceoryx2 finished it:
 /// `Ok(true)` if its mode changed.
-fn widen_file(path: &Path, access: ShmAccess, me: u32) -> Result<bool, AccessError> {
+fn widen_file(
+    path: &Path,
+    meta: &std::fs::Metadata,
+    access: ShmAccess,
+    me: u32,
+) -> Result<bool, AccessError> {
     let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default();
-    let meta = match std::fs::symlink_metadata(path) {
-        Ok(m) => m,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(false),
-        Err(source) => return Err(AccessError::CannotReadDir { dir: path.to_owned(), source }),
-    };
     if meta.uid() != me || meta.is_dir() {
         return Ok(false);
     }
@@ -463,7 +615,9 @@ fn effective_uid() -> u32 {
 }
 
 /// Keeps a domain's files as open as its [`ShmAccess`] says, for as long as it lives:
-/// a thread that runs [`widen_domain`] every 100 ms. A failure is logged once, when it
+/// a thread that runs [`widen_domain`] within 100 ms of a change to the directories
+/// holding the domain's files, and every second regardless (listing iceoryx2's
+/// services and nodes again only when their directories changed, or every 5 s). A failure is logged once, when it
 /// starts (and again when a different one follows); the thread stops when dropped.
 #[derive(Debug)]
 pub struct Widener {
@@ -486,9 +640,18 @@ impl Widener {
             .name("esgm-shm-access".into())
             .spawn(move || {
                 let mut last_error = None::<String>;
+                let mut scan = DomainScan::new(&d);
+                let mut last_pass: Option<(DirTimes, Instant)> = None;
                 while !s.load(Ordering::Relaxed) {
                     std::thread::sleep(WIDEN_EVERY);
-                    match widen_domain(&d, access) {
+                    let times = DirTimes::now();
+                    if last_pass.as_ref().is_some_and(|(t, at)| {
+                        t.settled() && *t == times && at.elapsed() < WIDEN_ALL_EVERY
+                    }) {
+                        continue;
+                    }
+                    last_pass = Some((times, Instant::now()));
+                    match scan.widen(access) {
                         Ok(_) => last_error = None,
                         Err(e) => {
                             let line = crate::process::one_line(error_chain(&e));
@@ -503,6 +666,41 @@ impl Widener {
             })
             .map_err(AccessError::CannotStartThread)?;
         Ok(Some(Self { stop, thread: Some(thread) }))
+    }
+}
+
+/// The modification times of the directories iceoryx2 adds the domain's files to, and
+/// when they were read.
+#[derive(Debug)]
+struct DirTimes {
+    times: Vec<Option<SystemTime>>,
+    read_at: SystemTime,
+}
+
+impl DirTimes {
+    fn now() -> Self {
+        let read_at = SystemTime::now();
+        let [root, nodes, services] = shared_dirs();
+        let times = [PathBuf::from(SHM_DIR), root, nodes, services]
+            .iter()
+            // Unreadable counts as changed: the next pass says why.
+            .map(|d| std::fs::metadata(d).and_then(|m| m.modified()).ok())
+            .collect();
+        Self { times, read_at }
+    }
+
+    /// True if no directory changed within [`SETTLE`] before they were read: a change
+    /// in the same (coarse) tick after reading would not have moved a time.
+    fn settled(&self) -> bool {
+        self.times
+            .iter()
+            .all(|t| t.is_some_and(|t| self.read_at.duration_since(t).is_ok_and(|d| d > SETTLE)))
+    }
+}
+
+impl PartialEq for DirTimes {
+    fn eq(&self, other: &Self) -> bool {
+        self.times == other.times
     }
 }
 
