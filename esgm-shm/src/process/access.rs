@@ -24,6 +24,18 @@
 //! Node files (details, monitors, tags) are never widened: another user's process
 //! does not need them to publish or subscribe, and they would let it tamper with the
 //! dead-node detection of this user's processes.
+//!
+//! Limits, all of them iceoryx2's multi-user model showing through:
+//! - A file becomes open up to 100 ms after iceoryx2 made it (a service listed while
+//!   being created, up to 5 s): another user's port that meets a file not yet open
+//!   fails with iceoryx2's `InsufficientPermissions` and may try again.
+//! - A connection a second user's process created stays in `/dev/shm` after the
+//!   domain stops: the directory is sticky, so only that user (or root) removes it.
+//! - iceoryx2's shared directories (`/tmp/iceoryx2`, its `nodes` and `services`) are
+//!   opened by whoever owns them; if another user made them first without opening
+//!   them, only that user or root can (`chmod 1777`).
+//! - Group access means a file's group, which is its creator's primary group: the
+//!   users must share it (or start their processes under it, `sg GROUP -c …`).
 
 use std::collections::HashSet;
 use std::os::unix::fs::{MetadataExt as _, PermissionsExt as _};
@@ -67,7 +79,7 @@ pub enum ShmAccess {
     #[default]
     Private,
     /// The owner's group too (`0660`/`0440`): for processes of several users that
-    /// share a group, such as a robot's service accounts.
+    /// share a primary group, such as a robot's service accounts.
     Group,
     /// Every user of the host (`0666`/`0444`). Any local process can then publish
     /// into the domain's services; use it only on a host whose users are all trusted.
