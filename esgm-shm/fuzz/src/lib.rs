@@ -12,7 +12,7 @@
 //! - **Inputs** start from valid ones (encodings of the library's types, a compound of
 //!   every value sort, nesting up to the bound; a sample per structure and a reset;
 //!   requests of every kind and the registry's answers; the tutorial and a file with
-//!   every declaration) and are mutated ([`mutate`], [`text`]): bit flips, byte sets,
+//!   every declaration) and are mutated ([`mutate`], [`text`], [`json`]): bit flips, byte sets,
 //!   truncation, extension, splicing, 4- and 8-byte length and offset fields set to
 //!   boundary values, deep nesting, long strings. Some are generated (random
 //!   structures, nesting past the bound) or random bytes. A hand-written SplitMix64
@@ -31,6 +31,7 @@
 
 pub mod buffer;
 pub mod event;
+pub mod json;
 pub mod mutate;
 pub mod report;
 pub mod rng;

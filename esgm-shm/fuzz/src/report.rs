@@ -1,9 +1,11 @@
-//! The run's report: cases, cases per second and findings per target.
+//! The run's report: cases, cases per second and findings per target, by kind.
 
 use std::fmt;
 
+use crate::event::{Finding, Kind};
 use crate::runner::SAVED_ALIKE;
 use crate::supervise::{Plan, TargetReport};
+use crate::target::RESET_EVERY;
 
 /// Everything a run found, printed as a table and a list of findings.
 #[derive(Debug, Clone)]
@@ -26,15 +28,27 @@ impl Report {
     }
 }
 
-/// Findings with a saved input listed per target; the rest are counted.
+/// Findings listed per target; the rest are counted.
 const SHOWN: usize = 20;
 
-fn shown_count(t: &TargetReport) -> usize {
-    t.findings.iter().filter(|x| !x.file.as_os_str().is_empty()).take(SHOWN).count()
-}
+const KINDS: [Kind; 4] = [Kind::Panic, Kind::Hang, Kind::Abort, Kind::Broken];
 
 fn rate(cases: u64, seconds: f64) -> f64 {
     if seconds > 0.0 { cases as f64 / seconds } else { 0.0 }
+}
+
+fn row(
+    f: &mut fmt::Formatter<'_>,
+    name: &str,
+    cases: u64,
+    seconds: f64,
+    findings: &[&Finding],
+) -> fmt::Result {
+    write!(f, "{name:<10} {cases:>12} {seconds:>9.1} {:>10.0}", rate(cases, seconds))?;
+    for kind in KINDS {
+        write!(f, " {:>7}", findings.iter().filter(|x| x.kind == kind).count())?;
+    }
+    writeln!(f)
 }
 
 impl fmt::Display for Report {
@@ -48,55 +62,44 @@ impl fmt::Display for Report {
             self.targets.len(),
             p.hang.as_millis()
         )?;
-        writeln!(
-            f,
-            "{:<10} {:>12} {:>9} {:>10} {:>9}",
-            "target", "cases", "seconds", "cases/s", "findings"
-        )?;
-        let mut seconds = 0.0;
-        for t in &self.targets {
-            seconds += t.seconds;
-            writeln!(
-                f,
-                "{:<10} {:>12} {:>9.1} {:>10.0} {:>9}",
-                t.name,
-                t.cases,
-                t.seconds,
-                rate(t.cases, t.seconds),
-                t.findings.len()
-            )?;
+        write!(f, "{:<10} {:>12} {:>9} {:>10}", "target", "cases", "seconds", "cases/s")?;
+        for kind in KINDS {
+            write!(f, " {:>7}", format!("{kind}s"))?;
         }
-        writeln!(
-            f,
-            "{:<10} {:>12} {:>9.1} {:>10.0} {:>9}",
-            "total",
-            self.cases(),
-            seconds,
-            rate(self.cases(), seconds),
-            self.findings()
-        )?;
+        writeln!(f)?;
         for t in &self.targets {
-            let unsaved = t.findings.iter().filter(|x| x.file.as_os_str().is_empty()).count();
-            let shown = t.findings.iter().filter(|x| !x.file.as_os_str().is_empty()).take(SHOWN);
-            for x in shown {
-                let file = x.file.display();
+            row(f, &t.name, t.cases, t.seconds, &t.findings.iter().collect::<Vec<_>>())?;
+        }
+        let all: Vec<&Finding> = self.targets.iter().flat_map(|t| &t.findings).collect();
+        let seconds = self.targets.iter().map(|t| t.seconds).sum();
+        row(f, "total", self.cases(), seconds, &all)?;
+        for t in &self.targets {
+            for x in t.findings.iter().take(SHOWN) {
+                let file = match x.file.to_str() {
+                    Some("") => "no input saved".to_owned(),
+                    _ => x.file.display().to_string(),
+                };
                 writeln!(
                     f,
                     "FINDING {} {} case {}: {} ({file})",
                     t.name, x.kind, x.index, x.message
                 )?;
+                // From the last reset on: a case may depend on the state earlier cases
+                // left (the request target's registry).
+                let from = x.index - x.index % RESET_EVERY;
                 writeln!(
                     f,
-                    "  again: esgm-fuzz --target {} --seed {} --from {} --max-cases 1",
-                    t.name, p.seed, x.index
+                    "  again: esgm-fuzz --target {} --seed {} --from {from} --max-cases {}",
+                    t.name,
+                    p.seed,
+                    x.index - from + 1
                 )?;
             }
-            let hidden = t.findings.len() - unsaved - shown_count(t);
-            if unsaved + hidden > 0 {
+            let more = t.findings.len().saturating_sub(SHOWN);
+            if more > 0 {
                 writeln!(
                     f,
-                    "  {} more {} finding(s) like those above (inputs saved for {SAVED_ALIKE} of each kind)",
-                    unsaved + hidden,
+                    "  {more} more {} finding(s) (inputs saved for {SAVED_ALIKE} alike)",
                     t.name
                 )?;
             }

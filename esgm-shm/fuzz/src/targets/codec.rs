@@ -1,13 +1,20 @@
 //! The codec: [`codec::access`] (envelope and full validation), [`codec::decode`],
 //! [`codec::decode_value`] and [`codec::decode_bytes`] on bytes at any alignment.
 //!
+//! An accepted archive is also read as each library type, as typed readers do: in
+//! place through its view (`RobotState::view`) and decoded (`from_structure`).
+//!
 //! Promises checked beyond "no panic": what `access` accepts decodes (every attribute
 //! value too), re-encodes, and the re-encoding is accepted and encodes the same again;
-//! `decode_bytes` on a misaligned copy agrees with `access` on an aligned one; every
-//! seed is accepted.
+//! `decode_bytes` on a misaligned copy agrees with `access` on an aligned one; a typed
+//! view and decoding agree on whether an archive is of a type; every seed is accepted.
 
-use esgm_core::EntityStructure;
-use esgm_core::codec::{self, ARCHIVE_ALIGNMENT, ENVELOPE_LEN, FORMAT_VERSION};
+use esgm_core::codec::{
+    self, ARCHIVE_ALIGNMENT, ArchivedEntityStructure, ENVELOPE_LEN, FORMAT_VERSION,
+};
+use esgm_core::library::{Blob, BlobSeq, DrivingDirection, Image, Pose, RobotState, Twist};
+use esgm_core::value::Octets;
+use esgm_core::{Entity, EntityStructure, ViewError};
 
 use esgm_shm::Block16;
 use esgm_shm::payload::blocks_for;
@@ -121,6 +128,7 @@ pub fn check_codec(input: &[u8]) -> Result<Option<EntityStructure>, Broken> {
     let reread = codec::access(&again)
         .and_then(codec::decode)
         .map_err(|e| Broken::new("a re-encoded structure is accepted", e))?;
+    read_as_library_types(archived, &owned)?;
     let third =
         codec::encode(&reread).map_err(|e| Broken::new("a decoded structure encodes again", e))?;
     if third[..] != again[..] {
@@ -130,6 +138,53 @@ pub fn check_codec(input: &[u8]) -> Result<Option<EntityStructure>, Broken> {
         ));
     }
     Ok(Some(owned))
+}
+
+/// Reads an archive as `T` in place (`view`, rebuilding `T` from the view's fields)
+/// and decoded: both must fail, or both read the same (compared as printed, so NaNs
+/// compare too).
+fn read_as<T: Entity + std::fmt::Debug>(
+    archived: &ArchivedEntityStructure,
+    owned: &EntityStructure,
+    view: impl FnOnce(&ArchivedEntityStructure) -> Result<T, ViewError>,
+) -> Result<(), Broken> {
+    let viewed = view(archived).ok().map(|t| format!("{t:?}"));
+    let decoded = T::from_structure(owned).ok().map(|t| format!("{t:?}"));
+    if viewed != decoded {
+        return Err(Broken::new(
+            "a typed view reads what decoding reads",
+            format!("view {viewed:?}, decoded {decoded:?}"),
+        ));
+    }
+    Ok(())
+}
+
+fn read_as_library_types(
+    archived: &ArchivedEntityStructure,
+    owned: &EntityStructure,
+) -> Result<(), Broken> {
+    read_as(archived, owned, |a| {
+        Image::view(a).map(|v| Image {
+            width: v.width(),
+            height: v.height(),
+            format: v.format(),
+            image_data: Octets::from(v.image_data()),
+        })
+    })?;
+    read_as(archived, owned, |a| {
+        Blob::view(a).map(|v| Blob { x: v.x(), y: v.y(), size: v.size() })
+    })?;
+    read_as(archived, owned, |a| BlobSeq::view(a).map(|v| BlobSeq { items: v.items().to_vec() }))?;
+    read_as(archived, owned, |a| {
+        RobotState::view(a).map(|v| RobotState { x: v.x(), y: v.y(), dir: v.dir() })
+    })?;
+    read_as(archived, owned, |a| {
+        DrivingDirection::view(a).map(|v| DrivingDirection { dir: v.dir(), speed: v.speed() })
+    })?;
+    read_as(archived, owned, |a| Pose::view(a).map(|v| Pose { pose: v.pose() }))?;
+    read_as(archived, owned, |a| {
+        Twist::view(a).map(|v| Twist { linear: v.linear(), angular: v.angular() })
+    })
 }
 
 impl Target for Codec {

@@ -146,3 +146,22 @@ impl Target for Configuration {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Mutated files must still parse now and then, so the checks after the syntax
+    /// are reached.
+    #[test]
+    fn some_mutated_files_parse() {
+        let target = Configuration::new();
+        for seed in target.seeds() {
+            assert_eq!(target.accepts(seed), Ok(()));
+        }
+        let parsed = (0..500)
+            .filter(|i| matches!(parse(&target.input(&mut Rng::for_case(6, *i))), Ok(Ok(_))))
+            .count();
+        assert!(parsed > 25, "{parsed} of 500 parsed");
+    }
+}

@@ -6,7 +6,9 @@
 //! the state earlier ones built. Promises checked beyond "no panic": what decodes
 //! encodes and decodes again (a client's request reaches the coordinator), and every
 //! answer the registry gives encodes and decodes as a [`Response`] (the client can
-//! read it); every seed decodes.
+//! read it); after a request that changes the registry, its saved state encodes,
+//! decodes and is restored (a crashed coordinator comes back from it); every seed
+//! decodes.
 
 use std::path::Path;
 use std::sync::{Mutex, PoisonError};
@@ -18,8 +20,11 @@ use esgm_core::library::predefined_types;
 use esgm_shm::HoldingStats;
 use esgm_shm::control::limits::MAX_REQUEST_BYTES;
 use esgm_shm::control::protocol::{decode, encode};
+use esgm_shm::control::registry::changes_registry;
+use esgm_shm::control::state::Snapshot;
 use esgm_shm::control::{ControlError, Origin, ProcessStatus, Registry, Request, Response};
 
+use crate::json::mutate_json;
 use crate::mutate::mutate;
 use crate::rng::Rng;
 use crate::target::{Broken, Target};
@@ -135,17 +140,23 @@ fn response_bytes(response: &Response) -> Result<Vec<u8>, Broken> {
 /// A protocol input: a seed mutated as text or as bytes, or random bytes; never more
 /// than the coordinator decodes (it refuses larger requests unread).
 fn control_input(rng: &mut Rng, seeds: &[Vec<u8>]) -> Vec<u8> {
-    let mut data = if rng.chance(5) {
-        let n = rng.len(4096);
-        rng.bytes(n)
-    } else {
-        let mut data = rng.pick(seeds).clone();
-        if rng.chance(75) {
-            mutate_text(rng, &mut data, seeds, &JSON_TOKENS);
-        } else {
-            mutate(rng, &mut data, seeds);
+    let seed = rng.pick(seeds);
+    let mut data = match rng.below(20) {
+        0 => {
+            let n = rng.len(4096);
+            rng.bytes(n)
         }
-        data
+        1..=10 => mutate_json(rng, seed, seeds).unwrap_or_else(|| seed.clone()),
+        11..=16 => {
+            let mut data = seed.clone();
+            mutate_text(rng, &mut data, seeds, &JSON_TOKENS);
+            data
+        }
+        _ => {
+            let mut data = seed.clone();
+            mutate(rng, &mut data, seeds);
+            data
+        }
     };
     data.truncate(MAX_REQUEST_BYTES);
     data
@@ -199,13 +210,22 @@ impl Target for Requests {
         decode::<Request>(&wire).map_err(|e| Broken::new("a re-encoded request decodes", e))?;
         // Now and then as the coordinator's own supervisor, which may report processes.
         let origin = if input.len() % 4 == 0 { Origin::Coordinator } else { Origin::Unknown };
+        let persist = changes_registry(&request);
         // A panic in an earlier case poisons the lock; the runner resets the registry.
-        let response = self
-            .registry
-            .lock()
-            .unwrap_or_else(PoisonError::into_inner)
-            .handle_from(request, origin);
-        answer_is_readable(&response)
+        let mut registry = self.registry.lock().unwrap_or_else(PoisonError::into_inner);
+        let response = registry.handle_from(request, origin);
+        answer_is_readable(&response)?;
+        if persist && !matches!(response, Response::Error(_)) {
+            // The coordinator saves its state after such a request; a coordinator that
+            // crashed must come back from it.
+            let saved = encode(&registry.snapshot())
+                .map_err(|e| Broken::new("the registry's state encodes", e))?;
+            let read = decode::<Snapshot>(&saved)
+                .map_err(|e| Broken::new("the registry's saved state decodes", e))?;
+            Registry::restore(TypeRegistry::with_library(), read)
+                .map_err(|e| Broken::new("a saved registry is restored", e))?;
+        }
+        Ok(())
     }
 
     fn accepts(&self, seed: &[u8]) -> Result<(), Broken> {
@@ -265,5 +285,20 @@ impl Target for Responses {
     fn accepts(&self, seed: &[u8]) -> Result<(), Broken> {
         decode::<Response>(seed).map_err(|e| Broken::new("a valid answer decodes", e))?;
         self.run(seed)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Mutated requests must still decode often enough to reach the registry.
+    #[test]
+    fn many_mutated_requests_reach_the_registry() {
+        let target = Requests::new().unwrap_or_else(|e| panic!("{e}"));
+        let decoded = (0..1_000)
+            .filter(|i| decode::<Request>(&target.input(&mut Rng::for_case(4, *i))).is_ok())
+            .count();
+        assert!(decoded > 100, "{decoded} of 1000 decoded");
     }
 }
