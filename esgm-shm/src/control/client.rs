@@ -35,6 +35,16 @@ pub enum ControlClientError {
         /// iceoryx2's reason.
         source: RequestResponseOpenError,
     },
+    /// The domain's coordinator runs as another user who did not open the domain to
+    /// this one; ask for `esgm up --allow-group` or `--allow-others` (see
+    /// [`crate::process::access`]).
+    #[error(
+        "the domain `{domain}` is another user's and not open to you (its coordinator can allow it: esgm up --allow-group or --allow-others)"
+    )]
+    NotAllowed {
+        /// The domain.
+        domain: String,
+    },
     /// The client port could not be created (too many clients?).
     #[error("cannot create the control client: {0}")]
     Client(#[source] ClientCreateError),
@@ -117,9 +127,11 @@ impl ControlClient {
             .max_nodes(MAX_NODES)
             .max_active_requests_per_client(4)
             .open()
-            .map_err(|source| ControlClientError::NoCoordinator {
-                domain: domain.to_owned(),
-                source,
+            .map_err(|source| match source {
+                RequestResponseOpenError::InsufficientPermissions => {
+                    ControlClientError::NotAllowed { domain: domain.to_owned() }
+                }
+                source => ControlClientError::NoCoordinator { domain: domain.to_owned(), source },
             })?;
         let client = service
             .client_builder()

@@ -86,18 +86,6 @@ pub fn state_dir(domain: &str, dir: Option<&Path>) -> anyhow::Result<StateDir> {
     }
 }
 
-/// Creates the state directory, and any missing parent, for its user alone (0700): it
-/// holds the registry and every process's log, which are nobody else's business
-/// whatever the domain's shared memory allows. A directory that exists keeps its mode.
-fn create_private(dir: &Path) -> anyhow::Result<()> {
-    use std::os::unix::fs::DirBuilderExt as _;
-    std::fs::DirBuilder::new()
-        .recursive(true)
-        .mode(0o700)
-        .create(dir)
-        .with_context(|| format!("cannot create the state directory {}", dir.display()))
-}
-
 /// How long a detached coordinator may take to serve: taking over from a crashed one
 /// connects every running worker's control client first.
 const START_WITHIN: Duration = Duration::from_secs(30);
@@ -111,7 +99,6 @@ pub fn run(domain: &str, args: &Args) -> anyhow::Result<()> {
     let plan = args.config.as_deref().map(config::load).transpose()?;
     let state = state_dir(domain, args.state_dir.as_deref())?;
     let access = args.access()?;
-    create_private(state.path())?;
     if args.detach {
         state.create().context("cannot create the state directory")?;
         std::fs::create_dir_all(state.log_dir()).context("cannot create the log directory")?;
