@@ -31,6 +31,7 @@ impl Report {
 /// Findings listed per target; the rest are counted.
 const SHOWN: usize = 20;
 
+/// The columns of findings, in the header's order.
 const KINDS: [Kind; 4] = [Kind::Panic, Kind::Hang, Kind::Abort, Kind::Broken];
 
 fn rate(cases: u64, seconds: f64) -> f64 {
@@ -63,10 +64,7 @@ impl fmt::Display for Report {
             p.hang.as_millis()
         )?;
         write!(f, "{:<10} {:>12} {:>9} {:>10}", "target", "cases", "seconds", "cases/s")?;
-        for kind in KINDS {
-            write!(f, " {:>7}", format!("{kind}s"))?;
-        }
-        writeln!(f)?;
+        writeln!(f, " {:>7} {:>7} {:>7} {:>7}", "panics", "hangs", "aborts", "broken")?;
         for t in &self.targets {
             row(f, &t.name, t.cases, t.seconds, &t.findings.iter().collect::<Vec<_>>())?;
         }
