@@ -205,6 +205,42 @@ fn a_domain_is_private_to_its_user_by_default() {
 }
 
 #[test]
+fn allow_group_opens_the_domain_to_the_group_only() {
+    let _one = one_system();
+    let _dirs = RestoreModes::of(shared_dirs());
+    let d = Domain::new("permissions_group");
+    d.ok(&["up", "--detach", "--allow-group"]);
+    d.ok(&["type", "add", "Reading", "value:Double"]);
+    d.ok(&["traj", "create", "reading", "--primitive", "Reading"]);
+    d.ok(&["push", "reading", "value=1.5"]);
+    // Within a pass or two of the coordinator's widener (every 100 ms on a change).
+    let deadline = Instant::now() + Duration::from_secs(20);
+    loop {
+        let files = domain_files(&d.name).expect("cannot list the domain's files");
+        assert!(!files.shared.is_empty(), "found no service or port file of `{}`", d.name);
+        let modes: Vec<(PathBuf, u32)> =
+            files.shared.into_iter().filter_map(|p| mode(&p).map(|(m, _)| (p, m))).collect();
+        for (path, m) in &modes {
+            assert_eq!(m & 0o007, 0, "{} is {m:o}: open to others", path.display());
+        }
+        // The group gets what the owner has (read, and write where the owner writes).
+        let closed: Vec<_> =
+            modes.iter().filter(|(_, m)| (m >> 3) & 0o7 != (m >> 6) & 0o6).collect();
+        if closed.is_empty() {
+            break;
+        }
+        assert!(Instant::now() < deadline, "not opened to the group: {closed:?}");
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    // Node files stay the owner's.
+    for path in domain_files(&d.name).expect("cannot list the domain's files").nodes {
+        if let Some((m, is_dir)) = mode(&path) {
+            assert!(private(m, is_dir), "{} is {m:o}", path.display());
+        }
+    }
+}
+
+#[test]
 fn a_second_user_publishes_only_into_a_domain_that_allows_others() {
     // SAFETY: geteuid has no preconditions.
     if unsafe { libc::geteuid() } != 0 {
@@ -266,7 +302,13 @@ fn publish_as_other(d: &Domain, up: &[&str], other_esgm: &Path) -> bool {
         true
     } else {
         assert!(latest.contains("value=1.5"), "the domain's sample changed: {latest}");
-        eprintln!("{OTHER_USER} refused in `{}`: {}", d.name, o.stderr.trim());
+        // Refused for want of permission, not for another failure.
+        let why = o.stderr.trim();
+        assert!(
+            why.contains("not open to you") || why.contains("cannot create a node"),
+            "{OTHER_USER} failed otherwise: {why}"
+        );
+        eprintln!("{OTHER_USER} refused in `{}`: {why}", d.name);
         false
     }
 }

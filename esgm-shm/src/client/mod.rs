@@ -203,7 +203,7 @@ impl ShmEsgmBuilder {
         let node = NodeBuilder::new()
             .name(&crate::service_name::node_name(&domain, &host))
             .create::<ShmService>()
-            .map_err(ControlClientError::Node)?;
+            .map_err(ControlClientError::node)?;
         let control = ControlClient::connect(&domain, timeout)?;
         let node = SharedNode::new(node);
         let mirrors = Arc::new(SharedMirrors::default());

@@ -35,6 +35,16 @@ pub enum ControlClientError {
         /// iceoryx2's reason.
         source: RequestResponseOpenError,
     },
+    /// iceoryx2's directory for nodes belongs to another user who did not open it:
+    /// no process of this user can take part in any domain on this host until that
+    /// user (or root) opens it, e.g. with `esgm up --allow-others` or `chmod 1777`.
+    #[error(
+        "cannot create a node: iceoryx2's directory {} is another user's and not open to you", dir.display()
+    )]
+    SharedDirClosed {
+        /// The directory.
+        dir: std::path::PathBuf,
+    },
     /// The domain's coordinator runs as another user who did not open the domain to
     /// this one; ask for `esgm up --allow-group` or `--allow-others` (see
     /// [`crate::process::access`]).
@@ -112,6 +122,20 @@ pub struct ControlClient {
     timeout: Duration,
 }
 
+impl ControlClientError {
+    /// The error of a node that could not be created: [`Self::SharedDirClosed`] when
+    /// iceoryx2's node directory is another user's and closed to this one (iceoryx2
+    /// says only "internal error" then), else [`Self::Node`].
+    pub fn node(e: NodeCreationFailure) -> Self {
+        let [_, dir, _] = crate::process::access::shared_dirs();
+        match crate::process::access::usable(&dir) {
+            Ok(false) => Self::SharedDirClosed { dir },
+            // Usable, or unknown: iceoryx2's own reason is all there is.
+            _ => Self::Node(e),
+        }
+    }
+}
+
 impl ControlClient {
     /// Connects to the coordinator of `domain`; calls wait up to `timeout` for answers.
     pub fn connect(domain: &str, timeout: Duration) -> Result<Self, ControlClientError> {
@@ -119,7 +143,7 @@ impl ControlClient {
         let node = NodeBuilder::new()
             .name(&crate::service_name::node_name(domain, "control-client"))
             .create::<ShmService>()
-            .map_err(ControlClientError::Node)?;
+            .map_err(ControlClientError::node)?;
         let service = node
             .service_builder(&name)
             .request_response::<[u8], [u8]>()

@@ -237,6 +237,21 @@ pub fn shared_dirs() -> [PathBuf; 3] {
         .map(|p| PathBuf::from(p.to_string()))
 }
 
+/// True if this process may create files in `dir` (write and search permission);
+/// an error if it cannot tell (the directory is missing, say).
+pub fn usable(dir: &Path) -> std::io::Result<bool> {
+    use std::os::unix::ffi::OsStrExt as _;
+    let path = std::ffi::CString::new(dir.as_os_str().as_bytes())?;
+    // SAFETY: a valid NUL-terminated path; access only reads it.
+    match unsafe { libc::access(path.as_ptr(), libc::W_OK | libc::X_OK) } {
+        0 => Ok(true),
+        _ => match std::io::Error::last_os_error() {
+            e if e.kind() == std::io::ErrorKind::PermissionDenied => Ok(false),
+            e => Err(e),
+        },
+    }
+}
+
 /// The files iceoryx2 made for a domain that this process's user owns.
 #[derive(Debug, Clone, Default)]
 pub struct DomainFiles {
@@ -639,13 +654,16 @@ pub struct Widener {
 
 impl Widener {
     /// Starts widening `domain`'s files as `access` admits; `None` for
-    /// [`ShmAccess::Private`], which needs nothing done. The first pass runs before
-    /// this returns, so its failure is the caller's to report.
+    /// [`ShmAccess::Private`], which needs nothing done. A pass that fails is logged
+    /// (once, until another failure follows) and tried again: in a process of a second
+    /// user, iceoryx2's directories may not be readable because the domain is not
+    /// open, and iceoryx2's own refusal is what that process should report. A
+    /// coordinator that must not start with its domain closed runs [`widen_domain`]
+    /// first.
     pub fn start(domain: &str, access: ShmAccess) -> Result<Option<Self>, AccessError> {
         if access == ShmAccess::Private {
             return Ok(None);
         }
-        widen_domain(domain, access)?;
         let stop = Arc::new(AtomicBool::new(false));
         let (d, s) = (domain.to_owned(), Arc::clone(&stop));
         let thread = std::thread::Builder::new()
@@ -655,7 +673,9 @@ impl Widener {
                 let mut scan = DomainScan::new(&d);
                 let mut last_pass: Option<(DirTimes, Instant)> = None;
                 while !s.load(Ordering::Relaxed) {
-                    std::thread::sleep(WIDEN_EVERY);
+                    if last_pass.is_some() {
+                        std::thread::sleep(WIDEN_EVERY);
+                    }
                     let times = DirTimes::now();
                     if last_pass.as_ref().is_some_and(|(t, at)| {
                         t.settled() && *t == times && at.elapsed() < WIDEN_ALL_EVERY

@@ -29,7 +29,7 @@ use esgm_core::TypeRegistry;
 use esgm_shm::ShmEsgm;
 use esgm_shm::control::server::{cleanup_dead_nodes, log_cleanup};
 use esgm_shm::control::{ControlClient, Coordinator, Request, Response, StateDir};
-use esgm_shm::process::access::{ACCESS_ENV, ShmAccess, Widener};
+use esgm_shm::process::access::{ACCESS_ENV, ShmAccess, Widener, widen_domain};
 
 use super::supervise::Supervisor;
 use crate::config::apply::SYSTEM_HOST;
@@ -214,8 +214,10 @@ fn serve(
         .context("cannot start the system's own location")?;
     system.serve_assignments();
     // Before anything is applied: a second user's process may come as soon as we serve.
-    let sharing = Widener::start(domain, access)
-        .with_context(|| format!("cannot open the shared memory of `{domain}` to {access}"))?;
+    // The first pass here, so a domain that cannot be opened does not start.
+    let cannot_open = || format!("cannot open the shared memory of `{domain}` to {access}");
+    widen_domain(domain, access).with_context(cannot_open)?;
+    let sharing = Widener::start(domain, access).with_context(cannot_open)?;
     if !quiet {
         eprintln!("coordinator of `{domain}` serving; stop it with `esgm down --domain {domain}`");
     }
