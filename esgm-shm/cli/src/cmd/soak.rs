@@ -12,6 +12,15 @@
 //!   on the host for context;
 //! - every trajectory's added count and losses by cause, as `esgm stats` reports them.
 //!
+//! # Caches
+//! The tutorial lets blobs, current_blob and driving_direction keep every sample (no
+//! cache constraint: the seed's default). At 1 kHz that is retention, not a leak:
+//! driving_direction alone grows its writer and the robot's replica by about 25 MB a
+//! minute (measured), and no memory can stay flat. A soak looks for leaks, so by
+//! default those trajectories keep the last 10 s of valid time instead (`--cache`,
+//! overridden in the plan like the periods); `--cache all` runs the file's policy and
+//! shows the retention. Trajectories the file bounds keep their bound.
+//!
 //! At the end it stops the system as `esgm demo` does, checks that no process, node or
 //! shared-memory file of the domain is left, prints a verdict, and writes `soak.json`
 //! (every sample and the verdict) and `soak.png` (memory over time, losses) into
@@ -60,6 +69,10 @@ pub struct Args {
     /// robot_state samples per second.
     #[arg(long, default_value_t = 1000.0)]
     pub robot_hz: f64,
+    /// What the trajectories the file lets keep every sample keep during the soak: a
+    /// duration of valid time (`10s`), a count (`1000`), or `all` for the file's policy.
+    #[arg(long, default_value = "10s")]
+    pub cache: String,
     /// Seconds before the baseline memory is taken (at most half the run).
     #[arg(long, default_value_t = 60.0)]
     pub warmup: f64,
@@ -78,6 +91,8 @@ struct Settings {
     out: PathBuf,
     camera_hz: f64,
     robot_hz: f64,
+    /// The cache of unbounded trajectories; `None`: the file's (keep all).
+    cache: Option<String>,
     /// The warm-up, capped at half the run so a short run still compares two halves.
     warmup: f64,
     max_growth: f64,
@@ -100,6 +115,7 @@ impl Settings {
             out: a.out.clone(),
             camera_hz: positive("--camera-hz", a.camera_hz)?,
             robot_hz: positive("--robot-hz", a.robot_hz)?,
+            cache: (a.cache != "all").then(|| a.cache.clone()),
             warmup: warmup.min(seconds / 2.0),
             max_growth: positive("--max-growth", a.max_growth)?,
             check: !a.no_check,
@@ -117,6 +133,9 @@ struct Report<'a> {
     domain: &'a str,
     camera_hz: f64,
     robot_hz: f64,
+    /// The cache the trajectories in `bounded` kept instead of every sample.
+    cache: Option<&'a str>,
+    bounded: &'a [String],
     planned_seconds: f64,
     interrupted: bool,
     /// How the domain's shared memory is told from other files.
@@ -133,7 +152,7 @@ const TUTORIAL: &str = include_str!("../../tutorial.toml");
 /// Runs the soak; a missed target or anything left behind is an error (exit 1).
 pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
     let settings = Settings::new(a)?;
-    let plan = plan(settings.camera_hz, settings.robot_hz)?;
+    let (plan, bounded) = plan(&settings)?;
     std::fs::create_dir_all(&settings.out)
         .with_context(|| format!("cannot create {}", settings.out.display()))?;
     let stop = Arc::new(AtomicBool::new(false));
@@ -145,6 +164,9 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
         settings.robot_hz,
         settings.run_for.as_secs_f64()
     );
+    if let Some(cache) = &settings.cache {
+        println!("  keeping {cache} (not every sample) of {}", bounded.join(", "));
+    }
 
     let mut system = System::start(&domain)?;
     let run = system.soak(&plan, &settings, &stop);
@@ -164,6 +186,8 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
         domain: &domain,
         camera_hz: settings.camera_hz,
         robot_hz: settings.robot_hz,
+        cache: settings.cache.as_deref(),
+        bounded: &bounded,
         planned_seconds: settings.run_for.as_secs_f64(),
         interrupted,
         shm_attribution: "the /dev/shm files mapped by the domain's processes (coordinator, \
@@ -195,14 +219,48 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The tutorial with the camera at `camera_hz` and the robot at `robot_hz`: the
-/// images trajectory's period and the robot's are overridden in the parsed file.
-fn plan(camera_hz: f64, robot_hz: f64) -> anyhow::Result<Plan> {
+/// The tutorial at the soak's settings, overridden in the parsed file: the images
+/// trajectory's period, the robot's, and the cache of every trajectory that keeps all
+/// (returned by name).
+fn plan(settings: &Settings) -> anyhow::Result<(Plan, Vec<String>)> {
     let mut doc: toml::Table = toml::from_str(TUTORIAL).context("tutorial.toml")?;
-    set(&mut doc, "trajectory", ("name", "images"), "period", period_of(camera_hz)?)?;
-    set(&mut doc, "robot", ("trajectory", "robot_state"), "period", period_of(robot_hz)?)?;
+    let camera = period_of(settings.camera_hz)?;
+    set(&mut doc, "trajectory", ("name", "images"), "period", camera)?;
+    let robot = period_of(settings.robot_hz)?;
+    set(&mut doc, "robot", ("trajectory", "robot_state"), "period", robot)?;
+    let bounded = match &settings.cache {
+        Some(cache) => bound_caches(&mut doc, cache),
+        None => Vec::new(),
+    };
     let text = toml::to_string(&doc).context("tutorial.toml")?;
-    Ok(config::parse("tutorial.toml (soak rates)", &text, Path::new("."))?)
+    let plan = config::parse("tutorial.toml (soak settings)", &text, Path::new("."))?;
+    Ok((plan, bounded))
+}
+
+/// Gives every `[[trajectory]]` without a cache constraint (or with `all` or `0`) the
+/// cache `cache`; returns their names.
+fn bound_caches(doc: &mut toml::Table, cache: &str) -> Vec<String> {
+    let mut bounded = Vec::new();
+    let list = doc.get_mut("trajectory").and_then(toml::Value::as_array_mut);
+    for t in list.into_iter().flatten().filter_map(toml::Value::as_table_mut) {
+        let name = t.get("name").and_then(toml::Value::as_str).unwrap_or_default().to_owned();
+        let policy = t
+            .entry("policy")
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+            .as_table_mut();
+        let Some(policy) = policy else { continue }; // not a table: parse() says so
+        let keeps_all = match policy.get("cache") {
+            None => true,
+            Some(toml::Value::String(s)) => s == "all" || s == "0",
+            Some(toml::Value::Integer(n)) => *n == 0,
+            Some(_) => false,
+        };
+        if keeps_all {
+            policy.insert("cache".to_owned(), toml::Value::String(cache.to_owned()));
+            bounded.push(name);
+        }
+    }
+    bounded
 }
 
 /// A rate as a configuration file's period: integer nanoseconds.
@@ -439,23 +497,29 @@ fn print(v: &Verdict, samples: &[Sample], left_behind: &[String]) {
         v.baseline_t, v.end_t, v.target_percent, load[0], load[1], load[2]
     );
     println!(
-        "  {:<28} {:>12} {:>12} {:>12} {:>9}",
+        "  {:<28} {:>12} {:>12} {:>12} {:>9}   (private memory alone)",
         "", "baseline MiB", "end MiB", "peak MiB", "growth"
     );
     for g in v.rss.iter().chain(&v.shm) {
+        let private = v.anon.iter().find(|a| a.what == g.what);
         println!(
-            "  {:<28} {:>12.2} {:>12.2} {:>12.2} {:>8.2}% {}",
+            "  {:<28} {:>12.2} {:>12.2} {:>12.2} {:>8.2}% {:<6} {}",
             g.what,
             mib(g.baseline),
             mib(g.end),
             mib(g.peak),
             g.percent,
-            if g.within { "ok" } else { "MISSED" }
+            if g.within { "ok" } else { "MISSED" },
+            private.map_or(String::new(), |a| format!(
+                "({:.2} MiB, {:+.2} %)",
+                mib(a.end),
+                a.percent
+            ))
         );
     }
-    println!("\n  {:<28} {:>12}", "trajectory", "added");
-    for (name, added) in &v.added {
-        println!("  {name:<28} {added:>12}");
+    println!("\n  {:<28} {:>12} {:>10} {:>10}", "trajectory", "added", "rate Hz", "stored");
+    for f in &v.trajectories {
+        println!("  {:<28} {:>12} {:>10.1} {:>10}", f.trajectory, f.added, f.rate_hz, f.stored);
     }
     if v.losses.is_empty() {
         println!("\nlosses: none");
@@ -489,6 +553,7 @@ mod tests {
     #![allow(clippy::unwrap_used, clippy::panic)]
 
     use clap::Parser;
+    use esgm_core::CacheConstraint;
 
     use super::*;
 
@@ -516,8 +581,8 @@ mod tests {
     }
 
     #[test]
-    fn the_plan_runs_the_tutorial_at_the_soak_rates() {
-        let plan = plan(30.0, 1000.0).unwrap();
+    fn the_plan_runs_the_tutorial_at_the_soak_settings() {
+        let (plan, bounded) = plan(&settings(&[]).unwrap()).unwrap();
         let robot = plan.workers.iter().find(|w| w.what.spec.name.contains("robot")).unwrap();
         let period = robot.what.spec.args.iter().skip_while(|a| *a != "--period").nth(1);
         assert_eq!(period.map(String::as_str), Some("1ms"));
@@ -528,5 +593,23 @@ mod tests {
             panic!("images is not sampled: {:?}", images.what.spec.source);
         };
         assert_eq!(sample_period, 33_333_333);
+        // The trajectories that keep every sample keep 10 s; the others their bound.
+        assert_eq!(bounded, ["blobs", "current_blob", "driving_direction"]);
+        let cache = |name: &str| {
+            plan.trajectories
+                .iter()
+                .find(|t| t.what.spec.name == name)
+                .unwrap()
+                .what
+                .spec
+                .policy
+                .cache
+        };
+        assert_eq!(cache("driving_direction"), CacheConstraint::Duration(10_000_000_000));
+        assert_eq!(cache("robot_state"), CacheConstraint::Elements(600));
+        let (file, bounded) = super::plan(&settings(&["--cache", "all"]).unwrap()).unwrap();
+        assert!(bounded.is_empty());
+        let all = file.trajectories.iter().find(|t| t.what.spec.name == "blobs").unwrap();
+        assert_eq!(all.what.spec.policy.cache, CacheConstraint::All);
     }
 }

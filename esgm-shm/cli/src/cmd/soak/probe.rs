@@ -81,7 +81,10 @@ pub struct ShmUse {
     /// Bytes tmpfs has allocated to them (`st_blocks × 512`): the pages written, what
     /// the machine actually spends. iceoryx2 sizes a segment for its worst case up
     /// front and tmpfs commits pages as they are used, so this is far below
-    /// `apparent`.
+    /// `apparent`. A page stays allocated until its file is removed, so for a sample
+    /// pool this is the high-water mark of the chunks ever in use at once: it steps up
+    /// when a stalled reader holds more samples than ever before, never down, and
+    /// never past `apparent`.
     pub allocated: u64,
     /// Their sizes as `ls -l` shows them (`st_size`).
     pub apparent: u64,

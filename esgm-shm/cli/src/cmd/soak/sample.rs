@@ -67,6 +67,8 @@ pub struct ProcessSample {
 pub struct Counts {
     /// Structures its writer added.
     pub added: u64,
+    /// Samples its writer's cache holds (what its cache constraint retains).
+    pub stored: usize,
     /// Adds per second over its last 128 adds.
     pub rate_hz: f64,
     /// Its losses by cause (only causes with a count).
@@ -101,7 +103,7 @@ impl Counts {
             .filter(|(_, n, _)| *n > 0)
             .map(|(cause, count, explained)| Loss { cause, count, explained })
             .collect();
-        Counts { added: s.added, rate_hz: s.rate_hz, losses }
+        Counts { added: s.added, stored: s.stored, rate_hz: s.rate_hz, losses }
     }
 }
 
@@ -165,7 +167,7 @@ mod tests {
         };
         report.worker.panics = 1;
         let c = Counts::of(&report);
-        assert_eq!(c.added, 90);
+        assert_eq!((c.added, c.stored), (90, 5));
         assert_eq!(
             c.losses,
             [

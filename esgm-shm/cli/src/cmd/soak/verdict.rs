@@ -61,6 +61,19 @@ pub struct TrajectoryLoss {
     pub loss: Loss,
 }
 
+/// A trajectory at the end of the run.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Flow {
+    /// The trajectory.
+    pub trajectory: String,
+    /// Structures its writer added over the whole run.
+    pub added: u64,
+    /// Samples its writer's cache held at the end.
+    pub stored: usize,
+    /// Its rate at the end, Hz.
+    pub rate_hz: f64,
+}
+
 /// What a run showed, against its targets.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Verdict {
@@ -70,12 +83,16 @@ pub struct Verdict {
     pub baseline_t: f64,
     /// Time of the last sample, seconds.
     pub end_t: f64,
-    /// Resident memory growth per process.
+    /// Resident memory growth per process (judged).
     pub rss: Vec<Growth>,
+    /// Private memory (`RssAnon`) growth per process: not judged, but it tells a leak
+    /// of the process's own (heap) from shared pages it touched for the first time
+    /// (`rss` − `anon`: a shared-memory pool's high-water mark rising).
+    pub anon: Vec<Growth>,
     /// Growth of the domain's allocated shared memory.
     pub shm: Option<Growth>,
-    /// Structures added per trajectory over the whole run (last counters read).
-    pub added: Vec<(String, u64)>,
+    /// Per trajectory, its last counters read.
+    pub trajectories: Vec<Flow>,
     /// Every loss at the end, by trajectory and cause.
     pub losses: Vec<TrajectoryLoss>,
     /// The sum of the unexplained ones.
@@ -101,8 +118,9 @@ pub fn judge(samples: &[Sample], warmup: f64, target_percent: f64) -> Verdict {
             baseline_t: 0.0,
             end_t: 0.0,
             rss: Vec::new(),
+            anon: Vec::new(),
             shm: None,
-            added: Vec::new(),
+            trajectories: Vec::new(),
             losses: Vec::new(),
             unexplained: 0,
             missed: vec!["no sample was taken".to_owned()],
@@ -123,10 +141,12 @@ pub fn judge(samples: &[Sample], warmup: f64, target_percent: f64) -> Verdict {
     let after = &samples[from..];
     let baseline = &samples[from];
 
-    let mut rss = Vec::new();
+    let (mut rss, mut anon) = (Vec::new(), Vec::new());
     for (name, p) in &last.processes {
         let points: Vec<(f64, u64)> =
             after.iter().filter_map(|s| Some((s.t, s.processes.get(name)?.rss))).collect();
+        let private: Vec<(f64, u64)> =
+            after.iter().filter_map(|s| Some((s.t, s.processes.get(name)?.anon))).collect();
         if !baseline.processes.contains_key(name) {
             missed.push(format!("{name} was not measured at the baseline ({:.0} s)", baseline.t));
         }
@@ -137,9 +157,8 @@ pub fn judge(samples: &[Sample], warmup: f64, target_percent: f64) -> Verdict {
         } else if first.processes.get(name).is_some_and(|f| f.pid != p.pid) {
             missed.push(format!("{name} changed pid during the run"));
         }
-        if let Some(g) = Growth::of(name, &points, target_percent) {
-            rss.push(g);
-        }
+        rss.extend(Growth::of(name, &points, target_percent));
+        anon.extend(Growth::of(name, &private, target_percent));
     }
     for name in first.processes.keys().filter(|n| !last.processes.contains_key(*n)) {
         missed.push(format!("{name} was not measured at the end"));
@@ -162,13 +181,18 @@ pub fn judge(samples: &[Sample], warmup: f64, target_percent: f64) -> Verdict {
 
     let counted = samples.iter().rev().find(|s| !s.trajectories.is_empty());
     let mut losses = Vec::new();
-    let mut added = Vec::new();
+    let mut trajectories = Vec::new();
     match counted {
         None => missed.push("no trajectory counters could be read".to_owned()),
         Some(end) => {
             let at_baseline = after.iter().find(|s| !s.trajectories.is_empty()).unwrap_or(end);
             for (name, c) in &end.trajectories {
-                added.push((name.clone(), c.added));
+                trajectories.push(Flow {
+                    trajectory: name.clone(),
+                    added: c.added,
+                    stored: c.stored,
+                    rate_hz: c.rate_hz,
+                });
                 let before = at_baseline.trajectories.get(name).map_or(0, |b| b.added);
                 if c.added <= before && end.t > at_baseline.t {
                     missed.push(format!(
@@ -193,8 +217,9 @@ pub fn judge(samples: &[Sample], warmup: f64, target_percent: f64) -> Verdict {
         baseline_t: baseline.t,
         end_t: last.t,
         rss,
+        anon,
         shm,
-        added,
+        trajectories,
         losses,
         unexplained,
         missed,
@@ -219,7 +244,8 @@ mod tests {
                     ProcessSample { pid: 7, rss: rss(t), anon: rss(t) / 2, restarts: 0 },
                 );
                 s.shm = ShmUse { files: 4, allocated: shm(t), apparent: 1 << 30 };
-                let counts = Counts { added: 30 * i as u64, rate_hz: 30.0, losses: Vec::new() };
+                let counts =
+                    Counts { added: 30 * i as u64, stored: 5, rate_hz: 30.0, losses: Vec::new() };
                 s.trajectories.insert("images".into(), counts);
                 s
             })
@@ -241,8 +267,9 @@ mod tests {
         let v = judge(&samples, 10.0, 1.0);
         assert!(v.passed(), "{:?}", v.missed);
         assert_eq!(v.baseline_t, 10.0);
-        assert_eq!(v.rss[0].percent, 0.0);
-        assert_eq!(v.added, [("images".to_owned(), 29 * 30)]);
+        assert_eq!((v.rss[0].percent, v.anon[0].percent), (0.0, 0.0));
+        assert_eq!(v.trajectories.len(), 1);
+        assert_eq!((v.trajectories[0].added, v.trajectories[0].stored), (29 * 30, 5));
     }
 
     #[test]
