@@ -21,6 +21,15 @@ pub fn mutate_json(rng: &mut Rng, data: &[u8], others: &[Vec<u8>]) -> Option<Vec
     serde_json::to_vec(&tree).ok()
 }
 
+/// The most bytes one repetition adds: a request is cut at the coordinator's limit
+/// anyway, and the fuzzer's own memory must stay small.
+const MAX_GROWTH: usize = 1 << 20;
+
+/// A value's encoded size (at least 1).
+fn size(v: &Value) -> usize {
+    serde_json::to_vec(v).map_or(1, |b| b.len().max(1))
+}
+
 fn count(v: &Value) -> usize {
     1 + match v {
         Value::Array(a) => a.iter().map(count).sum(),
@@ -119,7 +128,7 @@ fn same_type(v: &mut Value, rng: &mut Rng) {
             }
             _ => {
                 let item = a[rng.below(a.len())].clone();
-                let n = *rng.pick(&[1usize, 10, 1000, 10_000]);
+                let n = *rng.pick(&[1usize, 10, 1000, 10_000]).min(&(MAX_GROWTH / size(&item)));
                 a.extend(std::iter::repeat_n(item, n));
             }
         },

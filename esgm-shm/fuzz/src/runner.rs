@@ -168,11 +168,11 @@ impl Child<'_> {
         let (kind, mut message) = match outcome {
             Ok(Ok(())) => return,
             Ok(Err(broken)) => (Kind::Broken, broken.to_string()),
-            Err(_) => {
-                target.reset();
-                (Kind::Panic, last_panic())
-            }
+            Err(_) => (Kind::Panic, last_panic()),
         };
+        // State a failure left behind would fail every later case alike; a run that
+        // makes the case again from the last reset resets here too.
+        target.reset();
         let index = case & !SEED_BIT;
         if case & SEED_BIT != 0 {
             message = format!("seed {index}: {message}");

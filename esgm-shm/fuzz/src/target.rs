@@ -53,8 +53,8 @@ pub trait Target: Send + Sync {
     fn accepts(&self, seed: &[u8]) -> Result<(), Broken>;
 
     /// Forgets state kept between cases (the registry of the request target); called
-    /// every [`RESET_EVERY`] cases and after a panic, so a case's outcome depends on at
-    /// most that many before it.
+    /// every [`RESET_EVERY`] cases and after a finding, so a case's outcome depends on
+    /// at most that many before it.
     fn reset(&self) {}
 }
 
