@@ -113,8 +113,9 @@ fn run(args: Args) -> anyhow::Result<ExitCode> {
             trace: args.trace,
             check_seeds: args.from == 0 && !args.trace,
         };
-        runner::run(target, cases);
-        return Ok(ExitCode::SUCCESS);
+        let found = runner::run(target, cases);
+        // A child's findings are the parent's to judge; a case run by hand fails here.
+        return Ok(if found > 0 && !args.child { ExitCode::FAILURE } else { ExitCode::SUCCESS });
     }
     let plan = Plan {
         seconds: args.seconds.max(0.0),

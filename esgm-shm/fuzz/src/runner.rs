@@ -145,6 +145,8 @@ struct Child<'a> {
     clock: Instant,
     /// Findings so far, by [`alike`] key.
     seen: HashMap<String, u32>,
+    /// Findings so far.
+    found: u64,
 }
 
 /// The key of findings alike: kind and the message's first 80 characters.
@@ -185,12 +187,14 @@ impl Child<'_> {
         } else {
             PathBuf::new()
         };
+        self.found += 1;
         emit(&Event::Found(Finding { kind, index, file, message }));
     }
 }
 
-/// Runs `target`'s cases as `cases` says, reporting on stdout.
-pub fn run(target: Arc<dyn Target>, cases: Cases) {
+/// Runs `target`'s cases as `cases` says, reporting on stdout; returns how many
+/// findings it reported (a hang ends the process instead).
+pub fn run(target: Arc<dyn Target>, cases: Cases) -> u64 {
     keep_panic_messages();
     let clock = Instant::now();
     let running = Arc::new(Running::default());
@@ -199,8 +203,14 @@ pub fn run(target: Arc<dyn Target>, cases: Cases) {
         std::thread::spawn(move || watchdog(target, cases, running, clock))
     };
     let t = target.as_ref();
-    let mut child =
-        Child { target: t, cases: &cases, running: &running, clock, seen: HashMap::new() };
+    let mut child = Child {
+        target: t,
+        cases: &cases,
+        running: &running,
+        clock,
+        seen: HashMap::new(),
+        found: 0,
+    };
     if cases.check_seeds {
         for (n, seed) in t.seeds().iter().enumerate() {
             child.case(n as u64 | SEED_BIT, seed, || t.accepts(seed));
@@ -227,4 +237,5 @@ pub fn run(target: Arc<dyn Target>, cases: Cases) {
         eprintln!("esgm-fuzz: the watchdog thread panicked");
     }
     emit(&Event::Done { cases: done, millis: clock.elapsed().as_millis() as u64 });
+    child.found
 }
