@@ -6,7 +6,7 @@ use esgm_core::library::{Blob, BlobSeq, DrivingDirection, Image, Pose, RobotStat
 use esgm_core::value::{
     Octets, Pos2, Position, PositionAltitude, PositionAltitudeRotation, Rotation, Value, Vec3,
 };
-use esgm_core::{Entity, EntityFrame, EntityStructure};
+use esgm_core::{AttributeValuePair, Entity, EntityFrame, EntityStructure};
 
 use crate::rng::Rng;
 
@@ -89,6 +89,9 @@ pub fn nested(depth: usize) -> EntityStructure {
 /// A random structure: random names, times and value trees up to `depth` levels, now
 /// and then just past the nesting bound.
 pub fn random(rng: &mut Rng) -> EntityStructure {
+    if rng.chance(1) {
+        return wide(rng);
+    }
     let depth = match rng.below(10) {
         0 => MAX_NESTING + 1 + rng.below(3),
         1 => MAX_NESTING - rng.below(2),
@@ -101,6 +104,22 @@ pub fn random(rng: &mut Rng) -> EntityStructure {
     for _ in 0..rng.below(6) {
         es = es.with(name(rng), value(rng, depth, &mut budget));
     }
+    es
+}
+
+/// A structure with thousands of small attributes (a few duplicated): what costs a
+/// reader per attribute, not per byte, shows here.
+pub fn wide(rng: &mut Rng) -> EntityStructure {
+    let n = *rng.pick(&[1_000usize, 10_000, 30_000]);
+    let mut es = EntityStructure::new("wide", 1, 2);
+    // Pushed, not `with`: that replaces an attribute of the same name, so it would
+    // search the list each time and remove the duplicates.
+    es.attributes = (0..n)
+        .map(|i| {
+            let name = if rng.chance(1) { "x".to_owned() } else { format!("a{i}") };
+            AttributeValuePair::new(name, Value::Long(i as i64))
+        })
+        .collect();
     es
 }
 

@@ -2,20 +2,22 @@
 //! [`codec::decode_value`] and [`codec::decode_bytes`] on bytes at any alignment.
 //!
 //! An accepted archive is also read as each library type, as typed readers do: in
-//! place through its view (`RobotState::view`) and decoded (`from_structure`).
+//! place through its view (`RobotState::view`), decoded (`from_structure`), and
+//! through the layout check a subscription runs before taking a structure
+//! ([`TypeChecker::check`]).
 //!
 //! Promises checked beyond "no panic": what `access` accepts decodes (every attribute
 //! value too), re-encodes, and the re-encoding is accepted and encodes the same again;
 //! `decode_bytes` on a misaligned copy agrees with `access` on an aligned one; a typed
-//! view and decoding agree on whether an archive is of a type; every seed is accepted.
+//! view reads what decoding reads; a structure the layout check accepts as a type
+//! decodes as it; every seed is accepted.
 
 use esgm_core::codec::{
     self, ARCHIVE_ALIGNMENT, ArchivedEntityStructure, ENVELOPE_LEN, FORMAT_VERSION,
 };
 use esgm_core::library::{Blob, BlobSeq, DrivingDirection, Image, Pose, RobotState, Twist};
 use esgm_core::value::Octets;
-use esgm_core::{Entity, EntityStructure, ViewError};
-
+use esgm_core::{Entity, EntityStructure, TypeChecker, TypeRegistry, ViewError};
 use esgm_shm::Block16;
 use esgm_shm::payload::blocks_for;
 
@@ -29,6 +31,9 @@ use crate::target::{Broken, Target};
 #[derive(Debug)]
 pub struct Codec {
     seeds: Vec<Vec<u8>>,
+    /// A reader's layout check of each library type (what a subscription runs on a
+    /// decoded structure before taking it).
+    checkers: Vec<TypeChecker>,
 }
 
 impl Codec {
@@ -39,7 +44,14 @@ impl Codec {
             seeds.push(encode(&es)?);
         }
         seeds.push(in_place_image()?);
-        Ok(Self { seeds })
+        let types = TypeRegistry::with_library();
+        let checkers = types
+            .names()
+            .iter()
+            .map(|name| TypeChecker::new(&types, name))
+            .collect::<Result<_, _>>()
+            .map_err(|e| Broken::new("the library's types check", e))?;
+        Ok(Self { seeds, checkers })
     }
 }
 
@@ -101,7 +113,10 @@ pub fn codec_input(rng: &mut Rng, seeds: &[Vec<u8>]) -> Vec<u8> {
 }
 
 /// Runs the codec's reading paths on `input`; see the module docs for the promises.
-pub fn check_codec(input: &[u8]) -> Result<Option<EntityStructure>, Broken> {
+pub fn check_codec(
+    input: &[u8],
+    checkers: &[TypeChecker],
+) -> Result<Option<EntityStructure>, Broken> {
     let buffer = Blocks::aligned(input);
     let accepted = codec::access(buffer.bytes());
     // The same bytes misaligned by 1 to 15, as a request payload or a file may be.
@@ -129,6 +144,13 @@ pub fn check_codec(input: &[u8]) -> Result<Option<EntityStructure>, Broken> {
         .and_then(codec::decode)
         .map_err(|e| Broken::new("a re-encoded structure is accepted", e))?;
     read_as_library_types(archived, &owned)?;
+    for checker in checkers {
+        // A wrong layout is a reader's typed rejection (only time and panics count);
+        // a right one must read as the type.
+        if checker.check(&owned.attributes).is_ok() {
+            read_checked(checker.type_name(), &owned)?;
+        }
+    }
     let third =
         codec::encode(&reread).map_err(|e| Broken::new("a decoded structure encodes again", e))?;
     if third[..] != again[..] {
@@ -187,6 +209,25 @@ fn read_as_library_types(
     })
 }
 
+/// Decodes a structure the layout check accepted as `type_name` as that library type.
+fn read_checked(type_name: &str, owned: &EntityStructure) -> Result<(), Broken> {
+    fn read<T: Entity>(owned: &EntityStructure) -> Result<(), Broken> {
+        T::from_structure(owned)
+            .map(drop)
+            .map_err(|e| Broken::new("a structure of a type's layout reads as the type", e))
+    }
+    match type_name {
+        "Image" => read::<Image>(owned),
+        "Blob" => read::<Blob>(owned),
+        "BlobSeq" => read::<BlobSeq>(owned),
+        "RobotState" => read::<RobotState>(owned),
+        "DrivingDirection" => read::<DrivingDirection>(owned),
+        "Pose" => read::<Pose>(owned),
+        "Twist" => read::<Twist>(owned),
+        _ => Ok(()),
+    }
+}
+
 impl Target for Codec {
     fn name(&self) -> &'static str {
         "codec"
@@ -205,11 +246,11 @@ impl Target for Codec {
     }
 
     fn run(&self, input: &[u8]) -> Result<(), Broken> {
-        check_codec(input).map(|_| ())
+        check_codec(input, &self.checkers).map(|_| ())
     }
 
     fn accepts(&self, seed: &[u8]) -> Result<(), Broken> {
-        match check_codec(seed)? {
+        match check_codec(seed, &self.checkers)? {
             Some(_) => Ok(()),
             None => {
                 let why = codec::access(Blocks::aligned(seed).bytes()).err();
@@ -235,7 +276,7 @@ mod tests {
         let mut accepted = 0;
         for i in 0..500 {
             let input = target.input(&mut Rng::for_case(2, i));
-            match check_codec(&input) {
+            match check_codec(&input, &target.checkers) {
                 Ok(Some(_)) => accepted += 1,
                 Ok(None) => {}
                 Err(broken) => panic!("case {i}: {broken}"),
