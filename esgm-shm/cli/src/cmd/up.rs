@@ -246,11 +246,18 @@ fn serve(
                 supervisor.reconcile(&declared);
             }
             Ok(other) => tracing::warn!(answer = ?other, "unexpected answer to a process listing"),
+            // Asked while the coordinator stopped: nothing is wrong.
+            Err(_) if coordinator.is_finished() => break,
             Err(e) if !failing => {
                 failing = true;
                 tracing::warn!(error = %e, "cannot list the declared processes; retrying");
             }
             Err(_) => {}
+        }
+        // Stopping: the workers leave once the coordinator is gone, and must not be
+        // taken for crashed ones (restarted, and logged as such).
+        if coordinator.is_finished() {
+            break;
         }
         supervisor.poll();
         for (name, status) in supervisor.take_changes() {
