@@ -138,6 +138,14 @@ impl Catalog {
         Ok(())
     }
 
+    /// Puts back a sensor exactly as a saved registry held it, without the checks of
+    /// [`Catalog::add_sensor`]: a type may be destroyed while a sensor still names it
+    /// (what was made with it keeps its copy), and a registry restored from its own
+    /// saved state must hold what it held.
+    pub fn restore_sensor(&mut self, record: SensorRecord) {
+        self.sensors.insert(record.name.clone(), record);
+    }
+
     /// Removes a sensor that no trajectory samples.
     pub fn remove_sensor(&mut self, name: &str) -> Result<SensorRecord, RegistrationError> {
         if !self.sensors.contains_key(name) {
@@ -191,6 +199,12 @@ impl Catalog {
         };
         self.units.insert(name.to_owned(), record);
         Ok(())
+    }
+
+    /// Puts back a unit exactly as a saved registry held it (see
+    /// [`Catalog::restore_sensor`]).
+    pub fn restore_unit(&mut self, record: UnitRecord) {
+        self.units.insert(record.name.clone(), record);
     }
 
     /// Removes a unit that no trajectory uses.

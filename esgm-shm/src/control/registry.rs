@@ -130,13 +130,24 @@ impl Registry {
     /// running processes drop what they serve.
     pub fn restore(types: TypeRegistry, snapshot: Snapshot) -> Result<Self, ControlError> {
         let mut r = Self::new(types);
+        // The saved types are every type the registry had: a library type it had
+        // destroyed stays destroyed, and one it had defined anew comes back as it was.
+        let saved: std::collections::BTreeSet<&str> =
+            snapshot.types.iter().map(|(n, _)| n.as_str()).collect();
+        for name in r.catalog.types().names() {
+            let redefined = snapshot.types.iter().any(|(n, t)| {
+                *n == name && r.catalog.types().get_entity_structure_type(n).is_ok_and(|k| *k != *t)
+            });
+            let destroyed = !saved.is_empty() && !saved.contains(name.as_str());
+            if destroyed || redefined {
+                r.catalog.types_mut().destroy_entity_structure_type(&name)?;
+            }
+        }
         // Types may name each other: define in passes until none is left.
         let mut pending: Vec<(String, EntityStructureType)> = snapshot
             .types
             .into_iter()
-            .filter(|(n, t)| {
-                r.catalog.types().get_entity_structure_type(n).map_or(true, |known| *known != *t)
-            })
+            .filter(|(n, _)| r.catalog.types().get_entity_structure_type(n).is_err())
             .collect();
         while !pending.is_empty() {
             let before = pending.len();
@@ -156,11 +167,13 @@ impl Registry {
                 }
             }
         }
+        // As they were, even one whose type was destroyed since (allowed: what was
+        // made with a type keeps its copy).
         for s in snapshot.sensors {
-            r.catalog.add_sensor(&s.name, &s.type_name, &s.host)?;
+            r.catalog.restore_sensor(s);
         }
         for u in snapshot.units {
-            r.catalog.add_unit(&u.name, &u.type_name, u.input_types, &u.host)?;
+            r.catalog.restore_unit(u);
         }
         for t in snapshot.trajectories {
             let name = t.info.name.clone();
@@ -719,6 +732,48 @@ mod tests {
         // A recovered coordinator still knows it.
         let restored = Registry::restore(TypeRegistry::with_library(), r2.snapshot());
         assert_eq!(port(&mut restored.unwrap()), Some(WriterPort { publisher: 6, pid: me }));
+    }
+
+    /// Found by esgm-fuzz: states the registry allows must come back from its saved
+    /// state, or a coordinator restarted after a crash would not start.
+    #[test]
+    fn redefined_and_destroyed_types_and_their_users_are_restored_as_they_were() {
+        let mut r = registry();
+        let twist = EntityStructureType::new("Twist").attr("spin", ValueSort::Long);
+        let t = EntityStructureType::new("T").attr("x", ValueSort::Long);
+        let ok = |resp: Response| assert!(matches!(resp, Response::Done), "{resp:?}");
+        // A library type destroyed and defined anew; another destroyed for good.
+        ok(r.handle(Request::DestroyEntityStructureType { type_name: "Twist".into() }));
+        ok(r.handle(Request::CreateEntityStructureType {
+            type_name: "Twist".into(),
+            entity_type: twist.clone(),
+        }));
+        ok(r.handle(Request::DestroyEntityStructureType { type_name: "Blob".into() }));
+        // A unit and a sensor whose type is destroyed after they were registered.
+        ok(r.handle(Request::CreateEntityStructureType { type_name: "T".into(), entity_type: t }));
+        ok(r.handle(Request::AddCompUnit {
+            name: "u".into(),
+            type_name: "T".into(),
+            input_types: vec![],
+            host: "h".into(),
+        }));
+        ok(r.handle(Request::AddSensorInterface {
+            sensor: "s".into(),
+            type_name: "T".into(),
+            host: "h".into(),
+        }));
+        ok(r.handle(Request::DestroyEntityStructureType { type_name: "T".into() }));
+
+        let json = serde_json::to_vec(&r.snapshot()).unwrap();
+        let back = serde_json::from_slice(&json).unwrap();
+        let restored = Registry::restore(TypeRegistry::with_library(), back).unwrap();
+        let types = restored.catalog().types();
+        assert_eq!(*types.get_entity_structure_type("Twist").unwrap(), twist);
+        assert!(types.get_entity_structure_type("Blob").is_err(), "stays destroyed");
+        assert!(types.get_entity_structure_type("T").is_err());
+        assert!(restored.catalog().unit("u").is_some());
+        assert!(restored.catalog().sensor("s").is_some());
+        assert_eq!(restored.snapshot().types, r.snapshot().types);
     }
 
     #[test]
