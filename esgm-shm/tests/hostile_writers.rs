@@ -11,26 +11,14 @@
 
 mod common;
 
-use common::{RawPublisher, coordinator, wait_for};
+use common::{RawPublisher, coordinator, location, state, wait_for, x};
 use esgm_core::esgm::TrajectorySpec;
 use esgm_core::{
     DropCause, EntityStructure, EntityTrajectoryStructure, Esgm, InProcessTrajectory, Rejection,
-    Sample, Time, TrajectoryStats,
+    Time, TrajectoryStats,
 };
 use esgm_shm::ShmEsgm;
 use esgm_shm::control::{CoordinatorThread, Request, Response, TrajectoryRecord};
-
-fn location(c: &CoordinatorThread, host: &str) -> ShmEsgm {
-    ShmEsgm::builder().domain(c.domain()).host(host).connect().unwrap()
-}
-
-fn state(vt: Time, x: f64) -> EntityStructure {
-    EntityStructure::new("robot1", vt, vt).with("x", x).with("y", 0.0).with("dir", 0.0)
-}
-
-fn x(s: &Sample) -> f64 {
-    s.structure.get("x").and_then(|v| v.as_double()).unwrap()
-}
 
 fn record(at: &ShmEsgm, name: &str) -> TrajectoryRecord {
     match at.control(Request::GetEntityTrajectoryStructure { name: name.into() }) {

@@ -12,7 +12,7 @@ mod common;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use common::{TIMEOUT, coordinator, reap, spawn_child, wait_for};
+use common::{TIMEOUT, coordinator, location, reap, spawn_child, state, wait_for, x};
 use esgm_core::esgm::{
     ComputeError, CreateError, InputType, LookupError, SensorError, TrajectorySpec,
 };
@@ -21,22 +21,9 @@ use esgm_core::{
     Sample, SubscribeOptions, Time, ValueApproximation, millis,
 };
 use esgm_shm::ShmEsgm;
-use esgm_shm::control::CoordinatorThread;
 
 const ROLE: &str = "ESGM_LOCATIONS_ROLE";
 const DOMAIN: &str = "ESGM_LOCATIONS_DOMAIN";
-
-fn location(c: &CoordinatorThread, host: &str) -> ShmEsgm {
-    ShmEsgm::builder().domain(c.domain()).host(host).connect().unwrap()
-}
-
-fn state(vt: Time, x: f64) -> EntityStructure {
-    EntityStructure::new("robot1", vt, vt).with("x", x).with("y", 0.0).with("dir", 0.0)
-}
-
-fn x(s: &Sample) -> f64 {
-    s.structure.get("x").and_then(|v| v.as_double()).unwrap()
-}
 
 #[test]
 fn a_primitive_written_here_is_read_there_with_history_violations_and_reset() {

@@ -251,3 +251,19 @@ pub fn header_for(payload_len: usize, valid_time: i64, create_time: i64) -> Samp
         ..SampleHeader::default()
     }
 }
+
+/// A connection to the coordinator `c` as the process `host` (two of them in one test
+/// are two "processes" of the registry, each with its own ports and runtime).
+pub fn location(c: &esgm_shm::control::CoordinatorThread, host: &str) -> esgm_shm::ShmEsgm {
+    esgm_shm::ShmEsgm::builder().domain(c.domain()).host(host).connect().unwrap()
+}
+
+/// A RobotState valid (and created) at `vt` with `x`.
+pub fn state(vt: esgm_core::Time, x: f64) -> EntityStructure {
+    EntityStructure::new("robot1", vt, vt).with("x", x).with("y", 0.0).with("dir", 0.0)
+}
+
+/// The `x` of a RobotState sample.
+pub fn x(s: &esgm_core::Sample) -> f64 {
+    s.structure.get("x").and_then(|v| v.as_double()).unwrap()
+}
