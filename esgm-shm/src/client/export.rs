@@ -235,7 +235,9 @@ impl Export {
 
     /// Publishes `handle`'s stream (the trajectory of `record`) from now on (and its current content, so readers
     /// that connect later receive the history). A `repointed` name starts with a reset
-    /// marker: readers elsewhere forget the stream the name denoted before.
+    /// marker: readers elsewhere forget the stream the name denoted before. `register`
+    /// is given the publisher port's id once it is open and before anything is
+    /// published on it (the writer names it to the registry there).
     pub fn start(
         node: &SharedNode,
         domain: &str,
@@ -243,6 +245,7 @@ impl Export {
         record: &TrajectoryRecord,
         repointed: bool,
         holdings: &Arc<Holdings>,
+        register: &mut dyn FnMut(u128),
     ) -> Result<Self, ExportError> {
         let name = handle.name().to_owned();
         let (type_name, policy) = (&record.info.type_name, &record.info.policy);
@@ -285,6 +288,7 @@ impl Export {
             };
             Ok::<_, ExportError>((publisher, violations, inbox, blocking, own))
         })?;
+        register(publisher.id().value());
         let inbox_wake = match primitive {
             true => Some(
                 *TrajectoryServiceNames::new(&inbox_domain(domain), &name)

@@ -56,6 +56,8 @@ pub(crate) struct ImportSite<'a> {
     pub domain: &'a str,
     pub holdings: &'a Arc<Holdings>,
     pub mirrors: &'a Arc<SharedMirrors>,
+    /// Rings the location thread to ask the registry who writes (see `Import::arrive`).
+    pub verify: &'a crossbeam_channel::Sender<()>,
 }
 
 /// A trajectory of another process, mirrored into a local replica.
@@ -91,6 +93,11 @@ pub(crate) struct Import {
     /// Checks each structure's attributes against the trajectory's type; `None` if
     /// the record's definitions do not resolve (logged at the start).
     checker: Option<TypeChecker>,
+    /// Rings the location thread to ask the registry who writes, once per wait: what
+    /// is held meanwhile borrows shared memory (an image a chunk).
+    verify: crossbeam_channel::Sender<()>,
+    /// True while a question is out.
+    asked: bool,
 }
 
 /// The most arrivals an import holds while it waits for the registry to name the
@@ -123,7 +130,7 @@ impl Import {
         replica: InProcessTrajectory,
         record: &TrajectoryRecord,
     ) -> Result<Self, OpenError> {
-        let ImportSite { node, domain, holdings, mirrors } = *at;
+        let ImportSite { node, domain, holdings, mirrors, verify } = *at;
         let (type_name, policy) = (&record.info.type_name, &record.info.policy);
         let primitive = record.info.kind == TrajectoryKind::Primitive;
         let generation = record.generation;
@@ -197,6 +204,8 @@ impl Import {
             writer: record.port.map(|p| p.publisher),
             unverified: VecDeque::new(),
             checker,
+            verify: verify.clone(),
+            asked: false,
             lost: 0,
             // One borrow stays free to receive into.
             owner: holdings.owner(qos.max_borrowed_samples.saturating_sub(1)),
@@ -278,6 +287,11 @@ impl Import {
             }
         }
         self.unverified.push_back(arrival);
+        if !self.asked {
+            self.asked = true;
+            // Full: a question is already out, which this one joins.
+            let _pending = self.verify.try_send(());
+        }
     }
 
     /// Enters a sample or reset of the writer's into the replica, if its attributes
@@ -307,6 +321,8 @@ impl Import {
     /// The registry names `port` as the writer's (`None`: not yet): what was held from
     /// it is entered, in order, and what was held from any other port is rejected.
     pub fn set_writer(&mut self, port: Option<u128>) {
+        // Answered: the next arrival from an unnamed port asks again.
+        self.asked = false;
         let Some(port) = port else { return };
         self.writer = Some(port);
         for arrival in std::mem::take(&mut self.unverified) {

@@ -12,7 +12,7 @@ use std::collections::BTreeSet;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use crossbeam_channel::{Receiver, RecvTimeoutError, Sender};
+use crossbeam_channel::{Receiver, Sender};
 use esgm_core::esgm::{CreateError, Esgm, LookupError, TrajectorySpec};
 use esgm_core::{EntityStructureType, InProcessEsgm, InProcessTrajectory};
 
@@ -90,6 +90,11 @@ pub(crate) struct Location {
     /// Where resets through this process's handles go (every process holding the
     /// trajectory; see `admin`): installed on every export and replica.
     pub resets: Arc<dyn esgm_core::ResetForwarder>,
+    /// An import that holds samples from a port the registry has not named rings
+    /// this (its sender), and the location asks the registry at once
+    /// ([`Location::verify_writers`]) rather than at its next maintenance tick: the
+    /// samples held meanwhile borrow shared memory.
+    pub verify: (Sender<()>, Receiver<()>),
     /// Stopped and joined when the location ends.
     pub _receiver: SampleReceiver,
 }
@@ -105,15 +110,20 @@ impl Location {
             if self.serving {
                 due = due.min(next_assignments);
             }
-            match commands.recv_timeout(due.saturating_duration_since(Instant::now())) {
-                Ok(c) => self.handle(c),
-                Err(RecvTimeoutError::Timeout) => {}
-                Err(RecvTimeoutError::Disconnected) => {
-                    // The last word on this process's images, for whoever looks later.
-                    self.reported.1 = Instant::now();
-                    self.report_holdings();
-                    return;
-                }
+            let timeout = due.saturating_duration_since(Instant::now());
+            let verify = self.verify.1.clone();
+            crossbeam_channel::select! {
+                recv(commands) -> c => match c {
+                    Ok(c) => self.handle(c),
+                    Err(_) => {
+                        // The last word on this process's images, for whoever looks later.
+                        self.reported.1 = Instant::now();
+                        self.report_holdings();
+                        return;
+                    }
+                },
+                recv(verify) -> _ => self.verify_writers(),
+                default(timeout) => {}
             }
             if Instant::now() >= next_maintenance {
                 self.maintain();
@@ -212,6 +222,7 @@ impl Location {
             domain: &self.domain,
             holdings: &self.holdings,
             mirrors: &self.mirrors,
+            verify: &self.verify.0,
         };
         match Import::start(&site, replica.clone(), &record) {
             Ok(mut import) => {
@@ -361,35 +372,31 @@ impl Location {
         let (node, domain, holdings, mirrors) =
             (&self.node, &self.domain, &self.holdings, &self.mirrors);
         let resets = &self.resets;
+        let control = &self.control;
         let mut export = None;
         let handle = self.local.create_trajectory_prepared(spec.clone(), |handle| {
             // Re-pointed here (E5): the export follows the new trajectory, and readers
             // elsewhere follow it to its new generation's services.
             let repointed =
                 spec.replace && mirrors.change(|m| m.exports.remove(&spec.name)).is_some();
-            let started = Export::start(node, domain, handle, record, repointed, holdings)
-                .map_err(|e| CreateError::Unavailable { reason: e.to_string() })?;
+            // Registered before its first sample goes out, so readers find the port.
+            let mut register = |port| report_writer(control, &spec.name, record.generation, port);
+            let started =
+                Export::start(node, domain, handle, record, repointed, holdings, &mut register)
+                    .map_err(|e| CreateError::Unavailable { reason: e.to_string() })?;
             // A store destroyed meanwhile needs no resets.
             let _destroyed = handle.with_store(|s| s.forward_resets(Arc::clone(resets)));
             export = Some(started);
             Ok(())
         })?;
         if let Some(export) = export {
-            self.report_writer(&spec.name, record.generation, export.publisher());
             self.mirrors.change(|m| m.exports.insert(spec.name.clone(), export));
         }
         Ok(handle)
     }
 
-    /// Names this process's publisher port as the writer's of `name`, so that readers
-    /// accept its samples ([`super::import`]). A failure is logged; the next audit
-    /// reports again.
     fn report_writer(&mut self, name: &str, generation: u64, publisher: u128) {
-        let request = Request::ReportWriter { trajectory: name.to_owned(), generation, publisher };
-        if let Err(e) = self.control.call(&request) {
-            tracing::warn!(trajectory = %name, error = %e,
-                "cannot register as the writer; readers hold its samples until it can");
-        }
+        report_writer(&self.control, name, generation, publisher);
     }
 
     /// Asks the registry whose port the samples are that readers here hold unverified
@@ -454,6 +461,7 @@ impl Location {
             domain: &self.domain,
             holdings: &self.holdings,
             mirrors: &self.mirrors,
+            verify: &self.verify.0,
         };
         match Import::start(&site, handle.clone(), record) {
             Ok(mut import) => {
@@ -548,4 +556,15 @@ pub(crate) fn install(local: &InProcessEsgm, types: &[(String, EntityStructureTy
 
 fn unexpected(r: &Response) -> CreateError {
     CreateError::Unavailable { reason: format!("unexpected answer from the coordinator: {r:?}") }
+}
+
+/// Names this process's publisher port as the writer's of `name`, so that readers
+/// accept its samples ([`super::import`]). A failure is logged; the next audit reports
+/// again.
+fn report_writer(control: &ControlClient, name: &str, generation: u64, publisher: u128) {
+    let request = Request::ReportWriter { trajectory: name.to_owned(), generation, publisher };
+    if let Err(e) = control.call(&request) {
+        tracing::warn!(trajectory = %name, error = %e,
+            "cannot register as the writer; readers hold its samples until it can");
+    }
 }

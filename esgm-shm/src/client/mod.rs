@@ -230,6 +230,7 @@ impl ShmEsgmBuilder {
             serving: false,
             reported: (HoldingStats::default(), std::time::Instant::now()),
             resets,
+            verify: crossbeam_channel::bounded(1),
             _receiver: receiver,
         };
         let thread = std::thread::Builder::new()
