@@ -124,7 +124,7 @@ pub mod process;
 // The data plane's modules keep their paths at the crate root (`esgm_shm::publisher`).
 pub(crate) use data_plane::sequence_gaps;
 pub use data_plane::{
-    image_layout, image_loan, payload, publisher, qos, received, sample_check, service,
+    capacity, image_layout, image_loan, payload, publisher, qos, received, sample_check, service,
     service_name, size_hint, structure_loan, subscriber, type_id, violations, wait,
 };
 // What connected processes hold in shared memory, with its old path.

@@ -106,6 +106,11 @@ pub enum CreateError {
         /// The trajectory.
         name: String,
     },
+    /// A limit of the runtime was reached (shared memory: the domain's processes, or
+    /// a trajectory's readers); the error names the setting that raises it. Nothing
+    /// was changed, and every other process is served as before.
+    #[error(transparent)]
+    LimitReached(#[from] crate::esgm::LimitReached),
     /// The ESGM could not be reached or did not answer (a remote runtime whose
     /// coordinator is gone, stuck or unreachable — CORBA's `COMM_FAILURE`). Nothing
     /// was changed by this call as far as the caller can tell; retry or check the
@@ -129,6 +134,11 @@ pub enum LookupError {
         /// The closest existing name.
         suggestion: Option<String>,
     },
+    /// A limit of the runtime was reached (shared memory: the domain's processes, or
+    /// a trajectory's readers); the error names the setting that raises it. Nothing
+    /// was changed, and every other process is served as before.
+    #[error(transparent)]
+    LimitReached(#[from] crate::esgm::LimitReached),
     /// The ESGM could not be reached or did not answer (a remote runtime whose
     /// coordinator is gone, stuck or unreachable — CORBA's `COMM_FAILURE`). Nothing
     /// was changed by this call as far as the caller can tell; retry or check the

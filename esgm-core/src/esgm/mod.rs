@@ -15,11 +15,13 @@
 
 mod errors;
 mod interfaces;
+mod limit;
 mod report;
 mod spec;
 
 pub use errors::{CreateError, FlushError, InputType, LookupError, RegistrationError};
 pub use interfaces::{CompUnit, ComputeError, SensorError, SensorInterface};
+pub use limit::{Limit, LimitReached};
 pub use report::{EsgmStats, LogLevel, MemoryStats, TrajectoryInfo, TrajectoryReport, WorkerStats};
 pub use spec::{TrajectoryKind, TrajectorySource, TrajectorySpec};
 
@@ -193,6 +195,7 @@ pub trait Esgm: Send + Sync {
             },
             policy,
             replace: false,
+            readers: None,
         };
         self.create_trajectory(spec)
     }

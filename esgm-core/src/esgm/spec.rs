@@ -84,11 +84,30 @@ pub struct TrajectorySpec {
     /// If a trajectory with this name exists, re-point the name to the new one; its
     /// subscribers move over and see the new stream from then on (E5).
     pub replace: bool,
+    /// How many processes may read it at once, where a runtime must size its transport
+    /// up front (shared memory; see [`crate::esgm::Limit::Readers`]). `None`: the
+    /// system's default (the domain's `esgm up --readers`). The in-process runtime has
+    /// no such limit and ignores it.
+    #[serde(default)]
+    pub readers: Option<usize>,
 }
 
 impl TrajectorySpec {
     fn new(name: impl Into<String>, source: TrajectorySource) -> Self {
-        Self { name: name.into(), source, policy: FluentStreamPolicy::default(), replace: false }
+        Self {
+            name: name.into(),
+            source,
+            policy: FluentStreamPolicy::default(),
+            replace: false,
+            readers: None,
+        }
+    }
+
+    /// Room for `readers` processes reading it at once (see the field `readers`).
+    #[must_use]
+    pub fn readers(mut self, readers: usize) -> Self {
+        self.readers = Some(readers);
+        self
     }
 
     /// A primitive trajectory of `type_name`, unconstrained until a policy is set.

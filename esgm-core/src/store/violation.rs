@@ -165,6 +165,11 @@ pub enum AddError {
         /// The refused operation.
         operation: String,
     },
+    /// The trajectory's writer is in another process, and this process cannot join
+    /// the processes adding to it: a limit of the transport was reached (the error
+    /// names the setting that raises it). Nothing was added.
+    #[error(transparent)]
+    LimitReached(#[from] crate::esgm::LimitReached),
     /// The trajectory's writer is in another process and the structure could not be
     /// sent to it (see the reason); nothing was added.
     #[error("trajectory `{trajectory}`: cannot reach its writer: {reason}")]

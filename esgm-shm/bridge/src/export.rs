@@ -126,7 +126,7 @@ fn export_generation(site: &ExportSite, options: &ExportOptions) -> anyhow::Resu
         .map_or_else(|| EntityStructureType::new(""), |(_, t)| t.clone());
     // The writer's and every reader's settings: whoever opens the service first
     // creates it with them, and the others' requests fit.
-    let qos = esgm_shm::trajectory_qos(&record.info.policy, &entity_type);
+    let qos = esgm_shm::trajectory_qos(&record.info.policy, &entity_type, record.readers);
     let bound = qos.history_size;
     let node = NodeBuilder::new()
         .name(&esgm_shm::node_name(

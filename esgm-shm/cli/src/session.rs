@@ -9,15 +9,27 @@ use esgm_shm::ShmEsgm;
 /// How long a command waits for a trajectory's history to arrive from its writer.
 const SETTLE: Duration = Duration::from_millis(500);
 
-/// Connects to the coordinator of `domain` as the CLI.
+/// Connects to the coordinator of `domain` as the CLI, for a command that stays (a
+/// reader such as `esgm echo` or `esgm record`): it counts against the domain's
+/// processes and its trajectories' readers like any process.
 pub fn connect(domain: &str) -> anyhow::Result<ShmEsgm> {
+    connect_with(domain, false)
+}
+
+/// Connects as a short-lived command (`esgm latest`, `esgm push`, `esgm stats`…),
+/// which may use the room every service keeps beyond its limits: a domain whose
+/// limit is reached can still be looked at ([`esgm_shm::capacity`]).
+pub fn connect_tool(domain: &str) -> anyhow::Result<ShmEsgm> {
+    connect_with(domain, true)
+}
+
+fn connect_with(domain: &str, tool: bool) -> anyhow::Result<ShmEsgm> {
     let host = format!("esgm-cli-{}", std::process::id());
-    ShmEsgm::builder()
-        .domain(domain)
-        .host(host)
-        .timeout(Duration::from_secs(5))
-        .connect()
-        .with_context(|| format!("cannot reach the system `{domain}`"))
+    let mut builder = ShmEsgm::builder().domain(domain).host(host).timeout(Duration::from_secs(5));
+    if tool {
+        builder = builder.tool();
+    }
+    builder.connect().with_context(|| format!("cannot reach the system `{domain}`"))
 }
 
 /// A handle on `name` with the writer's history received (the CLI is a late reader:

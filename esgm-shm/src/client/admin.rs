@@ -2,13 +2,24 @@
 //! `stats`, `memory_stats`, `set_log_level`, T5 resets through any handle, and
 //! `flush`) asked of every connected process, and their answers collected.
 //!
-//! Every connection publishes and subscribes on one publish-subscribe service of the
-//! domain (`esgm/<domain>/admin`) and wakes the others through its event service. A
-//! question goes to everyone (the asking process included: one path for all); each
-//! process's *admin thread* answers it from its own runtime and mirrors, and the asker
-//! waits until as many answers came as the service had subscribers when it asked —
-//! every connected process — or its deadline passes (an error naming how many
-//! answered). Answers are addressed to the asker; the others drop them.
+//! Two publish-subscribe services of the domain carry it, sized by its limits
+//! ([`crate::capacity::DomainLimits`]) and created by the coordinator:
+//! - **questions** (`esgm/<domain>/admin`): every connected process subscribes, and
+//!   its *admin thread* waits on the domain's admin wake-up. An asker opens a
+//!   publisher for its question alone (at most [`ASKERS`] at once; one more waits its
+//!   turn), rings the wake-up, and drops both once answered.
+//! - **answers** (`esgm/<domain>/admin-answers`): an asker subscribes for the
+//!   question's time; each process answers with a publisher of its own, opened at its
+//!   first answer, and the asker polls (a question is rare; waking every process for
+//!   every answer would cost more).
+//!
+//! So a process's standing cost is one subscriber and one listener, whatever the
+//! domain's size, and no port connects every process to every other: a question
+//! costs one connection per process, made and dropped with it.
+//!
+//! The asker waits until as many answers came as the questions service had
+//! subscribers when it asked — every connected process, itself included — or its
+//! deadline passes (an error naming how many answered).
 //!
 //! A process killed without leaving still counts as a subscriber until the
 //! coordinator's dead-node cleanup removes its ports; until then a question waits its
@@ -20,33 +31,111 @@
 //! reset must reach the writer's store and every replica, in the processes that hold
 //! them. The coordinator stays out of the data's way.
 
-use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use crossbeam_channel::Sender;
-use esgm_core::esgm::{Esgm, LogLevel, MemoryStats, TrajectoryReport};
+use esgm_core::esgm::{Esgm, LimitReached, LogLevel, MemoryStats, TrajectoryReport};
 use esgm_core::{InProcessEsgm, QueryError, ResetForwarder};
 use iceoryx2::port::listener::Listener;
-use iceoryx2::port::notifier::Notifier;
-use iceoryx2::port::publisher::Publisher;
-use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
+use iceoryx2::port::subscriber::{Subscriber, SubscriberCreateError};
 use iceoryx2::prelude::{AllocationStrategy, PortFactory as _, ServiceName};
+use iceoryx2::service::builder::publish_subscribe::{
+    PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
+};
+use iceoryx2::service::port_factory::{event, publish_subscribe};
 use parking_lot::Mutex;
 use serde::{Deserialize, Serialize};
 
 use super::mirrors::SharedMirrors;
 use super::shared_node::SharedNode;
-use crate::service::{ShmService, open_event_service};
+use crate::capacity::{DomainLimits, EventCapacity, TOOL_RESERVE};
+use crate::service::{ShmNode, ShmService, open_event_service};
 
-/// How many processes of one domain the channel serves.
-const MAX_PROCESSES: usize = 32;
-/// Messages a process may have waiting before the oldest is dropped.
-const BUFFER: usize = 16;
+/// Processes that may ask the domain at once; one more waits until one is answered.
+pub(crate) const ASKERS: usize = 8;
+/// The largest question or answer, in bytes: statistics of every trajectory a process
+/// holds (a few hundred bytes each) fit thousands. Messages are loaned from a
+/// fixed-size pool mapped (not committed) for the askers' queues.
+const MAX_MESSAGE: usize = 4 << 20;
+/// Questions a process may have waiting before the oldest is dropped.
+const BUFFER: usize = 4;
 /// The longest the admin thread sleeps before it looks for its stop.
 const RECHECK: Duration = Duration::from_millis(500);
+/// The longest an asker sleeps between two looks for answers.
+const POLL: Duration = Duration::from_millis(1);
+
+type Channel = publish_subscribe::PortFactory<ShmService, [u8], ()>;
+
+/// The domain's administration services (see the module docs): opened by every
+/// process, created by the coordinator with the domain's limits.
+#[derive(Debug)]
+pub(crate) struct AdminServices {
+    questions: Channel,
+    answers: Channel,
+    wake: event::PortFactory<ShmService>,
+}
+
+impl AdminServices {
+    /// Opens (or creates, sized for `limits`) the administration services of `domain`
+    /// on `node`. A domain made with other limits is opened as it is.
+    pub fn open(node: &ShmNode, domain: &str, limits: &DomainLimits) -> Result<Self, AdminError> {
+        let (questions, answers, wake) = names(domain)?;
+        let unavailable = |what: &str, e: &dyn std::fmt::Debug| AdminError::Unavailable {
+            reason: format!("{what}: {e:?}"),
+        };
+        let processes = limits.process_ports();
+        let questions = open_channel(node, &questions, ASKERS, processes, limits)
+            .map_err(|e| unavailable("the admin questions", &e))?;
+        let answers = open_channel(node, &answers, processes, ASKERS, limits)
+            .map_err(|e| unavailable("the admin answers", &e))?;
+        let wake = open_event_service(node, &wake, EventCapacity::domain(limits))
+            .map_err(|e| unavailable("the admin wake-up", &e))?;
+        Ok(Self { questions, answers, wake })
+    }
+
+    /// The processes the domain admits, as its services were made (those a process
+    /// that is not a tool may take; see [`crate::capacity`]).
+    fn max_processes(&self) -> usize {
+        self.questions.static_config().max_subscribers().saturating_sub(TOOL_RESERVE)
+    }
+}
+
+/// Opens a channel with `publishers` and `subscribers`, or as it is if it was made
+/// with other numbers.
+fn open_channel(
+    node: &ShmNode,
+    name: &ServiceName,
+    publishers: usize,
+    subscribers: usize,
+    limits: &DomainLimits,
+) -> Result<Channel, PublishSubscribeOpenOrCreateError> {
+    let opened = node
+        .service_builder(name)
+        .publish_subscribe::<[u8]>()
+        .max_publishers(publishers)
+        .max_subscribers(subscribers)
+        .max_nodes(limits.process_nodes())
+        .subscriber_max_buffer_size(BUFFER)
+        .subscriber_max_borrowed_samples(1)
+        .history_size(0)
+        .open_or_create();
+    match opened {
+        Err(PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+            PublishSubscribeOpenError::DoesNotSupportRequestedAmountOfPublishers
+            | PublishSubscribeOpenError::DoesNotSupportRequestedAmountOfSubscribers
+            | PublishSubscribeOpenError::DoesNotSupportRequestedAmountOfNodes,
+        )) => node
+            .service_builder(name)
+            .publish_subscribe::<[u8]>()
+            .subscriber_max_buffer_size(BUFFER)
+            .open()
+            .map_err(PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError),
+        opened => opened,
+    }
+}
 
 /// A question to every process.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -139,6 +228,9 @@ pub enum AdminError {
         /// Why.
         reason: String,
     },
+    /// The domain has as many processes as it admits ([`crate::capacity`]).
+    #[error(transparent)]
+    LimitReached(LimitReached),
     /// The administration channel is not running in this process.
     #[error("the administration channel is not running: {reason}")]
     Unavailable {
@@ -153,13 +245,13 @@ pub(crate) type Answers = Vec<(String, AdminAnswer)>;
 /// This connection's end of the channel: asks, and owns the thread that answers.
 pub(crate) struct Admin {
     host: String,
-    publisher: Mutex<Publisher<ShmService, [u8], ()>>,
-    service: iceoryx2::service::port_factory::publish_subscribe::PortFactory<ShmService, [u8], ()>,
-    wake: Notifier<ShmService>,
-    pending: Mutex<HashMap<u64, Sender<(String, AdminAnswer)>>>,
+    node: SharedNode,
+    services: Arc<AdminServices>,
     next: AtomicU64,
     stop: Arc<AtomicBool>,
     thread: Mutex<Option<JoinHandle<()>>>,
+    /// Rings the admin threads (made at the first question or stop).
+    ring: Mutex<Option<iceoryx2::port::notifier::Notifier<ShmService>>>,
 }
 
 impl std::fmt::Debug for Admin {
@@ -168,80 +260,97 @@ impl std::fmt::Debug for Admin {
     }
 }
 
-fn names(domain: &str) -> Result<(ServiceName, ServiceName), AdminError> {
+fn names(domain: &str) -> Result<(ServiceName, ServiceName, ServiceName), AdminError> {
     let name = |s: String| {
         ServiceName::new(&s).map_err(|e| AdminError::Unavailable { reason: format!("{s}: {e:?}") })
     };
+    let prefix = crate::service_name::SERVICE_PREFIX;
     Ok((
-        name(format!("{}/{domain}/admin", crate::service_name::SERVICE_PREFIX))?,
-        name(format!("{}/{domain}/admin-wake", crate::service_name::SERVICE_PREFIX))?,
+        name(format!("{prefix}/{domain}/admin"))?,
+        name(format!("{prefix}/{domain}/admin-answers"))?,
+        name(format!("{prefix}/{domain}/admin-wake"))?,
     ))
+}
+
+/// Retries `make` while iceoryx2 says every port is taken (`busy`), until `deadline`.
+fn port_within<P, E: std::fmt::Debug>(
+    deadline: Instant,
+    mut make: impl FnMut() -> Result<P, E>,
+    busy: impl Fn(&E) -> bool,
+) -> Result<P, String> {
+    loop {
+        match make() {
+            Ok(p) => return Ok(p),
+            Err(e) if busy(&e) && Instant::now() < deadline => std::thread::sleep(POLL),
+            Err(e) => return Err(format!("{e:?}")),
+        }
+    }
 }
 
 impl Admin {
     /// Joins the channel of `domain` as `host` and starts the thread that answers
-    /// from `local` and `mirrors`.
+    /// from `local` and `mirrors`; refuses with [`AdminError::LimitReached`] once the
+    /// domain has as many processes as it admits. A `tool` (a short-lived command)
+    /// only asks: it is not counted, and answers nothing.
     pub fn start(
         node: &SharedNode,
         domain: &str,
         host: &str,
+        tool: bool,
         local: InProcessEsgm,
         mirrors: Arc<SharedMirrors>,
     ) -> Result<Arc<Self>, AdminError> {
-        let (data, wake) = names(domain)?;
         let unavailable = |what: &str, e: &dyn std::fmt::Debug| AdminError::Unavailable {
             reason: format!("{what}: {e:?}"),
         };
-        let (service, publisher, subscriber, notifier, listener) = node.with(|node| {
-            let service = node
-                .service_builder(&data)
-                .publish_subscribe::<[u8]>()
-                .max_publishers(MAX_PROCESSES)
-                .max_subscribers(MAX_PROCESSES)
-                .max_nodes(MAX_PROCESSES * 2)
-                .subscriber_max_buffer_size(BUFFER)
-                .history_size(0)
-                .open_or_create()
-                .map_err(|e| unavailable("the admin service", &e))?;
-            let publisher = service
-                .publisher_builder()
-                .initial_max_slice_len(1024)
-                .allocation_strategy(AllocationStrategy::PowerOfTwo)
-                .create()
-                .map_err(|e| unavailable("the admin publisher", &e))?;
-            let subscriber = service
-                .subscriber_builder()
-                .create()
-                .map_err(|e| unavailable("the admin subscriber", &e))?;
-            let events = open_event_service(node, &wake)
-                .map_err(|e| unavailable("the admin wake-up", &e))?;
-            let notifier = events
-                .notifier_builder()
-                .create()
-                .map_err(|e| unavailable("the admin notifier", &e))?;
-            let listener = events
-                .listener_builder()
-                .create()
-                .map_err(|e| unavailable("the admin listener", &e))?;
-            Ok::<_, AdminError>((service, publisher, subscriber, notifier, listener))
-        })?;
+        let services =
+            node.with(|node| AdminServices::open(node, domain, &DomainLimits::default()))?;
+        let max = services.max_processes();
+        let full = |connected: usize| {
+            AdminError::LimitReached(LimitReached::processes(domain, max.min(connected)))
+        };
+        let services = Arc::new(services);
         let admin = Arc::new(Self {
             host: host.to_owned(),
-            publisher: Mutex::new(publisher),
-            service,
-            wake: notifier,
-            pending: Mutex::default(),
+            node: node.clone(),
+            services: Arc::clone(&services),
             next: AtomicU64::new(0),
             stop: Arc::default(),
             thread: Mutex::new(None),
+            ring: Mutex::new(None),
         });
+        if tool {
+            // A command asks and leaves: it holds nothing another process's question
+            // is about, and is not counted among the domain's processes.
+            return Ok(admin);
+        }
+        let connected = services.questions.dynamic_config().number_of_subscribers();
+        if connected >= max {
+            return Err(full(connected));
+        }
+        let (subscriber, listener) = node.with(|_| {
+            let subscriber =
+                services.questions.subscriber_builder().create().map_err(|e| match e {
+                    SubscriberCreateError::ExceedsMaxSupportedSubscribers => full(max),
+                    e => unavailable("the admin subscriber", &e),
+                })?;
+            let listener = services.wake.listener_builder().create().map_err(|e| match e {
+                iceoryx2::port::listener::ListenerCreateError::ExceedsMaxSupportedListeners => {
+                    full(max)
+                }
+                e => unavailable("the admin listener", &e),
+            })?;
+            Ok::<_, AdminError>((subscriber, listener))
+        })?;
         let answerer = Answerer {
-            admin: Arc::downgrade(&admin),
             host: host.to_owned(),
+            node: node.clone(),
             local,
             mirrors,
+            services,
             subscriber,
             listener,
+            answers: None,
             stop: Arc::clone(&admin.stop),
         };
         let thread = std::thread::Builder::new()
@@ -263,75 +372,116 @@ impl Admin {
         }
     }
 
+    /// Wakes every admin thread of the domain.
     fn ring(&self) {
-        if let Err(e) = self.wake.notify() {
+        let mut ring = self.ring.lock();
+        if ring.is_none() {
+            match self.node.with(|_| self.services.wake.notifier_builder().create()) {
+                Ok(n) => *ring = Some(n),
+                Err(e) => {
+                    tracing::debug!(error = ?e, "cannot wake the admin threads; they look again soon");
+                    return;
+                }
+            }
+        }
+        if let Some(Err(e)) = ring.as_ref().map(iceoryx2::port::notifier::Notifier::notify) {
             tracing::debug!(error = ?e, "cannot wake the admin threads; they look again soon");
         }
     }
 
-    fn send(&self, envelope: &Envelope) -> Result<(), AdminError> {
-        let bytes =
-            serde_json::to_vec(envelope).map_err(|e| AdminError::Send { reason: e.to_string() })?;
-        let publisher = self.publisher.lock();
-        let loan = publisher
-            .loan_slice_uninit(bytes.len())
-            .map_err(|e| AdminError::Send { reason: format!("{e:?}") })?;
-        loan.write_from_slice(&bytes)
-            .send()
-            .map_err(|e| AdminError::Send { reason: format!("{e:?}") })?;
-        drop(publisher);
-        self.ring();
-        Ok(())
-    }
-
     /// Asks every connected process `op` and waits up to `timeout` for all of them.
     pub fn ask(&self, op: AdminOp, timeout: Duration) -> Result<Answers, AdminError> {
+        let deadline = Instant::now() + timeout;
+        let send = |reason: String| AdminError::Send { reason };
         let id = self.next.fetch_add(1, Ordering::Relaxed);
-        let (tx, rx) = crossbeam_channel::unbounded();
-        self.pending.lock().insert(id, tx);
-        let expected = self.service.dynamic_config().number_of_subscribers();
-        let envelope = Envelope { from: self.host.clone(), id, body: Body::Ask(op) };
-        let sent = self.send(&envelope);
-        let mut answers = Vec::with_capacity(expected);
-        if sent.is_ok() {
-            let deadline = Instant::now() + timeout;
-            while answers.len() < expected {
-                let left = deadline.saturating_duration_since(Instant::now());
-                match rx.recv_timeout(left) {
-                    Ok(a) => answers.push(a),
-                    Err(_) => break,
+        let bytes =
+            serde_json::to_vec(&Envelope { from: self.host.clone(), id, body: Body::Ask(op) })
+                .map_err(|e| send(e.to_string()))?;
+        // Subscribed before asking, so that no answer can come first.
+        let answers = port_within(
+            deadline,
+            || self.node.with(|_| self.services.answers.subscriber_builder().create()),
+            |e| matches!(e, SubscriberCreateError::ExceedsMaxSupportedSubscribers),
+        )
+        .map_err(|e| send(format!("no room to receive answers ({ASKERS} askers at once): {e}")))?;
+        let publisher = port_within(
+            deadline,
+            || {
+                self.node.with(|_| {
+                    self.services
+                        .questions
+                        .publisher_builder()
+                        .initial_max_slice_len(bytes.len())
+                        .allocation_strategy(AllocationStrategy::Static)
+                        .create()
+                })
+            },
+            |e| matches!(e, PublisherCreateError::ExceedsMaxSupportedPublishers),
+        )
+        .map_err(|e| send(format!("no room to ask ({ASKERS} askers at once): {e}")))?;
+        let expected = self.services.questions.dynamic_config().number_of_subscribers();
+        publisher
+            .loan_slice_uninit(bytes.len())
+            .map_err(|e| send(format!("{e:?}")))?
+            .write_from_slice(&bytes)
+            .send()
+            .map_err(|e| send(format!("{e:?}")))?;
+        self.ring();
+        let mut collected = Vec::with_capacity(expected);
+        while collected.len() < expected {
+            let mut any = false;
+            loop {
+                let sample = match answers.receive() {
+                    Ok(Some(s)) => s,
+                    Ok(None) => break,
+                    Err(e) => {
+                        tracing::debug!(error = ?e, "cannot receive an admin answer now");
+                        break;
+                    }
+                };
+                any = true;
+                match serde_json::from_slice::<Envelope>(sample.payload()) {
+                    Ok(Envelope { from, id: got, body: Body::Answer { to, answer } })
+                        if got == id && to == self.host =>
+                    {
+                        collected.push((from, answer));
+                    }
+                    // Another asker's, or an answer to a question given up on.
+                    Ok(_) => {}
+                    Err(e) => tracing::warn!(error = %e, "malformed admin answer dropped"),
                 }
             }
+            if !any {
+                if Instant::now() >= deadline {
+                    break;
+                }
+                std::thread::sleep(POLL);
+            }
         }
-        self.pending.lock().remove(&id);
-        sent?;
-        if answers.len() < expected {
-            return Err(AdminError::Incomplete { answered: answers.len(), expected, timeout });
+        drop(publisher);
+        if collected.len() < expected {
+            return Err(AdminError::Incomplete { answered: collected.len(), expected, timeout });
         }
-        Ok(answers)
-    }
-
-    fn deliver(&self, id: u64, from: String, answer: AdminAnswer) {
-        if let Some(tx) = self.pending.lock().get(&id) {
-            // The asker stopped waiting (its deadline passed): nothing to deliver to.
-            let _late = tx.send((from, answer));
-        }
+        Ok(collected)
     }
 }
 
 /// The admin thread: answers every question from this process's runtime.
 struct Answerer {
-    admin: std::sync::Weak<Admin>,
     host: String,
+    node: SharedNode,
     local: InProcessEsgm,
     mirrors: Arc<SharedMirrors>,
+    services: Arc<AdminServices>,
     subscriber: Subscriber<ShmService, [u8], ()>,
     listener: Listener<ShmService>,
+    /// This process's answers' publisher, opened at its first answer.
+    answers: Option<Publisher<ShmService, [u8], ()>>,
     stop: Arc<AtomicBool>,
 }
 
 impl Answerer {
-    fn run(self) {
+    fn run(mut self) {
         let mut failures = 0u64;
         while !self.stop.load(Ordering::Acquire) {
             if let Err(e) = crate::wait::timed_wait(&self.listener, RECHECK) {
@@ -353,31 +503,52 @@ impl Answerer {
                 let envelope: Envelope = match serde_json::from_slice(sample.payload()) {
                     Ok(e) => e,
                     Err(e) => {
-                        tracing::warn!(error = %e, "malformed admin message dropped");
+                        tracing::warn!(error = %e, "malformed admin question dropped");
                         continue;
                     }
                 };
                 drop(sample);
-                let Some(admin) = self.admin.upgrade() else { return };
-                match envelope.body {
-                    Body::Ask(op) => {
-                        let answer = self.answer(op);
-                        let reply = Envelope {
-                            from: self.host.clone(),
-                            id: envelope.id,
-                            body: Body::Answer { to: envelope.from, answer },
-                        };
-                        if let Err(e) = admin.send(&reply) {
-                            tracing::warn!(error = %e, "cannot answer an admin question");
-                        }
-                    }
-                    Body::Answer { to, answer } if to == self.host => {
-                        admin.deliver(envelope.id, envelope.from, answer);
-                    }
-                    Body::Answer { .. } => {}
+                let Body::Ask(op) = envelope.body else { continue };
+                let answer = self.answer(op);
+                let reply = Envelope {
+                    from: self.host.clone(),
+                    id: envelope.id,
+                    body: Body::Answer { to: envelope.from, answer },
+                };
+                if let Err(e) = self.reply(&reply) {
+                    tracing::warn!(error = %e, "cannot answer an admin question");
                 }
             }
         }
+    }
+
+    fn reply(&mut self, envelope: &Envelope) -> Result<(), String> {
+        let bytes = serde_json::to_vec(envelope).map_err(|e| e.to_string())?;
+        if bytes.len() > MAX_MESSAGE {
+            return Err(format!("the answer is {} bytes, more than {MAX_MESSAGE}", bytes.len()));
+        }
+        if self.answers.is_none() {
+            let publisher = self
+                .node
+                .with(|_| {
+                    self.services
+                        .answers
+                        .publisher_builder()
+                        .initial_max_slice_len(MAX_MESSAGE)
+                        .allocation_strategy(AllocationStrategy::Static)
+                        .create()
+                })
+                .map_err(|e| format!("cannot open the answers' publisher: {e:?}"))?;
+            self.answers = Some(publisher);
+        }
+        let Some(publisher) = &self.answers else { return Err("no publisher".into()) };
+        publisher
+            .loan_slice_uninit(bytes.len())
+            .map_err(|e| format!("{e:?}"))?
+            .write_from_slice(&bytes)
+            .send()
+            .map_err(|e| format!("{e:?}"))?;
+        Ok(())
     }
 
     /// The trajectories this process writes.

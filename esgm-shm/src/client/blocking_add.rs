@@ -25,8 +25,9 @@ use iceoryx2::port::server::Server;
 use iceoryx2::prelude::{AllocationStrategy, ServiceName};
 use iceoryx2::service::port_factory::request_response::PortFactory;
 
+use crate::capacity::Readers;
 use crate::control::protocol::{decode, encode};
-use crate::service::{OpenError, ShmNode, ShmService, open_event_service};
+use crate::service::{EventSpec, OpenError, ShmNode, ShmService};
 use crate::service_name::{NameError, TrajectoryServiceNames};
 
 /// The longest a blocking add waits for the writer's answer. The writer answers in
@@ -37,8 +38,10 @@ pub(crate) const BLOCKING_ADD_TIMEOUT: Duration = Duration::from_secs(1);
 /// Blocking adds one process may have in flight to one trajectory.
 const MAX_ACTIVE_REQUESTS: usize = 4;
 
-/// Processes that may add blocking to one trajectory.
-const MAX_CLIENTS: usize = 32;
+/// The largest answer (a gate's outcome: a policy violation names its constraint and
+/// values): answers are loaned from a fixed-size pool, which costs the writer no
+/// private memory per possible segment.
+const MAX_ANSWER: usize = 16 * 1024;
 
 type AddService = PortFactory<ShmService, [u8], (), [u8], ()>;
 
@@ -47,15 +50,18 @@ fn add_service_name(domain: &str, trajectory: &str) -> Result<ServiceName, NameE
     Ok(*TrajectoryServiceNames::new(&format!("{domain}:add"), trajectory)?.data())
 }
 
+/// Every process using the trajectory may add blocking ([`Readers::ports`]).
 fn open_service(
     node: &ShmNode,
     domain: &str,
     trajectory: &str,
+    readers: Readers,
 ) -> Result<AddService, BlockingAddError> {
     let name = add_service_name(domain, trajectory).map_err(OpenError::from)?;
     node.service_builder(&name)
         .request_response::<[u8], [u8]>()
-        .max_clients(MAX_CLIENTS)
+        .max_clients(readers.ports())
+        .max_nodes(readers.nodes())
         .max_active_requests_per_client(MAX_ACTIVE_REQUESTS)
         .open_or_create()
         .map_err(|e| BlockingAddError::Service(format!("{e:?}")))
@@ -84,12 +90,17 @@ pub(crate) struct AddServer {
 
 impl AddServer {
     /// Serves blocking adds to `trajectory`.
-    pub fn open(node: &ShmNode, domain: &str, trajectory: &str) -> Result<Self, BlockingAddError> {
-        let service = open_service(node, domain, trajectory)?;
+    pub fn open(
+        node: &ShmNode,
+        domain: &str,
+        trajectory: &str,
+        readers: Readers,
+    ) -> Result<Self, BlockingAddError> {
+        let service = open_service(node, domain, trajectory, readers)?;
         let server = service
             .server_builder()
-            .initial_max_slice_len(1024)
-            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .initial_max_slice_len(MAX_ANSWER)
+            .allocation_strategy(AllocationStrategy::Static)
             .create()
             .map_err(|e| BlockingAddError::Port(format!("{e:?}")))?;
         Ok(Self { server, _service: service })
@@ -144,7 +155,7 @@ pub(crate) struct AddClient {
     client: Client<ShmService, [u8], (), [u8], ()>,
     /// Wakes the writer's receiver thread (it listens to the inbox's wake-up).
     ring: Notifier<ShmService>,
-    _service: AddService,
+    service: AddService,
     trajectory: String,
 }
 
@@ -155,20 +166,18 @@ impl AddClient {
         node: &ShmNode,
         domain: &str,
         trajectory: &str,
-        wake: &ServiceName,
+        readers: Readers,
+        wake: &EventSpec,
     ) -> Result<Self, BlockingAddError> {
-        let service = open_service(node, domain, trajectory)?;
+        let service = open_service(node, domain, trajectory, readers)?;
         let client = service
             .client_builder()
             .initial_max_slice_len(4096)
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
             .map_err(|e| BlockingAddError::Port(format!("{e:?}")))?;
-        let ring = open_event_service(node, wake)?
-            .notifier_builder()
-            .create()
-            .map_err(OpenError::Notifier)?;
-        Ok(Self { client, ring, _service: service, trajectory: trajectory.to_owned() })
+        let ring = wake.open(node)?.notifier_builder().create().map_err(OpenError::Notifier)?;
+        Ok(Self { client, ring, service, trajectory: trajectory.to_owned() })
     }
 
     /// Adds `es` through the writer's gate and returns its outcome.
@@ -176,6 +185,16 @@ impl AddClient {
         let unavailable =
             |reason: String| AddError::Unavailable { trajectory: self.trajectory.clone(), reason };
         let bytes = codec::encode(es).map_err(|e| unavailable(e.to_string()))?;
+        // The writer opens its server when an adder first rings (see `Export`).
+        let serving = || {
+            iceoryx2::prelude::PortFactory::dynamic_config(&self.service).number_of_servers() > 0
+        };
+        if !super::import::writer_listens(serving, || self.ring.notify().map(|_| ())) {
+            return Err(unavailable(format!(
+                "the writer did not open its blocking adds within {:?}",
+                super::import::WRITER_OPENS
+            )));
+        }
         let pending = self
             .client
             .loan_slice_uninit(bytes.len())
@@ -184,7 +203,7 @@ impl AddClient {
             .send()
             .map_err(|e| unavailable(format!("cannot send to the writer: {e:?}")))?;
         if pending.number_of_server_connections() == 0 {
-            return Err(unavailable("the writer is not serving blocking adds".into()));
+            return Err(unavailable("the writer stopped serving blocking adds".into()));
         }
         if let Err(e) = self.ring.notify() {
             tracing::debug!(error = ?e, "cannot wake the writer; it polls");

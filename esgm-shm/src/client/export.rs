@@ -21,17 +21,21 @@ use esgm_core::value::Value;
 use esgm_core::{
     EntityStructure, EntityTrajectoryStructure, InProcessTrajectory, Sample, StoreEvent, TapId,
 };
-use iceoryx2::prelude::ServiceName;
+
 use parking_lot::Mutex;
 
 use super::blocking_add::{AddServer, BlockingAddError};
 use super::image_loans::{LoanAllocator, as_loan, loaned_image};
-use super::settings::{generation_domain, handle_qos, inbox_domain, inbox_qos, join_service};
+use super::settings::{
+    fixed_sample_len, generation_domain, handle_qos, inbox_domain, inbox_qos, join_service,
+};
 use super::shared_node::SharedNode;
+use crate::capacity::{EventCapacity, Readers};
 use crate::control::protocol::TrajectoryRecord;
 use crate::holdings::{HoldingOwner, Holdings};
 use crate::image_loan::ImageChunk;
-use crate::publisher::TrajectoryPublisher;
+use crate::publisher::{SampleSizing, TrajectoryPublisher};
+use crate::service::EventSpec;
 use crate::service::OpenError;
 use crate::service_name::TrajectoryServiceNames;
 use crate::subscriber::{ReceiveError, TrajectorySubscriber};
@@ -206,14 +210,12 @@ pub(crate) struct Export {
     outlet: Arc<Mutex<Outlet>>,
     handle: InProcessTrajectory,
     tap: TapId,
-    /// Primitive trajectories: other processes' adds.
-    inbox: Option<TrajectorySubscriber>,
-    /// Primitive trajectories: other processes' blocking adds, answered.
-    blocking: Option<AddServer>,
-    /// The inbox's wake-up service, for the receiver thread.
-    inbox_wake: Option<ServiceName>,
+    /// Primitive trajectories: other processes' adds and blocking adds.
+    inbox: Option<Inbox>,
     /// The join service new readers ring for their history, for the receiver thread.
-    join: ServiceName,
+    join: EventSpec,
+    /// The publisher's subscribers when its connections were last updated.
+    readers_seen: std::sync::atomic::AtomicUsize,
 }
 
 impl Drop for Export {
@@ -252,13 +254,17 @@ impl Export {
         let primitive = record.info.kind == TrajectoryKind::Primitive;
         let generation = record.generation;
         let domain = &generation_domain(domain, generation);
-        let qos = handle_qos(handle, policy);
+        let readers = record.readers;
+        let qos = handle_qos(handle, policy, readers);
         let images = has_octets(handle);
-        let (publisher, violations, inbox, blocking, own) = node.with(|node| {
-            let publisher = TrajectoryPublisher::builder(&name, type_name)
-                .domain(domain)
-                .qos(qos)
-                .create(node)?;
+        let fixed = handle.entity_type().ok().as_ref().and_then(fixed_sample_len);
+        let (publisher, violations, own) = node.with(|node| {
+            let mut publisher =
+                TrajectoryPublisher::builder(&name, type_name).domain(domain).qos(qos);
+            if let Some(len) = fixed {
+                publisher = publisher.sizing(SampleSizing::Fixed).max_len(len);
+            }
+            let publisher = publisher.create(node)?;
             let own = match images {
                 true => Some(
                     TrajectorySubscriber::builder(&name, type_name)
@@ -270,34 +276,30 @@ impl Export {
                 ),
                 false => None,
             };
-            let violations = ViolationPublisher::create(node, domain, &name)?;
-            let inbox = match primitive {
-                true => Some(
-                    TrajectorySubscriber::builder(&name, type_name)
-                        .domain(inbox_domain(domain))
-                        .qos(inbox_qos())
-                        // Nobody waits on it: the receiver thread does (see `receiver`).
-                        .wait_strategy(WaitStrategy::BusySpin)
-                        .create(node)?,
-                ),
-                false => None,
-            };
-            let blocking = match primitive {
-                true => Some(AddServer::open(node, domain, &name)?),
-                false => None,
-            };
-            Ok::<_, ExportError>((publisher, violations, inbox, blocking, own))
+            let violations = ViolationPublisher::create(node, domain, &name, readers)?;
+            Ok::<_, ExportError>((publisher, violations, own))
         })?;
         register(publisher.id().value());
-        let inbox_wake = match primitive {
-            true => Some(
-                *TrajectoryServiceNames::new(&inbox_domain(domain), &name)
-                    .map_err(OpenError::from)?
-                    .wake(),
-            ),
+        let inbox = match primitive {
+            true => Some(Inbox {
+                wake: EventSpec {
+                    name: *TrajectoryServiceNames::new(&inbox_domain(domain), &name)
+                        .map_err(OpenError::from)?
+                        .wake(),
+                    capacity: inbox_qos(readers).wake_capacity(),
+                },
+                node: node.clone(),
+                domain: domain.to_owned(),
+                type_name: type_name.to_owned(),
+                readers,
+                ports: Mutex::new(None),
+            }),
             false => None,
         };
-        let join = join_service(domain, &name).map_err(OpenError::from)?;
+        let join = EventSpec {
+            name: join_service(domain, &name).map_err(OpenError::from)?,
+            capacity: EventCapacity::to_writer(readers),
+        };
         // One borrow stays free to receive into.
         let own = own.map(|o| (o, holdings.owner(qos.max_borrowed_samples.saturating_sub(1))));
         let outlet = Arc::new(Mutex::new(Outlet { publisher, violations, own, failures: 0 }));
@@ -330,21 +332,19 @@ impl Export {
             handle: handle.clone(),
             tap,
             inbox,
-            blocking,
-            inbox_wake,
             join,
+            readers_seen: std::sync::atomic::AtomicUsize::new(usize::MAX),
         })
     }
 
-    /// The wake-up services other processes ring for this trajectory: its inbox (their
-    /// adds) and its join service (a new reader's request for its history).
-    pub fn wake_services(&self) -> Vec<ServiceName> {
-        self.inbox_wake.iter().copied().chain([self.join]).collect()
+    /// The inbox's wake-up service (primitive trajectories), which adders ring.
+    pub fn inbox_wake(&self) -> Option<EventSpec> {
+        self.inbox.as_ref().map(|i| i.wake)
     }
 
-    /// The join service new readers ring.
-    pub fn join_service(&self) -> &ServiceName {
-        &self.join
+    /// The join service new readers ring for their history.
+    pub fn join_wake(&self) -> EventSpec {
+        self.join
     }
 
     /// Hands readers that connected since the last send their history now and wakes
@@ -362,6 +362,13 @@ impl Export {
     /// the next sample.
     pub fn update_connections(&self) {
         let outlet = self.outlet.lock();
+        // Connections change only when readers come or go: an idle trajectory costs a
+        // look at its service's count. (A reader that came as another went rings the
+        // join service, which hands it its history at once.)
+        let readers = outlet.publisher.subscriber_count();
+        if self.readers_seen.swap(readers, std::sync::atomic::Ordering::Relaxed) == readers {
+            return;
+        }
         if let Err(e) = outlet.publisher.update_connections() {
             tracing::debug!(trajectory = %outlet.publisher.trajectory(), error = %e,
                 "cannot update the connections of a trajectory's publisher");
@@ -371,9 +378,31 @@ impl Export {
     /// Adds what other processes sent to the inbox through this process's gate;
     /// returns how many there were. Whatever the gate refuses is counted in the
     /// trajectory's stats (and published as a violation).
-    pub fn take_inbox(&self) -> usize {
+    ///
+    /// The inbox's ports are opened the first time an adder rings: an idle primitive
+    /// trajectory pays nothing for them (a subscriber and a server sized for every
+    /// possible adder, about 0.7 MiB of private memory).
+    ///
+    /// `rung`: an adder rang the inbox (else this is a look for what may have come
+    /// without a ring, which opens nothing).
+    pub fn take_inbox(&self, rung: bool) -> usize {
         let Some(inbox) = &self.inbox else { return 0 };
-        let mut n = self.blocking.as_ref().map_or(0, |b| b.serve(&self.handle));
+        let mut ports = inbox.ports.lock();
+        if ports.is_none() {
+            if !rung {
+                return 0;
+            }
+            match inbox.open(self.handle.name()) {
+                Ok(opened) => *ports = Some(opened),
+                Err(e) => {
+                    tracing::warn!(trajectory = %self.handle.name(), error = %e,
+                        "cannot open the inbox; other processes' adds wait");
+                    return 0;
+                }
+            }
+        }
+        let Some((inbox, blocking)) = ports.as_ref() else { return 0 };
+        let mut n = blocking.serve(&self.handle);
         loop {
             match inbox.receive() {
                 Ok(Some(sample)) => {
@@ -401,6 +430,36 @@ impl Export {
             }
         }
         n
+    }
+}
+
+/// A primitive trajectory's inbox: where other processes' adds arrive.
+#[derive(Debug)]
+struct Inbox {
+    /// The wake-up service adders ring, which the receiver thread listens to.
+    wake: EventSpec,
+    node: SharedNode,
+    /// The generation's domain.
+    domain: String,
+    type_name: String,
+    readers: Readers,
+    /// The subscriber of adds and the server of blocking adds, opened at the first
+    /// ring.
+    ports: Mutex<Option<(TrajectorySubscriber, AddServer)>>,
+}
+
+impl Inbox {
+    fn open(&self, trajectory: &str) -> Result<(TrajectorySubscriber, AddServer), ExportError> {
+        self.node.with(|node| {
+            let inbox = TrajectorySubscriber::builder(trajectory, &self.type_name)
+                .domain(inbox_domain(&self.domain))
+                .qos(inbox_qos(self.readers))
+                // Nobody waits on it: the receiver thread does (see `receiver`).
+                .wait_strategy(WaitStrategy::BusySpin)
+                .create(node)?;
+            let blocking = AddServer::open(node, &self.domain, trajectory, self.readers)?;
+            Ok((inbox, blocking))
+        })
     }
 }
 

@@ -37,13 +37,16 @@ use parking_lot::Mutex;
 
 use super::blocking_add::AddClient;
 use super::mirrors::SharedMirrors;
-use super::settings::{bridge_qos, generation_domain, inbox_domain, inbox_qos, join_service};
+use super::settings::{
+    bridge_qos, fixed_sample_len, generation_domain, inbox_domain, inbox_qos, join_service,
+};
 use super::shared_node::SharedNode;
+use crate::capacity::{EventCapacity, Readers};
 use crate::control::protocol::TrajectoryRecord;
 use crate::holdings::{HoldingOwner, Holdings};
-use crate::publisher::TrajectoryPublisher;
+use crate::publisher::{SampleSizing, TrajectoryPublisher};
 use crate::sequence_gaps::SequenceGaps;
-use crate::service::{OpenError, ShmService, open_event_service};
+use crate::service::{EventSpec, OpenError, ShmService, open_event_service};
 use crate::service_name::{NameError, TrajectoryServiceNames};
 use crate::subscriber::{ReceiveError, TrajectorySubscriber};
 use crate::violations::{ViolationSubscriber, violation_service_name};
@@ -58,6 +61,10 @@ pub(crate) struct ImportSite<'a> {
     pub mirrors: &'a Arc<SharedMirrors>,
     /// Rings the location thread to ask the registry who writes (see `Import::arrive`).
     pub verify: &'a crossbeam_channel::Sender<()>,
+    /// True for a short-lived tool's connection, which may use the ports a trajectory
+    /// keeps beyond its `readers` ([`crate::capacity`]); a long-lived reader counts
+    /// itself against them.
+    pub tool: bool,
 }
 
 /// A trajectory of another process, mirrored into a local replica.
@@ -80,7 +87,7 @@ pub(crate) struct Import {
     /// Whose samples this import's held images count as, and how many it may hold.
     owner: HoldingOwner,
     /// The wake-up services of the samples and the violations, for the receiver.
-    wakes: Vec<ServiceName>,
+    wakes: Vec<EventSpec>,
     /// Workers waiting on this import's writer themselves: while there is one, the
     /// receiver thread does not listen to its samples (the worker feeds the replica
     /// each time it wakes), so a sample wakes one thread in this process, not two.
@@ -130,7 +137,8 @@ impl Import {
         replica: InProcessTrajectory,
         record: &TrajectoryRecord,
     ) -> Result<Self, OpenError> {
-        let ImportSite { node, domain, holdings, mirrors, verify } = *at;
+        let ImportSite { node, domain, holdings, mirrors, verify, tool } = *at;
+        let readers = record.readers;
         let (type_name, policy) = (&record.info.type_name, &record.info.policy);
         let primitive = record.info.kind == TrajectoryKind::Primitive;
         let generation = record.generation;
@@ -145,33 +153,45 @@ impl Import {
             }
         };
         let entity_type = replica.entity_type().unwrap_or_else(|_| EntityStructureType::new(""));
-        let qos = bridge_qos(policy, &entity_type);
+        let qos = bridge_qos(policy, &entity_type, readers);
         // Nobody waits on these ports: the receiver thread waits on their wake-up
         // services, so they need no listeners of their own.
-        let (subscriber, violations) = node.with(|node| {
-            let subscriber = TrajectorySubscriber::builder(&name, type_name)
-                .domain(domain)
-                .qos(qos)
-                .wait_strategy(WaitStrategy::BusySpin)
-                .create(node)?;
-            let violations = ViolationSubscriber::builder(&name)
-                .domain(domain)
-                .wait_strategy(WaitStrategy::BusySpin)
-                .create(node)?;
-            Ok::<_, OpenError>((subscriber, violations))
-        })?;
-        let sample_wake = *TrajectoryServiceNames::new(domain, &name)?.wake();
-        if let Err(e) = join(node, domain, &name, &sample_wake) {
+        let (subscriber, violations) = node
+            .with(|node| {
+                let mut subscriber = TrajectorySubscriber::builder(&name, type_name)
+                    .domain(domain)
+                    .qos(qos)
+                    .wait_strategy(WaitStrategy::BusySpin);
+                if !tool {
+                    subscriber = subscriber.reader_limit(readers.0);
+                }
+                let subscriber = subscriber.create(node)?;
+                let violations = ViolationSubscriber::builder(&name)
+                    .domain(domain)
+                    .readers(readers)
+                    .wait_strategy(WaitStrategy::BusySpin)
+                    .create(node)?;
+                Ok::<_, OpenError>((subscriber, violations))
+            })
+            .map_err(|e| e.as_limit(&name, readers))?;
+        let sample_wake = EventSpec {
+            name: *TrajectoryServiceNames::new(domain, &name)?.wake(),
+            capacity: qos.wake_capacity(),
+        };
+        if let Err(e) = join(node, domain, &name, &sample_wake, readers) {
             tracing::debug!(trajectory = %name, error = %e,
                 "the writer did not hand over its history at once; it comes with its next sample or maintenance");
         }
         let violations_wake = violation_service_name(domain, &name);
         let wakes = vec![
             sample_wake,
-            ServiceName::new(&violations_wake).map_err(|_| NameError::TooLong {
-                service: violations_wake.clone(),
-                max: ServiceName::max_len(),
-            })?,
+            EventSpec {
+                name: ServiceName::new(&violations_wake).map_err(|_| NameError::TooLong {
+                    service: violations_wake.clone(),
+                    max: ServiceName::max_len(),
+                })?,
+                capacity: EventCapacity::violations(readers),
+            },
         ];
         let feed = ImportFeed {
             trajectory: name.clone(),
@@ -185,6 +205,8 @@ impl Import {
                 trajectory: name.clone(),
                 type_name: type_name.to_owned(),
                 domain: domain.to_owned(),
+                readers,
+                fixed: fixed_sample_len(&entity_type),
                 node: node.clone(),
                 inbox: Mutex::new(None),
                 blocking: Mutex::new(None),
@@ -214,13 +236,13 @@ impl Import {
     }
 
     /// The wake-up service of this import's samples.
-    fn sample_wake(&self) -> Option<ServiceName> {
+    fn sample_wake(&self) -> Option<EventSpec> {
         self.wakes.first().copied()
     }
 
     /// The wake-up services the receiver thread listens to: without the samples'
     /// while a worker waits on them itself.
-    pub fn receiver_wakes(&self) -> &[ServiceName] {
+    pub fn receiver_wakes(&self) -> &[EventSpec] {
         match self.workers.load(std::sync::atomic::Ordering::Acquire) {
             0 => &self.wakes,
             _ => self.wakes.get(1..).unwrap_or_default(),
@@ -466,12 +488,9 @@ impl ImportWaiter {
         }
         // Another generation: count in the import now served.
         self.stand_down();
-        let listener = self.node.with(|node| {
-            open_event_service(node, &wake)?
-                .listener_builder()
-                .create()
-                .map_err(OpenError::Listener)
-        });
+        let listener = self
+            .node
+            .with(|node| wake.open(node)?.listener_builder().create().map_err(OpenError::Listener));
         match listener {
             Ok(l) => {
                 self.listening = Some((generation, l));
@@ -545,16 +564,18 @@ fn join(
     node: &SharedNode,
     domain: &str,
     trajectory: &str,
-    sample_wake: &ServiceName,
+    sample_wake: &EventSpec,
+    readers: Readers,
 ) -> Result<(), String> {
     let join = join_service(domain, trajectory).map_err(|e| e.to_string())?;
     let (listener, bell) = node.with(|node| {
-        let listener = open_event_service(node, sample_wake)
+        let listener = sample_wake
+            .open(node)
             .map_err(|e| e.to_string())?
             .listener_builder()
             .create()
             .map_err(|e| format!("cannot listen to the writer: {e:?}"))?;
-        let bell = open_event_service(node, &join)
+        let bell = open_event_service(node, &join, EventCapacity::to_writer(readers))
             .map_err(|e| e.to_string())?
             .notifier_builder()
             .create()
@@ -569,6 +590,37 @@ fn join(
     }
 }
 
+/// How long a process's first add to a trajectory waits for the writer to open its
+/// inbox (a control-plane round trip of the writer's receiver thread).
+pub(crate) const WRITER_OPENS: Duration = Duration::from_secs(2);
+
+/// Rings the writer (`ring`) until `listening`, for at most [`WRITER_OPENS`]; true if
+/// it listens.
+pub(crate) fn writer_listens<E: std::fmt::Display>(
+    listening: impl Fn() -> bool,
+    ring: impl Fn() -> Result<(), E>,
+) -> bool {
+    let deadline = std::time::Instant::now() + WRITER_OPENS;
+    let mut next_ring = std::time::Instant::now();
+    let mut pause = Duration::from_micros(50);
+    while !listening() {
+        let now = std::time::Instant::now();
+        if now >= deadline {
+            return false;
+        }
+        // Again now and then: a writer restarted meanwhile missed the first.
+        if now >= next_ring {
+            if let Err(e) = ring() {
+                tracing::debug!(error = %e, "cannot ring the writer");
+            }
+            next_ring = now + Duration::from_millis(100);
+        }
+        std::thread::sleep(pause);
+        pause = (pause * 2).min(Duration::from_millis(5));
+    }
+    true
+}
+
 /// A replica's side of forwarding: publishes each add on the writer's inbox, from the
 /// adding thread.
 #[derive(Debug)]
@@ -576,6 +628,10 @@ struct Outbox {
     trajectory: String,
     type_name: String,
     domain: String,
+    /// The trajectory's readers, which size its inbox and blocking-add services.
+    readers: Readers,
+    /// The largest structure of its type, if bounded (the inbox's fixed-size pool).
+    fixed: Option<usize>,
     node: SharedNode,
     /// Opened at the first add: most replicas of a primitive trajectory only read.
     inbox: Mutex<Option<TrajectoryPublisher>>,
@@ -593,8 +649,12 @@ impl AddForwarder for Outbox {
                 let names =
                     TrajectoryServiceNames::new(&inbox_domain(&self.domain), &self.trajectory)
                         .map_err(|e| unavailable(e.to_string()))?;
+                let wake = EventSpec {
+                    name: *names.wake(),
+                    capacity: inbox_qos(self.readers).wake_capacity(),
+                };
                 let opened = self.node.with(|node| {
-                    AddClient::open(node, &self.domain, &self.trajectory, names.wake())
+                    AddClient::open(node, &self.domain, &self.trajectory, self.readers, &wake)
                 });
                 *client = Some(opened.map_err(|e| unavailable(e.to_string()))?);
             }
@@ -606,14 +666,27 @@ impl AddForwarder for Outbox {
         let mut inbox = self.inbox.lock();
         if inbox.is_none() {
             let opened = self.node.with(|node| {
-                TrajectoryPublisher::builder(&self.trajectory, &self.type_name)
+                let mut publisher = TrajectoryPublisher::builder(&self.trajectory, &self.type_name)
                     .domain(inbox_domain(&self.domain))
-                    .qos(inbox_qos())
-                    .create(node)
+                    .qos(inbox_qos(self.readers));
+                if let Some(len) = self.fixed {
+                    publisher = publisher.sizing(SampleSizing::Fixed).max_len(len);
+                }
+                publisher.create(node)
             });
-            *inbox = Some(
-                opened.map_err(|e| unavailable(format!("cannot open the writer's inbox: {e}")))?,
-            );
+            let publisher =
+                opened.map_err(|e| match e.as_limit(&self.trajectory, self.readers) {
+                    OpenError::LimitReached(limit) => AddError::LimitReached(limit),
+                    e => unavailable(format!("cannot open the writer's inbox: {e}")),
+                })?;
+            // The writer opens its inbox when an adder first rings (see `Export`); an
+            // add sent before would reach nobody.
+            if !writer_listens(|| publisher.subscriber_count() > 0, || publisher.welcome()) {
+                return Err(unavailable(format!(
+                    "the writer did not open its inbox within {WRITER_OPENS:?}"
+                )));
+            }
+            *inbox = Some(publisher);
         }
         let Some(publisher) = inbox.as_ref() else {
             return Err(unavailable("the writer's inbox is not open".into()));

@@ -24,6 +24,7 @@ use super::shared_node::SharedNode;
 use crate::control::protocol::{Assignment, ControlError, Request, Response, TrajectoryRecord};
 use crate::control::{ControlClient, ControlClientError};
 use crate::holdings::{HoldingStats, Holdings};
+use crate::service::OpenError;
 
 /// How often publishers hand late readers their history.
 pub(crate) const MAINTENANCE_PERIOD: Duration = Duration::from_millis(250);
@@ -74,6 +75,13 @@ pub(crate) fn trajectory_record(
     }
 }
 
+/// What the location thread last looked at ([`Location::looked`]).
+#[derive(Debug, Default)]
+pub(crate) struct Looked {
+    audit: Option<(u64, u64)>,
+    assignments: Option<u64>,
+}
+
 pub(crate) struct Location {
     pub domain: String,
     pub host: String,
@@ -95,6 +103,12 @@ pub(crate) struct Location {
     /// ([`Location::verify_writers`]) rather than at its next maintenance tick: the
     /// samples held meanwhile borrow shared memory.
     pub verify: (Sender<()>, Receiver<()>),
+    /// A short-lived tool's connection ([`crate::ShmEsgmBuilder::tool`]).
+    pub tool: bool,
+    /// The registry's version and this process's mirrors' generation at the last
+    /// audit, and the registry's version at the last look for assignments: an idle
+    /// domain costs each process one ping per period, whatever its size.
+    pub looked: Looked,
     /// Stopped and joined when the location ends.
     pub _receiver: SampleReceiver,
 }
@@ -146,10 +160,18 @@ impl Location {
     /// readers receive a reset in the stream and move over, E5), as long as its type
     /// is the same.
     fn audit(&mut self) {
-        if self.mirrors.lock().is_empty() {
+        let names: Vec<String> = {
+            let mirrors = self.mirrors.lock();
+            mirrors.exports.keys().chain(mirrors.imports.keys()).cloned().collect()
+        };
+        if names.is_empty() {
             return;
         }
-        let placements = match self.control.call(&Request::ListPlacements) {
+        let looking = self.registry_version().map(|v| (v, self.mirrors.generation()));
+        if looking.is_some() && looking == self.looked.audit {
+            return;
+        }
+        let placements = match self.control.call(&Request::ListPlacementsOf { names }) {
             Ok(Response::Placements(p)) => p,
             Ok(other) => {
                 tracing::warn!(answer = ?other, "unexpected answer to a placement listing");
@@ -188,6 +210,11 @@ impl Location {
             }
             (stale, moved, unreported)
         };
+        // Settled only if nothing needed doing: what this audit changes is looked at
+        // again next time.
+        if stale.is_empty() && moved.is_empty() && unreported.is_empty() {
+            self.looked.audit = looking;
+        }
         for (name, generation, publisher) in unreported {
             self.report_writer(&name, generation, publisher);
         }
@@ -223,6 +250,7 @@ impl Location {
             holdings: &self.holdings,
             mirrors: &self.mirrors,
             verify: &self.verify.0,
+            tool: self.tool,
         };
         match Import::start(&site, replica.clone(), &record) {
             Ok(mut import) => {
@@ -462,6 +490,7 @@ impl Location {
             holdings: &self.holdings,
             mirrors: &self.mirrors,
             verify: &self.verify.0,
+            tool: self.tool,
         };
         match Import::start(&site, handle.clone(), record) {
             Ok(mut import) => {
@@ -477,8 +506,19 @@ impl Location {
                     tracing::warn!(trajectory = %name, error = %undo,
                         "cannot remove a replica that failed to start");
                 }
-                Err(CreateError::Unavailable { reason: e.to_string() })
+                Err(match e {
+                    OpenError::LimitReached(limit) => CreateError::LimitReached(limit),
+                    e => CreateError::Unavailable { reason: e.to_string() },
+                })
             }
+        }
+    }
+
+    /// The registry's version (`None` if the coordinator did not answer).
+    fn registry_version(&mut self) -> Option<u64> {
+        match self.control.call(&Request::Ping) {
+            Ok(Response::Pong { registry, .. }) => Some(registry),
+            _ => None,
         }
     }
 
@@ -497,7 +537,11 @@ impl Location {
             self.poll_assignments();
             return self.local.get_entity_trajectory_structure(name);
         }
-        self.replica(&record).map_err(|e| LookupError::Unavailable { reason: e.to_string() })
+        self.replica(&record).map_err(|e| match e {
+            CreateError::LimitReached(limit) => LookupError::LimitReached(limit),
+            CreateError::Unavailable { reason } => LookupError::Unavailable { reason },
+            e => LookupError::Unavailable { reason: e.to_string() },
+        })
     }
 
     fn destroy(&mut self, name: &str) -> Result<(), LookupError> {
@@ -510,6 +554,11 @@ impl Location {
     /// Builds the trajectories the coordinator placed here that are not built yet
     /// (sampled on this process's sensors, computed by its units, created by others).
     fn poll_assignments(&mut self) {
+        let version = self.registry_version();
+        if version.is_some() && version == self.looked.assignments && self.failed.is_empty() {
+            return;
+        }
+        self.looked.assignments = version;
         let list = match self.control.call(&Request::Assignments { host: self.host.clone() }) {
             Ok(Response::Assignments(list)) => list,
             Ok(_) => return,

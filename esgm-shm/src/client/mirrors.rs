@@ -8,12 +8,23 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use iceoryx2::port::notifier::Notifier;
 
-use iceoryx2::prelude::ServiceName;
 use parking_lot::{Mutex, MutexGuard};
 
 use super::export::Export;
 use super::import::Import;
-use crate::service::ShmService;
+use crate::service::{EventSpec, ShmService};
+
+/// What a wake-up service's notifications are for (the receiver thread serves that
+/// one mirror alone).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) enum Route {
+    /// An import's samples or violations arrived.
+    Import(String),
+    /// Another process added to an export's inbox (or asks for its blocking adds).
+    Inbox(String),
+    /// A new reader of an export asks for its history.
+    Join(String),
+}
 
 /// The exports and imports of one connection.
 #[derive(Debug, Default)]
@@ -23,27 +34,32 @@ pub(crate) struct Mirrors {
 }
 
 impl Mirrors {
-    /// True if nothing is mirrored.
-    pub fn is_empty(&self) -> bool {
-        self.exports.is_empty() && self.imports.is_empty()
+    /// Every wake-up service that other processes notify for this connection, with
+    /// what its notifications are for: each import's samples and violations, each
+    /// export's join service and each primitive export's inbox.
+    pub fn wake_routes(&self) -> Vec<(EventSpec, Route)> {
+        let imports = self.imports.iter().flat_map(|(name, i)| {
+            i.receiver_wakes().iter().map(move |w| (*w, Route::Import(name.clone())))
+        });
+        let exports = self.exports.iter().flat_map(|(name, e)| {
+            let inbox = e.inbox_wake().map(|w| (w, Route::Inbox(name.clone())));
+            inbox.into_iter().chain([(e.join_wake(), Route::Join(name.clone()))])
+        });
+        imports.chain(exports).collect()
     }
 
-    /// Every wake-up service that other processes notify for this connection: each
-    /// import's samples and violations, each primitive export's inbox.
-    pub fn wake_services(&self) -> Vec<ServiceName> {
-        self.imports
-            .values()
-            .flat_map(|i| i.receiver_wakes().iter().copied())
-            .chain(self.exports.values().flat_map(Export::wake_services))
-            .collect()
-    }
-
-    /// Hands their history to the readers that rang the join services in `rung`
-    /// (all of them with `None`: rings that came before the receiver listened).
-    pub fn welcome(&self, rung: Option<&[ServiceName]>) {
-        for e in self.exports.values() {
-            if rung.is_none_or(|r| r.contains(e.join_service())) {
-                e.welcome();
+    /// Serves what `route` is for; returns how many samples, adds or violations were
+    /// taken. `rung`: its service rang (else this is a look for what may have come
+    /// before its listener existed).
+    pub fn serve(&mut self, route: &Route, rung: bool) -> usize {
+        match route {
+            Route::Import(name) => self.imports.get_mut(name).map_or(0, Import::pump),
+            Route::Inbox(name) => self.exports.get(name).map_or(0, |e| e.take_inbox(rung)),
+            Route::Join(name) => {
+                if let Some(e) = self.exports.get(name) {
+                    e.welcome();
+                }
+                0
             }
         }
     }
@@ -51,7 +67,7 @@ impl Mirrors {
     /// Takes everything other processes sent: adds to the inboxes of the exports,
     /// samples, resets and violations of the imports; returns how many there were.
     pub fn pump(&mut self) -> usize {
-        let inboxes: usize = self.exports.values().map(Export::take_inbox).sum();
+        let inboxes: usize = self.exports.values().map(|e| e.take_inbox(false)).sum();
         inboxes + self.imports.values_mut().map(Import::pump).sum::<usize>()
     }
 }

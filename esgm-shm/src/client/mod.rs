@@ -59,7 +59,7 @@
 //!   Re-pointing a name (E5) moves readers in every process to the new generation
 //!   with their subscribers; a re-pointed name keeps its type.
 
-mod admin;
+pub(crate) mod admin;
 mod blocking_add;
 mod export;
 pub mod holdings;
@@ -105,6 +105,10 @@ pub const DEFAULT_TIMEOUT: Duration = Duration::from_secs(5);
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum ConnectError {
+    /// The domain has as many processes as it admits (`esgm up --max-processes`; see
+    /// [`crate::capacity`]): this process was refused, every other is served.
+    #[error(transparent)]
+    LimitReached(esgm_core::esgm::LimitReached),
     /// No coordinator answered (see the reason; start one with `esgm up`).
     #[error(transparent)]
     Control(#[from] ControlClientError),
@@ -136,6 +140,7 @@ pub struct ShmEsgmBuilder {
     clock: Option<SharedClock>,
     host: Option<String>,
     timeout: Option<Duration>,
+    tool: bool,
 }
 
 /// The environment variable naming the domain of the system a worker belongs to.
@@ -183,6 +188,17 @@ impl ShmEsgmBuilder {
         self
     }
 
+    /// Connects as a short-lived tool (a command such as `esgm latest`): it may use the
+    /// ports every domain-wide and trajectory service keeps beyond its limits
+    /// ([`crate::capacity`]), so a domain whose processes or a trajectory whose
+    /// readers reached their limit can still be looked at and added to. A long-lived
+    /// process must not: it would take the room the tools need.
+    #[must_use]
+    pub fn tool(mut self) -> Self {
+        self.tool = true;
+        self
+    }
+
     /// How long a control call may take ([`DEFAULT_TIMEOUT`]).
     #[must_use]
     pub fn timeout(mut self, timeout: Duration) -> Self {
@@ -201,10 +217,14 @@ impl ShmEsgmBuilder {
         }
         let local = local.create();
         let node = NodeBuilder::new()
+            .config(&crate::service::node_config())
             .name(&crate::service_name::node_name(&domain, &host))
             .create::<ShmService>()
             .map_err(ControlClientError::node)?;
-        let control = ControlClient::connect(&domain, timeout)?;
+        let control = ControlClient::connect(&domain, timeout).map_err(|e| match e {
+            ControlClientError::LimitReached(limit) => ConnectError::LimitReached(limit),
+            e => ConnectError::Control(e),
+        })?;
         let node = SharedNode::new(node);
         let mirrors = Arc::new(SharedMirrors::default());
         let holdings = Arc::new(Holdings::default());
@@ -214,7 +234,12 @@ impl ShmEsgmBuilder {
             crate::service_name::doorbell_service(&domain, &host)?,
             Arc::clone(&mirrors),
         )?;
-        let admin = Admin::start(&node, &domain, &host, local.clone(), Arc::clone(&mirrors))?;
+        let admin =
+            Admin::start(&node, &domain, &host, self.tool, local.clone(), Arc::clone(&mirrors))
+                .map_err(|e| match e {
+                    AdminError::LimitReached(limit) => ConnectError::LimitReached(limit),
+                    e => ConnectError::Admin(e),
+                })?;
         let resets: Arc<dyn esgm_core::ResetForwarder> =
             Arc::new(DomainReset { admin: Arc::downgrade(&admin), timeout });
         let (commands, inbox) = crossbeam_channel::unbounded();
@@ -231,6 +256,8 @@ impl ShmEsgmBuilder {
             reported: (HoldingStats::default(), std::time::Instant::now()),
             resets,
             verify: crossbeam_channel::bounded(1),
+            tool: self.tool,
+            looked: location::Looked::default(),
             _receiver: receiver,
         };
         let thread = std::thread::Builder::new()

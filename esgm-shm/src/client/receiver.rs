@@ -10,23 +10,30 @@
 //! inline (see [`super::export`]), a structure crosses a process boundary with one
 //! wake-up: this one.
 //!
-//! It rebuilds its listeners when the set of mirrors changes (a generation the
-//! location bumps and then rings the receiver's *doorbell*, an event service of its
-//! own), and pumps once then and at every [`RECHECK`] anyway, which bounds the delay
-//! of a notify it could not hear (a service whose listener could not be made).
+//! Cost proportional to use: a wake-up serves the one mirror its service belongs to
+//! ([`Route`]), looked up by the WaitSet's attachment id, whatever the number of
+//! mirrors. When the set changes (a generation the location bumps and then rings the
+//! receiver's *doorbell*, an event service of its own), it listens to the services
+//! that came and stops listening to those that went, keeping the others' listeners,
+//! and serves the new ones once. Services it could not listen to are served every
+//! [`RECHECK`], and everything every [`SWEEP`], which bounds the delay of a notify
+//! that was lost.
 
+use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 use std::thread::JoinHandle;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::{
-    CallbackProgression, NodeBuilder, NodeName, ServiceName, SignalHandlingMode, WaitSetBuilder,
+    CallbackProgression, NodeBuilder, NodeName, ServiceName, SignalHandlingMode,
+    WaitSetAttachmentId, WaitSetBuilder,
 };
 
-use super::mirrors::SharedMirrors;
+use super::mirrors::{Route, SharedMirrors};
 use super::shared_node::SharedNode;
-use crate::service::{ShmNode, ShmService, open_event_service};
+use crate::capacity::EventCapacity;
+use crate::service::{EventSpec, ShmNode, ShmService};
 
 /// The longest the receiver sleeps before it pumps anyway and looks for a new set of
 /// services (and for its stop).
@@ -60,8 +67,10 @@ impl Receiver {
         doorbell: ServiceName,
         mirrors: Arc<SharedMirrors>,
     ) -> Result<Self, ReceiverError> {
+        let doorbell = EventSpec { name: doorbell, capacity: EventCapacity::own() };
         let notifier = node.with(|node| {
-            open_event_service(node, &doorbell)
+            doorbell
+                .open(node)
                 .map_err(|e| ReceiverError::Doorbell(e.to_string()))?
                 .notifier_builder()
                 .create()
@@ -88,8 +97,9 @@ impl Drop for Receiver {
     }
 }
 
-fn run(node_name: &NodeName, doorbell: &ServiceName, mirrors: &SharedMirrors) {
+fn run(node_name: &NodeName, doorbell: &EventSpec, mirrors: &SharedMirrors) {
     let node = match NodeBuilder::new()
+        .config(&crate::service::node_config())
         .name(node_name)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ShmService>()
@@ -101,17 +111,53 @@ fn run(node_name: &NodeName, doorbell: &ServiceName, mirrors: &SharedMirrors) {
             return poll(mirrors);
         }
     };
+    // Listeners live across changes of the set: a change opens the new services' and
+    // drops the gone ones', never all of them again.
+    let mut listening: HashMap<ServiceName, Listener<ShmService>> = HashMap::new();
+    let bell = match listener(&node, doorbell) {
+        Ok(l) => Some(l),
+        Err(e) => {
+            tracing::warn!(error = %e, "the receiver has no doorbell; it looks for changes every {RECHECK:?}");
+            None
+        }
+    };
     while !mirrors.stopped() {
         let generation = mirrors.generation();
-        let mut services = mirrors.lock().wake_services();
-        services.push(*doorbell);
-        let listeners = listen(&node, &services);
-        // What arrived before these listeners existed would not wake them.
-        let mut locked = mirrors.lock();
-        locked.welcome(None);
-        locked.pump();
-        drop(locked);
-        wait_while_unchanged(mirrors, generation, &listeners);
+        let wanted = mirrors.lock().wake_routes();
+        let names: HashSet<ServiceName> = wanted.iter().map(|(spec, _)| spec.name).collect();
+        listening.retain(|name, _| names.contains(name));
+        let mut fresh = Vec::new();
+        let mut unheard = Vec::new();
+        for (spec, route) in &wanted {
+            if listening.contains_key(&spec.name) {
+                continue;
+            }
+            match listener(&node, spec) {
+                Ok(l) => {
+                    listening.insert(spec.name, l);
+                    fresh.push(route.clone());
+                }
+                Err(e) => {
+                    tracing::warn!(service = spec.name.as_str(), error = %e,
+                        "cannot listen to a service; what it carries is polled every {RECHECK:?}");
+                    unheard.push(route.clone());
+                }
+            }
+        }
+        let routes: HashMap<ServiceName, Route> =
+            wanted.into_iter().map(|(spec, route)| (spec.name, route)).collect();
+        // What arrived before the new listeners existed would not wake them.
+        {
+            let mut locked = mirrors.lock();
+            for route in &fresh {
+                locked.serve(route, false);
+            }
+            for route in &unheard {
+                locked.serve(route, true);
+            }
+        }
+        let set = Listening { listeners: &listening, routes: &routes, unheard: &unheard };
+        wait_while_unchanged(mirrors, generation, bell.as_ref(), &set);
     }
 }
 
@@ -129,29 +175,37 @@ fn poll(mirrors: &SharedMirrors) {
     }
 }
 
-/// One listener per service; a service that cannot be listened to is pumped at every
-/// [`RECHECK`] only (logged once per list).
-fn listen(node: &ShmNode, services: &[ServiceName]) -> Vec<(ServiceName, Listener<ShmService>)> {
-    let mut listeners = Vec::with_capacity(services.len());
-    for service in services {
-        let listener = open_event_service(node, service)
-            .map_err(|e| e.to_string())
-            .and_then(|s| s.listener_builder().create().map_err(|e| format!("{e:?}")));
-        match listener {
-            Ok(l) => listeners.push((*service, l)),
-            Err(e) => tracing::warn!(service = service.as_str(), error = %e,
-                "cannot listen to a service; what it carries is polled every {RECHECK:?}"),
-        }
-    }
-    listeners
+/// A listener on `service`.
+fn listener(node: &ShmNode, service: &EventSpec) -> Result<Listener<ShmService>, String> {
+    service
+        .open(node)
+        .map_err(|e| e.to_string())
+        .and_then(|s| s.listener_builder().create().map_err(|e| format!("{e:?}")))
 }
 
-/// Sleeps on every listener and pumps on each wake-up (and at least every [`RECHECK`])
-/// until the set of mirrors changes or the receiver is stopped.
+/// What the receiver waits on between two changes of the set of mirrors.
+struct Listening<'a> {
+    listeners: &'a HashMap<ServiceName, Listener<ShmService>>,
+    /// Where each service's notifications go.
+    routes: &'a HashMap<ServiceName, Route>,
+    /// Services without a listener: served at every [`RECHECK`].
+    unheard: &'a [Route],
+}
+
+/// How often everything mirrored is pumped even though nothing rang: a notify lost
+/// (a writer that crashed between its send and its notify) delays a sample by at most
+/// this. Pumping an idle mirror costs a look at its queue, about a microsecond.
+const SWEEP: Duration = Duration::from_secs(2);
+
+/// Sleeps on every listener and serves what each wake-up is for (and at least every
+/// [`RECHECK`] what cannot be listened to) until the set of mirrors changes or the
+/// receiver is stopped. A wake-up costs what its own mirror needs, whatever the
+/// number of mirrors.
 fn wait_while_unchanged(
     mirrors: &SharedMirrors,
     generation: u64,
-    listeners: &[(ServiceName, Listener<ShmService>)],
+    bell: Option<&Listener<ShmService>>,
+    set: &Listening<'_>,
 ) {
     let waitset = match WaitSetBuilder::new()
         .signal_handling_mode(SignalHandlingMode::Disabled)
@@ -167,24 +221,29 @@ fn wait_while_unchanged(
             return;
         }
     };
-    let guards: Vec<_> = listeners
-        .iter()
-        .enumerate()
-        .filter_map(|(i, l)| {
-            waitset
-                .attach_notification(&l.1)
-                .map(|g| (i, g))
-                .map_err(|e| tracing::warn!(error = ?e, "cannot attach a listener; polling it"))
-                .ok()
-        })
-        .collect();
-    let mut fired = Vec::with_capacity(listeners.len());
-    let mut rung = Vec::with_capacity(listeners.len());
+    let mut by_id = HashMap::with_capacity(set.listeners.len() + 1);
+    let mut guards = Vec::with_capacity(set.listeners.len() + 1);
+    let all = set.listeners.iter().map(|(name, l)| (Some(*name), l));
+    for (name, listener) in all.chain(bell.map(|b| (None, b))) {
+        match waitset.attach_notification(listener) {
+            Ok(guard) => {
+                by_id.insert(WaitSetAttachmentId::from_guard(&guard), (name, listener));
+                guards.push(guard);
+            }
+            Err(e) => {
+                tracing::warn!(error = ?e, "cannot attach a listener; polling it");
+            }
+        }
+    }
+    let mut fired = Vec::new();
+    let mut next_sweep = Instant::now() + SWEEP;
     while !mirrors.stopped() && mirrors.generation() == generation {
         fired.clear();
         let waited = waitset.wait_and_process_once_with_timeout(
             |id| {
-                fired.extend(guards.iter().filter(|(_, g)| id.has_event_from(g)).map(|(i, _)| *i));
+                if let Some(hit) = by_id.get(&id) {
+                    fired.push(*hit);
+                }
                 CallbackProgression::Continue
             },
             RECHECK,
@@ -194,20 +253,28 @@ fn wait_while_unchanged(
             std::thread::sleep(RECHECK);
         }
         // Consume the notifications, so that the next notify wakes again.
-        rung.clear();
-        for &i in &fired {
-            if let Some((service, l)) = listeners.get(i) {
-                rung.push(*service);
-                if let Err(e) = l.try_wait(|_| {}) {
-                    tracing::debug!(error = ?e, "cannot consume a notification");
-                }
+        for (_, listener) in &fired {
+            if let Err(e) = listener.try_wait(|_| {}) {
+                tracing::debug!(error = ?e, "cannot consume a notification");
             }
         }
-        let mut locked = mirrors.lock();
-        if !rung.is_empty() {
-            locked.welcome(Some(&rung));
+        let sweep = Instant::now() >= next_sweep;
+        if fired.is_empty() && set.unheard.is_empty() && !sweep {
+            continue;
         }
-        locked.pump();
+        let mut locked = mirrors.lock();
+        for (name, _) in &fired {
+            if let Some(route) = name.as_ref().and_then(|n| set.routes.get(n)) {
+                locked.serve(route, true);
+            }
+        }
+        for route in set.unheard {
+            locked.serve(route, true);
+        }
+        if sweep {
+            locked.pump();
+            next_sweep = Instant::now() + SWEEP;
+        }
         drop(locked);
         if mirrors.panic_requested() {
             #[allow(clippy::panic, reason = "test support: a panic asked for")]
@@ -216,4 +283,5 @@ fn wait_while_unchanged(
             }
         }
     }
+    drop(guards);
 }

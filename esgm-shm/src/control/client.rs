@@ -13,9 +13,11 @@ use iceoryx2::service::port_factory::client::ClientCreateError;
 use iceoryx2::service::port_factory::request_response::PortFactory;
 
 use super::protocol::{ControlError, Request, Response, decode, encode};
-use super::server::{MAX_CLIENTS, MAX_NODES};
+use crate::capacity::DomainLimits;
 use crate::service::ShmNode;
 use crate::service_name::{NameError, control_service};
+use esgm_core::esgm::LimitReached;
+use iceoryx2::service::port_factory::PortFactory as _;
 
 /// A control call failed before an answer arrived.
 #[derive(Debug, thiserror::Error)]
@@ -55,7 +57,11 @@ pub enum ControlClientError {
         /// The domain.
         domain: String,
     },
-    /// The client port could not be created (too many clients?).
+    /// The domain's control service has as many clients as it admits (one per
+    /// process; see [`crate::capacity`]).
+    #[error(transparent)]
+    LimitReached(LimitReached),
+    /// The client port could not be created.
     #[error("cannot create the control client: {0}")]
     Client(#[source] ClientCreateError),
     /// Loaning memory for a request failed.
@@ -141,14 +147,13 @@ impl ControlClient {
     pub fn connect(domain: &str, timeout: Duration) -> Result<Self, ControlClientError> {
         let name = control_service(domain)?;
         let node = NodeBuilder::new()
+            .config(&crate::service::node_config())
             .name(&crate::service_name::node_name(domain, "control-client"))
             .create::<ShmService>()
             .map_err(ControlClientError::node)?;
         let service = node
             .service_builder(&name)
             .request_response::<[u8], [u8]>()
-            .max_clients(MAX_CLIENTS)
-            .max_nodes(MAX_NODES)
             .max_active_requests_per_client(4)
             .open()
             .map_err(|source| match source {
@@ -162,8 +167,19 @@ impl ControlClient {
             .initial_max_slice_len(4096)
             .allocation_strategy(AllocationStrategy::PowerOfTwo)
             .create()
-            .map_err(ControlClientError::Client)?;
-        let ring = super::server::open_control_wake(&node, domain)
+            .map_err(|e| match e {
+                ClientCreateError::ExceedsMaxSupportedClients => {
+                    ControlClientError::LimitReached(LimitReached::processes(
+                        domain,
+                        service
+                            .static_config()
+                            .max_clients()
+                            .saturating_sub(16 + crate::capacity::TOOL_RESERVE),
+                    ))
+                }
+                e => ControlClientError::Client(e),
+            })?;
+        let ring = super::server::open_control_wake(&node, domain, &DomainLimits::default())
             .and_then(|w| w.notifier_builder().create().map_err(|e| format!("{e:?}")))
             .map_err(|e| tracing::warn!(error = %e, "cannot ring the coordinator; it polls"))
             .ok();

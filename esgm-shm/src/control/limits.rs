@@ -110,6 +110,9 @@ pub fn check_request(request: &Request) -> Result<(), ControlError> {
             check_name("host", host)
         }
         Request::DeclareProcess { spec } => check_name("process", &spec.name),
+        Request::ListPlacementsOf { names } => {
+            names.iter().try_for_each(|n| check_name("trajectory", n))
+        }
         Request::RemoveProcess { name } | Request::ReportProcess { name, .. } => {
             check_name("process", name)
         }

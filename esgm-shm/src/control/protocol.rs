@@ -114,6 +114,13 @@ pub enum Request {
     /// with the trajectories it mirrors, to drop those destroyed or re-created
     /// elsewhere.
     ListPlacements,
+    /// [`Request::ListPlacements`] of the named trajectories alone (those a process
+    /// mirrors): its cost is the asker's, not the domain's. A name without a
+    /// trajectory is left out of the answer.
+    ListPlacementsOf {
+        /// The trajectories.
+        names: Vec<String>,
+    },
     /// Every sensor.
     ListSensors,
     /// Every unit.
@@ -200,6 +207,11 @@ pub struct TrajectoryRecord {
     /// The writer's publisher port, once it has reported it ([`Request::ReportWriter`]).
     #[serde(default)]
     pub port: Option<WriterPort>,
+    /// How many processes may read it at once: the capacity every process opens its
+    /// services with ([`crate::capacity`]); the spec's `readers`, else the domain's
+    /// default.
+    #[serde(default)]
+    pub readers: crate::capacity::Readers,
 }
 
 /// Where one trajectory is written ([`Request::ListPlacements`]).
@@ -231,6 +243,11 @@ pub enum Response {
         /// The coordinator's process id (`esgm down` waits for it to exit).
         #[serde(default)]
         pid: u32,
+        /// The registry's version: it changes with every change of the registry, so a
+        /// process whose last look found the same version has nothing to look at
+        /// again (its audit and its assignments).
+        #[serde(default)]
+        registry: u64,
     },
     /// A type.
     Type(EntityStructureType),

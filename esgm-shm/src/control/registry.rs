@@ -4,7 +4,10 @@
 use std::collections::BTreeMap;
 
 use esgm_core::catalog::Catalog;
-use esgm_core::esgm::{TrajectoryInfo, TrajectoryKind, TrajectorySource, TrajectorySpec};
+use esgm_core::esgm::{
+    CreateError, TrajectoryInfo, TrajectoryKind, TrajectorySource, TrajectorySpec,
+};
+use esgm_core::policy::PolicyError;
 use esgm_core::{EntityStructureType, TypeChecker, TypeRegistry};
 
 use super::processes::ProcessTable;
@@ -12,6 +15,7 @@ use super::protocol::{
     Assignment, ControlError, PlacementRecord, Request, Response, TrajectoryRecord, WriterPort,
 };
 use super::state::{SNAPSHOT_VERSION, SavedTrajectory, Snapshot};
+use crate::capacity::{DomainLimits, Readers};
 use crate::holdings::HoldingStats;
 
 #[derive(Debug, Clone)]
@@ -37,6 +41,11 @@ pub struct Registry {
     next_generation: u64,
     /// Each connected process's last report of its images in shared memory.
     holdings: BTreeMap<String, HoldingStats>,
+    /// The domain's limits: a trajectory's readers default to them, and may not
+    /// exceed its processes.
+    limits: DomainLimits,
+    /// Bumped by every change ([`Response::Pong`]'s `registry`).
+    version: u64,
 }
 
 impl Registry {
@@ -48,7 +57,22 @@ impl Registry {
             processes: ProcessTable::default(),
             next_generation: 0,
             holdings: BTreeMap::new(),
+            limits: DomainLimits::default(),
+            version: start_version(),
         }
+    }
+
+    /// The same registry with the domain's `limits` (`esgm up --max-processes`,
+    /// `--readers`); [`DomainLimits::default`] until set.
+    #[must_use]
+    pub fn with_limits(mut self, limits: DomainLimits) -> Self {
+        self.limits = limits;
+        self
+    }
+
+    /// The domain's limits.
+    pub fn limits(&self) -> DomainLimits {
+        self.limits
     }
 
     /// The catalog, read-only.
@@ -66,12 +90,37 @@ impl Registry {
     /// ([`super::limits`]), and a process report is accepted only from the
     /// coordinator's own process (the supervisor) or from the reported process itself.
     pub fn handle_from(&mut self, request: Request, origin: Origin) -> Response {
+        let changes = changes_registry(&request);
         let checked = super::limits::check_request(&request)
             .and_then(|()| check_origin(&request, origin))
             .and_then(|()| self.apply(request, origin));
         match checked {
-            Ok(r) => r,
+            Ok(r) => {
+                if changes {
+                    self.version += 1;
+                }
+                r
+            }
             Err(e) => Response::Error(e),
+        }
+    }
+
+    /// The registry's version, bumped by every change.
+    pub fn version(&self) -> u64 {
+        self.version
+    }
+
+    fn placement_record(&self, name: &str, p: &Placement) -> PlacementRecord {
+        PlacementRecord {
+            name: name.to_owned(),
+            writer: p.writer.clone(),
+            generation: p.generation,
+            port: p.port,
+            type_name: self
+                .catalog
+                .trajectory(name)
+                .map(|t| t.type_name.clone())
+                .unwrap_or_default(),
         }
     }
 
@@ -207,12 +256,17 @@ impl Registry {
             // process needs to check the states it receives.
             Err(_) => self.state_definitions(&info),
         };
-        let (writer, generation, port) = self
+        let (writer, generation, port, asked) = self
             .placement
             .get(name)
-            .map(|p| (p.writer.clone(), p.generation, p.port))
+            .map(|p| (p.writer.clone(), p.generation, p.port, p.spec.readers))
             .unwrap_or_default();
-        Ok(TrajectoryRecord { info, types, writer, generation, port })
+        // Checked when it was created; a saved spec whose readers exceed a domain
+        // restarted with fewer processes is served with the most it may have.
+        let readers = self.limits.readers_of(asked).unwrap_or(Readers(
+            asked.unwrap_or(self.limits.readers).min(self.limits.max_processes),
+        ));
+        Ok(TrajectoryRecord { info, types, writer, generation, port, readers })
     }
 
     /// The pid a process reported for `name`, if any.
@@ -225,6 +279,7 @@ impl Registry {
             Request::Ping => Response::Pong {
                 version: env!("CARGO_PKG_VERSION").to_owned(),
                 pid: std::process::id(),
+                registry: self.version,
             },
             Request::CreateEntityStructureType { type_name, entity_type } => {
                 self.catalog.types_mut().create_entity_structure_type(type_name, entity_type)?;
@@ -274,6 +329,18 @@ impl Registry {
             }
             Request::CreateTrajectory { spec, host } => {
                 let resolved = self.catalog.resolve(&spec)?;
+                if let Err(e) = self.limits.readers_of(spec.readers) {
+                    return Err(ControlError::Create(CreateError::IllegalPolicy(
+                        PolicyError::IllegalPolicy {
+                            field: "readers".into(),
+                            value: e.value.to_string(),
+                            rule: format!(
+                                "between 1 and the domain's max-processes ({}); raise that with `esgm up --max-processes N`",
+                                e.max
+                            ),
+                        },
+                    )));
+                }
                 let writer = match &spec.source {
                     TrajectorySource::Sampled { sensor, .. } => {
                         self.catalog.sensor(sensor).map(|s| s.host.clone()).unwrap_or(host)
@@ -312,18 +379,13 @@ impl Registry {
                 Response::Holdings(self.holdings.iter().map(|(h, s)| (h.clone(), *s)).collect())
             }
             Request::ListPlacements => Response::Placements(
-                self.placement
+                self.placement.iter().map(|(name, p)| self.placement_record(name, p)).collect(),
+            ),
+            Request::ListPlacementsOf { names } => Response::Placements(
+                names
                     .iter()
-                    .map(|(name, p)| PlacementRecord {
-                        name: name.clone(),
-                        writer: p.writer.clone(),
-                        generation: p.generation,
-                        port: p.port,
-                        type_name: self
-                            .catalog
-                            .trajectory(name)
-                            .map(|t| t.type_name.clone())
-                            .unwrap_or_default(),
+                    .filter_map(|name| {
+                        self.placement.get(name).map(|p| self.placement_record(name, p))
                     })
                     .collect(),
             ),
@@ -467,11 +529,21 @@ pub fn changes_registry(request: &Request) -> bool {
             | Request::ReportHoldings { .. }
             | Request::ListHoldings
             | Request::ListPlacements
+            | Request::ListPlacementsOf { .. }
             | Request::ListSensors
             | Request::ListCompUnits
             | Request::Assignments { .. }
             | Request::ListProcesses
     )
+}
+
+/// A registry's first version: the time it was made, in nanoseconds, so that a
+/// coordinator restored after a crash never repeats a version its predecessor gave
+/// (a process that saw it would take the new registry for one it has looked at).
+fn start_version() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(1, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX / 2))
 }
 
 /// A process report comes from the supervisor, or from the process itself about its

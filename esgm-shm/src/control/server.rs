@@ -22,16 +22,17 @@ use super::limits::MAX_REQUEST_BYTES;
 use super::protocol::{ControlError, Request, Response, decode, encode};
 use super::registry::{Origin, Registry, changes_registry};
 use super::state::{StateDir, StateError};
+use crate::capacity::{DomainLimits, EventCapacity};
+use crate::client::admin::AdminServices;
 use crate::service::ShmNode;
 use crate::service_name::{NameError, control_service};
 
-/// Room for this many clients (processes and their threads) in one system.
-pub const MAX_CLIENTS: usize = 128;
-
-/// Nodes that may open the control service (and its wake-up): one per client, the
-/// coordinator's, and a margin for nodes being torn down while new ones connect.
-/// iceoryx2's default (20) locked a system of more than 20 processes out.
-pub const MAX_NODES: usize = MAX_CLIENTS + 16;
+/// Control clients a domain with `limits` admits: one per process (its connection's
+/// location thread) with the tools' reserve, and a margin for supervisors and for
+/// clients being replaced.
+pub fn control_clients(limits: &DomainLimits) -> usize {
+    limits.process_ports() + 16
+}
 
 /// The coordinator could not start or serve.
 #[derive(Debug, thiserror::Error)]
@@ -103,26 +104,28 @@ pub enum CoordinatorError {
     Stopped,
 }
 
-/// Responses the coordinator keeps room for: a client has one question out at a time
-/// (and may leave one abandoned answer behind after a timeout).
-const RESPONSES: usize = 4 * MAX_CLIENTS;
+/// Responses the coordinator keeps room for, per client: a client has one question
+/// out at a time (and may leave one abandoned answer behind after a timeout).
+const RESPONSES_PER_CLIENT: usize = 4;
 
 /// The longest an idle coordinator sleeps before it looks at its stop flag.
 const IDLE_WAIT: Duration = Duration::from_millis(100);
 
-/// Opens the control wake-up of `domain`, sized for every client.
+/// Opens the control wake-up of `domain`, sized for every client of a domain with
+/// `limits` (opened as it is if it was made with others): every client rings it, the
+/// coordinator alone listens.
 pub(crate) fn open_control_wake(
     node: &ShmNode,
     domain: &str,
+    limits: &DomainLimits,
 ) -> Result<iceoryx2::service::port_factory::event::PortFactory<ShmService>, String> {
     let name = crate::service_name::control_wake_service(domain).map_err(|e| e.to_string())?;
-    node.service_builder(&name)
-        .event()
-        .max_notifiers(MAX_CLIENTS + 16)
-        .max_listeners(4)
-        .max_nodes(MAX_NODES)
-        .open_or_create()
-        .map_err(|e| format!("{e:?}"))
+    let capacity = EventCapacity {
+        listeners: 4,
+        notifiers: control_clients(limits),
+        nodes: limits.process_nodes(),
+    };
+    crate::service::open_event_service(node, &name, capacity).map_err(|e| e.to_string())
 }
 
 /// Serves one domain's registry.
@@ -142,6 +145,9 @@ pub struct Coordinator {
     state: Option<StateDir>,
     /// The domain's coordinator lock, held while serving.
     _lock: Option<std::fs::File>,
+    /// The domain's administration services, made here with the domain's limits (and
+    /// kept while the coordinator serves, so a process joining finds them sized).
+    _admin: Option<AdminServices>,
 }
 
 impl Coordinator {
@@ -160,6 +166,7 @@ impl Coordinator {
         domain: &str,
         types: esgm_core::TypeRegistry,
         state: StateDir,
+        limits: DomainLimits,
     ) -> Result<(Self, usize), CoordinatorError> {
         let failed = |source| CoordinatorError::State { domain: domain.to_owned(), source };
         let lock = state.lock().map_err(failed)?;
@@ -172,7 +179,8 @@ impl Coordinator {
                 })?
             }
             None => Registry::new(types),
-        };
+        }
+        .with_limits(limits);
         let recovered = registry.catalog().trajectories().count();
         let coordinator = Self::serve_registry(domain, registry, Some(state), Some(lock))?;
         coordinator.save_state();
@@ -186,7 +194,9 @@ impl Coordinator {
         lock: Option<std::fs::File>,
     ) -> Result<Self, CoordinatorError> {
         let name = control_service(domain)?;
+        let limits = registry.limits();
         let node = NodeBuilder::new()
+            .config(&crate::service::node_config())
             .name(&crate::service_name::node_name(domain, "coordinator"))
             .create::<ShmService>()
             .map_err(CoordinatorError::Node)?;
@@ -194,8 +204,8 @@ impl Coordinator {
         let builder = || {
             node.service_builder(&name)
                 .request_response::<[u8], [u8]>()
-                .max_clients(MAX_CLIENTS)
-                .max_nodes(MAX_NODES)
+                .max_clients(control_clients(&limits))
+                .max_nodes(limits.process_nodes())
                 .max_active_requests_per_client(4)
         };
         let service = match builder().create() {
@@ -234,10 +244,15 @@ impl Coordinator {
             // connects. Clients ask one question at a time, so a few responses per
             // client suffice; this makes connecting (client churn, and a coordinator
             // taking over from a crashed one with every worker connected) 12x cheaper.
-            .override_response_preallocation(|_| RESPONSES)
+            .override_response_preallocation(move |_| {
+                RESPONSES_PER_CLIENT * control_clients(&limits)
+            })
             .create()
             .map_err(CoordinatorError::Server)?;
-        let wake = open_control_wake(&node, domain)
+        let admin = AdminServices::open(&node, domain, &limits)
+            .map_err(|e| tracing::warn!(error = %e, "cannot make the domain's administration services; the first process makes them with the default limits"))
+            .ok();
+        let wake = open_control_wake(&node, domain, &limits)
             .and_then(|w| w.listener_builder().create().map_err(|e| format!("{e:?}")))
             .map_err(|e| tracing::warn!(error = %e, "no control wake-up; the coordinator polls"))
             .ok();
@@ -254,6 +269,7 @@ impl Coordinator {
             shutdown_requested: false,
             state,
             _lock: lock,
+            _admin: admin,
         })
     }
 
@@ -421,10 +437,11 @@ impl Coordinator {
         domain: &str,
         types: esgm_core::TypeRegistry,
         state: StateDir,
+        limits: DomainLimits,
     ) -> Result<(CoordinatorThread, usize), CoordinatorError> {
         let (tx, rx) = std::sync::mpsc::sync_channel(1);
         let thread = Self::spawn_with(domain, move |d| {
-            let (c, recovered) = Coordinator::recover(d, types, state)?;
+            let (c, recovered) = Coordinator::recover(d, types, state, limits)?;
             if tx.send(recovered).is_err() {
                 tracing::debug!("nobody waits for the recovery count");
             }

@@ -7,6 +7,7 @@
 //! Trajectories with policy and history are built on it by the client
 //! ([`crate::client`]).
 
+pub mod capacity;
 pub mod image_layout;
 pub mod image_loan;
 pub mod payload;

@@ -221,7 +221,7 @@ impl TrajectoryPublisherBuilder {
             });
         }
         let port = port.create().map_err(OpenError::Publisher)?;
-        let wake = open_wake_service(node, &names)?;
+        let wake = open_wake_service(node, &names, &self.qos)?;
         let notifier = wake.notifier_builder().create().map_err(OpenError::Notifier)?;
         Ok(TrajectoryPublisher {
             type_id: type_id(&self.type_name),

@@ -40,6 +40,8 @@
 
 use esgm_core::CacheConstraint;
 
+use crate::capacity::{EventCapacity, Readers};
+
 /// What a publisher does when a subscriber's buffer is full.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 #[non_exhaustive]
@@ -84,6 +86,26 @@ impl Default for TrajectoryQos {
             max_subscribers: 8,
             max_nodes: 16,
             delivery: Delivery::LatestWins,
+        }
+    }
+}
+
+impl TrajectoryQos {
+    /// Room for `readers` reader processes ([`crate::capacity`]): their subscribers and
+    /// nodes, with the tools' reserve.
+    #[must_use]
+    pub fn readers(self, readers: Readers) -> Self {
+        Self { max_subscribers: readers.ports(), max_nodes: readers.nodes(), ..self }
+    }
+
+    /// How the wake-up service of a data service with these settings is sized: two
+    /// waiting threads per subscriber, a notifier per publisher (and a margin for
+    /// one being replaced), the data service's nodes.
+    pub fn wake_capacity(&self) -> EventCapacity {
+        EventCapacity {
+            listeners: 2 * self.max_subscribers,
+            notifiers: self.max_publishers + 3,
+            nodes: self.max_nodes.max(2 * self.max_subscribers),
         }
     }
 }

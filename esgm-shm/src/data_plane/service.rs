@@ -11,6 +11,11 @@ use iceoryx2::service::builder::event::EventOpenOrCreateError;
 use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenOrCreateError;
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
+use esgm_core::esgm::{Limit, LimitReached};
+use iceoryx2::service::builder::event::EventOpenError;
+use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError;
+
+use crate::capacity::{EventCapacity, Readers};
 use crate::payload::{Block16, SampleHeader};
 use crate::qos::{Delivery, TrajectoryQos};
 use crate::service_name::{NameError, TrajectoryServiceNames};
@@ -29,6 +34,22 @@ pub type ShmService = iceoryx2::prelude::ipc_threadsafe::Service;
 
 /// The iceoryx2 node type esgm uses: inter-process services.
 pub type ShmNode = Node<ShmService>;
+
+/// Expired connections a subscriber keeps room for (iceoryx2's default is 128): the
+/// connections of publishers that left with samples unread. Each costs about 3.6 KiB
+/// of private memory in every subscriber, whether used or not; a replica has one
+/// writer, and an inbox is drained as soon as an adder rings it.
+pub const EXPIRED_CONNECTIONS: usize = 16;
+
+/// The iceoryx2 configuration of every esgm node: iceoryx2's global one (its paths
+/// and prefix, so that every process meets on the same files), with a subscriber's
+/// room for expired connections cut to [`EXPIRED_CONNECTIONS`]. Cost proportional to
+/// use: 128 per subscriber made a process reading 300 trajectories hold 140 MiB.
+pub fn node_config() -> iceoryx2::config::Config {
+    let mut config = iceoryx2::config::Config::global_config().clone();
+    config.defaults.publish_subscribe.subscriber_expired_connection_buffer = EXPIRED_CONNECTIONS;
+    config
+}
 
 /// A trajectory's data service.
 pub(crate) type DataService = publish_subscribe::PortFactory<ShmService, [Block16], SampleHeader>;
@@ -76,6 +97,53 @@ pub enum OpenError {
     /// [`crate::WaitStrategy::BusySpin`], which needs none, or raise the limit.
     #[error("cannot create the wake-up listener: {0}")]
     Listener(#[source] ListenerCreateError),
+    /// A limit of the trajectory's services was reached ([`crate::capacity`]); the
+    /// error names the setting that raises it.
+    #[error(transparent)]
+    LimitReached(#[from] LimitReached),
+}
+
+impl OpenError {
+    /// The limit this failure is, if iceoryx2 refused a port or a node for lack of
+    /// room. A publisher refused on a trajectory's data service is not one: that
+    /// service admits its writer alone.
+    pub fn exceeded(&self) -> Option<Limit> {
+        match self {
+            Self::Subscriber(SubscriberCreateError::ExceedsMaxSupportedSubscribers)
+            | Self::Notifier(NotifierCreateError::ExceedsMaxSupportedNotifiers) => {
+                Some(Limit::Readers)
+            }
+            Self::Publisher(PublisherCreateError::ExceedsMaxSupportedPublishers) => {
+                Some(Limit::Adders)
+            }
+            Self::Listener(ListenerCreateError::ExceedsMaxSupportedListeners) => {
+                Some(Limit::Waiters)
+            }
+            Self::DataService {
+                source:
+                    PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                        PublishSubscribeOpenError::ExceedsMaxNumberOfNodes,
+                    ),
+                ..
+            }
+            | Self::WakeService {
+                source:
+                    EventOpenOrCreateError::EventOpenError(EventOpenError::ExceedsMaxNumberOfNodes),
+                ..
+            } => Some(Limit::Readers),
+            _ => None,
+        }
+    }
+
+    /// This error as the limit of `trajectory` (whose services admit `readers`) it
+    /// is, if it is one; else unchanged.
+    #[must_use]
+    pub fn as_limit(self, trajectory: &str, readers: Readers) -> Self {
+        match self.exceeded() {
+            Some(limit) => Self::LimitReached(readers.reached(limit, trajectory)),
+            None => self,
+        }
+    }
 }
 
 /// Opens (or creates) the data service of a trajectory with `qos`.
@@ -91,45 +159,94 @@ pub(crate) fn open_data_service(
     } else {
         qos.subscriber_buffer_size
     };
-    node.service_builder(names.data())
-        .publish_subscribe::<[Block16]>()
-        .user_header::<SampleHeader>()
-        .history_size(qos.history_size)
-        .subscriber_max_buffer_size(buffer)
-        .subscriber_max_borrowed_samples(qos.max_borrowed_samples)
+    let failed =
+        |source| OpenError::DataService { service: names.data().as_str().to_owned(), source };
+    let samples = || {
+        node.service_builder(names.data())
+            .publish_subscribe::<[Block16]>()
+            .user_header::<SampleHeader>()
+            .history_size(qos.history_size)
+            .subscriber_max_buffer_size(buffer)
+            .subscriber_max_borrowed_samples(qos.max_borrowed_samples)
+            .enable_safe_overflow(!lossless)
+    };
+    match samples()
         .max_publishers(qos.max_publishers)
         .max_subscribers(qos.max_subscribers)
         .max_nodes(qos.max_nodes)
-        .enable_safe_overflow(!lossless)
         .open_or_create()
-        .map_err(|source| OpenError::DataService {
-            service: names.data().as_str().to_owned(),
-            source,
-        })
+    {
+        // Made for other port counts (another `readers`, or a process that came
+        // first): what this port needs of the samples is checked; a port past the
+        // service's room is refused as the limit it is.
+        Err(PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+            PublishSubscribeOpenError::DoesNotSupportRequestedAmountOfPublishers
+            | PublishSubscribeOpenError::DoesNotSupportRequestedAmountOfSubscribers
+            | PublishSubscribeOpenError::DoesNotSupportRequestedAmountOfNodes,
+        )) => samples()
+            .open()
+            .map_err(|e| failed(PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(e))),
+        opened => opened.map_err(failed),
+    }
 }
 
-/// Listeners an esgm wake-up service admits: one per reading process (its receiver
-/// thread) and one per subscription waiting on it directly, across every process.
-pub const MAX_WAKE_LISTENERS: usize = 64;
+/// An event service to listen to or ring: its name and how it is sized, which every
+/// opener must agree on (the first creates it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct EventSpec {
+    /// The service's name.
+    pub name: ServiceName,
+    /// Its listeners, notifiers and nodes.
+    pub capacity: EventCapacity,
+}
 
-/// Opens (or creates) an esgm wake-up event service. Every opener creates it with
-/// the same limits, so whichever process comes first, the others fit.
+impl EventSpec {
+    /// Opens (or creates) it on `node`.
+    pub(crate) fn open(&self, node: &ShmNode) -> Result<WakeService, OpenError> {
+        open_event_service(node, &self.name, self.capacity)
+    }
+}
+
+/// Opens (or creates) an esgm wake-up event service sized `capacity`
+/// ([`crate::capacity`]). Every opener asks for the same capacity, derived from the
+/// trajectory's record or the domain's limits, so whichever process comes first, the
+/// others fit.
 pub(crate) fn open_event_service(
     node: &ShmNode,
     name: &ServiceName,
+    capacity: EventCapacity,
 ) -> Result<WakeService, OpenError> {
-    node.service_builder(name)
+    let failed = |source| OpenError::WakeService { service: name.as_str().to_owned(), source };
+    match node
+        .service_builder(name)
         .event()
-        .max_listeners(MAX_WAKE_LISTENERS)
-        .max_nodes(MAX_WAKE_LISTENERS + 16)
+        .max_listeners(capacity.listeners)
+        .max_notifiers(capacity.notifiers)
+        .max_nodes(capacity.nodes)
         .open_or_create()
-        .map_err(|source| OpenError::WakeService { service: name.as_str().to_owned(), source })
+    {
+        // Made for fewer ports than this process would ask (another esgm's sizing, or
+        // a trajectory re-declared with other `readers`): use it as it is; a port past
+        // its room is refused as the limit it is.
+        Err(EventOpenOrCreateError::EventOpenError(
+            EventOpenError::DoesNotSupportRequestedAmountOfListeners
+            | EventOpenError::DoesNotSupportRequestedAmountOfNotifiers
+            | EventOpenError::DoesNotSupportRequestedAmountOfNodes,
+        )) => node
+            .service_builder(name)
+            .event()
+            .open()
+            .map_err(|e| failed(EventOpenOrCreateError::EventOpenError(e))),
+        opened => opened.map_err(failed),
+    }
 }
 
-/// Opens (or creates) the wake-up service of a trajectory.
+/// Opens (or creates) the wake-up service of a trajectory whose data service has
+/// `qos`.
 pub(crate) fn open_wake_service(
     node: &ShmNode,
     names: &TrajectoryServiceNames,
+    qos: &TrajectoryQos,
 ) -> Result<WakeService, OpenError> {
-    open_event_service(node, names.wake())
+    open_event_service(node, names.wake(), qos.wake_capacity())
 }

@@ -23,6 +23,8 @@ use crate::qos::TrajectoryQos;
 use crate::received::SubscriberPort;
 use crate::received::{Checked, Counters, ReceivedSample};
 use crate::sample_check::{SampleVerdict, check_sample};
+use esgm_core::esgm::{Limit, LimitReached};
+
 use crate::service::{DataService, OpenError, ShmNode, open_data_service, open_wake_service};
 use crate::service_name::{DEFAULT_DOMAIN, TrajectoryServiceNames};
 use crate::type_id::type_id;
@@ -120,9 +122,20 @@ pub struct TrajectorySubscriberBuilder {
     history: Option<usize>,
     wait: WaitStrategy,
     validation: Validation,
+    reader_limit: Option<usize>,
 }
 
 impl TrajectorySubscriberBuilder {
+    /// Refuses to subscribe, with [`esgm_core::esgm::LimitReached`], when the
+    /// trajectory already has `limit` subscribers: a long-lived reader counts itself
+    /// against the trajectory's `readers`, and leaves the ports beyond them to
+    /// short-lived tools ([`crate::capacity`]). Default: no count (iceoryx2's own
+    /// limit alone).
+    pub fn reader_limit(mut self, limit: usize) -> Self {
+        self.reader_limit = Some(limit);
+        self
+    }
+
     /// The domain (namespace) of the trajectory; default [`DEFAULT_DOMAIN`].
     pub fn domain(mut self, domain: impl Into<String>) -> Self {
         self.domain = domain.into();
@@ -160,13 +173,24 @@ impl TrajectorySubscriberBuilder {
     pub fn create(self, node: &ShmNode) -> Result<TrajectorySubscriber, OpenError> {
         let names = TrajectoryServiceNames::new(&self.domain, &self.trajectory)?;
         let service = open_data_service(node, &names, &self.qos)?;
+        if let Some(limit) = self.reader_limit {
+            // Counted before the port is made, so the reserve beyond `limit` stays for
+            // tools ([`crate::capacity`]); iceoryx2's own count is the backstop.
+            if service.dynamic_config().number_of_subscribers() >= limit {
+                return Err(OpenError::LimitReached(LimitReached::trajectory(
+                    Limit::Readers,
+                    &self.trajectory,
+                    limit,
+                )));
+            }
+        }
         let mut port = service.subscriber_builder();
         if let Some(n) = self.history {
             port = port.history_request(n);
         }
         let port = port.create().map_err(OpenError::Subscriber)?;
         let listener = if self.wait.blocks() {
-            let wake = open_wake_service(node, &names)?;
+            let wake = open_wake_service(node, &names, &self.qos)?;
             Some(wake.listener_builder().create().map_err(OpenError::Listener)?)
         } else {
             None
@@ -215,6 +239,7 @@ impl TrajectorySubscriber {
             history: None,
             wait: WaitStrategy::default(),
             validation: Validation::default(),
+            reader_limit: None,
         }
     }
 

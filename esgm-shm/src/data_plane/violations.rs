@@ -21,6 +21,7 @@
 //! oldest ones rather than stall the writer; the record's sequence number shows the gap
 //! ([`ViolationSubscriberStats::lost`]).
 
+use crate::capacity::{EventCapacity, Readers};
 use crate::service::ShmService;
 use std::cell::{Cell, RefCell};
 use std::time::Duration;
@@ -130,13 +131,14 @@ fn open_services(
     node: &ShmNode,
     domain: &str,
     trajectory: &str,
+    readers: Readers,
 ) -> Result<ViolationServices, OpenError> {
     // Checks the domain and name characters the same way as for the data services.
     TrajectoryServiceNames::new(domain, trajectory)?;
     let text = violation_service_name(domain, trajectory);
     let name = ServiceName::new(&text)
         .map_err(|_| NameError::TooLong { service: text.clone(), max: ServiceName::max_len() })?;
-    // Fixed settings: every opener agrees without configuration.
+    // Settings every opener derives alike: fixed, but for the trajectory's readers.
     let data = node
         .service_builder(&name)
         .publish_subscribe::<ViolationRecord>()
@@ -144,11 +146,12 @@ fn open_services(
         .subscriber_max_buffer_size(VIOLATION_BUFFER)
         .subscriber_max_borrowed_samples(2)
         .max_publishers(2)
-        .max_subscribers(16)
+        .max_subscribers(readers.ports())
+        .max_nodes(readers.nodes())
         .enable_safe_overflow(true)
         .open_or_create()
         .map_err(|source| OpenError::DataService { service: text.clone(), source })?;
-    let wake = crate::service::open_event_service(node, &name)?;
+    let wake = crate::service::open_event_service(node, &name, EventCapacity::violations(readers))?;
     Ok(ViolationServices { data, wake })
 }
 
@@ -161,9 +164,15 @@ pub struct ViolationPublisher {
 }
 
 impl ViolationPublisher {
-    /// Opens (or creates) the violations service of `trajectory` in `domain`.
-    pub fn create(node: &ShmNode, domain: &str, trajectory: &str) -> Result<Self, OpenError> {
-        let services = open_services(node, domain, trajectory)?;
+    /// Opens (or creates) the violations service of `trajectory` in `domain`, read by
+    /// `readers` processes.
+    pub fn create(
+        node: &ShmNode,
+        domain: &str,
+        trajectory: &str,
+        readers: Readers,
+    ) -> Result<Self, OpenError> {
+        let services = open_services(node, domain, trajectory, readers)?;
         let port = services.data.publisher_builder().create().map_err(OpenError::Publisher)?;
         let notifier = services.wake.notifier_builder().create().map_err(OpenError::Notifier)?;
         Ok(Self { port, notifier, sequence: Cell::new(0) })
@@ -197,9 +206,17 @@ pub struct ViolationSubscriberBuilder {
     trajectory: String,
     domain: String,
     wait: WaitStrategy,
+    readers: Readers,
 }
 
 impl ViolationSubscriberBuilder {
+    /// The trajectory's readers, which size its violations service; default
+    /// [`Readers::default`].
+    pub fn readers(mut self, readers: Readers) -> Self {
+        self.readers = readers;
+        self
+    }
+
     /// The domain of the trajectory; default [`DEFAULT_DOMAIN`].
     pub fn domain(mut self, domain: impl Into<String>) -> Self {
         self.domain = domain.into();
@@ -215,7 +232,7 @@ impl ViolationSubscriberBuilder {
 
     /// Opens (or creates) the violations service and the subscriber port on `node`.
     pub fn create(self, node: &ShmNode) -> Result<ViolationSubscriber, OpenError> {
-        let services = open_services(node, &self.domain, &self.trajectory)?;
+        let services = open_services(node, &self.domain, &self.trajectory, self.readers)?;
         let port = services.data.subscriber_builder().create().map_err(OpenError::Subscriber)?;
         let listener = if self.wait.blocks() {
             Some(services.wake.listener_builder().create().map_err(OpenError::Listener)?)
@@ -249,6 +266,7 @@ impl ViolationSubscriber {
             trajectory: trajectory.into(),
             domain: DEFAULT_DOMAIN.to_owned(),
             wait: WaitStrategy::Block,
+            readers: Readers::default(),
         }
     }
 

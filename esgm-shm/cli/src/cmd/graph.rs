@@ -22,7 +22,7 @@ use esgm_core::esgm::TrajectoryInfo;
 use esgm_core::{EntityTrajectoryStructure, Esgm, Time, TrajectoryStats};
 use serde_json::json;
 
-use crate::session::{connect, trajectory};
+use crate::session::{connect_tool as connect, trajectory};
 
 /// `esgm graph` options.
 #[derive(Debug, clap::Args)]

@@ -7,7 +7,7 @@ use anyhow::{Context, bail};
 use esgm_core::esgm::LogLevel;
 use serde_json::json;
 
-use crate::session::connect;
+use crate::session::connect_tool as connect;
 
 /// `esgm log-level` options.
 #[derive(Debug, clap::Args)]

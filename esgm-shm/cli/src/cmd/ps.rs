@@ -4,7 +4,7 @@
 use anyhow::bail;
 use esgm_shm::control::{ProcessRecord, Request, Response};
 
-use crate::session::connect;
+use crate::session::connect_tool as connect;
 
 /// The declared processes, as the supervisor last reported them.
 pub fn processes(domain: &str) -> anyhow::Result<Vec<ProcessRecord>> {

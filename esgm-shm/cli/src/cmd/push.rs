@@ -12,7 +12,7 @@ use esgm_core::value::{Value, ValueSort};
 use esgm_core::{AddError, AddOutcome, EntityStructure, EntityTrajectoryStructure};
 use serde_json::json;
 
-use crate::session::connect;
+use crate::session::connect_tool as connect;
 use crate::time_arg::TimeArg;
 
 /// `esgm push` options.

@@ -3,7 +3,7 @@
 
 use esgm_core::{EntityTrajectoryStructure, Sample, ValueApproximation};
 
-use crate::session::{connect, trajectory};
+use crate::session::{connect_tool as connect, trajectory};
 use crate::show::print_sample;
 use crate::time_arg::TimeArg;
 

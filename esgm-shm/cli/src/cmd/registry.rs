@@ -3,7 +3,7 @@
 use esgm_core::Esgm;
 use serde_json::json;
 
-use crate::session::connect;
+use crate::session::connect_tool as connect;
 
 /// Subcommands of registries that are only listed from the command line (sensors and
 /// units are registered by the processes that serve them).

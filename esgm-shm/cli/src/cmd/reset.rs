@@ -6,7 +6,7 @@ use anyhow::Context;
 use esgm_core::{EntityTrajectoryStructure, Esgm};
 use serde_json::json;
 
-use crate::session::connect;
+use crate::session::connect_tool as connect;
 
 /// `esgm reset` options.
 #[derive(Debug, clap::Args)]

@@ -5,7 +5,7 @@
 use esgm_core::{EntityTrajectoryStructure, Esgm};
 use serde_json::json;
 
-use crate::session::{connect, trajectory};
+use crate::session::{connect_tool as connect, trajectory};
 use crate::show::ms;
 
 /// Prints one line (or JSON object) per trajectory, then every drop by cause.

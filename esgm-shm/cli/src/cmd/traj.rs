@@ -8,7 +8,7 @@ use esgm_shm::control::{Request, Response};
 
 use crate::config::apply::SYSTEM_HOST;
 use crate::config::decl::TrajectoryDecl;
-use crate::session::{connect, trajectory};
+use crate::session::{connect_tool as connect, trajectory};
 
 /// `esgm traj` subcommands.
 #[derive(Debug, clap::Subcommand)]

@@ -4,7 +4,7 @@ use esgm_core::Esgm;
 use serde_json::json;
 
 use crate::config::decl::TypeDecl;
-use crate::session::connect;
+use crate::session::connect_tool as connect;
 
 /// `esgm type` subcommands.
 #[derive(Debug, clap::Subcommand)]

@@ -27,6 +27,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use esgm_core::TypeRegistry;
 use esgm_shm::ShmEsgm;
+use esgm_shm::capacity::{DEFAULT_MAX_PROCESSES, DEFAULT_READERS, DomainLimits};
 use esgm_shm::control::server::{cleanup_dead_nodes, log_cleanup};
 use esgm_shm::control::{ControlClient, Coordinator, Request, Response, StateDir};
 use esgm_shm::process::access::{ACCESS_ENV, ShmAccess, Widener, widen_domain};
@@ -64,9 +65,31 @@ pub struct Args {
     /// processes take part with `ESGM_SHM_ACCESS=others`.
     #[arg(long)]
     pub allow_others: bool,
+    /// Processes the domain admits at once (each a connection: a worker, a unit, a
+    /// command); one more is refused with an error naming this setting. Each costs
+    /// about 4 KiB of shared memory in the domain's control and administration
+    /// services (see ARCHITECTURE.md, "Limits").
+    #[arg(long, value_name = "N", env = MAX_PROCESSES_ENV, default_value_t = DEFAULT_MAX_PROCESSES)]
+    pub max_processes: usize,
+    /// Reader processes a trajectory admits when its declaration names no `readers`
+    /// of its own (at most --max-processes).
+    #[arg(long, value_name = "N", env = READERS_ENV, default_value_t = DEFAULT_READERS)]
+    pub readers: usize,
 }
 
+/// The environment variables a coordinator started by another command reads its
+/// limits from.
+const MAX_PROCESSES_ENV: &str = "ESGM_MAX_PROCESSES";
+const READERS_ENV: &str = "ESGM_READERS";
+
 impl Args {
+    /// The domain's limits, checked.
+    pub fn limits(&self) -> anyhow::Result<DomainLimits> {
+        let limits = DomainLimits { max_processes: self.max_processes, readers: self.readers };
+        limits.check().context("illegal limit")?;
+        Ok(limits)
+    }
+
     /// Who may use the domain's shared memory: the flags, else `ESGM_SHM_ACCESS`
     /// (a coordinator restarted by `--supervise` or a service manager), else its user.
     pub fn access(&self) -> anyhow::Result<ShmAccess> {
@@ -99,6 +122,7 @@ pub fn run(domain: &str, args: &Args) -> anyhow::Result<()> {
     let plan = args.config.as_deref().map(config::load).transpose()?;
     let state = state_dir(domain, args.state_dir.as_deref())?;
     let access = args.access()?;
+    let limits = args.limits()?;
     if args.detach {
         state.create().context("cannot create the state directory")?;
         std::fs::create_dir_all(state.log_dir()).context("cannot create the log directory")?;
@@ -113,6 +137,7 @@ pub fn run(domain: &str, args: &Args) -> anyhow::Result<()> {
             Some(state.path()),
             args.supervise,
             access,
+            limits,
             Stdio::from(log),
             true,
         )?
@@ -134,7 +159,7 @@ pub fn run(domain: &str, args: &Args) -> anyhow::Result<()> {
     if args.supervise {
         return supervise_coordinator(domain, args, access, &state);
     }
-    serve(domain, plan, args.quiet, access, state)
+    serve(domain, plan, args.quiet, access, limits, state)
 }
 
 /// `esgm up --supervise`: runs the coordinator as a child process and starts it again
@@ -158,6 +183,8 @@ fn supervise_coordinator(
         let mut command = Command::new(&exe);
         command.args(["up", "--domain", domain]).arg("--state-dir").arg(state.path());
         command.env(ACCESS_ENV, access.as_str());
+        command.env(MAX_PROCESSES_ENV, args.max_processes.to_string());
+        command.env(READERS_ENV, args.readers.to_string());
         if args.quiet || !first {
             command.arg("--quiet");
         }
@@ -196,10 +223,11 @@ fn serve(
     plan: Option<Plan>,
     quiet: bool,
     access: ShmAccess,
+    limits: DomainLimits,
     state: StateDir,
 ) -> anyhow::Result<()> {
     let (coordinator, recovered) =
-        Coordinator::spawn_recovering(domain, TypeRegistry::with_library(), state.clone())
+        Coordinator::spawn_recovering(domain, TypeRegistry::with_library(), state.clone(), limits)
             .with_context(|| {
                 format!("cannot serve `{domain}`; is a coordinator already running for it?")
             })?;
@@ -301,7 +329,8 @@ pub fn spawn_detached(
     stderr: Stdio,
     outliving: bool,
 ) -> anyhow::Result<std::process::Child> {
-    spawn_coordinator(domain, state_dir, supervise, ShmAccess::Private, stderr, outliving)
+    let limits = DomainLimits::default();
+    spawn_coordinator(domain, state_dir, supervise, ShmAccess::Private, limits, stderr, outliving)
 }
 
 /// [`spawn_detached`] with the domain's shared memory open to `access`.
@@ -310,12 +339,15 @@ fn spawn_coordinator(
     state_dir: Option<&Path>,
     supervise: bool,
     access: ShmAccess,
+    limits: DomainLimits,
     stderr: Stdio,
     outliving: bool,
 ) -> anyhow::Result<std::process::Child> {
     let exe = std::env::current_exe().context("cannot find the esgm executable")?;
     let mut command = Command::new(exe);
     command.args(["up", "--quiet", "--domain", domain]).env(ACCESS_ENV, access.as_str());
+    command.env(MAX_PROCESSES_ENV, limits.max_processes.to_string());
+    command.env(READERS_ENV, limits.readers.to_string());
     if !matches!(std::env::var_os("NO_COLOR"), Some(v) if !v.is_empty()) {
         // Its log goes to a file (or the demo's terminal): plain text.
         command.env("NO_COLOR", "1");

@@ -210,6 +210,11 @@ pub struct TrajectoryDecl {
     #[arg(long)]
     #[serde(default)]
     pub replace: bool,
+    /// Reader processes it admits at once (default: the domain's `esgm up --readers`;
+    /// at most its --max-processes). Raise it for a stream every process reads (a
+    /// `tf`-like one); each reader costs its writer about 3 KiB of private memory.
+    #[arg(long, value_name = "N")]
+    pub readers: Option<usize>,
     /// The policy (C1–C6).
     #[command(flatten)]
     #[serde(default)]
@@ -338,6 +343,15 @@ impl TrajectoryDecl {
         spec.policy = self.policy.apply_to(spec.policy)?;
         if self.replace {
             spec = spec.replace();
+        }
+        if let Some(readers) = self.readers {
+            if readers == 0 {
+                bail!(
+                    "trajectory `{}`: readers = 0: at least one process must be able to read it",
+                    self.name
+                );
+            }
+            spec = spec.readers(readers);
         }
         Ok(spec)
     }
