@@ -58,6 +58,9 @@ pub enum Method {
     /// item handed over to the last one done) over its items. A throughput, as
     /// nanoseconds per structure or frame.
     PerItem,
+    /// CPU time a process used per second of wall time, over one-second windows: 10 ms
+    /// is 1 % of a core.
+    CpuPerSecond,
 }
 
 impl Method {
@@ -70,6 +73,7 @@ impl Method {
             Method::SystemClock => "clock",
             Method::Call => "call",
             Method::PerItem => "per-item",
+            Method::CpuPerSecond => "cpu/s",
         }
     }
 
@@ -87,6 +91,9 @@ impl Method {
             Method::Call => "duration of one call, timed in the calling thread",
             Method::PerItem => {
                 "a batch's time (first item handed over -> last one done) / its items: a throughput"
+            }
+            Method::CpuPerSecond => {
+                "CPU time the process used per second of wall time (10 ms = 1 % of a core)"
             }
         }
     }

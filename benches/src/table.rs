@@ -206,7 +206,8 @@ fn targets(report: &Report) -> String {
 /// `×1.32`: a latency row's p50 over the floor's (same wait); `-` for rows that are
 /// not hops (queries, compute calls, lateness) or without a floor in the run.
 fn vs_floor(report: &Report, m: &Measurement) -> String {
-    if matches!(m.method, Method::Call | Method::Lateness | Method::PerItem) {
+    if matches!(m.method, Method::Call | Method::Lateness | Method::PerItem | Method::CpuPerSecond)
+    {
         return "-".to_owned();
     }
     match report.scenarios.iter().find(|f| f.name == FLOOR && f.wait == m.wait) {

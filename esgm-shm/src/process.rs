@@ -5,7 +5,7 @@
 //! programs of one system: they log alike (to stderr, `RUST_LOG` or warnings,
 //! iceoryx2's own log cut to errors, since its warnings — no config file, defaults
 //! used — are not news) and report a failure alike (one line naming what was wrong,
-//! never a backtrace; STYLE habit 6). They also share their domain's shared memory
+//! never a backtrace; ARCHITECTURE.md, "Code habits that matter"). They also share their domain's shared memory
 //! alike: privately unless the domain was started to allow others ([`share_domain`]).
 
 pub mod access;

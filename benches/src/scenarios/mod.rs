@@ -39,6 +39,12 @@
 //! - [`ipc_pipeline`]: `pipeline-<stage>`, the tutorial across six processes;
 //! - [`ipc_memory`]: resident and shared memory, into the report's `memory` section.
 //!
+//! The scale issue (23) adds, after `pipeline-*`:
+//! - [`ipc_scale`]: `scale-{connect,first-add,idle}-<n>` for domains of 10, 100 and
+//!   1,000 trajectories, against the domain of 10, with memory rows;
+//! - [`ipc_fanout`]: `fanout-<k>`, one writer and k reader connections, until the last
+//!   reader holds the structure, against `fanout-1`.
+//!
 //! The recordings issue (14) adds, after `pipeline-*` (before `memory`):
 //! - [`record_small`]: `record-small`, `record-small-none`, `RobotState`s from another
 //!   process recorded by the `Recorder` (zstd, none): structures/s in batches, losses
@@ -65,12 +71,14 @@ pub mod ipc_connect_echo;
 pub mod ipc_esgm_echo;
 pub mod ipc_esgm_image;
 pub mod ipc_esgm_small;
+pub mod ipc_fanout;
 pub mod ipc_floor_iceoryx2;
 pub mod ipc_memory;
 pub mod ipc_node;
 pub mod ipc_payload;
 pub mod ipc_pipeline;
 pub mod ipc_query;
+pub mod ipc_scale;
 pub mod ipc_throughput;
 pub mod ipc_uds_echo;
 pub mod ipc_uds_frames;
@@ -114,6 +122,13 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(ipc_query::Query::THOUSAND),
         Box::new(ipc_query::Query::MILLION),
         Box::new(ipc_pipeline::Pipeline),
+        Box::new(ipc_scale::Scale::TEN),
+        Box::new(ipc_scale::Scale::HUNDRED),
+        Box::new(ipc_scale::Scale::THOUSAND),
+        Box::new(ipc_fanout::Fanout::ONE),
+        Box::new(ipc_fanout::Fanout::EIGHT),
+        Box::new(ipc_fanout::Fanout::THIRTY_TWO),
+        Box::new(ipc_fanout::Fanout::SIXTY_FOUR),
         Box::new(record_small::RecordSmall),
         Box::new(file_write_image::FileWriteImage),
         Box::new(record_image::RecordImage),

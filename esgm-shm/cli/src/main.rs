@@ -24,7 +24,7 @@ use clap::{Parser, Subcommand};
 #[command(name = "esgm", version, about, propagate_version = true)]
 struct Cli {
     /// The system to talk to (one coordinator per domain).
-    #[arg(long, global = true, env = "ESGM_DOMAIN", default_value = "esgm")]
+    #[arg(long, global = true, env = "ESGM_DOMAIN", default_value = esgm_shm::service_name::SYSTEM_DOMAIN)]
     domain: String,
     /// Print data as JSON (one object per line for streams).
     #[arg(long, global = true)]
@@ -54,6 +54,13 @@ enum Command {
     /// The tutorial run hard for minutes (camera 30 Hz, robot 1 kHz), watched for
     /// memory growth and losses; writes soak.json and soak.png.
     Soak(cmd::soak::Args),
+    /// A synthetic robot (by default 300 trajectories in 60 processes) in a fresh
+    /// domain: memory, CPU, connect and first-add times, latency and losses against
+    /// the scale targets; writes scale.json and scale.png.
+    Scale(cmd::scale::Args),
+    /// One process of `esgm scale`'s synthetic robot (started by `esgm scale`).
+    #[command(hide = true)]
+    ScaleWorker(cmd::scale::WorkerArgs),
     /// Entity structure types.
     #[command(subcommand)]
     Type(cmd::types::TypeCommand),

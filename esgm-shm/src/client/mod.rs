@@ -165,7 +165,8 @@ impl ShmEsgmBuilder {
         self
     }
 
-    /// The system's domain (default `esgm`, as the coordinator's).
+    /// The system's domain (default [`crate::service_name::SYSTEM_DOMAIN`], `esgm`, as
+    /// the `esgm` command's).
     #[must_use]
     pub fn domain(mut self, domain: impl Into<String>) -> Self {
         self.domain = Some(domain.into());
@@ -208,7 +209,7 @@ impl ShmEsgmBuilder {
 
     /// Connects: starts the location thread, which opens the control service.
     pub fn connect(self) -> Result<ShmEsgm, ConnectError> {
-        let domain = self.domain.unwrap_or_else(|| crate::service_name::DEFAULT_DOMAIN.to_owned());
+        let domain = self.domain.unwrap_or_else(|| crate::service_name::SYSTEM_DOMAIN.to_owned());
         let host = self.host.unwrap_or_else(default_host);
         let timeout = self.timeout.unwrap_or(DEFAULT_TIMEOUT);
         let mut local = InProcessEsgm::builder();

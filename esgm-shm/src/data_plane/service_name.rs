@@ -21,8 +21,12 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use iceoryx2::prelude::ServiceName;
 
-/// The domain used when none is given.
+/// The domain of the data plane's ports when none is given.
 pub const DEFAULT_DOMAIN: &str = "default";
+
+/// The domain of a system when none is given: the `esgm` command's default, so that a
+/// program connecting without naming one reaches a system started with `esgm up`.
+pub const SYSTEM_DOMAIN: &str = "esgm";
 
 /// Prefix of every esgm service.
 pub const SERVICE_PREFIX: &str = "esgm";

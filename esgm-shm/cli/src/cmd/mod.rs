@@ -20,6 +20,7 @@ pub mod record;
 pub mod registry;
 pub mod replay;
 pub mod reset;
+pub mod scale;
 pub mod soak;
 pub mod stats;
 pub mod supervise;
@@ -39,6 +40,8 @@ pub fn process_name(c: &Command) -> String {
         Command::Up(_) => "coordinator".into(),
         Command::Demo(_) => "demo".into(),
         Command::Soak(_) => "soak".into(),
+        Command::Scale(_) => "scale".into(),
+        Command::ScaleWorker(a) => format!("scale-worker-{}", a.index),
         Command::Worker(role) => role.process_name(),
         _ => "cli".into(),
     }
@@ -85,6 +88,8 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Load(a) => load::run(domain, json, a),
         Command::Bridge(a) => bridge::run(domain, json, a),
         Command::Soak(a) => soak::run(domain, a),
+        Command::Scale(a) => scale::run(domain, a),
+        Command::ScaleWorker(a) => scale::worker::run(domain, a),
         Command::Worker(role) => worker::run(domain, role),
     }
 }

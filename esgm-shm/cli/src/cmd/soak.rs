@@ -32,8 +32,8 @@
 //! report written as after a full run, and the command exits 1 (the run was short).
 
 mod chart;
-mod probe;
-mod sample;
+pub(super) mod probe;
+pub(super) mod sample;
 mod verdict;
 
 use std::collections::BTreeSet;

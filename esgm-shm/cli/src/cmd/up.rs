@@ -333,6 +333,17 @@ pub fn spawn_detached(
     spawn_coordinator(domain, state_dir, supervise, ShmAccess::Private, limits, stderr, outliving)
 }
 
+/// [`spawn_detached`] (unsupervised) of a domain with `limits`.
+pub fn spawn_detached_with(
+    domain: &str,
+    state_dir: Option<&Path>,
+    limits: DomainLimits,
+    stderr: Stdio,
+    outliving: bool,
+) -> anyhow::Result<std::process::Child> {
+    spawn_coordinator(domain, state_dir, false, ShmAccess::Private, limits, stderr, outliving)
+}
+
 /// [`spawn_detached`] with the domain's shared memory open to `access`.
 fn spawn_coordinator(
     domain: &str,

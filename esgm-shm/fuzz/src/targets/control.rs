@@ -107,6 +107,7 @@ fn requests() -> Result<Vec<Request>, Broken> {
         Request::ListSensors,
         Request::ListCompUnits,
         Request::ListPlacements,
+        Request::ListPlacementsOf { names: vec!["robot_state".into(), "x".repeat(101)] },
         Request::Assignments { host: host() },
         Request::ReportHoldings { host: host(), stats: HoldingStats::default() },
         Request::ListHoldings,
@@ -250,7 +251,7 @@ impl Responses {
         let mut registry = new_registry();
         let mut answers: Vec<Response> =
             requests()?.into_iter().map(|r| registry.handle_from(r, Origin::Coordinator)).collect();
-        answers.push(Response::Pong { version: "0.1.0".into(), pid: u32::MAX });
+        answers.push(Response::Pong { version: "0.1.0".into(), pid: u32::MAX, registry: u64::MAX });
         answers.push(Response::Error(ControlError::TooLarge { bytes: usize::MAX, max: 1 }));
         answers.push(Response::Error(ControlError::BadRequest { reason: "ü".into() }));
         let seeds = answers.iter().map(response_bytes).collect::<Result<_, _>>()?;

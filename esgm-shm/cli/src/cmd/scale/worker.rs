@@ -1,0 +1,255 @@
+//! One process of `esgm scale`'s synthetic robot (`esgm scale-worker`, started by the
+//! harness): it connects, creates the trajectories the profile has it write, reads
+//! those it has it read, and reports to the harness on its stdout:
+//! - `READY {json}` once every read trajectory is subscribed to ([`Ready`]);
+//! - `REPORT {json}` when it is told to stop ([`Report`]).
+//!
+//! Between the two it idles until the run directory holds `go`, then writes its
+//! trajectories at their rates (a camera's pixels rendered into the trajectory's own
+//! shared memory, as a camera does), adds once to a trajectory another process
+//! writes (the first add from a non-writer, timed), and stamps each structure with its
+//! creation time, so that every reader measures how long it took to hold it. It stops
+//! when the directory holds `stop`.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use esgm_core::esgm::TrajectorySpec;
+use esgm_core::library::{Image, RobotState};
+use esgm_core::policy::FluentStreamPolicy;
+use esgm_core::{
+    CacheConstraint, Clock, Entity, EntityStructure, EntityTrajectoryStructure, Esgm,
+    InProcessTrajectory, SubscribeOptions, SystemClock,
+};
+use esgm_shm::ShmEsgm;
+use serde::{Deserialize, Serialize};
+
+use super::profile::{Class, Profile};
+
+/// `esgm scale-worker` options.
+#[derive(Debug, clap::Args)]
+pub struct WorkerArgs {
+    /// The run directory (the profile as `profile.json`, and `go`/`stop`).
+    #[arg(long, value_name = "DIR")]
+    pub run: PathBuf,
+    /// This process's number in the profile.
+    #[arg(long)]
+    pub index: usize,
+}
+
+/// What a worker says once it is set up.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct Ready {
+    /// Its number.
+    pub index: usize,
+    /// Its pid.
+    pub pid: u32,
+    /// How long `connect` took, in milliseconds.
+    pub connect_ms: f64,
+}
+
+/// What a worker says at the end.
+#[derive(Debug, Clone, Default, Serialize, Deserialize)]
+pub struct Report {
+    /// Its number.
+    pub index: usize,
+    /// How long its first add to a trajectory another process writes took, in
+    /// milliseconds (`None`: it reads none it can add to).
+    pub first_add_ms: Option<f64>,
+    /// Structures it added to its own trajectories.
+    pub published: u64,
+    /// Per class, the latency of every structure it received, in microseconds (from
+    /// the writer's creation to this process holding it).
+    pub latency_us: BTreeMap<Class, Vec<u32>>,
+    /// Adds or subscriptions that failed, with why.
+    pub errors: Vec<String>,
+}
+
+/// Cache of each trajectory: enough history for late readers, bounded memory.
+const CACHE: usize = 10;
+/// Images of a camera trajectory kept.
+const IMAGE_CACHE: usize = 4;
+const WIDTH: i64 = 640;
+const HEIGHT: i64 = 480;
+/// How long a worker waits for the trajectories it reads to be created by others.
+const PATIENCE: Duration = Duration::from_secs(120);
+
+/// Runs one worker.
+pub fn run(domain: &str, a: &WorkerArgs) -> anyhow::Result<()> {
+    let profile: Profile = serde_json::from_slice(
+        &std::fs::read(a.run.join("profile.json")).context("cannot read the profile")?,
+    )
+    .context("malformed profile")?;
+    let started = Instant::now();
+    let esgm = ShmEsgm::builder()
+        .domain(domain)
+        .host(format!("scale-{}", a.index))
+        .timeout(Duration::from_secs(10))
+        .connect()
+        .context("cannot connect")?;
+    let connect_ms = started.elapsed().as_secs_f64() * 1e3;
+    let mut report = Report { index: a.index, ..Report::default() };
+
+    let mut written = Vec::new();
+    for t in profile.written_by(a.index) {
+        let cache = if t.class == Class::Image { IMAGE_CACHE } else { CACHE };
+        let spec = TrajectorySpec::primitive(&t.name, t.class.type_name())
+            .policy(FluentStreamPolicy::default().cache(CacheConstraint::Elements(cache)))
+            .readers(t.readers.len().max(1));
+        let handle =
+            esgm.create_trajectory(spec).with_context(|| format!("cannot create `{}`", t.name))?;
+        written.push((handle, t.class, t.hz));
+    }
+    let latencies: Arc<Mutex<BTreeMap<Class, Vec<u32>>>> = Arc::default();
+    let stop = Arc::new(AtomicBool::new(false));
+    let mut readers = Vec::new();
+    let mut reads = Vec::new();
+    for t in profile.read_by(a.index) {
+        let handle = wait_for_trajectory(&esgm, &t.name)?;
+        let subscription = handle
+            .subscribe(SubscribeOptions::default())
+            .with_context(|| format!("cannot subscribe to `{}`", t.name))?;
+        let (class, latencies, stop) = (t.class, Arc::clone(&latencies), Arc::clone(&stop));
+        readers.push(std::thread::spawn(move || {
+            let clock = SystemClock;
+            let mut mine = Vec::new();
+            while !stop.load(Ordering::Acquire) {
+                if let Ok(sample) = subscription.recv_timeout(Duration::from_millis(100)) {
+                    let held = clock.now();
+                    let us = (held - sample.structure.create_time).max(0) / 1_000;
+                    mine.push(u32::try_from(us).unwrap_or(u32::MAX));
+                }
+            }
+            if let Ok(mut all) = latencies.lock() {
+                all.entry(class).or_default().extend(mine);
+            }
+        }));
+        reads.push((handle, t.class));
+    }
+    let ready = Ready { index: a.index, pid: std::process::id(), connect_ms };
+    println!("READY {}", serde_json::to_string(&ready)?);
+
+    wait_for_file(&a.run.join("go"), &a.run.join("stop"));
+    // The first add from a process that does not write the trajectory.
+    if let Some((handle, _)) = reads.iter().find(|(_, c)| *c != Class::Image) {
+        let es = robot_state(SystemClock.now());
+        let t = Instant::now();
+        match handle.add(es) {
+            Ok(_) => report.first_add_ms = Some(t.elapsed().as_secs_f64() * 1e3),
+            Err(e) => report.errors.push(format!("first add to `{}`: {e}", handle.name())),
+        }
+    }
+    publish(&written, &a.run.join("stop"), &mut report);
+    stop.store(true, Ordering::Release);
+    for r in readers {
+        if r.join().is_err() {
+            report.errors.push("a reader thread panicked".into());
+        }
+    }
+    if let Ok(mut all) = latencies.lock() {
+        report.latency_us = std::mem::take(&mut *all);
+    }
+    println!("REPORT {}", serde_json::to_string(&report)?);
+    drop(esgm);
+    Ok(())
+}
+
+/// A handle on `name` once its writer created it.
+fn wait_for_trajectory(esgm: &ShmEsgm, name: &str) -> anyhow::Result<InProcessTrajectory> {
+    let deadline = Instant::now() + PATIENCE;
+    loop {
+        match esgm.get_entity_trajectory_structure(name) {
+            Ok(h) => return Ok(h),
+            Err(esgm_core::esgm::LookupError::NoSuchEntityStructure { .. })
+                if Instant::now() < deadline =>
+            {
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            Err(e) => return Err(e).with_context(|| format!("cannot read `{name}`")),
+        }
+    }
+}
+
+/// Waits until `file` exists (or `or_else` does).
+fn wait_for_file(file: &Path, or_else: &Path) {
+    while !file.exists() && !or_else.exists() {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn robot_state(now: i64) -> EntityStructure {
+    RobotState { x: 1.0, y: 2.0, dir: 3.0 }.to_structure("robot", now, now)
+}
+
+/// The next structure of `handle`, made now: an image's pixels rendered into the
+/// trajectory's own buffer.
+fn make(handle: &InProcessTrajectory, class: Class, n: u64) -> EntityStructure {
+    let now = SystemClock.now();
+    if class != Class::Image {
+        return robot_state(now);
+    }
+    let octets = match handle.image_buffer(WIDTH, HEIGHT, Image::FORMAT_RGB8) {
+        Some(mut buffer) => {
+            let shade = (n % 251) as u8;
+            buffer.pixels_mut().fill(shade);
+            buffer.into_octets()
+        }
+        None => vec![0u8; (WIDTH * HEIGHT * 3) as usize].into(),
+    };
+    Image { width: WIDTH, height: HEIGHT, format: Image::FORMAT_RGB8, image_data: octets }
+        .to_structure("camera", now, now)
+}
+
+/// Adds to every written trajectory at its rate until `stop` exists.
+fn publish(written: &[(InProcessTrajectory, Class, f64)], stop: &Path, report: &mut Report) {
+    let start = Instant::now();
+    let mut due: Vec<(Instant, Duration)> = written
+        .iter()
+        .enumerate()
+        .map(|(i, (_, _, hz))| {
+            let period = Duration::from_secs_f64(1.0 / hz);
+            // Spread the first adds over a period, as independent sensors would be.
+            (start + period.mul_f64((i % 16) as f64 / 16.0), period)
+        })
+        .collect();
+    let mut next_look = Instant::now();
+    let mut n = 0u64;
+    loop {
+        let now = Instant::now();
+        if now >= next_look {
+            if stop.exists() {
+                return;
+            }
+            next_look = now + Duration::from_millis(50);
+        }
+        let Some((i, when)) = due.iter().enumerate().map(|(i, d)| (i, d.0)).min_by_key(|d| d.1)
+        else {
+            std::thread::sleep(Duration::from_millis(20));
+            continue;
+        };
+        if when > now {
+            std::thread::sleep((when - now).min(Duration::from_millis(50)));
+            continue;
+        }
+        let (handle, class, _) = &written[i];
+        n += 1;
+        match handle.add(make(handle, *class, n)) {
+            Ok(_) => report.published += 1,
+            Err(e) => {
+                if report.errors.len() < 10 {
+                    report.errors.push(format!("add to `{}`: {e}", handle.name()));
+                }
+            }
+        }
+        let (at, period) = &mut due[i];
+        *at += *period;
+        // Behind by more than a period (a stalled machine): skip, do not burst.
+        if *at + *period < now {
+            *at = now + *period;
+        }
+    }
+}
