@@ -22,8 +22,9 @@ use esgm_core::{
     SystemClock, TrajectorySpec, TypeRegistry,
 };
 use esgm_shm::control::{Coordinator, Registry};
-use esgm_shm::{ShmEsgm, unique_domain};
+use esgm_shm::unique_domain;
 
+use super::ipc_connect_echo::connect;
 use super::ipc_payload::Kind;
 use crate::latency::Latency;
 use crate::report::{Measurement, Method, Wait};
@@ -163,12 +164,4 @@ impl Scenario for Fanout {
         drop(coordinator);
         Ok(vec![row])
     }
-}
-
-fn connect(domain: &str, host: &str) -> anyhow::Result<ShmEsgm> {
-    ShmEsgm::builder()
-        .domain(domain)
-        .host(host)
-        .connect()
-        .with_context(|| format!("could not connect `{host}` to the coordinator of {domain}"))
 }

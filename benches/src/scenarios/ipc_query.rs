@@ -2,7 +2,7 @@
 //! user of `connect` calls it, on histories of 10^3 and 10^6 small structures.
 //!
 //! A coordinator runs on a thread of the measuring process, with two connections
-//! ([`ShmEsgm`], hosts `bench-writer` and `bench-reader`: two locations, as two
+//! ([`esgm_shm::ShmEsgm`], hosts `bench-writer` and `bench-reader`: two locations, as two
 //! processes of one robot are). The writer creates a primitive `RobotState` trajectory
 //! and adds `n` structures, one per millisecond of valid time; the reader's handle
 //! ([`Esgm::get_entity_trajectory_structure`]) is its replica — an esgm-core store fed
@@ -37,8 +37,9 @@ use esgm_core::{
     TypeRegistry, ValueApproximation,
 };
 use esgm_shm::control::{Coordinator, Registry};
-use esgm_shm::{DEFAULT_MAX_HISTORY, ShmEsgm, unique_domain};
+use esgm_shm::{DEFAULT_MAX_HISTORY, unique_domain};
 
+use super::ipc_connect_echo::connect;
 use super::ipc_floor_iceoryx2;
 use super::ipc_payload::{Kind, read_value};
 use crate::latency::Latency;
@@ -157,14 +158,6 @@ impl Scenario for Query {
         drop(coordinator);
         Ok(rows)
     }
-}
-
-fn connect(domain: &str, host: &str) -> anyhow::Result<ShmEsgm> {
-    ShmEsgm::builder()
-        .domain(domain)
-        .host(host)
-        .connect()
-        .with_context(|| format!("could not connect `{host}` to the coordinator of {domain}"))
 }
 
 /// Adds `n` structures through `written` in batches, each time waiting until `replica`

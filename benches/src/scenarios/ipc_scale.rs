@@ -23,8 +23,9 @@ use esgm_core::{
     TypeRegistry,
 };
 use esgm_shm::control::{Coordinator, Registry};
-use esgm_shm::{ShmEsgm, unique_domain};
+use esgm_shm::unique_domain;
 
+use super::ipc_connect_echo::connect;
 use super::ipc_payload::Kind;
 use crate::latency::Latency;
 use crate::report::{Measurement, MemoryRow, Method, Wait};
@@ -174,14 +175,6 @@ impl Scenario for Scale {
         drop(coordinator);
         Ok(rows)
     }
-}
-
-fn connect(domain: &str, host: &str) -> anyhow::Result<ShmEsgm> {
-    ShmEsgm::builder()
-        .domain(domain)
-        .host(host)
-        .connect()
-        .with_context(|| format!("could not connect `{host}` to the coordinator of {domain}"))
 }
 
 /// This process's private memory and shared memory touched (`RssAnon`, `RssShmem`).

@@ -27,9 +27,15 @@ impl Echo {
         let stdout = child.stdout.take().expect("piped");
         let (tx, rx) = mpsc::channel();
         std::thread::spawn(move || {
+            let mut lines = BufReader::new(stdout);
             let mut first = String::new();
-            let read = BufReader::new(stdout).read_line(&mut first);
+            let read = lines.read_line(&mut first);
             let _ = tx.send(read.map(|_| first));
+            // Drained while it runs: a reader whose stdout closed would leave.
+            let mut rest = String::new();
+            while lines.read_line(&mut rest).is_ok_and(|n| n > 0) {
+                rest.clear();
+            }
         });
         match rx.recv_timeout(PATIENCE) {
             Ok(Ok(line)) if !line.is_empty() => Echo(child),

@@ -39,6 +39,7 @@ use super::blocking_add::AddClient;
 use super::mirrors::SharedMirrors;
 use super::settings::{
     bridge_qos, fixed_sample_len, generation_domain, inbox_domain, inbox_qos, join_service,
+    own_subscriber,
 };
 use super::shared_node::SharedNode;
 use crate::capacity::{EventCapacity, Readers};
@@ -163,7 +164,7 @@ impl Import {
                     .qos(qos)
                     .wait_strategy(WaitStrategy::BusySpin);
                 if !tool {
-                    subscriber = subscriber.reader_limit(readers.0);
+                    subscriber = subscriber.reader_limit(readers.0 + own_subscriber(&entity_type));
                 }
                 let subscriber = subscriber.create(node)?;
                 let violations = ViolationSubscriber::builder(&name)

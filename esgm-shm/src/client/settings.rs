@@ -59,7 +59,16 @@ pub fn bridge_qos(
         true => qos.max_borrowed_samples + HOLD_SLACK,
         false => TrajectoryQos::default().max_borrowed_samples,
     };
-    TrajectoryQos { max_borrowed_samples, max_publishers: 1, ..qos }.readers(readers)
+    let qos = TrajectoryQos { max_borrowed_samples, max_publishers: 1, ..qos }.readers(readers);
+    // The writer of images reads its own samples back ([`own_subscriber`]).
+    TrajectoryQos { max_subscribers: qos.max_subscribers + own_subscriber(entity_type), ..qos }
+}
+
+/// Subscribers of a trajectory of `entity_type` that its writer itself holds beside
+/// its readers: one for images, which the writer's store keeps as its own subscriber
+/// received them (in shared memory), none otherwise.
+pub(crate) fn own_subscriber(entity_type: &EntityStructureType) -> usize {
+    usize::from(entity_type.attributes.iter().any(|a| a.sort == ValueSort::OctetSeq))
 }
 
 /// The largest structure of `entity_type` a writer's pool is sized for, if the type

@@ -33,7 +33,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use esgm_shm::capacity::{DEFAULT_MAX_PROCESSES, DEFAULT_READERS, DomainLimits};
 use esgm_shm::control::StateDir;
-use esgm_shm::{nodes_of, unique_domain};
+use esgm_shm::unique_domain;
 use serde::Serialize;
 
 use super::soak::probe;
@@ -155,7 +155,7 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
     let run_dir = a.out.join("scale-run");
     std::fs::create_dir_all(run_dir.join("logs"))
         .with_context(|| format!("cannot create {}", run_dir.display()))?;
-    for stale in ["go", "stop"] {
+    for stale in ["go", "stop", "exit"] {
         let path = run_dir.join(stale);
         if path.exists() {
             std::fs::remove_file(&path)
@@ -296,14 +296,22 @@ impl System {
             let p = if k == 0 { &mut m.coordinator } else { &mut m.workers[k - 1] };
             (p.private_loaded, p.cpu_loaded) = (r.anon, loaded[k]);
         }
-        let tool = crate::session::connect_tool(&self.domain)?;
+        std::fs::write(run_dir.join("stop"), b"").context("cannot stop the workers")?;
+        let reports: Vec<Report> =
+            collect(&heard, "REPORT", profile.processes, WIND_DOWN, &mut self.workers)?;
+        // Every worker still connected, nothing flowing: every trajectory's counters.
+        let tool = esgm_shm::ShmEsgm::builder()
+            .domain(&self.domain)
+            .host("esgm-scale")
+            .timeout(WIND_DOWN)
+            .tool()
+            .connect()
+            .context("cannot connect to collect the counters")?;
         let stats = tool.domain_stats().context("cannot collect the trajectories' counters")?;
         m.trajectory_counts =
             stats.trajectories.iter().map(|(n, r)| (n.clone(), Counts::of(r))).collect();
         drop(tool);
-        std::fs::write(run_dir.join("stop"), b"").context("cannot stop the workers")?;
-        let reports: Vec<Report> =
-            collect(&heard, "REPORT", profile.processes, WIND_DOWN, &mut self.workers)?;
+        std::fs::write(run_dir.join("exit"), b"").context("cannot let the workers leave")?;
         let mut latency: BTreeMap<Class, Vec<u32>> = BTreeMap::new();
         for r in reports {
             m.first_add_ms.extend(r.first_add_ms);
@@ -390,32 +398,22 @@ fn collect<T: serde::de::DeserializeOwned>(
     Ok(got.into_values().collect())
 }
 
-/// Percent of a core each of `pids` used over `window`.
+/// Percent of a core each of `pids` used over `window` (as `top` counts: one busy
+/// core is 100 %); fails naming a process that could not be read.
 fn cpu_percent(pids: &[u32], window: Duration) -> anyhow::Result<Vec<f64>> {
-    let before = pids.iter().map(|p| cpu_ticks(*p)).collect::<anyhow::Result<Vec<_>>>()?;
-    let start = Instant::now();
+    let mut meter = crate::dashboard::procfs::CpuMeter::default();
+    for pid in pids {
+        // The first read of each only primes the meter.
+        let _first = meter.percent(*pid);
+    }
     std::thread::sleep(window);
-    let elapsed = start.elapsed().as_secs_f64();
-    let after = pids.iter().map(|p| cpu_ticks(*p)).collect::<anyhow::Result<Vec<_>>>()?;
-    // SAFETY: sysconf only reads a constant of the system.
-    let hz = unsafe { libc::sysconf(libc::_SC_CLK_TCK) }.max(1) as f64;
-    Ok(before.iter().zip(&after).map(|(b, a)| (a - b) as f64 / hz / elapsed * 100.0).collect())
-}
-
-/// User and system CPU time of `pid`, in clock ticks (`/proc/<pid>/stat`).
-fn cpu_ticks(pid: u32) -> anyhow::Result<u64> {
-    let path = format!("/proc/{pid}/stat");
-    let text = std::fs::read_to_string(&path).with_context(|| format!("cannot read {path}"))?;
-    parse_ticks(&text).with_context(|| format!("{path} is not a stat line"))
-}
-
-/// utime + stime of a `/proc/<pid>/stat` line (fields 14 and 15, after the command
-/// name in parentheses, which may hold spaces).
-fn parse_ticks(stat: &str) -> Option<u64> {
-    let rest = &stat[stat.rfind(')')? + 1..];
-    let fields: Vec<&str> = rest.split_whitespace().collect();
-    // After ')': state is field 3, so utime (14) is index 11.
-    Some(fields.get(11)?.parse::<u64>().ok()? + fields.get(12)?.parse::<u64>().ok()?)
+    pids.iter()
+        .map(|pid| {
+            meter
+                .percent(*pid)
+                .with_context(|| format!("cannot read the CPU time of process {pid}"))
+        })
+        .collect()
 }
 
 /// Percentiles of `l`.
@@ -430,33 +428,16 @@ fn summary(mut l: Vec<u32>) -> Latency {
     }
 }
 
-/// What of the domain is still there after the stop (see `esgm soak`).
+/// What of the domain is still there after the stop (as `esgm soak` checks).
 fn left_behind(domain: &str, seen: &BTreeSet<PathBuf>, m: &Measured) -> Vec<String> {
-    let mut left = Vec::new();
-    let pids = std::iter::once(m.coordinator.pid).chain(m.workers.iter().map(|w| w.pid));
-    for pid in pids.filter(|p| *p != 0) {
-        if super::supervise::alive(pid) {
-            left.push(format!("process {pid}"));
-        }
-    }
-    match nodes_of(domain) {
-        Ok(nodes) => left.extend(nodes.into_iter().map(|(n, _)| format!("iceoryx2 node {n}"))),
-        Err(e) => left.push(format!("iceoryx2 nodes (cannot list them: {e})")),
-    }
-    left.extend(probe::still_present(seen).into_iter().map(|p| format!("file {}", p.display())));
-    left
+    let pids = std::iter::once(("coordinator".to_owned(), m.coordinator.pid))
+        .chain(m.workers.iter().enumerate().map(|(i, w)| (format!("scale-worker-{i}"), w.pid)));
+    super::soak::left_behind_of(domain, seen, pids.filter(|(_, pid)| *pid != 0).collect())
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn cpu_ticks_are_read_past_a_command_with_spaces() {
-        let stat = "42 (esgm scale-worker) S 1 42 42 0 -1 4194560 100 0 0 0 7 5 0 0 20 0 3 0";
-        assert_eq!(parse_ticks(stat), Some(12));
-        assert_eq!(parse_ticks("garbage"), None);
-    }
 
     #[test]
     fn percentiles_of_latencies() {

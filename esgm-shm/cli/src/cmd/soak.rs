@@ -458,9 +458,20 @@ fn mib(bytes: u64) -> f64 {
 /// still run, iceoryx2 nodes of the domain, and shared-memory files its processes
 /// mapped. A failure to look counts as something left (never assume "none").
 fn left_behind(domain: &str, seen: &BTreeSet<PathBuf>, samples: &[Sample]) -> Vec<String> {
-    let mut left = Vec::new();
     let pids: BTreeSet<(String, u32)> =
         samples.iter().flat_map(|s| s.processes.iter().map(|(n, p)| (n.clone(), p.pid))).collect();
+    left_behind_of(domain, seen, pids)
+}
+
+/// What of `domain` is still there: which of the named `pids` still run, its iceoryx2
+/// nodes, and which of the `seen` shared-memory files exist (`esgm scale` checks the
+/// same).
+pub(super) fn left_behind_of(
+    domain: &str,
+    seen: &BTreeSet<PathBuf>,
+    pids: BTreeSet<(String, u32)>,
+) -> Vec<String> {
+    let mut left = Vec::new();
     for (name, pid) in pids {
         if super::supervise::alive(pid) {
             left.push(format!("process {name} (pid {pid})"));

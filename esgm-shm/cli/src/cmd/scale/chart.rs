@@ -53,7 +53,7 @@ pub fn draw(m: &Measured, path: &Path) -> anyhow::Result<()> {
     let classes: Vec<_> = m.latency.iter().collect();
     let ymax = classes.iter().map(|(_, l)| f64::from(l.p99_us)).fold(1.0, f64::max) * 1.1;
     let mut chart = ChartBuilder::on(&panels[1])
-        .caption("latency until a reader holds it (p50, p99)", (FAMILY, 18))
+        .caption("latency until a reader holds it (blue p50, orange p99)", (FAMILY, 18))
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(60)

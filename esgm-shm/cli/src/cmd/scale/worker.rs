@@ -9,7 +9,8 @@
 //! shared memory, as a camera does), adds once to a trajectory another process
 //! writes (the first add from a non-writer, timed), and stamps each structure with its
 //! creation time, so that every reader measures how long it took to hold it. It stops
-//! when the directory holds `stop`.
+//! when the directory holds `stop`, reports, and leaves once it holds `exit` (the
+//! harness asks every process for its counters in between).
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -154,6 +155,8 @@ pub fn run(domain: &str, a: &WorkerArgs) -> anyhow::Result<()> {
         report.latency_us = std::mem::take(&mut *all);
     }
     println!("REPORT {}", serde_json::to_string(&report)?);
+    // Connected until told to leave: the harness asks every process for its counters.
+    wait_for_file(&a.run.join("exit"), &a.run.join("exit"));
     drop(esgm);
     Ok(())
 }
