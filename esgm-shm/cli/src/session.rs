@@ -8,6 +8,8 @@ use esgm_shm::ShmEsgm;
 
 /// How long a command waits for a trajectory's history to arrive from its writer.
 const SETTLE: Duration = Duration::from_millis(500);
+/// How long nothing new must arrive before the history counts as received.
+const QUIET: Duration = Duration::from_millis(30);
 
 /// Connects to the coordinator of `domain` as the CLI, for a command that stays (a
 /// reader such as `esgm echo` or `esgm record`): it counts against the domain's
@@ -42,7 +44,9 @@ pub fn trajectory(esgm: &ShmEsgm, name: &str) -> anyhow::Result<InProcessTraject
         let added = t.stats().map(|s| s.added).unwrap_or(0);
         if added != last.0 {
             last = (added, Instant::now());
-        } else if added > 0 && last.1.elapsed() > Duration::from_millis(50) {
+        } else if last.1.elapsed() > QUIET {
+            // The writer handed the history over when the replica was made (its join);
+            // what still comes, comes within a moment. An empty trajectory stays empty.
             break;
         }
         std::thread::sleep(Duration::from_millis(5));

@@ -449,8 +449,9 @@ impl ReplicaFeed for ImportFeed {
 
 /// The longest one wait of a subscriber lasts before it looks again at what it
 /// listens to: a re-pointed name is imported from new services, and the subscriber
-/// follows.
-const WAIT_SLICE: std::time::Duration = std::time::Duration::from_millis(250);
+/// follows within this. Each look costs a waiting thread a wake-up, so it is not
+/// shorter: a robot has hundreds of subscriptions waiting.
+const WAIT_SLICE: std::time::Duration = std::time::Duration::from_secs(1);
 
 /// One subscription's listener on the writer's wake-up service.
 struct ImportWaiter {

@@ -80,6 +80,23 @@ pub(crate) fn trajectory_record(
 pub(crate) struct Looked {
     audit: Option<(u64, u64)>,
     assignments: Option<u64>,
+    /// The registry's versions as the coordinator announces them in shared memory
+    /// (`None`: not subscribed; the coordinator is asked instead), and the last one.
+    pub versions: Option<iceoryx2::port::subscriber::Subscriber<crate::ShmService, u64, ()>>,
+    announced: Option<u64>,
+}
+
+impl Looked {
+    /// What `node` subscribes to for the versions of `domain`'s registry (`None`, and
+    /// a debug line, where it cannot: the coordinator is then asked).
+    pub fn subscribe(node: &crate::ShmNode, domain: &str) -> Self {
+        let limits = crate::capacity::DomainLimits::default();
+        let versions = crate::control::server::open_version_service(node, domain, &limits)
+            .and_then(|s| s.subscriber_builder().create().map_err(|e| format!("{e:?}")))
+            .map_err(|e| tracing::debug!(error = %e, "the registry's versions are asked for"))
+            .ok();
+        Self { versions, ..Self::default() }
+    }
 }
 
 pub(crate) struct Location {
@@ -514,8 +531,17 @@ impl Location {
         }
     }
 
-    /// The registry's version (`None` if the coordinator did not answer).
+    /// The registry's version, as announced in shared memory, else as the coordinator
+    /// answers (`None` if it did not).
     fn registry_version(&mut self) -> Option<u64> {
+        if let Some(versions) = &self.looked.versions {
+            while let Ok(Some(v)) = versions.receive() {
+                self.looked.announced = Some(*v);
+            }
+            if self.looked.announced.is_some() {
+                return self.looked.announced;
+            }
+        }
         match self.control.call(&Request::Ping) {
             Ok(Response::Pong { registry, .. }) => Some(registry),
             _ => None,

@@ -243,6 +243,7 @@ impl ShmEsgmBuilder {
                 })?;
         let resets: Arc<dyn esgm_core::ResetForwarder> =
             Arc::new(DomainReset { admin: Arc::downgrade(&admin), timeout });
+        let looked = node.with(|n| location::Looked::subscribe(n, &domain));
         let (commands, inbox) = crossbeam_channel::unbounded();
         let location = Location {
             domain: domain.clone(),
@@ -258,7 +259,7 @@ impl ShmEsgmBuilder {
             resets,
             verify: crossbeam_channel::bounded(1),
             tool: self.tool,
-            looked: location::Looked::default(),
+            looked,
             _receiver: receiver,
         };
         let thread = std::thread::Builder::new()

@@ -128,6 +128,42 @@ pub(crate) fn open_control_wake(
     crate::service::open_event_service(node, &name, capacity).map_err(|e| e.to_string())
 }
 
+/// The service on which the coordinator announces its registry's version
+/// (`esgm/<domain>/registry-version`, the last value kept for processes that join):
+/// a process's audit and its look for assignments read it from shared memory and ask
+/// the coordinator only when it changed, so an idle domain costs the coordinator
+/// nothing per process.
+pub(crate) fn open_version_service(
+    node: &ShmNode,
+    domain: &str,
+    limits: &DomainLimits,
+) -> Result<
+    iceoryx2::service::port_factory::publish_subscribe::PortFactory<ShmService, u64, ()>,
+    String,
+> {
+    let text = format!("{}/{domain}/registry-version", crate::service_name::SERVICE_PREFIX);
+    let name = iceoryx2::prelude::ServiceName::new(&text).map_err(|e| format!("{text}: {e:?}"))?;
+    let sized = node
+        .service_builder(&name)
+        .publish_subscribe::<u64>()
+        .history_size(1)
+        .subscriber_max_buffer_size(1)
+        .max_publishers(2)
+        .max_subscribers(limits.process_ports())
+        .max_nodes(limits.process_nodes())
+        .open_or_create();
+    match sized {
+        Ok(service) => Ok(service),
+        // Made for another domain size: used as it is.
+        Err(_) => node
+            .service_builder(&name)
+            .publish_subscribe::<u64>()
+            .history_size(1)
+            .open()
+            .map_err(|e| format!("{e:?}")),
+    }
+}
+
 /// Serves one domain's registry.
 #[derive(Debug)]
 pub struct Coordinator {
@@ -148,6 +184,37 @@ pub struct Coordinator {
     /// The domain's administration services, made here with the domain's limits (and
     /// kept while the coordinator serves, so a process joining finds them sized).
     _admin: Option<AdminServices>,
+    /// Announces the registry's version ([`open_version_service`]), and the last
+    /// version announced.
+    version: Option<VersionOut>,
+}
+
+/// The coordinator's end of the registry-version service.
+#[derive(Debug)]
+struct VersionOut {
+    publisher: iceoryx2::port::publisher::Publisher<ShmService, u64, ()>,
+    _service: iceoryx2::service::port_factory::publish_subscribe::PortFactory<ShmService, u64, ()>,
+    announced: Option<u64>,
+}
+
+impl VersionOut {
+    /// Announces `version` if it is new; hands processes that joined since the last
+    /// announcement the last version.
+    fn announce(&mut self, version: u64) {
+        let sent = match self.announced == Some(version) {
+            true => iceoryx2::port::update_connections::UpdateConnections::update_connections(
+                &self.publisher,
+            )
+            .map_err(|e| format!("{e:?}")),
+            false => self.publisher.send_copy(version).map(|_| ()).map_err(|e| format!("{e:?}")),
+        };
+        match sent {
+            Ok(()) => self.announced = Some(version),
+            Err(e) => {
+                tracing::debug!(error = %e, "cannot announce the registry's version; processes ask")
+            }
+        }
+    }
 }
 
 impl Coordinator {
@@ -252,6 +319,14 @@ impl Coordinator {
         let admin = AdminServices::open(&node, domain, &limits)
             .map_err(|e| tracing::warn!(error = %e, "cannot make the domain's administration services; the first process makes them with the default limits"))
             .ok();
+        let version = open_version_service(&node, domain, &limits)
+            .and_then(|service| {
+                let publisher =
+                    service.publisher_builder().create().map_err(|e| format!("{e:?}"))?;
+                Ok(VersionOut { publisher, _service: service, announced: None })
+            })
+            .map_err(|e| tracing::warn!(error = %e, "cannot announce the registry's version; processes ask"))
+            .ok();
         let wake = open_control_wake(&node, domain, &limits)
             .and_then(|w| w.listener_builder().create().map_err(|e| format!("{e:?}")))
             .map_err(|e| tracing::warn!(error = %e, "no control wake-up; the coordinator polls"))
@@ -270,6 +345,7 @@ impl Coordinator {
             state,
             _lock: lock,
             _admin: admin,
+            version,
         })
     }
 
@@ -516,7 +592,12 @@ impl Coordinator {
                     break;
                 }
             }
-            if self.serve_pending()? == 0 {
+            let served = self.serve_pending()?;
+            let version = self.registry.version();
+            if let Some(out) = &mut self.version {
+                out.announce(version);
+            }
+            if served == 0 {
                 // Asleep until a client rings (after sending), the next cleanup, or a
                 // look at `stop`.
                 let until_cleanup = next_cleanup.saturating_duration_since(Instant::now());

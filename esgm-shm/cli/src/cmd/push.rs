@@ -9,7 +9,7 @@ use anyhow::{Context, bail};
 use esgm_core::time::Time;
 use esgm_core::types::EntityStructureType;
 use esgm_core::value::{Value, ValueSort};
-use esgm_core::{AddError, AddOutcome, EntityStructure, EntityTrajectoryStructure};
+use esgm_core::{AddError, AddOutcome, EntityStructure, EntityTrajectoryStructure, Esgm};
 use serde_json::json;
 
 use crate::session::connect_tool as connect;
@@ -36,7 +36,12 @@ pub struct Args {
 /// error (exit 1) naming the constraint.
 pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
     let esgm = connect(domain)?;
-    let t = crate::session::trajectory(&esgm, &a.trajectory)?;
+    // The history matters only to a valid time relative to the latest sample: an
+    // absolute one adds at once.
+    let t = match &a.valid_time {
+        Some(TimeArg::Relative(_)) => crate::session::trajectory(&esgm, &a.trajectory)?,
+        _ => esgm.get_entity_trajectory_structure(&a.trajectory)?,
+    };
     let entity_type = t.entity_type()?;
     let now = esgm.local().clock().now();
     let valid_time = match &a.valid_time {

@@ -122,10 +122,16 @@ pub struct Measured {
     pub shm_files: usize,
     /// Allocated bytes of those files.
     pub shm_bytes: u64,
-    /// Connect times, milliseconds, by worker.
+    /// A new process's connect to the running domain, milliseconds: connections made
+    /// one after another by this command, idle domain.
     pub connect_ms: Vec<f64>,
-    /// First-add times, milliseconds.
+    /// A new process's first add to a trajectory another process writes, milliseconds
+    /// (connected and its replica made beforehand).
     pub first_add_ms: Vec<f64>,
+    /// The workers' connects at start-up (all at once), milliseconds.
+    pub startup_connect_ms: Vec<f64>,
+    /// The workers' first adds when writing starts (all at once), milliseconds.
+    pub startup_first_add_ms: Vec<f64>,
     /// Latency by class.
     pub latency: BTreeMap<Class, Latency>,
     /// Structures the workers added.
@@ -183,7 +189,13 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
         Stdio::inherit(),
         true,
     )?;
-    let mut system = System { domain: domain.clone(), coordinator, state, workers: Vec::new() };
+    let mut system = System {
+        domain: domain.clone(),
+        coordinator,
+        state,
+        workers: Vec::new(),
+        run_dir: run_dir.clone(),
+    };
     let mut seen = BTreeSet::new();
     let measured = system.measure(&profile, a, &run_dir, &mut seen);
     let stopped = system.stop();
@@ -214,6 +226,8 @@ struct System {
     coordinator: Child,
     state: StateDir,
     workers: Vec<Child>,
+    /// Where the workers look for `go`, `stop` and `exit`.
+    run_dir: PathBuf,
 }
 
 /// How long every worker has to be set up (connect, create, subscribe).
@@ -267,7 +281,7 @@ impl System {
             collect(&heard, "READY", profile.processes, SETUP, &mut self.workers)?;
         let mut pids = vec![self.coordinator.id()];
         for r in &ready {
-            m.connect_ms.push(r.connect_ms);
+            m.startup_connect_ms.push(r.connect_ms);
             m.workers[r.index].pid = r.pid;
             m.workers[r.index].writes = profile.written_by(r.index).count();
             m.workers[r.index].reads = profile.read_by(r.index).count();
@@ -287,6 +301,9 @@ impl System {
         let shm = probe::usage(&files)?;
         (m.shm_files, m.shm_bytes) = (shm.files, shm.allocated);
         seen.extend(files);
+        let small = profile.trajectories.iter().filter(|t| t.class == Class::Small);
+        let targets: Vec<&str> = small.map(|t| t.name.as_str()).take(NEW_PROCESSES).collect();
+        (m.connect_ms, m.first_add_ms) = new_processes(&self.domain, &targets)?;
         println!("  writing at the profile's rates for {:.0} s", a.seconds);
         std::fs::write(run_dir.join("go"), b"").context("cannot start the workers")?;
         let loaded = cpu_percent(&pids, Duration::from_secs_f64(a.seconds))?;
@@ -314,7 +331,7 @@ impl System {
         std::fs::write(run_dir.join("exit"), b"").context("cannot let the workers leave")?;
         let mut latency: BTreeMap<Class, Vec<u32>> = BTreeMap::new();
         for r in reports {
-            m.first_add_ms.extend(r.first_add_ms);
+            m.startup_first_add_ms.extend(r.first_add_ms);
             m.published += r.published;
             m.errors.extend(r.errors.into_iter().map(|e| format!("worker {}: {e}", r.index)));
             for (class, l) in r.latency_us {
@@ -327,6 +344,10 @@ impl System {
 
     /// Stops the workers and the system (as `esgm demo` does).
     fn stop(&mut self) -> anyhow::Result<()> {
+        // Whatever phase the run stopped in, the workers are told to leave.
+        for file in ["stop", "exit"] {
+            std::fs::write(self.run_dir.join(file), b"").context("cannot stop the workers")?;
+        }
         let deadline = Instant::now() + Duration::from_secs(20);
         for w in &mut self.workers {
             while w.try_wait()?.is_none() && Instant::now() < deadline {
@@ -354,6 +375,39 @@ impl Drop for System {
             }
         }
     }
+}
+
+/// Processes that join the running domain, one after another, to time a connect and a
+/// first add.
+const NEW_PROCESSES: usize = 10;
+
+/// Times [`NEW_PROCESSES`] new connections to `domain` (as a process that stays, not a
+/// tool) and, for each, its first add to one of `targets` (written by a worker),
+/// its replica made beforehand.
+fn new_processes(domain: &str, targets: &[&str]) -> anyhow::Result<(Vec<f64>, Vec<f64>)> {
+    let (mut connects, mut adds) = (Vec::new(), Vec::new());
+    for (i, target) in targets.iter().enumerate() {
+        let t = Instant::now();
+        let esgm = esgm_shm::ShmEsgm::builder()
+            .domain(domain)
+            .host(format!("esgm-scale-new-{i}"))
+            .connect()
+            .context("a new process cannot connect")?;
+        connects.push(t.elapsed().as_secs_f64() * 1e3);
+        let replica = esgm_core::Esgm::get_entity_trajectory_structure(&esgm, target)?;
+        let now = esgm_core::Clock::now(&esgm_core::SystemClock);
+        let es = esgm_core::Entity::to_structure(
+            &esgm_core::library::RobotState { x: 0.0, y: 0.0, dir: 0.0 },
+            "robot",
+            now,
+            now,
+        );
+        let t = Instant::now();
+        esgm_core::EntityTrajectoryStructure::add(&replica, es)
+            .with_context(|| format!("a new process cannot add to `{target}`"))?;
+        adds.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    Ok((connects, adds))
 }
 
 /// The `tag`ged line of every one of `n` workers, within `within`: fails naming the

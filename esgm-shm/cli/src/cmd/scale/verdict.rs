@@ -62,17 +62,23 @@ pub fn judge(m: &Measured) -> Verdict {
     };
     let connect = quantile(&m.connect_ms, 0.5);
     check(
-        "connect p50 <= 20 ms".into(),
-        format!("{connect:.1} ms (p99 {:.1} ms)", quantile(&m.connect_ms, 0.99)),
+        "a new process's connect p50 <= 20 ms".into(),
+        format!(
+            "{connect:.1} ms (max {:.1} ms; at start-up, {} at once: p50 {:.0} ms)",
+            quantile(&m.connect_ms, 1.0),
+            m.startup_connect_ms.len(),
+            quantile(&m.startup_connect_ms, 0.5)
+        ),
         !m.connect_ms.is_empty() && connect <= 20.0,
     );
     let first = quantile(&m.first_add_ms, 0.5);
     check(
         "first add from a non-writer p50 <= 5 ms".into(),
         format!(
-            "{first:.2} ms (p99 {:.2} ms, {} processes)",
-            quantile(&m.first_add_ms, 0.99),
-            m.first_add_ms.len()
+            "{first:.2} ms (max {:.2} ms; when writing starts, {} at once: p50 {:.1} ms)",
+            quantile(&m.first_add_ms, 1.0),
+            m.startup_first_add_ms.len(),
+            quantile(&m.startup_first_add_ms, 0.5)
         ),
         !m.first_add_ms.is_empty() && first <= 5.0,
     );

@@ -76,6 +76,9 @@ const CACHE: usize = 10;
 const IMAGE_CACHE: usize = 4;
 const WIDTH: i64 = 640;
 const HEIGHT: i64 = 480;
+/// Readers a trajectory admits beyond the profile's: the processes `esgm scale`
+/// starts later to time a new process's connect and first add.
+const JOINING: usize = 1;
 /// How long a worker waits for the trajectories it reads to be created by others.
 const PATIENCE: Duration = Duration::from_secs(120);
 
@@ -100,7 +103,7 @@ pub fn run(domain: &str, a: &WorkerArgs) -> anyhow::Result<()> {
         let cache = if t.class == Class::Image { IMAGE_CACHE } else { CACHE };
         let spec = TrajectorySpec::primitive(&t.name, t.class.type_name())
             .policy(FluentStreamPolicy::default().cache(CacheConstraint::Elements(cache)))
-            .readers(t.readers.len().max(1));
+            .readers(t.readers.len() + JOINING);
         let handle =
             esgm.create_trajectory(spec).with_context(|| format!("cannot create `{}`", t.name))?;
         written.push((handle, t.class, t.hz));
@@ -119,7 +122,7 @@ pub fn run(domain: &str, a: &WorkerArgs) -> anyhow::Result<()> {
             let clock = SystemClock;
             let mut mine = Vec::new();
             while !stop.load(Ordering::Acquire) {
-                if let Ok(sample) = subscription.recv_timeout(Duration::from_millis(100)) {
+                if let Ok(sample) = subscription.recv_timeout(Duration::from_secs(1)) {
                     let held = clock.now();
                     let us = (held - sample.structure.create_time).max(0) / 1_000;
                     mine.push(u32::try_from(us).unwrap_or(u32::MAX));
