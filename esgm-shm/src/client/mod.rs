@@ -218,7 +218,7 @@ impl ShmEsgmBuilder {
         }
         let local = local.create();
         let node = NodeBuilder::new()
-            .config(&crate::service::node_config())
+            .config(&crate::service::node_config(crate::service::Cleanup::OnCreation))
             .name(&crate::service_name::node_name(&domain, &host))
             .create::<ShmService>()
             .map_err(ControlClientError::node)?;

@@ -99,7 +99,7 @@ impl Drop for Receiver {
 
 fn run(node_name: &NodeName, doorbell: &EventSpec, mirrors: &SharedMirrors) {
     let node = match NodeBuilder::new()
-        .config(&crate::service::node_config())
+        .config(&crate::service::node_config(crate::service::Cleanup::None))
         .name(node_name)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ShmService>()

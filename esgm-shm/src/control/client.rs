@@ -147,7 +147,7 @@ impl ControlClient {
     pub fn connect(domain: &str, timeout: Duration) -> Result<Self, ControlClientError> {
         let name = control_service(domain)?;
         let node = NodeBuilder::new()
-            .config(&crate::service::node_config())
+            .config(&crate::service::node_config(crate::service::Cleanup::None))
             .name(&crate::service_name::node_name(domain, "control-client"))
             .create::<ShmService>()
             .map_err(ControlClientError::node)?;

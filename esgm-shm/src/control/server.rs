@@ -263,7 +263,7 @@ impl Coordinator {
         let name = control_service(domain)?;
         let limits = registry.limits();
         let node = NodeBuilder::new()
-            .config(&crate::service::node_config())
+            .config(&crate::service::node_config(crate::service::Cleanup::OnCreation))
             .name(&crate::service_name::node_name(domain, "coordinator"))
             .create::<ShmService>()
             .map_err(CoordinatorError::Node)?;

@@ -41,13 +41,29 @@ pub type ShmNode = Node<ShmService>;
 /// writer, and an inbox is drained as soon as an adder rings it.
 pub const EXPIRED_CONNECTIONS: usize = 16;
 
+/// Which dead-node cleanup a node does ([`node_config`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Cleanup {
+    /// When it is made (iceoryx2's default, also when it is dropped): a process's
+    /// first node, so that what a crashed predecessor held (a trajectory's one
+    /// publisher) is free before it opens its ports.
+    OnCreation,
+    /// Never: a process's further nodes, made right after its first. The coordinator
+    /// cleans up every second, and every cleanup reads every node of the host, so a
+    /// connect that cleaned three times and again at each drop grew with the domain.
+    None,
+}
+
 /// The iceoryx2 configuration of every esgm node: iceoryx2's global one (its paths
 /// and prefix, so that every process meets on the same files), with a subscriber's
-/// room for expired connections cut to [`EXPIRED_CONNECTIONS`]. Cost proportional to
-/// use: 128 per subscriber made a process reading 300 trajectories hold 140 MiB.
-pub fn node_config() -> iceoryx2::config::Config {
+/// room for expired connections cut to [`EXPIRED_CONNECTIONS`] (128 per subscriber
+/// made a process reading 300 trajectories hold 140 MiB), and dead-node cleanup as
+/// `cleanup` says.
+pub fn node_config(cleanup: Cleanup) -> iceoryx2::config::Config {
     let mut config = iceoryx2::config::Config::global_config().clone();
     config.defaults.publish_subscribe.subscriber_expired_connection_buffer = EXPIRED_CONNECTIONS;
+    config.global.node.cleanup_dead_nodes_on_creation = cleanup == Cleanup::OnCreation;
+    config.global.node.cleanup_dead_nodes_on_destruction = false;
     config
 }
 
