@@ -63,7 +63,7 @@ const MAX_MESSAGE: usize = 4 << 20;
 /// Questions a process may have waiting before the oldest is dropped.
 const BUFFER: usize = 4;
 /// The longest the admin thread sleeps before it looks for its stop.
-const RECHECK: Duration = Duration::from_millis(500);
+const RECHECK: Duration = Duration::from_secs(2);
 /// The longest an asker sleeps between two looks for answers.
 const POLL: Duration = Duration::from_millis(1);
 

@@ -451,7 +451,7 @@ impl ReplicaFeed for ImportFeed {
 /// listens to: a re-pointed name is imported from new services, and the subscriber
 /// follows within this. Each look costs a waiting thread a wake-up, so it is not
 /// shorter: a robot has hundreds of subscriptions waiting.
-const WAIT_SLICE: std::time::Duration = std::time::Duration::from_secs(1);
+const WAIT_SLICE: std::time::Duration = std::time::Duration::from_secs(2);
 
 /// One subscription's listener on the writer's wake-up service.
 struct ImportWaiter {

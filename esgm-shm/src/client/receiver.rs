@@ -37,7 +37,7 @@ use crate::service::{EventSpec, ShmNode, ShmService};
 
 /// The longest the receiver sleeps before it pumps anyway and looks for a new set of
 /// services (and for its stop).
-pub(crate) const RECHECK: Duration = Duration::from_millis(250);
+pub(crate) const RECHECK: Duration = Duration::from_secs(1);
 
 /// The receiver thread could not be started.
 #[derive(Debug, thiserror::Error)]

@@ -108,6 +108,12 @@ pub enum CoordinatorError {
 /// out at a time (and may leave one abandoned answer behind after a timeout).
 const RESPONSES_PER_CLIENT: usize = 4;
 
+/// How often a serving coordinator cleans up after processes that died: each cleanup
+/// reads every iceoryx2 node of the host (a few milliseconds for a robot's hundreds),
+/// and until it runs, a dead process's ports count against the domain's limits and
+/// its admin answer is awaited.
+const CLEANUP_EVERY: Duration = Duration::from_secs(2);
+
 /// The longest an idle coordinator sleeps before it looks at its stop flag.
 const IDLE_WAIT: Duration = Duration::from_millis(100);
 
@@ -549,7 +555,7 @@ impl Coordinator {
                 if ready.send(Ok(())).is_err() {
                     tracing::debug!("nobody waits for the coordinator to start");
                 }
-                if let Err(e) = coordinator.run(&s, Duration::from_secs(1)) {
+                if let Err(e) = coordinator.run(&s, CLEANUP_EVERY) {
                     tracing::error!(error = %e, "coordinator stopped");
                 }
             })

@@ -122,7 +122,7 @@ pub fn run(domain: &str, a: &WorkerArgs) -> anyhow::Result<()> {
             let clock = SystemClock;
             let mut mine = Vec::new();
             while !stop.load(Ordering::Acquire) {
-                if let Ok(sample) = subscription.recv_timeout(Duration::from_secs(1)) {
+                if let Ok(sample) = subscription.recv_timeout(Duration::from_secs(5)) {
                     let held = clock.now();
                     let us = (held - sample.structure.create_time).max(0) / 1_000;
                     mine.push(u32::try_from(us).unwrap_or(u32::MAX));
@@ -183,7 +183,8 @@ fn wait_for_trajectory(esgm: &ShmEsgm, name: &str) -> anyhow::Result<InProcessTr
 /// Waits until `file` exists (or `or_else` does).
 fn wait_for_file(file: &Path, or_else: &Path) {
     while !file.exists() && !or_else.exists() {
-        std::thread::sleep(Duration::from_millis(20));
+        // Seldom: the idle phase measures esgm, not this loop.
+        std::thread::sleep(Duration::from_millis(200));
     }
 }
 
