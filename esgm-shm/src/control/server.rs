@@ -106,7 +106,14 @@ pub enum CoordinatorError {
 
 /// Responses the coordinator keeps room for, per client: a client has one question
 /// out at a time (and may leave one abandoned answer behind after a timeout).
-const RESPONSES_PER_CLIENT: usize = 4;
+const RESPONSES_PER_CLIENT: usize = 2;
+
+/// The largest answer the coordinator sends, in bytes: a listing of thousands of
+/// trajectories fits. Answers are loaned from one fixed-size pool: mapped for every
+/// client's responses, committed only as answers are written. A growable pool kept,
+/// in every client's connection, a used-chunk list for its 255 possible segments,
+/// about 3 MB of shared memory committed per connected process.
+pub const MAX_RESPONSE_BYTES: usize = 4 << 20;
 
 /// How often a serving coordinator cleans up after processes that died: each cleanup
 /// reads every iceoryx2 node of the host (a few milliseconds for a robot's hundreds),
@@ -308,15 +315,14 @@ impl Coordinator {
         };
         let server = service
             .server_builder()
-            .initial_max_slice_len(4096)
-            .allocation_strategy(AllocationStrategy::PowerOfTwo)
+            .initial_max_slice_len(MAX_RESPONSE_BYTES)
+            .allocation_strategy(AllocationStrategy::Static)
             // iceoryx2 sizes the response pool for every client holding its maximum
-            // of responses (6,144 chunks here), and every client's connection carries
-            // a used-chunk list of that size for each of the 255 segments a growing
-            // data segment may have: ~1.5 M entries initialised per client that
-            // connects. Clients ask one question at a time, so a few responses per
-            // client suffice; this makes connecting (client churn, and a coordinator
-            // taking over from a crashed one with every worker connected) 12x cheaper.
+            // of responses; clients ask one question at a time, so a few responses
+            // per client suffice (a pool of MAX_RESPONSE_BYTES chunks, mapped, not
+            // committed). A fixed-size pool keeps every client's connection to a
+            // used-chunk list of one segment: 11 KiB where a growable pool's 255
+            // segments committed 2.9 MB of shared memory per connected process.
             .override_response_preallocation(move |_| {
                 RESPONSES_PER_CLIENT * control_clients(&limits)
             })
@@ -471,6 +477,21 @@ impl Coordinator {
                 }
             };
             let bytes = match encode(&response) {
+                Ok(b) if b.len() > MAX_RESPONSE_BYTES => {
+                    // The client learns why at once, instead of waiting its deadline.
+                    tracing::warn!(bytes = b.len(), "control answer too large; refused");
+                    let refusal = Response::Error(ControlError::TooLarge {
+                        bytes: b.len(),
+                        max: MAX_RESPONSE_BYTES,
+                    });
+                    match encode(&refusal) {
+                        Ok(b) => b,
+                        Err(e) => {
+                            self.fail(CoordinatorError::Encode(e));
+                            continue;
+                        }
+                    }
+                }
                 Ok(b) => b,
                 Err(e) => {
                     // Not expected (every answer is plain data); the client times out.
