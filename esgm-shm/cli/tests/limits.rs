@@ -2,6 +2,8 @@
 //! one line naming the limit and its setting, and `esgm push` and `esgm latest` keep
 //! working on the same domain.
 
+#![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // a failure is a failed test
+
 mod common;
 
 use std::io::{BufRead, BufReader};
