@@ -34,13 +34,23 @@ use crate::capacity::{EventCapacity, Readers};
 use crate::control::protocol::TrajectoryRecord;
 use crate::holdings::{HoldingOwner, Holdings};
 use crate::image_loan::ImageChunk;
-use crate::publisher::{SampleSizing, TrajectoryPublisher};
+use crate::publisher::{PublishError, SampleSizing, TrajectoryPublisher};
 use crate::service::EventSpec;
 use crate::service::OpenError;
 use crate::service_name::TrajectoryServiceNames;
 use crate::subscriber::{ReceiveError, TrajectorySubscriber};
 use crate::violations::ViolationPublisher;
 use crate::wait::WaitStrategy;
+
+/// Where an export's violations publisher is opened ([`Outlet::violations`]).
+#[derive(Debug)]
+struct ViolationSite {
+    node: SharedNode,
+    /// The generation's domain.
+    domain: String,
+    trajectory: String,
+    readers: Readers,
+}
 
 /// An export could not be set up.
 #[derive(Debug, thiserror::Error)]
@@ -61,7 +71,12 @@ pub(crate) enum ExportError {
 #[derive(Debug)]
 pub(crate) struct Outlet {
     publisher: TrajectoryPublisher,
-    violations: ViolationPublisher,
+    /// Opened at the first violation: most trajectories never have one, and its ports
+    /// and services cost the writer memory and file descriptors (a process writing a
+    /// thousand trajectories ran out of the latter).
+    violations: Option<ViolationPublisher>,
+    /// Where the violations publisher is opened.
+    violation_site: ViolationSite,
     /// Trajectories of images: this process's own subscriber, through which the
     /// writer's store reads the images it sent from loans ([`super::image_loans`]).
     own: Option<(TrajectorySubscriber, HoldingOwner)>,
@@ -187,12 +202,27 @@ impl Outlet {
         }
     }
 
+    /// The violations publisher, opened now if this is the first violation.
+    fn violation_publisher(&mut self) -> Result<&ViolationPublisher, PublishError> {
+        if self.violations.is_none() {
+            let ViolationSite { node, domain, trajectory, readers } = &self.violation_site;
+            let opened =
+                node.with(|node| ViolationPublisher::create(node, domain, trajectory, *readers));
+            self.violations = Some(opened.map_err(|e| PublishError::Violations(Box::new(e)))?);
+        }
+        self.violations.as_ref().ok_or_else(|| {
+            PublishError::Violations(Box::new(OpenError::from(
+                crate::service_name::NameError::Empty { what: "violations" },
+            )))
+        })
+    }
+
     fn publish(&mut self, event: &StoreEvent) {
         let result = match event {
             StoreEvent::Entered(s) => {
                 self.publisher.publish_added(&s.structure, s.add_time).map(|_| ())
             }
-            StoreEvent::Violation(v) => self.violations.publish(v),
+            StoreEvent::Violation(v) => self.violation_publisher().and_then(|p| p.publish(v)),
             StoreEvent::Reset => self.publisher.publish_reset().map(|_| ()),
             _ => Ok(()),
         };
@@ -258,7 +288,7 @@ impl Export {
         let qos = handle_qos(handle, policy, readers);
         let images = has_octets(handle);
         let fixed = handle.entity_type().ok().as_ref().and_then(fixed_sample_len);
-        let (publisher, violations, own) = node.with(|node| {
+        let (publisher, own) = node.with(|node| {
             let mut publisher =
                 TrajectoryPublisher::builder(&name, type_name).domain(domain).qos(qos);
             if let Some(len) = fixed {
@@ -276,8 +306,7 @@ impl Export {
                 ),
                 false => None,
             };
-            let violations = ViolationPublisher::create(node, domain, &name, readers)?;
-            Ok::<_, ExportError>((publisher, violations, own))
+            Ok::<_, ExportError>((publisher, own))
         })?;
         register(publisher.id().value());
         let inbox = match primitive {
@@ -302,7 +331,19 @@ impl Export {
         };
         // One borrow stays free to receive into.
         let own = own.map(|o| (o, holdings.owner(qos.max_borrowed_samples.saturating_sub(1))));
-        let outlet = Arc::new(Mutex::new(Outlet { publisher, violations, own, failures: 0 }));
+        let violation_site = ViolationSite {
+            node: node.clone(),
+            domain: domain.to_owned(),
+            trajectory: name.clone(),
+            readers,
+        };
+        let outlet = Arc::new(Mutex::new(Outlet {
+            publisher,
+            violations: None,
+            violation_site,
+            own,
+            failures: 0,
+        }));
         let owner = Arc::as_ptr(&outlet) as *const () as usize;
         // Content and tap under one lock: nothing falls between the two, and the
         // backlog is published before any later event.

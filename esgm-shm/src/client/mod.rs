@@ -209,6 +209,7 @@ impl ShmEsgmBuilder {
 
     /// Connects: starts the location thread, which opens the control service.
     pub fn connect(self) -> Result<ShmEsgm, ConnectError> {
+        raise_file_limit();
         let domain = self.domain.unwrap_or_else(|| crate::service_name::SYSTEM_DOMAIN.to_owned());
         let host = self.host.unwrap_or_else(default_host);
         let timeout = self.timeout.unwrap_or(DEFAULT_TIMEOUT);
@@ -282,6 +283,28 @@ impl ShmEsgmBuilder {
             }),
         })
     }
+}
+
+/// Raises this process's limit of open files to the most it may have, once: iceoryx2
+/// keeps a descriptor open for every service a process opens and every port it holds
+/// (about ten for a trajectory it writes), and the usual soft limit, 1,024, would stop
+/// a process at a hundred trajectories where its hard limit allows thousands.
+fn raise_file_limit() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        let mut limit = libc::rlimit { rlim_cur: 0, rlim_max: 0 };
+        // SAFETY: `limit` is a valid rlimit for the calls to read and write.
+        let raised = unsafe {
+            libc::getrlimit(libc::RLIMIT_NOFILE, &mut limit) == 0
+                && (limit.rlim_cur >= limit.rlim_max || {
+                    limit.rlim_cur = limit.rlim_max;
+                    libc::setrlimit(libc::RLIMIT_NOFILE, &limit) == 0
+                })
+        };
+        if !raised {
+            tracing::debug!("cannot raise the limit of open files; the system's holds");
+        }
+    });
 }
 
 fn default_host() -> String {

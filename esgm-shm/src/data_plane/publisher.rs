@@ -102,6 +102,10 @@ pub enum PublishError {
     /// The image could not be loaned or laid out.
     #[error(transparent)]
     Image(#[from] ImageError),
+    /// The trajectory's violations service could not be opened (at its first
+    /// violation).
+    #[error("cannot open the violations service: {0}")]
+    Violations(#[source] Box<crate::service::OpenError>),
 }
 
 /// What a successful publish did.
