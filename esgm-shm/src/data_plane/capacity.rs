@@ -129,17 +129,11 @@ impl Readers {
         2 * self.ports() + 4
     }
 
-    /// Threads that may wait on its samples' wake-up service at once, over every
-    /// process: each reader's receiver and its subscriptions and units waiting
-    /// themselves.
-    pub fn waiters(self) -> usize {
-        2 * self.ports()
-    }
-
-    /// The error for `limit` of `trajectory` reached.
+    /// The error for `limit` of `trajectory` reached. Threads waiting on its samples
+    /// are two per reader ([`crate::TrajectoryQos::wake_capacity`]).
     pub fn reached(self, limit: Limit, trajectory: &str) -> LimitReached {
         let value = match limit {
-            Limit::Waiters => self.waiters() - 2 * TOOL_RESERVE,
+            Limit::Waiters => 2 * self.0,
             _ => self.0,
         };
         LimitReached::trajectory(limit, trajectory, value)
@@ -162,12 +156,6 @@ pub struct EventCapacity {
 const WRITER_SIDE: usize = 4;
 
 impl EventCapacity {
-    /// A trajectory's samples wake-up: the writer notifies, every reader's threads
-    /// wait.
-    pub fn samples(readers: Readers) -> Self {
-        Self { listeners: readers.waiters(), notifiers: WRITER_SIDE, nodes: readers.nodes() }
-    }
-
     /// A trajectory's violations wake-up: the writer notifies, each reader's receiver
     /// waits.
     pub fn violations(readers: Readers) -> Self {
@@ -217,7 +205,8 @@ mod tests {
     fn every_service_keeps_the_tools_reserve() {
         let r = Readers(64);
         assert_eq!(r.ports(), 64 + TOOL_RESERVE);
-        assert!(EventCapacity::samples(r).listeners >= 2 * 64);
+        let qos = crate::TrajectoryQos::default().readers(r);
+        assert!(qos.wake_capacity().listeners >= 2 * 64, "two waiting threads per reader");
         assert!(EventCapacity::to_writer(r).notifiers > 64);
         let limits = DomainLimits::default();
         assert!(EventCapacity::domain(&limits).notifiers > DEFAULT_MAX_PROCESSES);
