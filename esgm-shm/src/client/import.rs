@@ -593,8 +593,10 @@ fn join(
 }
 
 /// How long a process's first add to a trajectory waits for the writer to open its
-/// inbox (a control-plane round trip of the writer's receiver thread).
-pub(crate) const WRITER_OPENS: Duration = Duration::from_secs(2);
+/// inbox: a round trip of the writer's receiver thread, or, for a trajectory just
+/// created or re-pointed, until its writer has built it (its next look at the
+/// registry, then its services; seconds on a loaded machine).
+pub(crate) const WRITER_OPENS: Duration = Duration::from_secs(10);
 
 /// Rings the writer (`ring`) until `listening`, for at most [`WRITER_OPENS`]; true if
 /// it listens.
