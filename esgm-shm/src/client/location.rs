@@ -289,6 +289,9 @@ impl Location {
     /// Removes every trace of `name` from this process: its export or import and its
     /// local trajectory. Values that still read its images own their samples.
     fn forget(&mut self, name: &str) {
+        // What is forgotten here may be assigned here again (a name re-pointed): the
+        // next look for assignments asks, whatever the registry's version.
+        self.looked.assignments = None;
         let (export, import) =
             self.mirrors.change(|m| (m.exports.remove(name), m.imports.remove(name)));
         drop((export, import));
