@@ -72,9 +72,9 @@ pub struct Args {
     #[arg(long, value_name = "N", env = MAX_PROCESSES_ENV, default_value_t = DEFAULT_MAX_PROCESSES)]
     pub max_processes: usize,
     /// Reader processes a trajectory admits when its declaration names no `readers`
-    /// of its own (at most --max-processes).
-    #[arg(long, value_name = "N", env = READERS_ENV, default_value_t = DEFAULT_READERS)]
-    pub readers: usize,
+    /// of its own, at most --max-processes [default: 16, or --max-processes if fewer].
+    #[arg(long, value_name = "N", env = READERS_ENV)]
+    pub readers: Option<usize>,
 }
 
 /// The environment variables a coordinator started by another command reads its
@@ -85,7 +85,8 @@ const READERS_ENV: &str = "ESGM_READERS";
 impl Args {
     /// The domain's limits, checked.
     pub fn limits(&self) -> anyhow::Result<DomainLimits> {
-        let limits = DomainLimits { max_processes: self.max_processes, readers: self.readers };
+        let readers = self.readers.unwrap_or(DEFAULT_READERS.min(self.max_processes));
+        let limits = DomainLimits { max_processes: self.max_processes, readers };
         limits.check().context("illegal limit")?;
         Ok(limits)
     }
@@ -184,7 +185,9 @@ fn supervise_coordinator(
         command.args(["up", "--domain", domain]).arg("--state-dir").arg(state.path());
         command.env(ACCESS_ENV, access.as_str());
         command.env(MAX_PROCESSES_ENV, args.max_processes.to_string());
-        command.env(READERS_ENV, args.readers.to_string());
+        if let Some(readers) = args.readers {
+            command.env(READERS_ENV, readers.to_string());
+        }
         if args.quiet || !first {
             command.arg("--quiet");
         }
