@@ -244,8 +244,9 @@ pub(crate) struct Export {
     inbox: Option<Inbox>,
     /// The join service new readers ring for their history, for the receiver thread.
     join: EventSpec,
-    /// The publisher's subscribers when its connections were last updated.
-    readers_seen: std::sync::atomic::AtomicUsize,
+    /// The publisher's subscribers ([`TrajectoryPublisher::readers_fingerprint`]) when
+    /// its connections were last updated.
+    readers_seen: parking_lot::Mutex<Option<u128>>,
 }
 
 impl Drop for Export {
@@ -374,7 +375,7 @@ impl Export {
             tap,
             inbox,
             join,
-            readers_seen: std::sync::atomic::AtomicUsize::new(usize::MAX),
+            readers_seen: parking_lot::Mutex::new(None),
         })
     }
 
@@ -404,10 +405,11 @@ impl Export {
     pub fn update_connections(&self) {
         let outlet = self.outlet.lock();
         // Connections change only when readers come or go: an idle trajectory costs a
-        // look at its service's count. (A reader that came as another went rings the
-        // join service, which hands it its history at once.)
-        let readers = outlet.publisher.subscriber_count();
-        if self.readers_seen.swap(readers, std::sync::atomic::Ordering::Relaxed) == readers {
+        // look at its service's list of subscribers. (A reader made through `connect`
+        // also rings the join service, which hands it its history at once; a bridge's
+        // or a recorder's own subscriber is found here.)
+        let readers = Some(outlet.publisher.readers_fingerprint());
+        if std::mem::replace(&mut *self.readers_seen.lock(), readers) == readers {
             return;
         }
         if let Err(e) = outlet.publisher.update_connections() {

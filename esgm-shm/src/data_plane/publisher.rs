@@ -304,6 +304,21 @@ impl TrajectoryPublisher {
         self.service.dynamic_config().number_of_subscribers()
     }
 
+    /// Which subscribers are connected, as one number that changes whenever the set
+    /// does: a reader that came as another went (a killed one cleaned up) leaves the
+    /// count alone, and would wait for its history until the next send.
+    pub fn readers_fingerprint(&self) -> u128 {
+        let mut fingerprint = 0u128;
+        self.service.dynamic_config().list_subscribers(|details| {
+            // A multiplicative mix, summed: the order of the list does not matter.
+            let id = details.subscriber_id.value();
+            fingerprint = fingerprint
+                .wrapping_add(id.wrapping_mul(0x9e37_79b9_7f4a_7c15_f39c_c060_5ced_c835));
+            iceoryx2::prelude::CallbackProgression::Continue
+        });
+        fingerprint
+    }
+
     /// Wake-ups that could not be sent so far (each failure is logged once).
     pub fn notify_failures(&self) -> u64 {
         self.notify_failures.get()
