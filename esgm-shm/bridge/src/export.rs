@@ -128,7 +128,10 @@ fn export_generation(site: &ExportSite, options: &ExportOptions) -> anyhow::Resu
     // creates it with them, and the others' requests fit.
     let qos = esgm_shm::trajectory_qos(&record.info.policy, &entity_type, record.readers);
     let bound = qos.history_size;
+    // esgm's node settings: no scan of every node of the host at each node and each
+    // service opened (a crashed reader's room is reclaimed when it is needed).
     let node = NodeBuilder::new()
+        .config(&esgm_shm::node_config(esgm_shm::Cleanup::None))
         .name(&esgm_shm::node_name(
             &site.domain,
             &format!("bridge-{}/export/{name}", std::process::id()),

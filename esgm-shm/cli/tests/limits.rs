@@ -116,8 +116,8 @@ fn readers_and_processes_past_their_limits_are_refused_and_the_domain_serves_on(
     served(&d, "odom", "4.5");
     served(&d, "tf", "5.5");
 
-    // Processes leaving (killed: the coordinator's dead-node cleanup frees their
-    // ports) make room for another.
+    // Processes leaving (killed: whoever needs their room cleans up after them) make
+    // room for another.
     drop(more);
     let deadline = Instant::now() + PATIENCE;
     loop {

@@ -66,6 +66,9 @@ const BUFFER: usize = 4;
 const RECHECK: Duration = Duration::from_secs(2);
 /// The longest an asker sleeps between two looks for answers.
 const POLL: Duration = Duration::from_millis(1);
+/// How long an asker waits for missing answers before it cleans up after processes
+/// that may have crashed ([`Admin::ask`]).
+const CLEAN_AFTER: Duration = Duration::from_millis(200);
 
 type Channel = publish_subscribe::PortFactory<ShmService, [u8], ()>;
 
@@ -324,23 +327,27 @@ impl Admin {
             // is about, and is not counted among the domain's processes.
             return Ok(admin);
         }
-        let connected = services.questions.dynamic_config().number_of_subscribers();
-        if connected >= max {
-            return Err(full(connected));
-        }
-        let (subscriber, listener) = node.with(|_| {
-            let subscriber =
-                services.questions.subscriber_builder().create().map_err(|e| match e {
-                    SubscriberCreateError::ExceedsMaxSupportedSubscribers => full(max),
-                    e => unavailable("the admin subscriber", &e),
+        // The processes that crashed still count until someone cleans up after them.
+        let lacks_room = |e: &AdminError| matches!(e, AdminError::LimitReached(_));
+        let (subscriber, listener) = crate::service::with_room(lacks_room, || {
+            let connected = services.questions.dynamic_config().number_of_subscribers();
+            if connected >= max {
+                return Err(full(connected));
+            }
+            node.with(|_| {
+                let subscriber =
+                    services.questions.subscriber_builder().create().map_err(|e| match e {
+                        SubscriberCreateError::ExceedsMaxSupportedSubscribers => full(max),
+                        e => unavailable("the admin subscriber", &e),
+                    })?;
+                let listener = services.wake.listener_builder().create().map_err(|e| match e {
+                    iceoryx2::port::listener::ListenerCreateError::ExceedsMaxSupportedListeners => {
+                        full(max)
+                    }
+                    e => unavailable("the admin listener", &e),
                 })?;
-            let listener = services.wake.listener_builder().create().map_err(|e| match e {
-                iceoryx2::port::listener::ListenerCreateError::ExceedsMaxSupportedListeners => {
-                    full(max)
-                }
-                e => unavailable("the admin listener", &e),
-            })?;
-            Ok::<_, AdminError>((subscriber, listener))
+                Ok::<_, AdminError>((subscriber, listener))
+            })
         })?;
         let answerer = Answerer {
             host: host.to_owned(),
@@ -419,7 +426,8 @@ impl Admin {
             |e| matches!(e, PublisherCreateError::ExceedsMaxSupportedPublishers),
         )
         .map_err(|e| send(format!("no room to ask ({ASKERS} askers at once): {e}")))?;
-        let expected = self.services.questions.dynamic_config().number_of_subscribers();
+        let connected = || self.services.questions.dynamic_config().number_of_subscribers();
+        let mut expected = connected();
         publisher
             .loan_slice_uninit(bytes.len())
             .map_err(|e| send(format!("{e:?}")))?
@@ -428,7 +436,17 @@ impl Admin {
             .map_err(|e| send(format!("{e:?}")))?;
         self.ring();
         let mut collected = Vec::with_capacity(expected);
+        // A process that crashed is counted until someone cleans up after it: if some
+        // are slow to answer, this asker cleans up once and expects only the living.
+        let mut cleaned = false;
+        let clean_after = Instant::now() + CLEAN_AFTER;
         while collected.len() < expected {
+            if !cleaned && Instant::now() >= clean_after {
+                cleaned = true;
+                crate::control::server::log_cleanup(crate::service::cleanup_dead_nodes());
+                expected = expected.min(connected());
+                continue;
+            }
             let mut any = false;
             loop {
                 let sample = match answers.receive() {

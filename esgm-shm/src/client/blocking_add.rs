@@ -16,6 +16,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use esgm_core::codec;
+use esgm_core::esgm::Limit;
 use esgm_core::{
     AddError, AddOutcome, EntityStructure, EntityTrajectoryStructure, InProcessTrajectory,
 };
@@ -23,11 +24,15 @@ use iceoryx2::port::client::Client;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::server::Server;
 use iceoryx2::prelude::{AllocationStrategy, ServiceName};
+use iceoryx2::service::builder::request_response::{
+    RequestResponseOpenError, RequestResponseOpenOrCreateError,
+};
+use iceoryx2::service::port_factory::client::ClientCreateError;
 use iceoryx2::service::port_factory::request_response::PortFactory;
 
 use crate::capacity::Readers;
 use crate::control::protocol::{decode, encode};
-use crate::service::{EventSpec, OpenError, ShmNode, ShmService};
+use crate::service::{EventSpec, OpenError, ShmNode, ShmService, with_room};
 use crate::service_name::{NameError, TrajectoryServiceNames};
 
 /// The longest a blocking add waits for the writer's answer. The writer answers in
@@ -64,7 +69,14 @@ fn open_service(
         .max_nodes(readers.nodes())
         .max_active_requests_per_client(MAX_ACTIVE_REQUESTS)
         .open_or_create()
-        .map_err(|e| BlockingAddError::Service(format!("{e:?}")))
+        .map_err(|e| match e {
+            RequestResponseOpenOrCreateError::RequestResponseOpenError(
+                RequestResponseOpenError::ExceedsMaxNumberOfNodes,
+            ) => BlockingAddError::Open(OpenError::LimitReached(
+                readers.reached(Limit::Adders, trajectory),
+            )),
+            e => BlockingAddError::Service(format!("{e:?}")),
+        })
 }
 
 /// A blocking-add port could not be opened.
@@ -169,15 +181,29 @@ impl AddClient {
         readers: Readers,
         wake: &EventSpec,
     ) -> Result<Self, BlockingAddError> {
-        let service = open_service(node, domain, trajectory, readers)?;
-        let client = service
-            .client_builder()
-            .initial_max_slice_len(4096)
-            .allocation_strategy(AllocationStrategy::PowerOfTwo)
-            .create()
-            .map_err(|e| BlockingAddError::Port(format!("{e:?}")))?;
-        let ring = wake.open(node)?.notifier_builder().create().map_err(OpenError::Notifier)?;
-        Ok(Self { client, ring, service, trajectory: trajectory.to_owned() })
+        // A crashed adder's ports hold their room until someone cleans up after it.
+        let lacks_room =
+            |e: &BlockingAddError| matches!(e, BlockingAddError::Open(e) if e.lacks_room());
+        with_room(lacks_room, || {
+            let service = open_service(node, domain, trajectory, readers)?;
+            let client = service
+                .client_builder()
+                .initial_max_slice_len(4096)
+                .allocation_strategy(AllocationStrategy::PowerOfTwo)
+                .create()
+                .map_err(|e| match e {
+                    ClientCreateError::ExceedsMaxSupportedClients => BlockingAddError::Open(
+                        OpenError::LimitReached(readers.reached(Limit::Adders, trajectory)),
+                    ),
+                    e => BlockingAddError::Port(format!("{e:?}")),
+                })?;
+            let ring = wake
+                .open(node)?
+                .notifier_builder()
+                .create()
+                .map_err(|e| OpenError::Notifier(e).as_limit(trajectory, readers))?;
+            Ok(Self { client, ring, service, trajectory: trajectory.to_owned() })
+        })
     }
 
     /// Adds `es` through the writer's gate and returns its outcome.

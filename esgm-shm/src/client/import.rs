@@ -35,7 +35,7 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::prelude::ServiceName;
 use parking_lot::Mutex;
 
-use super::blocking_add::AddClient;
+use super::blocking_add::{AddClient, BlockingAddError};
 use super::mirrors::SharedMirrors;
 use super::settings::{
     bridge_qos, fixed_sample_len, generation_domain, inbox_domain, inbox_qos, join_service,
@@ -660,7 +660,12 @@ impl AddForwarder for Outbox {
                 let opened = self.node.with(|node| {
                     AddClient::open(node, &self.domain, &self.trajectory, self.readers, &wake)
                 });
-                *client = Some(opened.map_err(|e| unavailable(e.to_string()))?);
+                *client = Some(opened.map_err(|e| match e {
+                    BlockingAddError::Open(OpenError::LimitReached(limit)) => {
+                        AddError::LimitReached(limit)
+                    }
+                    e => unavailable(e.to_string()),
+                })?);
             }
             let Some(client) = client.as_ref() else {
                 return Err(unavailable("the writer's blocking adds are not open".into()));

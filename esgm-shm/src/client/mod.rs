@@ -219,7 +219,7 @@ impl ShmEsgmBuilder {
         }
         let local = local.create();
         let node = NodeBuilder::new()
-            .config(&crate::service::node_config(crate::service::Cleanup::OnCreation))
+            .config(&crate::service::node_config(crate::service::Cleanup::None))
             .name(&crate::service_name::node_name(&domain, &host))
             .create::<ShmService>()
             .map_err(ControlClientError::node)?;

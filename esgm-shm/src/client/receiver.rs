@@ -37,7 +37,8 @@ use crate::service::{EventSpec, ShmNode, ShmService};
 
 /// The longest the receiver sleeps before it pumps anyway and looks for a new set of
 /// services (and for its stop).
-pub(crate) const RECHECK: Duration = Duration::from_secs(1);
+/// As long as a [`SWEEP`]: one wake-up of an idle receiver every two seconds.
+pub(crate) const RECHECK: Duration = Duration::from_secs(2);
 
 /// The receiver thread could not be started.
 #[derive(Debug, thiserror::Error)]

@@ -162,23 +162,28 @@ impl ControlClient {
                 }
                 source => ControlClientError::NoCoordinator { domain: domain.to_owned(), source },
             })?;
-        let client = service
-            .client_builder()
-            .initial_max_slice_len(4096)
-            .allocation_strategy(AllocationStrategy::PowerOfTwo)
-            .create()
-            .map_err(|e| match e {
-                ClientCreateError::ExceedsMaxSupportedClients => {
-                    ControlClientError::LimitReached(LimitReached::processes(
-                        domain,
-                        service
-                            .static_config()
-                            .max_clients()
-                            .saturating_sub(16 + crate::capacity::TOOL_RESERVE),
-                    ))
-                }
-                e => ControlClientError::Client(e),
-            })?;
+        // A crashed process's client holds its room until someone cleans up after it.
+        let lacks_room =
+            |e: &ClientCreateError| *e == ClientCreateError::ExceedsMaxSupportedClients;
+        let client = crate::service::with_room(lacks_room, || {
+            service
+                .client_builder()
+                .initial_max_slice_len(4096)
+                .allocation_strategy(AllocationStrategy::PowerOfTwo)
+                .create()
+        })
+        .map_err(|e| match e {
+            ClientCreateError::ExceedsMaxSupportedClients => {
+                ControlClientError::LimitReached(LimitReached::processes(
+                    domain,
+                    service
+                        .static_config()
+                        .max_clients()
+                        .saturating_sub(16 + crate::capacity::TOOL_RESERVE),
+                ))
+            }
+            e => ControlClientError::Client(e),
+        })?;
         let ring = super::server::open_control_wake(&node, domain, &DomainLimits::default())
             .and_then(|w| w.notifier_builder().create().map_err(|e| format!("{e:?}")))
             .map_err(|e| tracing::warn!(error = %e, "cannot ring the coordinator; it polls"))

@@ -49,7 +49,9 @@ use crate::image_layout::{ImageError, image_loan_len, pixel_len};
 use crate::image_loan::{ImageChunk, ImageLoan};
 use crate::payload::{BLOCK_LEN, Block16, SampleHeader, as_uninit_bytes, blocks_for, zero_fill};
 use crate::qos::{Delivery, TrajectoryQos};
-use crate::service::{DataService, OpenError, ShmNode, open_data_service, open_wake_service};
+use crate::service::{
+    DataService, OpenError, ShmNode, open_data_service, open_wake_service, with_room,
+};
 use crate::service_name::{DEFAULT_DOMAIN, TrajectoryServiceNames};
 use crate::size_hint::archived_size_hint;
 use crate::structure_loan::StructureLoan;
@@ -198,6 +200,11 @@ impl TrajectoryPublisherBuilder {
 
     /// Opens (or creates) the trajectory's services and the publisher port on `node`.
     pub fn create(self, node: &ShmNode) -> Result<TrajectoryPublisher, OpenError> {
+        // A crashed process's ports hold their room until someone cleans up after it.
+        with_room(OpenError::lacks_room, || self.open(node))
+    }
+
+    fn open(&self, node: &ShmNode) -> Result<TrajectoryPublisher, OpenError> {
         let names = TrajectoryServiceNames::new(&self.domain, &self.trajectory)?;
         let service = open_data_service(node, &names, &self.qos)?;
         let allocation = match self.sizing {
@@ -229,12 +236,12 @@ impl TrajectoryPublisherBuilder {
         let notifier = wake.notifier_builder().create().map_err(OpenError::Notifier)?;
         Ok(TrajectoryPublisher {
             type_id: type_id(&self.type_name),
-            trajectory: self.trajectory,
-            type_name: self.type_name,
+            trajectory: self.trajectory.clone(),
+            type_name: self.type_name.clone(),
             service,
             port,
             notifier,
-            clock: self.clock.unwrap_or_else(SystemClock::shared),
+            clock: self.clock.clone().unwrap_or_else(SystemClock::shared),
             lossless_timeout: self.lossless_timeout,
             sequence: Cell::new(0),
             max_len: max_blocks * BLOCK_LEN,

@@ -44,26 +44,84 @@ pub const EXPIRED_CONNECTIONS: usize = 16;
 /// Which dead-node cleanup a node does ([`node_config`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Cleanup {
-    /// When it is made (iceoryx2's default, also when it is dropped): a process's
-    /// first node, so that what a crashed predecessor held (a trajectory's one
-    /// publisher) is free before it opens its ports.
+    /// When it is made (iceoryx2's default): the coordinator's node, so that what a
+    /// crashed predecessor left is gone before it serves.
     OnCreation,
-    /// Never: a process's further nodes, made right after its first. The coordinator
-    /// cleans up every second, and every cleanup reads every node of the host, so a
-    /// connect that cleaned three times and again at each drop grew with the domain.
+    /// Never: every other node. A cleanup reads every node of the host (about 0.3 ms
+    /// each), so a connect that cleaned took 80 ms in a domain of 60 processes. The
+    /// room a crashed process's ports hold is reclaimed by whoever needs it
+    /// ([`with_room`]), and the rest by the coordinator now and then.
     None,
+}
+
+/// Removes what crashed processes left in shared memory (iceoryx2's dead-node cleanup);
+/// returns how many dead nodes were cleaned. A dead node that cannot be cleaned is
+/// logged with the reason; an error means the nodes could not even be listed. It reads
+/// every node of the host: call it when room is needed, or seldom.
+pub fn cleanup_dead_nodes() -> Result<usize, iceoryx2::node::NodeListFailure> {
+    use iceoryx2::node::{NodeCleanupFailure, NodeState, NodeView};
+    let mut removed = 0;
+    Node::<ShmService>::list(iceoryx2::config::Config::global_config(), |state| {
+        if let NodeState::Dead(view) = state {
+            let id = format!("{:?}", view.id());
+            match view.try_remove_stale_resources() {
+                Ok(()) => removed += 1,
+                // Someone else cleans it (another coordinator, a process that needs
+                // the room).
+                Err(
+                    NodeCleanupFailure::ResourcesAlreadyCleanedUp
+                    | NodeCleanupFailure::AnotherInstanceIsCleaningUpTheNode,
+                ) => {}
+                Err(e) => tracing::warn!(node = %id, error = ?e,
+                    "cannot clean up after a dead process"),
+            }
+        }
+        iceoryx2::prelude::CallbackProgression::Continue
+    })?;
+    Ok(removed)
+}
+
+/// Runs `open`, and once more after [`cleanup_dead_nodes`] if it failed for lack of
+/// room (`lacks_room`): the ports of a process that crashed hold their room until
+/// someone cleans up after it, and a process that needs the room does not wait for the
+/// coordinator's next round. A limit really reached costs one cleanup, and is then
+/// reported as it was.
+pub fn with_room<T, E>(
+    lacks_room: impl Fn(&E) -> bool,
+    mut open: impl FnMut() -> Result<T, E>,
+) -> Result<T, E> {
+    match open() {
+        Err(e) if lacks_room(&e) => {
+            match cleanup_dead_nodes() {
+                Ok(0) => {}
+                Ok(removed) => tracing::info!(removed, "cleaned up after dead processes"),
+                Err(list) => tracing::debug!(error = %list, "cannot list nodes to clean up"),
+            }
+            // Again even if this cleanup found nobody: another process (the
+            // coordinator) may have cleaned up meanwhile.
+            drop(e);
+            open()
+        }
+        r => r,
+    }
 }
 
 /// The iceoryx2 configuration of every esgm node: iceoryx2's global one (its paths
 /// and prefix, so that every process meets on the same files), with a subscriber's
 /// room for expired connections cut to [`EXPIRED_CONNECTIONS`] (128 per subscriber
-/// made a process reading 300 trajectories hold 140 MiB), and dead-node cleanup as
-/// `cleanup` says.
+/// made a process reading 300 trajectories hold 140 MiB), dead-node cleanup when the
+/// node is made as `cleanup` says, and none when a service is opened.
 pub fn node_config(cleanup: Cleanup) -> iceoryx2::config::Config {
     let mut config = iceoryx2::config::Config::global_config().clone();
     config.defaults.publish_subscribe.subscriber_expired_connection_buffer = EXPIRED_CONNECTIONS;
     config.global.node.cleanup_dead_nodes_on_creation = cleanup == Cleanup::OnCreation;
     config.global.node.cleanup_dead_nodes_on_destruction = false;
+    // Opening a service would otherwise read every node attached to it (its details,
+    // about 0.2 ms each) to find dead ones: a process joining a domain of 60 opens the
+    // admin, control and registry-version services, each attached to every process,
+    // and its connect took 50 ms more. Dead nodes are cleaned up by whoever needs
+    // their room ([`with_room`]) and by the coordinator now and then.
+    config.global.service.cleanup_dead_nodes_on_open = false;
     config
 }
 
@@ -149,6 +207,12 @@ impl OpenError {
             } => Some(Limit::Readers),
             _ => None,
         }
+    }
+
+    /// True if this failure is for lack of room ([`Self::exceeded`], or a limit esgm
+    /// checked itself), which [`with_room`] retries after cleaning up.
+    pub fn lacks_room(&self) -> bool {
+        matches!(self, Self::LimitReached(_)) || self.exceeded().is_some()
     }
 
     /// This error as the limit of `trajectory` (whose services admit `readers`) it

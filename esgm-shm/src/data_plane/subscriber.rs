@@ -25,7 +25,9 @@ use crate::received::{Checked, Counters, ReceivedSample};
 use crate::sample_check::{SampleVerdict, check_sample};
 use esgm_core::esgm::{Limit, LimitReached};
 
-use crate::service::{DataService, OpenError, ShmNode, open_data_service, open_wake_service};
+use crate::service::{
+    DataService, OpenError, ShmNode, open_data_service, open_wake_service, with_room,
+};
 use crate::service_name::{DEFAULT_DOMAIN, TrajectoryServiceNames};
 use crate::type_id::type_id;
 use crate::wait::{WaitStrategy, Waiter, deadline_after};
@@ -171,6 +173,11 @@ impl TrajectorySubscriberBuilder {
 
     /// Opens (or creates) the trajectory's services and the subscriber port on `node`.
     pub fn create(self, node: &ShmNode) -> Result<TrajectorySubscriber, OpenError> {
+        // A crashed process's ports hold their room until someone cleans up after it.
+        with_room(OpenError::lacks_room, || self.open(node))
+    }
+
+    fn open(&self, node: &ShmNode) -> Result<TrajectorySubscriber, OpenError> {
         let names = TrajectoryServiceNames::new(&self.domain, &self.trajectory)?;
         let service = open_data_service(node, &names, &self.qos)?;
         if let Some(limit) = self.reader_limit {
@@ -197,8 +204,8 @@ impl TrajectorySubscriberBuilder {
         };
         Ok(TrajectorySubscriber {
             expected_type_id: type_id(&self.type_name),
-            trajectory: self.trajectory,
-            type_name: self.type_name,
+            trajectory: self.trajectory.clone(),
+            type_name: self.type_name.clone(),
             service,
             port: Arc::new(port),
             waiter: Waiter::new(self.wait, listener),

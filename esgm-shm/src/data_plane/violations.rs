@@ -36,7 +36,7 @@ use iceoryx2::service::port_factory::{event, publish_subscribe};
 
 use crate::publisher::PublishError;
 use crate::sequence_gaps::SequenceGaps;
-use crate::service::{OpenError, ShmNode};
+use crate::service::{OpenError, ShmNode, with_room};
 use crate::service_name::{DEFAULT_DOMAIN, NameError, SERVICE_PREFIX, TrajectoryServiceNames};
 use crate::subscriber::ReceiveError;
 use crate::wait::{WaitStrategy, Waiter, deadline_after};
@@ -172,10 +172,13 @@ impl ViolationPublisher {
         trajectory: &str,
         readers: Readers,
     ) -> Result<Self, OpenError> {
-        let services = open_services(node, domain, trajectory, readers)?;
-        let port = services.data.publisher_builder().create().map_err(OpenError::Publisher)?;
-        let notifier = services.wake.notifier_builder().create().map_err(OpenError::Notifier)?;
-        Ok(Self { port, notifier, sequence: Cell::new(0) })
+        with_room(OpenError::lacks_room, || {
+            let services = open_services(node, domain, trajectory, readers)?;
+            let port = services.data.publisher_builder().create().map_err(OpenError::Publisher)?;
+            let notifier =
+                services.wake.notifier_builder().create().map_err(OpenError::Notifier)?;
+            Ok(Self { port, notifier, sequence: Cell::new(0) })
+        })
     }
 
     /// Sends `v` to every subscriber and wakes sleeping ones.
@@ -232,6 +235,11 @@ impl ViolationSubscriberBuilder {
 
     /// Opens (or creates) the violations service and the subscriber port on `node`.
     pub fn create(self, node: &ShmNode) -> Result<ViolationSubscriber, OpenError> {
+        // A crashed process's ports hold their room until someone cleans up after it.
+        with_room(OpenError::lacks_room, || self.open(node))
+    }
+
+    fn open(&self, node: &ShmNode) -> Result<ViolationSubscriber, OpenError> {
         let services = open_services(node, &self.domain, &self.trajectory, self.readers)?;
         let port = services.data.subscriber_builder().create().map_err(OpenError::Subscriber)?;
         let listener = if self.wait.blocks() {
@@ -240,7 +248,7 @@ impl ViolationSubscriberBuilder {
             None
         };
         Ok(ViolationSubscriber {
-            trajectory: self.trajectory,
+            trajectory: self.trajectory.clone(),
             port,
             waiter: Waiter::new(self.wait, listener),
             stats: Cell::new(ViolationSubscriberStats::default()),

@@ -39,7 +39,7 @@ use serde::Serialize;
 use super::soak::probe;
 use super::soak::sample::Counts;
 use profile::{Class, Profile};
-use worker::{Ready, Report};
+use worker::{Phase, Ready, Report};
 
 pub use worker::WorkerArgs;
 
@@ -161,13 +161,6 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
     let run_dir = a.out.join("scale-run");
     std::fs::create_dir_all(run_dir.join("logs"))
         .with_context(|| format!("cannot create {}", run_dir.display()))?;
-    for stale in ["go", "stop", "exit"] {
-        let path = run_dir.join(stale);
-        if path.exists() {
-            std::fs::remove_file(&path)
-                .with_context(|| format!("cannot remove {}", path.display()))?;
-        }
-    }
     std::fs::write(run_dir.join("profile.json"), serde_json::to_vec(&profile)?)
         .context("cannot write the profile")?;
     println!(
@@ -189,13 +182,7 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
         Stdio::inherit(),
         true,
     )?;
-    let mut system = System {
-        domain: domain.clone(),
-        coordinator,
-        state,
-        workers: Vec::new(),
-        run_dir: run_dir.clone(),
-    };
+    let mut system = System { domain: domain.clone(), coordinator, state, workers: Vec::new() };
     let mut seen = BTreeSet::new();
     let measured = system.measure(&profile, a, &run_dir, &mut seen);
     let stopped = system.stop();
@@ -226,8 +213,6 @@ struct System {
     coordinator: Child,
     state: StateDir,
     workers: Vec<Child>,
-    /// Where the workers look for `go`, `stop` and `exit`.
-    run_dir: PathBuf,
 }
 
 /// How long every worker has to be set up (connect, create, subscribe).
@@ -236,6 +221,18 @@ const SETUP: Duration = Duration::from_secs(300);
 const WIND_DOWN: Duration = Duration::from_secs(60);
 
 impl System {
+    /// Moves every worker to `phase` (a line on its stdin).
+    fn tell(&mut self, phase: Phase) -> std::io::Result<()> {
+        use std::io::Write;
+        for w in &mut self.workers {
+            if let Some(stdin) = &mut w.stdin {
+                writeln!(stdin, "{}", phase.line())?;
+                stdin.flush()?;
+            }
+        }
+        Ok(())
+    }
+
     fn measure(
         &mut self,
         profile: &Profile,
@@ -252,7 +249,7 @@ impl System {
                 .args(["--domain", &self.domain, "scale-worker", "--index", &i.to_string()])
                 .arg("--run")
                 .arg(run_dir)
-                .stdin(Stdio::null())
+                .stdin(Stdio::piped())
                 .stdout(Stdio::piped())
                 .stderr(Stdio::from(log))
                 .spawn()
@@ -305,7 +302,7 @@ impl System {
         let targets: Vec<&str> = small.map(|t| t.name.as_str()).take(NEW_PROCESSES).collect();
         (m.connect_ms, m.first_add_ms) = new_processes(&self.domain, &targets)?;
         println!("  writing at the profile's rates for {:.0} s", a.seconds);
-        std::fs::write(run_dir.join("go"), b"").context("cannot start the workers")?;
+        self.tell(Phase::Go).context("cannot start the workers")?;
         let loaded = cpu_percent(&pids, Duration::from_secs_f64(a.seconds))?;
         for (k, pid) in pids.iter().enumerate() {
             let r = probe::resident(*pid)?;
@@ -313,7 +310,7 @@ impl System {
             let p = if k == 0 { &mut m.coordinator } else { &mut m.workers[k - 1] };
             (p.private_loaded, p.cpu_loaded) = (r.anon, loaded[k]);
         }
-        std::fs::write(run_dir.join("stop"), b"").context("cannot stop the workers")?;
+        self.tell(Phase::Stop).context("cannot stop the workers")?;
         let reports: Vec<Report> =
             collect(&heard, "REPORT", profile.processes, WIND_DOWN, &mut self.workers)?;
         // Every worker still connected, nothing flowing: every trajectory's counters.
@@ -328,7 +325,7 @@ impl System {
         m.trajectory_counts =
             stats.trajectories.iter().map(|(n, r)| (n.clone(), Counts::of(r))).collect();
         drop(tool);
-        std::fs::write(run_dir.join("exit"), b"").context("cannot let the workers leave")?;
+        self.tell(Phase::Exit).context("cannot let the workers leave")?;
         let mut latency: BTreeMap<Class, Vec<u32>> = BTreeMap::new();
         for r in reports {
             m.startup_first_add_ms.extend(r.first_add_ms);
@@ -344,9 +341,10 @@ impl System {
 
     /// Stops the workers and the system (as `esgm demo` does).
     fn stop(&mut self) -> anyhow::Result<()> {
-        // Whatever phase the run stopped in, the workers are told to leave.
-        for file in ["stop", "exit"] {
-            std::fs::write(self.run_dir.join(file), b"").context("cannot stop the workers")?;
+        // Whatever phase the run stopped in, the workers are told to leave: their stdin
+        // closes (a worker that already left cannot be told).
+        for w in &mut self.workers {
+            drop(w.stdin.take());
         }
         let deadline = Instant::now() + Duration::from_secs(20);
         for w in &mut self.workers {
