@@ -55,8 +55,12 @@ pub struct Args {
     /// Processes reading `tf` (default: every other process).
     #[arg(long)]
     pub readers: Option<usize>,
-    /// Seconds of idle measurement, once every process is set up.
+    /// Seconds the domain has to settle once every process is set up, before the
+    /// idle measurement (a robot's domain settles within 10 s).
     #[arg(long, default_value_t = 10.0)]
+    pub settle_seconds: f64,
+    /// Seconds of idle measurement, once the domain settled.
+    #[arg(long, default_value_t = 60.0)]
     pub idle_seconds: f64,
     /// Seconds of writing at the profile's rates.
     #[arg(long, default_value_t = 20.0)]
@@ -152,6 +156,9 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
         if !v.is_finite() || v <= 0.0 {
             bail!("{flag} must be a positive number of seconds, got {v}");
         }
+    }
+    if !a.settle_seconds.is_finite() || a.settle_seconds < 0.0 {
+        bail!("--settle-seconds must be zero or more seconds, got {}", a.settle_seconds);
     }
     let domain = if domain == esgm_shm::service_name::SYSTEM_DOMAIN {
         unique_domain("scale")
@@ -285,8 +292,11 @@ impl System {
         }
         pids.extend(m.workers.iter().map(|w| w.pid));
         m.coordinator.pid = self.coordinator.id();
-        println!("  every process set up; settling, then {:.0} s idle", a.idle_seconds);
-        std::thread::sleep(Duration::from_secs(2));
+        println!(
+            "  every process set up; settling {:.0} s, then {:.0} s idle",
+            a.settle_seconds, a.idle_seconds
+        );
+        std::thread::sleep(Duration::from_secs_f64(a.settle_seconds));
         let idle = cpu_percent(&pids, Duration::from_secs_f64(a.idle_seconds))?;
         let mut files = BTreeSet::new();
         for (k, pid) in pids.iter().enumerate() {

@@ -114,8 +114,12 @@ pub fn state_dir(domain: &str, dir: Option<&Path>) -> anyhow::Result<StateDir> {
 /// connects every running worker's control client first.
 const START_WITHIN: Duration = Duration::from_secs(30);
 
-/// How often the supervisor looks at the declared processes.
-const SUPERVISE_EVERY: Duration = Duration::from_millis(100);
+/// How often the supervisor looks whether a worker exited.
+const SUPERVISE_EVERY: Duration = Duration::from_millis(250);
+
+/// How often the supervisor asks the coordinator which processes are declared: a
+/// round trip each, which ten times a second was half of an idle robot's coordinator.
+const RECONCILE_EVERY: Duration = Duration::from_secs(1);
 
 /// Runs (or starts) the coordinator of `domain`.
 pub fn run(domain: &str, args: &Args) -> anyhow::Result<()> {
@@ -270,13 +274,21 @@ fn serve(
     let mut supervisor = Supervisor::new(domain, Some(state)).sharing(access);
     // Failures to reach the own coordinator are logged once per streak.
     let mut failing = false;
+    let mut next_reconcile = Instant::now();
     while !coordinator.is_finished() {
-        match system.control(Request::ListProcesses) {
-            Ok(Response::Processes(declared)) => {
+        let reconcile = Instant::now() >= next_reconcile;
+        if reconcile {
+            next_reconcile = Instant::now() + RECONCILE_EVERY;
+        }
+        match reconcile.then(|| system.control(Request::ListProcesses)).transpose() {
+            Ok(None) => {}
+            Ok(Some(Response::Processes(declared))) => {
                 failing = false;
                 supervisor.reconcile(&declared);
             }
-            Ok(other) => tracing::warn!(answer = ?other, "unexpected answer to a process listing"),
+            Ok(Some(other)) => {
+                tracing::warn!(answer = ?other, "unexpected answer to a process listing");
+            }
             // Asked while the coordinator stopped: nothing is wrong.
             Err(_) if coordinator.is_finished() => break,
             Err(e) if !failing => {
