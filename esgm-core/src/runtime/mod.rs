@@ -86,6 +86,9 @@ impl Drop for Inner {
         for cell in self.cells() {
             cell.worker.lock().take();
         }
+        // The releaser sleeps until kicked while nothing is held; a trajectory handle
+        // that outlives the runtime keeps the channel open, so it is told.
+        let _kick_pending = self.kick.try_send(());
     }
 }
 

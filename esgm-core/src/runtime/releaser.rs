@@ -13,9 +13,6 @@ use crossbeam_channel::Receiver;
 use super::Inner;
 use super::periodic::STOP_POLL;
 
-/// How long the thread sleeps when nothing is held (a hold or a shutdown wakes it
-/// sooner): an idle runtime should not wake fifty times a second.
-const IDLE_POLL: Duration = Duration::from_secs(1);
 use crate::time::Time;
 
 pub(crate) fn run(inner: Weak<Inner>, kicks: Receiver<()>) {
@@ -41,14 +38,18 @@ pub(crate) fn run(inner: Weak<Inner>, kicks: Receiver<()>) {
         // Wait for the next deadline (on the runtime's clock), a kick, or the poll
         // interval that notices shutdown. A simulated clock only moves when a test moves
         // it; its waits are bounded by the poll interval.
-        let wait = match next {
-            Some(t) => {
-                Duration::from_nanos(u64::try_from(t.saturating_sub(clock.now())).unwrap_or(0))
+        let Some(t) = next else {
+            // Nothing held: asleep until a hold or a shutdown kicks, or the runtime is
+            // gone (its end of the channel with it). An idle process's runtime wakes
+            // for nothing; each look at every store cost it a wake-up a second.
+            match kicks.recv() {
+                Ok(()) => while kicks.try_recv().is_ok() {},
+                Err(_) => return,
             }
-            // Nothing held: a hold kicks, and so does shutdown.
-            None => IDLE_POLL,
-        }
-        .min(if next.is_some() { STOP_POLL } else { IDLE_POLL });
+            continue;
+        };
+        let wait = Duration::from_nanos(u64::try_from(t.saturating_sub(clock.now())).unwrap_or(0))
+            .min(STOP_POLL);
         if kicks.recv_timeout(wait).is_ok() {
             // Drain bursts of kicks: one re-plan covers them all.
             while kicks.try_recv().is_ok() {}

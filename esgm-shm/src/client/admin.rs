@@ -62,8 +62,10 @@ pub(crate) const ASKERS: usize = 8;
 const MAX_MESSAGE: usize = 4 << 20;
 /// Questions a process may have waiting before the oldest is dropped.
 const BUFFER: usize = 4;
-/// The longest the admin thread sleeps before it looks for its stop.
-const RECHECK: Duration = Duration::from_secs(2);
+/// The longest the admin thread sleeps before it looks for its stop (stopping rings
+/// it awake; this is the backstop). Every 2 s it was a wake-up a second in every
+/// process of an idle robot.
+const RECHECK: Duration = Duration::from_secs(30);
 /// The longest an asker sleeps between two looks for answers.
 const POLL: Duration = Duration::from_millis(1);
 /// How long an asker waits for missing answers before it cleans up after processes

@@ -37,8 +37,9 @@ use crate::service::{EventSpec, ShmNode, ShmService};
 
 /// The longest the receiver sleeps before it pumps anyway and looks for a new set of
 /// services (and for its stop).
-/// As long as a [`SWEEP`]: one wake-up of an idle receiver every two seconds.
-pub(crate) const RECHECK: Duration = Duration::from_secs(2);
+/// As long as a [`SWEEP`]: one wake-up of an idle receiver (about 100 µs, a look at
+/// every mirror) every five seconds.
+pub(crate) const RECHECK: Duration = Duration::from_secs(5);
 
 /// The receiver thread could not be started.
 #[derive(Debug, thiserror::Error)]
@@ -196,7 +197,7 @@ struct Listening<'a> {
 /// How often everything mirrored is pumped even though nothing rang: a notify lost
 /// (a writer that crashed between its send and its notify) delays a sample by at most
 /// this. Pumping an idle mirror costs a look at its queue, about a microsecond.
-const SWEEP: Duration = Duration::from_secs(2);
+const SWEEP: Duration = Duration::from_secs(5);
 
 /// Sleeps on every listener and serves what each wake-up is for (and at least every
 /// [`RECHECK`] what cannot be listened to) until the set of mirrors changes or the

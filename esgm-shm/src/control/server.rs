@@ -122,13 +122,14 @@ const MAX_BATCH: usize = 256;
 type ControlRequest = iceoryx2::active_request::ActiveRequest<ShmService, [u8], (), [u8], ()>;
 
 /// How often a serving coordinator cleans up after processes that died unsupervised.
-/// Each cleanup reads every iceoryx2 node of the host, about 0.2 ms each: every 2 s it
-/// was 2 % of a core for a domain of 60 processes, twice the whole domain's idle
-/// budget. Nothing waits for it: a process that needs a dead one's room cleans up
-/// itself ([`crate::service::with_room`]), an admin question that misses answers does
-/// too, and a supervised worker's exit cleans up at once. What it still reclaims is
-/// the memory of processes that crashed and left nothing waiting.
-const CLEANUP_EVERY: Duration = Duration::from_secs(30);
+/// Each cleanup reads every iceoryx2 node of the host: about 150 ms for a domain of
+/// 60 processes (180 nodes), so every 2 s it was 2 % of a core and every 30 s still
+/// half the whole domain's idle budget. Nothing waits for it: a process that needs a
+/// dead one's room cleans up itself ([`crate::service::with_room`]), an admin question
+/// that misses answers does too, and a supervised worker's exit cleans up at once.
+/// What it still reclaims is the memory of processes that crashed and left nothing
+/// waiting, within five minutes.
+const CLEANUP_EVERY: Duration = Duration::from_secs(300);
 
 /// The longest an idle coordinator sleeps before it looks at its stop flag (dropping
 /// a [`CoordinatorThread`] rings it awake at once).
