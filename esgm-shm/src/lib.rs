@@ -125,7 +125,7 @@ pub mod process;
 pub(crate) use data_plane::sequence_gaps;
 pub use data_plane::{
     capacity, image_layout, image_loan, payload, publisher, qos, received, sample_check, service,
-    service_name, size_hint, structure_loan, subscriber, type_id, violations, wait,
+    service_name, size_hint, structure_loan, subscriber, type_id, violations, wait, writer_check,
 };
 // What connected processes hold in shared memory, with its old path.
 pub use client::holdings;
@@ -147,6 +147,7 @@ pub use subscriber::{ReceiveError, SubscriberStats, TrajectorySubscriber, Valida
 pub use type_id::type_id;
 pub use violations::{ViolationPublisher, ViolationRecord, ViolationSubscriber};
 pub use wait::WaitStrategy;
+pub use writer_check::{Decided, WriterCheck};
 
 pub use client::{
     ConnectError, DOMAIN_ENV, ShmEsgm, ShmEsgmBuilder, WORKER_ENV, connect, trajectory_qos,

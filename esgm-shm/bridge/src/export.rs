@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 
 use esgm_core::EntityStructureType;
 use esgm_shm::control::protocol::{Request, Response, TrajectoryRecord};
-use esgm_shm::{ReceiveError, ShmEsgm, ShmService, TrajectorySubscriber};
+use esgm_shm::{Decided, ReceiveError, ShmEsgm, ShmService, TrajectorySubscriber, WriterCheck};
 use iceoryx2::prelude::NodeBuilder;
 use parking_lot::Mutex;
 use zenoh::Wait as _;
@@ -168,12 +168,9 @@ fn export_generation(site: &ExportSite, options: &ExportOptions) -> anyhow::Resu
 
     let interval = options.max_rate.filter(|r| *r > 0.0).map(|r| Duration::from_secs_f64(1.0 / r));
     let mut flow = Flow {
-        writer_port: record.port.map(|p| p.publisher),
-        unverified: VecDeque::new(),
-        not_writer: 0,
+        check: WriterCheck::new(record.port.map(|p| p.publisher)),
         throttled: options.latest_only || interval.is_some(),
         queue: VecDeque::new(),
-        last_seen: None,
         skipped: 0,
         type_hash,
         type_name,
@@ -187,13 +184,13 @@ fn export_generation(site: &ExportSite, options: &ExportOptions) -> anyhow::Resu
         }
         // A sample from a port the registry has not named yet (a writer that just
         // started or restarted) is held, and the registry asked soon.
-        let recheck = if flow.unverified.is_empty() { RECHECK } else { VERIFY_WRITER };
+        let recheck = if flow.check.awaits_writer() { VERIFY_WRITER } else { RECHECK };
         if checked.elapsed() >= recheck {
             checked = Instant::now();
             match lookup(&site.esgm, name) {
                 Ok(r) if r.generation == record.generation => {
                     flow.set_writer(r.port.map(|p| p.publisher));
-                    let not_writer = flow.not_writer;
+                    let not_writer = flow.check.not_writer();
                     site.stats.with("export", &site.domain, name, |c| c.not_writer = not_writer);
                 }
                 _ => {
@@ -256,26 +253,16 @@ fn export_generation(site: &ExportSite, options: &ExportOptions) -> anyhow::Resu
 /// How soon an exporter holding samples from an unnamed port asks the registry again.
 const VERIFY_WRITER: Duration = Duration::from_millis(100);
 
-/// The most samples an exporter holds from ports the registry has not named; past it
-/// the oldest is dropped as not the writer's.
-const MAX_UNVERIFIED: usize = 1024;
-
 /// What an exporter has taken from shared memory and not sent yet.
 struct Flow {
-    /// The writer's publisher port as the registry names it; `None` until it does.
-    /// Only its samples are sent (esgm-shm's readers check the same).
-    writer_port: Option<u128>,
-    /// Messages from a port the registry has not named (yet), with the port, in order.
-    unverified: VecDeque<(u128, Vec<u8>)>,
-    /// Samples and resets dropped as not the writer's.
-    not_writer: u64,
+    /// Only the writer's samples are sent, as every esgm reader checks
+    /// ([`WriterCheck`]: held until the registry names the writer's port).
+    check: WriterCheck<Vec<u8>>,
     /// `--latest-only` or `--max-rate`: only the newest waiting message is sent.
     throttled: bool,
     /// Messages made, oldest first (the codec bytes are copied out of shared memory at
     /// once, so the writer's samples go back to it).
     queue: VecDeque<Vec<u8>>,
-    /// The writer and sequence number of the last sample taken.
-    last_seen: Option<(u64, u64)>,
     /// Samples not sent on purpose so far.
     skipped: u64,
     type_hash: u64,
@@ -287,22 +274,28 @@ impl Flow {
     /// The registry names `port` as the writer's (`None`: not yet): held messages from
     /// it are queued, in order, the others dropped and counted.
     fn set_writer(&mut self, port: Option<u128>) {
-        let Some(port) = port else { return };
-        self.writer_port = Some(port);
-        for (from, message) in std::mem::take(&mut self.unverified) {
-            if from == port {
-                self.queue_message(message);
-            } else {
-                self.drop_not_writer(from);
-            }
+        for decided in self.check.set_writer(port) {
+            self.decide(decided);
         }
     }
 
-    fn drop_not_writer(&mut self, from: u128) {
-        self.not_writer += 1;
-        if self.not_writer == 1 {
-            tracing::warn!(publisher = %format!("{from:#x}"),
-                "a sample from a port that is not the writer's was not exported (later ones are counted)");
+    fn decide(&mut self, decided: Decided<Vec<u8>>) {
+        match decided {
+            Decided::Enter { item, lost } => {
+                // Samples the shared-memory queue overwrote while this exporter waited
+                // are, with a rate limit, not sent by choice too; without one the
+                // importer counts them from the sequence numbers.
+                if self.throttled {
+                    self.skipped += lost;
+                }
+                self.queue_message(item);
+            }
+            Decided::NotWriter { port, .. } => {
+                if self.check.not_writer() == 1 {
+                    tracing::warn!(publisher = %format!("{port:#x}"),
+                        "a sample from a port that is not the writer's was not exported (later ones are counted)");
+                }
+            }
         }
     }
 
@@ -338,19 +331,6 @@ impl Flow {
                 return;
             }
         };
-        let from_writer = self.writer_port == Some(port);
-        if self.throttled && from_writer {
-            // Samples the shared-memory queue overwrote while waiting were not sent by
-            // choice too.
-            if let Some((w, s)) = self.last_seen {
-                if w == writer && sequence > s + 1 {
-                    self.skipped += sequence - s - 1;
-                }
-            }
-        }
-        if from_writer {
-            self.last_seen = Some((writer, sequence));
-        }
         let header = Header {
             session: self.session,
             writer,
@@ -362,14 +342,8 @@ impl Flow {
             kind,
         };
         let message = wire::encode(&header, bytes);
-        if from_writer {
-            return self.queue_message(message);
+        if let Some(decided) = self.check.arrive(port, sequence, message) {
+            self.decide(decided);
         }
-        if self.unverified.len() >= MAX_UNVERIFIED {
-            if let Some((from, _)) = self.unverified.pop_front() {
-                self.drop_not_writer(from);
-            }
-        }
-        self.unverified.push_back((port, message));
     }
 }

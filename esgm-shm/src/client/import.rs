@@ -20,7 +20,6 @@
 //! adding thread; the writer's gate decides, and the structure comes back through
 //! replication.
 
-use std::collections::VecDeque;
 use std::sync::{Arc, Weak};
 use std::time::Duration;
 
@@ -46,12 +45,12 @@ use crate::capacity::{EventCapacity, Readers};
 use crate::control::protocol::TrajectoryRecord;
 use crate::holdings::{HoldingOwner, Holdings};
 use crate::publisher::{SampleSizing, TrajectoryPublisher};
-use crate::sequence_gaps::SequenceGaps;
 use crate::service::{EventSpec, OpenError, ShmService, open_event_service};
 use crate::service_name::{NameError, TrajectoryServiceNames};
 use crate::subscriber::{ReceiveError, TrajectorySubscriber};
 use crate::violations::{ViolationSubscriber, violation_service_name};
 use crate::wait::{WaitStrategy, timed_wait};
+use crate::writer_check::{Decided, WriterCheck};
 
 /// Where an import is made: the connection's node, domain, holdings and mirrors.
 #[derive(Debug, Clone, Copy)]
@@ -81,8 +80,9 @@ pub(crate) struct Import {
     replica: InProcessTrajectory,
     /// Samples that could not be taken (already counted by the subscriber).
     rejected: u64,
-    /// The writer's sequence numbers, per publisher: a gap is samples lost on the way.
-    gaps: SequenceGaps,
+    /// Whether an arrival is the writer's, and which of its samples never arrived
+    /// (the check every reader of another process's trajectory makes).
+    check: WriterCheck<Arrival>,
     /// Samples lost so far (the first is logged).
     lost: u64,
     /// Whose samples this import's held images count as, and how many it may hold.
@@ -93,19 +93,12 @@ pub(crate) struct Import {
     /// receiver thread does not listen to its samples (the worker feeds the replica
     /// each time it wakes), so a sample wakes one thread in this process, not two.
     workers: Arc<std::sync::atomic::AtomicUsize>,
-    /// The writer's publisher port as the registry names it; `None` until it does.
-    writer: Option<u128>,
-    /// What arrived from a port the registry does not name (yet), in order: entered
-    /// or rejected once it does ([`Import::set_writer`]).
-    unverified: VecDeque<Arrival>,
     /// Checks each structure's attributes against the trajectory's type; `None` if
     /// the record's definitions do not resolve (logged at the start).
     checker: Option<TypeChecker>,
     /// Rings the location thread to ask the registry who writes, once per wait: what
     /// is held meanwhile borrows shared memory (an image a chunk).
     verify: crossbeam_channel::Sender<()>,
-    /// True while a question is out.
-    asked: bool,
     /// This process's node, to wake the workers waiting on this import when it goes.
     node: SharedNode,
 }
@@ -131,27 +124,14 @@ impl Drop for Import {
     }
 }
 
-/// The most arrivals an import holds while it waits for the registry to name the
-/// writer's port: past it, the oldest is rejected as [`Rejection::NotWriter`]. A
-/// restarted writer is named within a maintenance tick, so this bounds only what a
-/// process that is not the writer can make a reader hold.
-const MAX_UNVERIFIED: usize = 1024;
-
-/// A sample or reset taken from the trajectory's service, with the port it came from.
+/// A sample or reset taken from the trajectory's service, until the writer check
+/// decides about it.
 #[derive(Debug)]
 enum Arrival {
     /// A structure, decoded (its images stay in shared memory, held).
-    Entry { publisher: UniquePublisherId, sequence: u64, es: EntityStructure, add_time: i64 },
+    Entry { es: EntityStructure, add_time: i64 },
     /// A reset marker.
-    Reset { publisher: UniquePublisherId, sequence: u64 },
-}
-
-impl Arrival {
-    fn publisher(&self) -> UniquePublisherId {
-        match self {
-            Arrival::Entry { publisher, .. } | Arrival::Reset { publisher, .. } => *publisher,
-        }
-    }
+    Reset,
 }
 
 impl Import {
@@ -245,13 +225,10 @@ impl Import {
             violations,
             replica,
             rejected: 0,
-            gaps: SequenceGaps::default(),
+            check: WriterCheck::new(record.port.map(|p| p.publisher)),
             workers: Arc::default(),
-            writer: record.port.map(|p| p.publisher),
-            unverified: VecDeque::new(),
             checker,
             verify: verify.clone(),
-            asked: false,
             lost: 0,
             // One borrow stays free to receive into.
             owner: holdings.owner(qos.max_borrowed_samples.saturating_sub(1)),
@@ -285,14 +262,14 @@ impl Import {
                     let publisher = sample.publisher_id();
                     let (sequence, add_time) = (sample.header().sequence, sample.header().add_time);
                     match self.owner.decode(sample) {
-                        Ok(es) => self.arrive(Arrival::Entry { publisher, sequence, es, add_time }),
+                        Ok(es) => self.arrive(publisher, sequence, Arrival::Entry { es, add_time }),
                         Err(e) => self.reject(&ReceiveError::Malformed(e)),
                     }
                 }
                 Ok(None) => break,
                 Err(ReceiveError::Reset { sequence, publisher }) => {
                     n += 1;
-                    self.arrive(Arrival::Reset { publisher, sequence });
+                    self.arrive(publisher, sequence, Arrival::Reset);
                 }
                 Err(e) => {
                     n += 1;
@@ -323,21 +300,24 @@ impl Import {
     }
 
     /// Enters what the writer sent; holds what another port sent until the registry
-    /// names the writer's.
-    fn arrive(&mut self, arrival: Arrival) {
-        if self.writer == Some(arrival.publisher().value()) {
-            return self.enter(arrival);
+    /// names the writer's, and asks it once.
+    fn arrive(&mut self, publisher: UniquePublisherId, sequence: u64, arrival: Arrival) {
+        if let Some(decided) = self.check.arrive(publisher.value(), sequence, arrival) {
+            self.decide(decided);
         }
-        if self.unverified.len() >= MAX_UNVERIFIED {
-            if let Some(oldest) = self.unverified.pop_front() {
-                self.not_writer(&oldest);
-            }
-        }
-        self.unverified.push_back(arrival);
-        if !self.asked {
-            self.asked = true;
+        if self.check.should_ask() {
             // Full: a question is already out, which this one joins.
             let _pending = self.verify.try_send(());
+        }
+    }
+
+    fn decide(&mut self, decided: Decided<Arrival>) {
+        match decided {
+            Decided::Enter { item, lost } => {
+                self.count_lost(lost);
+                self.enter(item);
+            }
+            Decided::NotWriter { port, item } => self.not_writer(port, &item),
         }
     }
 
@@ -345,16 +325,14 @@ impl Import {
     /// match the trajectory's type.
     fn enter(&mut self, arrival: Arrival) {
         match arrival {
-            Arrival::Entry { publisher, sequence, es, add_time } => {
+            Arrival::Entry { es, add_time } => {
                 if let Some(Err(e)) = self.checker.as_ref().map(|c| c.check(&es.attributes)) {
                     return self.count_rejection(Rejection::WrongLayout, &e);
                 }
-                self.count_gap(publisher, sequence);
                 // A replica destroyed meanwhile needs nothing more.
                 let _destroyed = self.replica.with_store(|s| s.replicate(Arc::new(es), add_time));
             }
-            Arrival::Reset { publisher, sequence } => {
-                self.count_gap(publisher, sequence);
+            Arrival::Reset => {
                 let _destroyed = self.replica.with_store(|s| s.reset());
             }
         }
@@ -362,42 +340,32 @@ impl Import {
 
     /// True while samples wait for the registry to name the writer's port.
     pub fn awaits_writer(&self) -> bool {
-        !self.unverified.is_empty()
+        self.check.awaits_writer()
     }
 
     /// The registry names `port` as the writer's (`None`: not yet): what was held from
     /// it is entered, in order, and what was held from any other port is rejected.
     pub fn set_writer(&mut self, port: Option<u128>) {
-        // Answered: the next arrival from an unnamed port asks again.
-        self.asked = false;
-        let Some(port) = port else { return };
-        self.writer = Some(port);
-        for arrival in std::mem::take(&mut self.unverified) {
-            if arrival.publisher().value() == port {
-                self.enter(arrival);
-            } else {
-                self.not_writer(&arrival);
-            }
+        for decided in self.check.set_writer(port) {
+            self.decide(decided);
         }
     }
 
-    fn not_writer(&mut self, arrival: &Arrival) {
+    fn not_writer(&mut self, port: u128, arrival: &Arrival) {
         let what = match arrival {
             Arrival::Entry { .. } => "a sample",
-            Arrival::Reset { .. } => "a reset",
+            Arrival::Reset => "a reset",
         };
         let detail = format!(
-            "{what} from publisher {:#x}, not the writer's ({})",
-            arrival.publisher().value(),
-            self.writer.map_or_else(|| "not named".to_owned(), |w| format!("{w:#x}"))
+            "{what} from publisher {port:#x}, not the writer's ({})",
+            self.check.writer().map_or_else(|| "not named".to_owned(), |w| format!("{w:#x}"))
         );
         self.count_rejection(Rejection::NotWriter, &detail);
     }
 
-    /// Counts the samples of `publisher` skipped before `sequence` as lost in the
-    /// replica's stats (every sample accounted for).
-    fn count_gap(&mut self, publisher: iceoryx2::identifiers::UniquePublisherId, sequence: u64) {
-        let lost = self.gaps.observe(publisher, sequence);
+    /// Counts `lost` samples of the writer's, skipped before the one that entered, in
+    /// the replica's stats (every sample accounted for).
+    fn count_lost(&mut self, lost: u64) {
         if lost == 0 {
             return;
         }

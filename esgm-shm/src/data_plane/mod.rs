@@ -24,3 +24,4 @@ pub mod subscriber;
 pub mod type_id;
 pub mod violations;
 pub mod wait;
+pub mod writer_check;
