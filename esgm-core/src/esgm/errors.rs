@@ -111,6 +111,16 @@ pub enum CreateError {
     /// was changed, and every other process is served as before.
     #[error(transparent)]
     LimitReached(#[from] crate::esgm::LimitReached),
+    /// A definition of the trajectory's types, as its writer's process or host sent
+    /// it, is not valid here (malformed, or from an incompatible version): no replica
+    /// was made. The writer's side has to fix or re-register the type.
+    #[error("the definition of entity structure type `{name}` is invalid: {reason}")]
+    InvalidTypeDefinition {
+        /// The type whose definition was refused.
+        name: String,
+        /// Why it was refused.
+        reason: String,
+    },
     /// The ESGM could not be reached or did not answer (a remote runtime whose
     /// coordinator is gone, stuck or unreachable — CORBA's `COMM_FAILURE`). Nothing
     /// was changed by this call as far as the caller can tell; retry or check the

@@ -188,8 +188,14 @@ impl InProcessEsgm {
         for (name, t) in types {
             if catalog.types().get_entity_structure_type(name).is_err() {
                 // Registration only checks the definition itself, so element types
-                // may come in any order.
-                let _ = catalog.types_mut().create_entity_structure_type(name, t.clone());
+                // may come in any order. A definition refused is the writer's side's
+                // fault, and says why: not "no such type".
+                if let Err(e) = catalog.types_mut().create_entity_structure_type(name, t.clone()) {
+                    return Err(CreateError::InvalidTypeDefinition {
+                        name: name.clone(),
+                        reason: e.to_string(),
+                    });
+                }
             }
         }
         if self.descriptor(&info.name).is_some() {
@@ -639,5 +645,39 @@ impl Esgm for InProcessEsgm {
 
     fn set_log_level(&self, level: LogLevel) {
         self.inner.log_level.store(level as u8, Ordering::Relaxed);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::panic)]
+
+    use super::*;
+    use crate::esgm::TrajectoryKind;
+    use crate::{EntityStructureType, ValueSort};
+
+    #[test]
+    fn a_replica_whose_type_definition_is_invalid_says_why() {
+        let esgm = InProcessEsgm::default();
+        // As a hostile or broken writer could send it: one attribute twice.
+        let broken =
+            EntityStructureType::new("Odd").attr("x", ValueSort::Double).attr("x", ValueSort::Long);
+        let info = TrajectoryInfo {
+            name: "odd".into(),
+            kind: TrajectoryKind::Primitive,
+            type_name: "Odd".into(),
+            source: None,
+            inputs: Vec::new(),
+            policy: crate::policy::FluentStreamPolicy::default(),
+        };
+        match esgm.create_replica(info, &[("Odd".into(), broken)]) {
+            Err(CreateError::InvalidTypeDefinition { name, reason }) => {
+                assert_eq!(name, "Odd");
+                assert!(reason.contains('x'), "{reason}");
+            }
+            other => panic!("expected InvalidTypeDefinition, got {other:?}"),
+        }
+        // Nothing was made, and the type was not registered.
+        assert!(esgm.get_entity_structure_type("Odd").is_err());
     }
 }
