@@ -81,6 +81,18 @@ pub enum ReadError {
         /// What is wrong.
         reason: String,
     },
+    /// The file could not be read on at a position it was readable at when opened
+    /// (changed, truncated or unreadable since): what came before was read, nothing
+    /// after.
+    #[error("{path}: byte {position}: damaged: {reason}")]
+    Damaged {
+        /// The file.
+        path: PathBuf,
+        /// Where reading stopped.
+        position: u64,
+        /// What is wrong there.
+        reason: String,
+    },
 }
 
 /// Where and why a file stops being readable.
@@ -322,7 +334,19 @@ impl Iterator for Samples {
                     }
                 }
                 Ok(Some(Item::Footer)) => {}
-                Ok(None) | Err(_) => self.done = true,
+                Ok(None) => self.done = true,
+                // Damage found when the file was opened ends the readable part
+                // (`stop_at`, and `Recording::damage` says where); damage within it
+                // appeared since, and is said, not taken for the end.
+                Err(damage) if damage.position >= self.stop_at => self.done = true,
+                Err(damage) => {
+                    self.done = true;
+                    return Some(Err(ReadError::Damaged {
+                        path: self.path.clone(),
+                        position: damage.position,
+                        reason: damage.reason,
+                    }));
+                }
             }
         }
         None

@@ -368,3 +368,33 @@ fn top_level(bytes: &[u8]) -> Vec<(u8, usize, usize)> {
     }
     out
 }
+
+#[test]
+fn a_file_damaged_after_it_was_opened_is_reported_not_taken_for_a_short_one() {
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("run.mcap");
+    let written = write(&path, RecordOptions::default().chunk_size(2048), 200);
+    let rec = Recording::open(&path).expect("opens");
+    assert!(rec.complete && rec.damage.is_none());
+    // Another program cuts the file while it is replayed.
+    let bytes = std::fs::read(&path).expect("read");
+    std::fs::write(&path, &bytes[..bytes.len() / 2]).expect("cut");
+    let mut read = 0;
+    let mut damaged = None;
+    for s in rec.samples().expect("samples") {
+        match s {
+            Ok(_) => read += 1,
+            Err(e) => {
+                damaged = Some(e);
+                break;
+            }
+        }
+    }
+    assert!(read > 0 && read < written.len(), "read {read} of {}", written.len());
+    match damaged {
+        Some(ReadError::Damaged { position, reason, .. }) => {
+            assert!(position > 0 && position < bytes.len() as u64, "at {position}: {reason}");
+        }
+        other => panic!("the damage was not reported: {other:?}"),
+    }
+}
