@@ -422,6 +422,7 @@ impl Probe {
         let stats = self.esgm.domain_stats().map_err(|e| gap("trajectory counters", &e));
         s.load = load.unwrap_or_default();
         s.processes = processes;
+        s.shm_failed = shm.is_err();
         s.shm = shm.unwrap_or_default();
         s.host_iceoryx2 = host.unwrap_or_default();
         if let Ok(stats) = stats {

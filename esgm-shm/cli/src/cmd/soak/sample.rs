@@ -38,8 +38,13 @@ pub struct Sample {
     pub load: [f64; 3],
     /// Per process of the system (the coordinator and every supervised worker).
     pub processes: BTreeMap<String, ProcessSample>,
-    /// The domain's shared memory: the `/dev/shm` files its processes map.
+    /// The domain's shared memory: the `/dev/shm` files its processes map (zero, and
+    /// `shm_failed`, when it could not be measured).
     pub shm: ShmUse,
+    /// The shared memory could not be measured this second (see `gaps`): the verdict
+    /// takes no zero for a figure, and counts the failure as a missed check.
+    #[serde(default)]
+    pub shm_failed: bool,
     /// Every iceoryx2 file on the host, other domains' and tests' included (context).
     pub host_iceoryx2: ShmUse,
     /// Per trajectory, its counters as the domain reports them (empty when the

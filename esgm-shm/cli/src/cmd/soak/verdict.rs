@@ -170,7 +170,16 @@ pub fn judge(samples: &[Sample], warmup: f64, target_percent: f64) -> Verdict {
         ));
     }
 
-    let shm_points: Vec<(f64, u64)> = after.iter().map(|s| (s.t, s.shm.allocated)).collect();
+    // A measurement that failed is no figure, and a failed check.
+    let failed = after.iter().filter(|s| s.shm_failed).count();
+    if failed > 0 {
+        missed.push(format!(
+            "the shared memory could not be measured at {failed} of {} samples",
+            after.len()
+        ));
+    }
+    let shm_points: Vec<(f64, u64)> =
+        after.iter().filter(|s| !s.shm_failed).map(|s| (s.t, s.shm.allocated)).collect();
     let shm = Growth::of("shared memory", &shm_points, target_percent);
     if let Some(g) = shm.as_ref().filter(|g| !g.within) {
         missed.push(format!(
@@ -250,6 +259,21 @@ mod tests {
                 s
             })
             .collect()
+    }
+
+    #[test]
+    fn a_failed_shared_memory_measurement_is_a_missed_check_not_a_zero() {
+        let mut samples = run(20, |_| 100 << 20, |_| 10 << 20);
+        samples[15].shm = ShmUse::default();
+        samples[15].shm_failed = true;
+        let v = judge(&samples, 2.0, 10.0);
+        assert!(
+            v.missed.iter().any(|m| m.contains("could not be measured at 1 of")),
+            "{:?}",
+            v.missed
+        );
+        // The zero did not enter the growth figure.
+        assert_eq!(v.shm.as_ref().map(|g| g.percent), Some(0.0));
     }
 
     #[test]
