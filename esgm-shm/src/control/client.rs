@@ -121,7 +121,7 @@ pub enum ControlClientError {
 pub struct ControlClient {
     domain: String,
     client: Client<ShmService, [u8], (), [u8], ()>,
-    _service: PortFactory<ShmService, [u8], (), [u8], ()>,
+    service: PortFactory<ShmService, [u8], (), [u8], ()>,
     _node: ShmNode,
     /// Wakes the coordinator after each request (`None`: it polls for them).
     ring: Option<Notifier<ShmService>>,
@@ -188,14 +188,7 @@ impl ControlClient {
             .and_then(|w| w.notifier_builder().create().map_err(|e| format!("{e:?}")))
             .map_err(|e| tracing::warn!(error = %e, "cannot ring the coordinator; it polls"))
             .ok();
-        Ok(Self {
-            domain: domain.to_owned(),
-            client,
-            _service: service,
-            _node: node,
-            ring,
-            timeout,
-        })
+        Ok(Self { domain: domain.to_owned(), client, service, _node: node, ring, timeout })
     }
 
     /// Sends `request` and waits for the answer; the seed's errors come back as
@@ -229,6 +222,13 @@ impl ControlClient {
                 };
             }
             if Instant::now() >= deadline {
+                // A coordinator that crashed still counts as the server until someone
+                // cleans up after it (nobody scans for dead nodes at connect): if
+                // cleaning up leaves no server, nobody serves, which is not slowness.
+                crate::control::server::log_cleanup(crate::service::cleanup_dead_nodes());
+                if self.service.dynamic_config().number_of_servers() == 0 {
+                    return Err(ControlClientError::NotServing { domain: self.domain.clone() });
+                }
                 return Err(ControlClientError::Timeout {
                     domain: self.domain.clone(),
                     timeout: self.timeout,
