@@ -63,20 +63,32 @@ fn open_service(
     readers: Readers,
 ) -> Result<AddService, BlockingAddError> {
     let name = add_service_name(domain, trajectory).map_err(OpenError::from)?;
-    node.service_builder(&name)
-        .request_response::<[u8], [u8]>()
-        .max_clients(readers.ports())
-        .max_nodes(readers.nodes())
-        .max_active_requests_per_client(MAX_ACTIVE_REQUESTS)
-        .open_or_create()
-        .map_err(|e| match e {
+    let denied = |e: &RequestResponseOpenOrCreateError| {
+        matches!(
+            e,
             RequestResponseOpenOrCreateError::RequestResponseOpenError(
-                RequestResponseOpenError::ExceedsMaxNumberOfNodes,
-            ) => BlockingAddError::Open(OpenError::LimitReached(
-                readers.reached(Limit::Adders, trajectory),
-            )),
-            e => BlockingAddError::Service(format!("{e:?}")),
-        })
+                RequestResponseOpenError::InsufficientPermissions
+            )
+        )
+    };
+    // In a domain shared with other users, a service just made by another user's
+    // process is closed until its owner widens it.
+    crate::service::with_access(denied, || {
+        node.service_builder(&name)
+            .request_response::<[u8], [u8]>()
+            .max_clients(readers.ports())
+            .max_nodes(readers.nodes())
+            .max_active_requests_per_client(MAX_ACTIVE_REQUESTS)
+            .open_or_create()
+    })
+    .map_err(|e| match e {
+        RequestResponseOpenOrCreateError::RequestResponseOpenError(
+            RequestResponseOpenError::ExceedsMaxNumberOfNodes,
+        ) => BlockingAddError::Open(OpenError::LimitReached(
+            readers.reached(Limit::Adders, trajectory),
+        )),
+        e => BlockingAddError::Service(format!("{e:?}")),
+    })
 }
 
 /// A blocking-add port could not be opened.

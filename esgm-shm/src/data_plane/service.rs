@@ -81,6 +81,31 @@ pub fn cleanup_dead_nodes() -> Result<usize, iceoryx2::node::NodeListFailure> {
     Ok(removed)
 }
 
+/// How long opening a service of a shared domain is retried while iceoryx2 refuses it
+/// for permissions: the owner's process widens a new service's files within 100 ms,
+/// or, for a service listed while it was being created, within 5 s
+/// (`process::access`).
+pub const ACCESS_PATIENCE: std::time::Duration = std::time::Duration::from_secs(5);
+
+/// Runs `open` again while it fails for permissions (`denied`), for at most
+/// [`ACCESS_PATIENCE`]: in a domain shared with other users, a service another user's
+/// process just made is closed until its owner widens it. In a private domain it ends
+/// as it was refused.
+pub fn with_access<T, E>(
+    denied: impl Fn(&E) -> bool,
+    mut open: impl FnMut() -> Result<T, E>,
+) -> Result<T, E> {
+    let deadline = std::time::Instant::now() + ACCESS_PATIENCE;
+    loop {
+        match open() {
+            Err(e) if denied(&e) && std::time::Instant::now() < deadline => {
+                std::thread::sleep(std::time::Duration::from_millis(50));
+            }
+            r => return r,
+        }
+    }
+}
+
 /// Runs `open`, and once more after [`cleanup_dead_nodes`] if it failed for lack of
 /// room (`lacks_room`): the ports of a process that crashed hold their room until
 /// someone cleans up after it, and a process that needs the room does not wait for the
@@ -250,12 +275,22 @@ pub(crate) fn open_data_service(
             .subscriber_max_borrowed_samples(qos.max_borrowed_samples)
             .enable_safe_overflow(!lossless)
     };
-    match samples()
-        .max_publishers(qos.max_publishers)
-        .max_subscribers(qos.max_subscribers)
-        .max_nodes(qos.max_nodes)
-        .open_or_create()
-    {
+    let denied = |e: &PublishSubscribeOpenOrCreateError| {
+        matches!(
+            e,
+            PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+                PublishSubscribeOpenError::InsufficientPermissions
+            )
+        )
+    };
+    let opened = with_access(denied, || {
+        samples()
+            .max_publishers(qos.max_publishers)
+            .max_subscribers(qos.max_subscribers)
+            .max_nodes(qos.max_nodes)
+            .open_or_create()
+    });
+    match opened {
         // Made for other port counts (another `readers`, or a process that came
         // first): what this port needs of the samples is checked; a port past the
         // service's room is refused as the limit it is.
@@ -297,14 +332,18 @@ pub(crate) fn open_event_service(
     capacity: EventCapacity,
 ) -> Result<WakeService, OpenError> {
     let failed = |source| OpenError::WakeService { service: name.as_str().to_owned(), source };
-    match node
-        .service_builder(name)
-        .event()
-        .max_listeners(capacity.listeners)
-        .max_notifiers(capacity.notifiers)
-        .max_nodes(capacity.nodes)
-        .open_or_create()
-    {
+    let denied = |e: &EventOpenOrCreateError| {
+        matches!(e, EventOpenOrCreateError::EventOpenError(EventOpenError::InsufficientPermissions))
+    };
+    let opened = with_access(denied, || {
+        node.service_builder(name)
+            .event()
+            .max_listeners(capacity.listeners)
+            .max_notifiers(capacity.notifiers)
+            .max_nodes(capacity.nodes)
+            .open_or_create()
+    });
+    match opened {
         // Made for fewer ports than this process would ask (another esgm's sizing, or
         // a trajectory re-declared with other `readers`): use it as it is; a port past
         // its room is refused as the limit it is.
