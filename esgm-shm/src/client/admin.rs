@@ -68,9 +68,6 @@ const BUFFER: usize = 4;
 const RECHECK: Duration = Duration::from_secs(30);
 /// The longest an asker sleeps between two looks for answers.
 const POLL: Duration = Duration::from_millis(1);
-/// How long an asker waits for missing answers before it cleans up after processes
-/// that may have crashed ([`Admin::ask`]).
-const CLEAN_AFTER: Duration = Duration::from_millis(200);
 
 type Channel = publish_subscribe::PortFactory<ShmService, [u8], ()>;
 
@@ -439,9 +436,11 @@ impl Admin {
         self.ring();
         let mut collected = Vec::with_capacity(expected);
         // A process that crashed is counted until someone cleans up after it: if some
-        // are slow to answer, this asker cleans up once and expects only the living.
+        // have not answered by half the deadline, this asker cleans up once and
+        // expects only the living. (Not sooner: a cleanup reads every node of the
+        // host, and a loaded machine's processes may take a while to answer.)
         let mut cleaned = false;
-        let clean_after = Instant::now() + CLEAN_AFTER;
+        let clean_after = Instant::now() + timeout / 2;
         while collected.len() < expected {
             if !cleaned && Instant::now() >= clean_after {
                 cleaned = true;
