@@ -39,7 +39,9 @@ impl Sample {
 
     /// Delay between the valid time and the add time: what a delay constraint bounds.
     pub fn add_delay(&self) -> Time {
-        self.add_time - self.structure.valid_time
+        // Both times come from writers, possibly other processes or hosts: an extreme
+        // valid time saturates instead of overflowing.
+        self.add_time.saturating_sub(self.structure.valid_time)
     }
 
     /// The same sample answering a query asked at `query_time`.
@@ -54,5 +56,20 @@ impl Deref for Sample {
     type Target = EntityStructure;
     fn deref(&self) -> &EntityStructure {
         &self.structure
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Any writer chooses the valid time: the extreme one must not panic a reader that
+    /// shows the add delay (`esgm latest`, `echo`, `hz`, the demo).
+    #[test]
+    fn the_add_delay_of_an_extreme_valid_time_saturates() {
+        let es = Arc::new(EntityStructure::new("x", Time::MIN, 0));
+        assert_eq!(Sample::new(es, 5, 5).add_delay(), Time::MAX);
+        let es = Arc::new(EntityStructure::new("x", Time::MAX, 0));
+        assert_eq!(Sample::new(es, -5, -5).add_delay(), Time::MIN);
     }
 }

@@ -158,6 +158,37 @@ fn a_fixed_size_publisher_refuses_larger_samples() {
     p.publish(&EntityStructure::new("b", 1, 1)).unwrap();
 }
 
+/// A structure the writer could not send is forgone: its number is used, so a reader
+/// sees the gap and counts it lost, instead of never knowing of it (issue 24).
+#[test]
+fn a_structure_that_could_not_be_sent_is_a_gap_that_readers_count() {
+    let domain = unique_domain("forgone");
+    let (pub_node, sub_node) = (node(), node());
+    let p = publisher(&domain, "fixed", "Big")
+        .max_len(512)
+        .sizing(SampleSizing::Fixed)
+        .create(&pub_node)
+        .unwrap();
+    let s = subscriber(&domain, "fixed", "Big").create(&sub_node).unwrap();
+    p.publish(&EntityStructure::new("b", 1, 1)).unwrap();
+    let big = EntityStructure::new("b", 2, 2).with("data", Octets::from(vec![3u8; 4096]));
+    assert!(p.publish(&big).is_err());
+    p.forgo();
+    assert_eq!(p.publish(&EntityStructure::new("b", 3, 3)).unwrap().sequence, 2);
+
+    let mut check = esgm_shm::WriterCheck::new(Some(p.id().value()));
+    let mut lost = Vec::new();
+    for _ in 0..2 {
+        let sample = s.wait_for_sample(TIMEOUT).unwrap().expect("sample within timeout");
+        let port = sample.publisher_id().value();
+        match check.arrive(port, sample.header().sequence, ()) {
+            Some(esgm_shm::Decided::Enter { lost: n, .. }) => lost.push(n),
+            other => panic!("{other:?}"),
+        }
+    }
+    assert_eq!(lost, [0, 1], "the forgone structure is one lost at the reader");
+}
+
 #[test]
 fn an_image_published_as_a_structure_round_trips() {
     let domain = unique_domain("image_structure");

@@ -68,8 +68,8 @@ impl Recording {
             recovered_bytes: self.readable_len,
             start_valid_time: range.map(|r| r.0),
             end_valid_time: range.map(|r| r.1),
-            duration_s: range.map_or(0.0, |(a, b)| (b - a) as f64 / 1e9),
-            structures: self.trajectories.iter().map(|t| t.count).sum(),
+            duration_s: range.map_or(0.0, |(a, b)| (b as f64 - a as f64) / 1e9),
+            structures: self.trajectories.iter().fold(0, |a, t| a.saturating_add(t.count)),
             trajectories: self
                 .trajectories
                 .iter()
@@ -80,7 +80,7 @@ impl Recording {
                     count: t.count,
                     rate_hz: match t.valid_range {
                         Some((a, b)) if b > a && t.count > 1 => {
-                            (t.count - 1) as f64 / ((b - a) as f64 / 1e9)
+                            (t.count - 1) as f64 / ((b as f64 - a as f64) / 1e9)
                         }
                         _ => 0.0,
                     },

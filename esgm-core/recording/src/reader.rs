@@ -133,7 +133,8 @@ pub struct RecordedTrajectory {
 impl RecordedTrajectory {
     /// All losses, whatever the cause.
     pub fn lost(&self) -> u64 {
-        self.losses.values().sum()
+        // Counts come from the file, which may be crafted: they saturate, never wrap.
+        self.losses.values().fold(0, |a, &n| a.saturating_add(n))
     }
 }
 
@@ -213,12 +214,13 @@ impl Recording {
                         Ok(Some(sample)) => {
                             let t = &mut rec.trajectories[sample.trajectory];
                             let expected = next_sequence.entry(sample.trajectory).or_insert(0);
+                            // Sequence numbers come from the file: nothing here may wrap.
                             if sample.header.sequence > *expected {
-                                *t.losses.entry("sequence_gap".into()).or_default() +=
-                                    sample.header.sequence - *expected;
+                                let gap = t.losses.entry("sequence_gap".into()).or_default();
+                                *gap = gap.saturating_add(sample.header.sequence - *expected);
                             }
-                            *expected = sample.header.sequence + 1;
-                            t.count += 1;
+                            *expected = sample.header.sequence.saturating_add(1);
+                            t.count = t.count.saturating_add(1);
                             rec.max_lateness = rec.max_lateness.max(
                                 sample.header.recorded_time.saturating_sub(sample.header.add_time),
                             );
@@ -252,7 +254,7 @@ impl Recording {
                         && e.cause == "recorder_overflow"
                 })
                 .map(|e| e.count)
-                .sum();
+                .fold(0, u64::saturating_add);
             if let Some(gap) = t.losses.get_mut("sequence_gap") {
                 *gap = gap.saturating_sub(explained);
                 if *gap == 0 {
@@ -261,8 +263,11 @@ impl Recording {
             }
             for e in rec.events.iter().filter(|e| e.trajectory == t.info.name) {
                 match e.kind {
-                    EventKind::Violation => t.violations += e.count,
-                    EventKind::Loss => *t.losses.entry(e.cause.clone()).or_default() += e.count,
+                    EventKind::Violation => t.violations = t.violations.saturating_add(e.count),
+                    EventKind::Loss => {
+                        let n = t.losses.entry(e.cause.clone()).or_default();
+                        *n = n.saturating_add(e.count);
+                    }
                 }
             }
         }
@@ -469,7 +474,7 @@ impl Decoder {
                         .map_err(|e| malformed(h.sequence, format!("image view: {e}")))?;
                     structure.set(PIXELS_ATTRIBUTE, Octets::new(image.data.to_vec()));
                 }
-                t.bytes += data.len() as u64 + view_len;
+                t.bytes = t.bytes.saturating_add(data.len() as u64).saturating_add(view_len);
                 return Ok(Some(RecordedSample { trajectory: index, structure, header: h }));
             }
             _ => {}

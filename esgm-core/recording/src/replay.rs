@@ -34,6 +34,10 @@ use crate::layout::PIXELS_ATTRIBUTE;
 use crate::reader::{ReadError, RecordedSample, Recording, Samples};
 use crate::type_diff::type_difference;
 
+/// The longest pause a replay's pace computes: a crafted file's add times cannot make
+/// it wait past the clock's range (stopping still ends it at once).
+const LONGEST_PAUSE: Duration = Duration::from_secs(86_400);
+
 /// How fast a replay publishes.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Pace {
@@ -396,10 +400,12 @@ where
             let base = *first_add.get_or_insert(sample.header.add_time);
             if let Pace::Rate(r) = options.pace {
                 if r > 0.0 {
-                    let due = started
-                        + Duration::from_nanos(
-                            ((sample.header.add_time - base).max(0) as f64 / r) as u64,
-                        );
+                    // Add times come from the file: the pause saturates, never wraps.
+                    let wait = Duration::from_nanos(
+                        (sample.header.add_time.saturating_sub(base).max(0) as f64 / r) as u64,
+                    )
+                    .min(LONGEST_PAUSE);
+                    let due = started + wait;
                     while Instant::now() < due {
                         if stop.load(Ordering::Acquire) {
                             return Ok(report);
@@ -413,10 +419,11 @@ where
             let mut es = sample.structure;
             if options.times == TimeMode::ShiftToNow {
                 let offset = *shift.get_or_insert_with(|| {
-                    esgm_core::clock::Clock::now(&esgm_core::SystemClock) - v
+                    esgm_core::clock::Clock::now(&esgm_core::SystemClock).saturating_sub(v)
                 });
-                es.valid_time += offset + pass_offset;
-                es.create_time += offset + pass_offset;
+                let moved = offset.saturating_add(pass_offset);
+                es.valid_time = es.valid_time.saturating_add(moved);
+                es.create_time = es.create_time.saturating_add(moved);
             }
             let Some(handle) = handles.get(name) else { continue };
             let counts = report.published.entry(name.to_owned()).or_default();
@@ -451,7 +458,8 @@ where
             return Ok(report);
         }
         // The next pass continues the valid time where this one ended.
-        pass_offset += last_valid - first_valid + 1;
+        pass_offset =
+            pass_offset.saturating_add(last_valid.saturating_sub(first_valid)).saturating_add(1);
     }
 }
 

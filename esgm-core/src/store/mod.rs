@@ -244,6 +244,13 @@ pub trait StoreTap: Send + 'static {
         self.observe(&StoreEvent::Entered(sample.clone()));
         None
     }
+
+    /// How many entries the tap could not pass on since it was last asked: the store
+    /// counts them ([`DropCause::Unpublished`]), so a mirror's failure shows in the
+    /// trajectory's stats. Asked after every entry.
+    fn take_unpublished(&mut self) -> u64 {
+        0
+    }
 }
 
 impl<F: FnMut(&StoreEvent) + Send + 'static> StoreTap for F {
@@ -677,7 +684,9 @@ impl TrajectoryStore {
         let es = match &mut self.tap {
             Some((_, tap)) => {
                 let entering = Sample::new(es, now, now);
-                tap.entering(&entering).unwrap_or(entering.structure)
+                let kept = tap.entering(&entering).unwrap_or(entering.structure);
+                self.stats.record_dropped_n(DropCause::Unpublished, tap.take_unpublished());
+                kept
             }
             None => es,
         };
@@ -719,9 +728,7 @@ impl TrajectoryStore {
     /// Counts `n` structures the writer of this replica admitted that never reached
     /// it ([`DropCause::Lost`]).
     pub fn replicate_loss(&mut self, n: u64) {
-        for _ in 0..n {
-            self.stats.record_dropped(DropCause::Lost);
-        }
+        self.stats.record_dropped_n(DropCause::Lost, n);
     }
 
     /// Counts bytes that arrived on a replicated trajectory's service and were not a

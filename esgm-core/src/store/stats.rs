@@ -64,7 +64,16 @@ impl StatsRecorder {
     }
 
     pub fn record_dropped(&mut self, cause: DropCause) {
-        *self.dropped.entry(cause).or_default() += 1;
+        self.record_dropped_n(cause, 1);
+    }
+
+    /// `n` drops for one cause at once. Counts can come from another process (a gap
+    /// in its sequence numbers): they saturate, never wrap, and cost O(1) whatever `n`.
+    pub fn record_dropped_n(&mut self, cause: DropCause, n: u64) {
+        if n > 0 {
+            let count = self.dropped.entry(cause).or_default();
+            *count = count.saturating_add(n);
+        }
     }
 
     pub fn record_evicted(&mut self, n: usize) {
@@ -80,14 +89,14 @@ impl StatsRecorder {
     }
 
     pub fn dropped_total(&self) -> u64 {
-        self.dropped.values().sum()
+        self.dropped.values().fold(0, |a, &n| a.saturating_add(n))
     }
 
     pub fn snapshot(&self, stored: usize, held: usize, subscribers: usize) -> TrajectoryStats {
         let rate_hz = match (self.recent_adds.front(), self.recent_adds.back()) {
             (Some(first), Some(last)) if last > first => {
                 (self.recent_adds.len() - 1) as f64 * TIMEUNITS_PER_SECOND as f64
-                    / (last - first) as f64
+                    / (*last as f64 - *first as f64)
             }
             _ => 0.0,
         };
@@ -105,8 +114,7 @@ impl StatsRecorder {
                 .dropped
                 .iter()
                 .filter(|(c, _)| matches!(c, DropCause::Violation(_)))
-                .map(|(_, n)| n)
-                .sum(),
+                .fold(0, |a, (_, &n)| a.saturating_add(n)),
             evicted: self.evicted,
             stored,
             held,

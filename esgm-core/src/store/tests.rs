@@ -621,3 +621,41 @@ fn adopting_moves_held_samples_under_the_new_policy() {
     assert_eq!(vts(&sub.drain()), vec![1_000]);
     assert_eq!(old.store.stats().held, 0);
 }
+
+/// A tap that cannot pass an entry on (a mirror whose publish failed) makes the store
+/// count it, so the failure shows in the trajectory's stats; the entry is still stored
+/// here.
+#[test]
+fn entries_a_tap_could_not_pass_on_are_counted_unpublished() {
+    struct FailingTap(u64);
+    impl StoreTap for FailingTap {
+        fn observe(&mut self, _: &StoreEvent) {}
+        fn entering(&mut self, _: &Sample) -> Option<Arc<EntityStructure>> {
+            self.0 += 1;
+            None
+        }
+        fn take_unpublished(&mut self) -> u64 {
+            std::mem::take(&mut self.0)
+        }
+    }
+    let mut f = store(FluentStreamPolicy::default());
+    let _ = f.store.set_tap(Box::new(FailingTap(0)));
+    for vt in 1..=3 {
+        f.store.add(reading(vt, 1.0)).unwrap();
+    }
+    let stats = f.store.stats();
+    assert_eq!((stats.added, stats.dropped_for(DropCause::Unpublished)), (3, 3));
+    assert_eq!(stored_vts(&f.store), [1, 2, 3]);
+}
+
+/// Loss counts come from another process's sequence numbers: a hostile gap saturates
+/// the count, at once, instead of overflowing it or counting one by one.
+#[test]
+fn hostile_loss_counts_saturate_at_once() {
+    let mut f = store(FluentStreamPolicy::default());
+    f.store.replicate_loss(u64::MAX);
+    f.store.replicate_loss(u64::MAX);
+    let stats = f.store.stats();
+    assert_eq!(stats.dropped_for(DropCause::Lost), u64::MAX);
+    assert_eq!(stats.dropped_total, u64::MAX);
+}

@@ -60,6 +60,11 @@ pub enum DropCause {
     /// In a replica: bytes that arrived on the trajectory's service were not a valid
     /// sample of it, and were dropped unread (see [`Rejection`]).
     Rejected(Rejection),
+    /// In a writer mirrored to other processes: admitted and stored here, but it could
+    /// not be published to them (no shared-memory loan, encoding or sending failed).
+    /// Its sequence number was used anyway, so each reader also counts it as
+    /// [`DropCause::Lost`].
+    Unpublished,
 }
 
 /// Why a replica dropped bytes that arrived on its trajectory's service: hostile or
@@ -107,6 +112,7 @@ impl fmt::Display for DropCause {
             DropCause::Reset => f.write_str("reset"),
             DropCause::Lost => f.write_str("lost"),
             DropCause::Rejected(r) => r.fmt(f),
+            DropCause::Unpublished => f.write_str("unpublished"),
         }
     }
 }

@@ -166,7 +166,9 @@ fn export_generation(site: &ExportSite, options: &ExportOptions) -> anyhow::Resu
     site.stats.with("export", &site.domain, name, |c| c.error = None);
     tracing::info!(key = %key, generation = record.generation, "exporting");
 
-    let interval = options.max_rate.filter(|r| *r > 0.0).map(|r| Duration::from_secs_f64(1.0 / r));
+    // A rate whose period cannot be a duration was refused when parsed; one reaching
+    // here anyway (a library caller) means no limit rather than a panic.
+    let interval = options.max_rate.and_then(|r| esgm_core::time::period_from_rate(r).ok());
     let mut flow = Flow {
         check: WriterCheck::new(record.port.map(|p| p.publisher)),
         throttled: options.latest_only || interval.is_some(),
@@ -286,7 +288,7 @@ impl Flow {
                 // are, with a rate limit, not sent by choice too; without one the
                 // importer counts them from the sequence numbers.
                 if self.throttled {
-                    self.skipped += lost;
+                    self.skipped = self.skipped.saturating_add(lost);
                 }
                 self.queue_message(item);
             }

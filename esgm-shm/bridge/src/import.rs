@@ -335,7 +335,8 @@ fn apply(
         stats.with("import", domain, name, |c| {
             c.messages += 1;
             if let Some((cause, n)) = lost {
-                *c.lost.entry(cause).or_default() += n;
+                let count = c.lost.entry(cause).or_default();
+                *count = count.saturating_add(n);
             }
         });
         return;
@@ -343,9 +344,11 @@ fn apply(
     let outcome = imported.handle.add(es);
     stats.with("import", domain, name, |c| {
         c.messages += 1;
-        c.skipped += skipped;
+        // Gaps come from the network: two hostile messages must not overflow the sums.
+        c.skipped = c.skipped.saturating_add(skipped);
         if let Some((cause, n)) = lost {
-            *c.lost.entry(cause).or_default() += n;
+            let count = c.lost.entry(cause).or_default();
+            *count = count.saturating_add(n);
         }
         match outcome {
             Ok(AddOutcome::Added | AddOutcome::Held { .. } | AddOutcome::Forwarded) => c.added += 1,

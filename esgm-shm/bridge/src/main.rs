@@ -95,7 +95,8 @@ fn export_options(a: &RunArgs, name: &str) -> anyhow::Result<ExportOptions> {
             .with_context(|| format!("--max-rate `{spec}`: expected TRAJECTORY=HZ"))?;
         if n == name {
             let hz: f64 = hz.parse().with_context(|| format!("--max-rate `{spec}`: HZ"))?;
-            anyhow::ensure!(hz > 0.0, "--max-rate `{spec}`: the rate must be positive");
+            esgm_core::time::period_from_rate(hz)
+                .with_context(|| format!("--max-rate `{spec}`: the rate"))?;
             max_rate = Some(hz);
         }
     }

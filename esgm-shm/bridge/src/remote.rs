@@ -128,7 +128,7 @@ fn line(trajectory: &str, add_time: i64, es: &EntityStructure, as_json: bool) ->
             es.valid_time,
             es.name,
             attrs.join(" "),
-            (add_time - es.valid_time) as f64 / 1e6
+            (add_time as f64 - es.valid_time as f64) / 1e6
         )
     }
 }

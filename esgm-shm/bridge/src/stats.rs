@@ -54,7 +54,7 @@ pub struct TrajectoryCounters {
 impl TrajectoryCounters {
     /// Sum of `lost`.
     pub fn lost_total(&self) -> u64 {
-        self.lost.values().sum()
+        self.lost.values().fold(0, |a, &n| a.saturating_add(n))
     }
 }
 

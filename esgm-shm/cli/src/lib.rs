@@ -12,4 +12,5 @@
 pub mod config;
 pub mod external;
 pub mod policy_args;
+pub mod span_arg;
 pub mod time_arg;

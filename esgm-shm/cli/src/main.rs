@@ -13,7 +13,7 @@ mod session;
 mod show;
 
 // The library's modules keep their paths in the binary (`crate::config`).
-use esgm_cli::{config, external, time_arg};
+use esgm_cli::{config, external, span_arg, time_arg};
 
 use std::process::ExitCode;
 
@@ -201,6 +201,27 @@ mod tests {
     use std::path::Path;
 
     use super::*;
+
+    /// A duration or rate that would panic once the system runs is refused by the parser,
+    /// before anything starts (`esgm demo --seconds inf` started a whole system, then
+    /// panicked and left it running).
+    #[test]
+    fn unusable_seconds_and_rates_are_refused_before_anything_starts() {
+        use clap::Parser;
+
+        for args in [
+            &["esgm", "demo", "--seconds", "inf"][..],
+            &["esgm", "echo", "x", "--seconds", "NaN"],
+            &["esgm", "violations", "x", "--seconds=-1"],
+            &["esgm", "top", "--interval", "1e300"],
+            &["esgm", "hz", "x", "--window", "inf"],
+            &["esgm", "replay", "f.mcap", "--rate", "0"],
+        ] {
+            let e = Cli::try_parse_from(args).err().unwrap_or_else(|| panic!("{args:?} parsed"));
+            assert_eq!(e.kind(), clap::error::ErrorKind::ValueValidation, "{args:?}: {e}");
+        }
+        assert!(Cli::try_parse_from(["esgm", "demo", "--seconds", "2.5"]).is_ok());
+    }
 
     /// What a plan starts is what `esgm worker` (the publishers' own arguments) takes.
     #[test]

@@ -15,11 +15,13 @@
 //! checks and counts every process's adds.
 
 use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use esgm_core::esgm::TrajectoryKind;
 use esgm_core::value::Value;
 use esgm_core::{
-    EntityStructure, EntityTrajectoryStructure, InProcessTrajectory, Sample, StoreEvent, TapId,
+    EntityStructure, EntityTrajectoryStructure, InProcessTrajectory, Rejection, Sample, StoreEvent,
+    TapId,
 };
 
 use parking_lot::Mutex;
@@ -82,6 +84,8 @@ pub(crate) struct Outlet {
     own: Option<(TrajectorySubscriber, HoldingOwner)>,
     /// Events that could not be published (the first is logged, all are counted).
     failures: u64,
+    /// Entries not published since the store last asked ([`esgm_core::StoreTap`]).
+    unpublished: u64,
 }
 
 impl Outlet {
@@ -131,7 +135,7 @@ impl Outlet {
         let published = match sent {
             Ok(p) => p,
             Err(e) => {
-                self.failed(&e);
+                self.entry_failed(&e);
                 return None;
             }
         };
@@ -196,9 +200,22 @@ impl Outlet {
 
     fn failed(&mut self, e: &dyn std::fmt::Display) {
         self.failures += 1;
-        if self.failures == 1 {
+        if is_power_of_ten(self.failures) {
             tracing::warn!(trajectory = %self.publisher.trajectory(), error = %e,
-                "cannot publish to other processes (later failures are only counted)");
+                failures = self.failures,
+                "cannot publish to other processes (the log says the 1st, 10th, 100th… only)");
+        }
+    }
+
+    /// A structure this process admitted did not reach the other processes. Unless
+    /// some got it ([`PublishError::NotDelivered`]: the others count it lost), its
+    /// number is forgone, so readers see the gap, and the writer counts it
+    /// ([`esgm_core::DropCause::Unpublished`], taken by the store after the entry).
+    fn entry_failed(&mut self, e: &PublishError) {
+        self.failed(e);
+        if !matches!(e, PublishError::NotDelivered { .. }) {
+            self.publisher.forgo();
+            self.unpublished += 1;
         }
     }
 
@@ -220,7 +237,10 @@ impl Outlet {
     fn publish(&mut self, event: &StoreEvent) {
         let result = match event {
             StoreEvent::Entered(s) => {
-                self.publisher.publish_added(&s.structure, s.add_time).map(|_| ())
+                if let Err(e) = self.publisher.publish_added(&s.structure, s.add_time) {
+                    self.entry_failed(&e);
+                }
+                return;
             }
             StoreEvent::Violation(v) => self.violation_publisher().and_then(|p| p.publish(v)),
             StoreEvent::Reset => self.publisher.publish_reset().map(|_| ()),
@@ -323,6 +343,7 @@ impl Export {
                 type_name: type_name.to_owned(),
                 readers,
                 ports: Mutex::new(None),
+                rejected: AtomicU64::new(0),
             }),
             false => None,
         };
@@ -344,6 +365,7 @@ impl Export {
             violation_site,
             own,
             failures: 0,
+            unpublished: 0,
         }));
         let owner = Arc::as_ptr(&outlet) as *const () as usize;
         // Content and tap under one lock: nothing falls between the two, and the
@@ -444,32 +466,41 @@ impl Export {
                 }
             }
         }
-        let Some((inbox, blocking)) = ports.as_ref() else { return 0 };
+        let Some((port, blocking)) = ports.as_ref() else { return 0 };
         let mut n = blocking.serve(&self.handle);
         loop {
-            match inbox.receive() {
+            match port.receive() {
                 Ok(Some(sample)) => {
                     n += 1;
                     match sample.to_owned() {
                         Ok(es) => {
+                            // The gate counts (and publishes) what it refuses.
                             if let Err(e) = self.handle.add(es) {
                                 tracing::debug!(trajectory = %self.handle.name(), error = %e,
                                     "add from another process refused");
                             }
                         }
-                        Err(e) => tracing::warn!(trajectory = %self.handle.name(), error = %e,
-                            "malformed add from another process"),
+                        Err(e) => inbox.reject(&self.handle, Rejection::Malformed, &e),
                     }
                 }
                 Ok(None) => break,
-                Err(e) => {
-                    n += 1;
-                    tracing::warn!(trajectory = %self.handle.name(), error = %e,
-                        "add from another process refused");
-                    if matches!(e, ReceiveError::Connection(_) | ReceiveError::TooManyHeld) {
+                Err(e) => match e.rejection() {
+                    Some(why) => {
+                        n += 1;
+                        inbox.reject(&self.handle, why, &e);
+                    }
+                    // Adders never send resets: a marker in the inbox is a kind of sample
+                    // it does not take.
+                    None if matches!(e, ReceiveError::Reset { .. }) => {
+                        n += 1;
+                        inbox.reject(&self.handle, Rejection::UnknownKind, &e);
+                    }
+                    None => {
+                        tracing::debug!(trajectory = %self.handle.name(), error = %e,
+                            "cannot receive from the inbox now");
                         break;
                     }
-                }
+                },
             }
         }
         n
@@ -489,9 +520,26 @@ struct Inbox {
     /// The subscriber of adds and the server of blocking adds, opened at the first
     /// ring.
     ports: Mutex<Option<(TrajectorySubscriber, AddServer)>>,
+    /// Adds from other processes that were not samples of the trajectory.
+    rejected: AtomicU64,
 }
 
 impl Inbox {
+    /// Counts bytes another process put in the inbox that are not a sample of the
+    /// trajectory, in its stats ([`esgm_core::DropCause::Rejected`]), as a replica counts
+    /// what its writer sent. The log says the 1st, 10th, 100th… only: a hostile local
+    /// process can fill the stats, not the log.
+    fn reject(&self, handle: &InProcessTrajectory, why: Rejection, detail: &dyn std::fmt::Display) {
+        let n = self.rejected.fetch_add(1, Ordering::Relaxed) + 1;
+        if is_power_of_ten(n) {
+            tracing::warn!(trajectory = %handle.name(), cause = %why, error = %detail, rejected = n,
+                "an add from another process is not a sample of the trajectory (counted in its \
+                 stats; the log says the 1st, 10th, 100th… only)");
+        }
+        // A trajectory destroyed meanwhile counts nothing.
+        let _destroyed = handle.with_store(|s| s.replicate_rejection(why));
+    }
+
     fn open(&self, trajectory: &str) -> Result<(TrajectorySubscriber, AddServer), ExportError> {
         self.node.with(|node| {
             let inbox = TrajectorySubscriber::builder(trajectory, &self.type_name)
@@ -521,6 +569,10 @@ impl esgm_core::StoreTap for OutletTap {
     fn entering(&mut self, sample: &Sample) -> Option<Arc<EntityStructure>> {
         self.outlet.lock().enter(sample, self.owner)
     }
+
+    fn take_unpublished(&mut self) -> u64 {
+        std::mem::take(&mut self.outlet.lock().unpublished)
+    }
 }
 
 /// True if the trajectory's type has octet sequences (images).
@@ -528,4 +580,24 @@ fn has_octets(handle: &InProcessTrajectory) -> bool {
     handle
         .entity_type()
         .is_ok_and(|t| t.attributes.iter().any(|a| a.sort == esgm_core::value::ValueSort::OctetSeq))
+}
+
+/// True for 1, 10, 100…: how often a flood of the same failure is logged.
+fn is_power_of_ten(mut n: u64) -> bool {
+    while n >= 10 && n % 10 == 0 {
+        n /= 10;
+    }
+    n == 1
+}
+
+#[cfg(test)]
+mod tests {
+    use super::is_power_of_ten;
+
+    #[test]
+    fn a_flood_is_logged_at_powers_of_ten() {
+        let logged: Vec<u64> = (1..=1000).filter(|&n| is_power_of_ten(n)).collect();
+        assert_eq!(logged, [1, 10, 100, 1000]);
+        assert!(!is_power_of_ten(0));
+    }
 }

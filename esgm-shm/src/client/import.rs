@@ -379,15 +379,8 @@ impl Import {
     }
 
     fn reject(&mut self, e: &ReceiveError) {
-        let why = match e {
-            ReceiveError::Malformed(_) => Some(Rejection::Malformed),
-            ReceiveError::TypeMismatch { .. } => Some(Rejection::WrongType),
-            ReceiveError::UnknownKind { .. } => Some(Rejection::UnknownKind),
-            ReceiveError::Truncated { .. } => Some(Rejection::Truncated),
-            // Not a sample: the port could not receive (logged, retried at the next wake).
-            _ => None,
-        };
-        let Some(why) = why else {
+        // Not a sample: the port could not receive (logged, retried at the next wake).
+        let Some(why) = e.rejection() else {
             tracing::debug!(trajectory = %self.subscriber.trajectory(), error = %e,
                 "cannot receive from the writer now");
             return;

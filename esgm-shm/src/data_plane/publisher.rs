@@ -504,6 +504,13 @@ impl TrajectoryPublisher {
         Ok(Published { sequence, subscribers })
     }
 
+    /// Gives up a structure the writer admitted but could not send (no loan, no
+    /// encoding, a failed send): its sequence number is used anyway, so every reader
+    /// sees the gap and counts the structure as lost, instead of never knowing of it.
+    pub fn forgo(&self) {
+        self.sequence.set(self.sequence.get() + 1);
+    }
+
     fn wake(&self) {
         // A failed wake-up is not a failed publish: the sample is delivered, and a
         // reader's timed wait bounds the delay. Log the first, count all.

@@ -103,6 +103,26 @@ pub enum ReceiveError {
     Wait(#[from] ListenerWaitError),
 }
 
+impl ReceiveError {
+    /// Why the bytes that arrived are not a sample of the trajectory, as a store counts
+    /// it ([`esgm_core::DropCause::Rejected`]); `None` if nothing was received (the port
+    /// could not receive now) or the arrival is a reset marker. One mapping for every
+    /// reader of another process's bytes: a replica's import and a writer's inbox.
+    pub fn rejection(&self) -> Option<esgm_core::Rejection> {
+        use esgm_core::Rejection;
+        match self {
+            ReceiveError::Malformed(_) => Some(Rejection::Malformed),
+            ReceiveError::TypeMismatch { .. } => Some(Rejection::WrongType),
+            ReceiveError::UnknownKind { .. } => Some(Rejection::UnknownKind),
+            ReceiveError::Truncated { .. } => Some(Rejection::Truncated),
+            ReceiveError::TooManyHeld
+            | ReceiveError::Connection(_)
+            | ReceiveError::Reset { .. }
+            | ReceiveError::Wait(_) => None,
+        }
+    }
+}
+
 /// What a subscriber has seen so far.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct SubscriberStats {

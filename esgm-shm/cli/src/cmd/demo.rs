@@ -26,7 +26,7 @@ use crate::show::ms;
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// How long the robot drives.
-    #[arg(long, default_value_t = 6.0)]
+    #[arg(long, default_value_t = 6.0, value_parser = crate::span_arg::seconds)]
     pub seconds: f64,
     /// Scene seed.
     #[arg(long, default_value_t = 0)]

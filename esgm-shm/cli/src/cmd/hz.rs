@@ -14,7 +14,7 @@ pub struct Args {
     /// Trajectory name.
     pub trajectory: String,
     /// Seconds per report.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = crate::span_arg::seconds)]
     pub window: f64,
     /// Stop after this many reports.
     #[arg(long)]

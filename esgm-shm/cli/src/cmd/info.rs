@@ -49,7 +49,7 @@ pub fn run(json: bool, a: &Args) -> anyhow::Result<()> {
         "trajectory", "kind", "type", "count", "rate Hz", "MiB", "lost", "violations"
     );
     for t in &info.trajectories {
-        let lost: u64 = t.losses.values().sum();
+        let lost: u64 = t.losses.values().fold(0, |a, &n| a.saturating_add(n));
         println!(
             "{:<22} {:<10} {:<18} {:>8} {:>9.2} {:>10.2} {:>7} {:>10}",
             t.name,

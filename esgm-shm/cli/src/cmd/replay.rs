@@ -25,7 +25,7 @@ pub struct Args {
     /// The recording (`.mcap`).
     pub file: PathBuf,
     /// Speed factor against the recorded pace (2 = twice as fast).
-    #[arg(long, default_value_t = 1.0, conflicts_with = "max")]
+    #[arg(long, default_value_t = 1.0, conflicts_with = "max", value_parser = crate::span_arg::rate)]
     pub rate: f64,
     /// As fast as the domain takes it.
     #[arg(long)]

@@ -57,13 +57,13 @@ pub struct Args {
     pub readers: Option<usize>,
     /// Seconds the domain has to settle once every process is set up, before the
     /// idle measurement (a robot's domain settles within 10 s).
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, value_parser = crate::span_arg::seconds)]
     pub settle_seconds: f64,
     /// Seconds of idle measurement, once the domain settled.
-    #[arg(long, default_value_t = 60.0)]
+    #[arg(long, default_value_t = 60.0, value_parser = crate::span_arg::seconds)]
     pub idle_seconds: f64,
     /// Seconds of writing at the profile's rates.
-    #[arg(long, default_value_t = 20.0)]
+    #[arg(long, default_value_t = 20.0, value_parser = crate::span_arg::seconds)]
     pub seconds: f64,
     /// Directory for `scale.json`, `scale.png` and the workers' logs (created).
     #[arg(long, value_name = "DIR", default_value = ".")]

@@ -55,26 +55,26 @@ use verdict::Verdict;
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// How long to run, in minutes [default: 10].
-    #[arg(long, conflicts_with = "seconds")]
+    #[arg(long, conflicts_with = "seconds", value_parser = crate::span_arg::minutes)]
     pub minutes: Option<f64>,
     /// How long to run, in seconds (for short runs).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::span_arg::seconds)]
     pub seconds: Option<f64>,
     /// Directory for `soak.json`, `soak.png` and the processes' logs (created).
     #[arg(long, value_name = "DIR", default_value = ".")]
     pub out: PathBuf,
     /// Camera images per second.
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(long, default_value_t = 30.0, value_parser = crate::span_arg::rate)]
     pub camera_hz: f64,
     /// robot_state samples per second.
-    #[arg(long, default_value_t = 1000.0)]
+    #[arg(long, default_value_t = 1000.0, value_parser = crate::span_arg::rate)]
     pub robot_hz: f64,
     /// What the trajectories the file lets keep every sample keep during the soak: a
     /// duration of valid time (`10s`), a count (`1000`), or `all` for the file's policy.
     #[arg(long, default_value = "10s")]
     pub cache: String,
     /// Seconds before the baseline memory is taken (at most half the run).
-    #[arg(long, default_value_t = 60.0)]
+    #[arg(long, default_value_t = 60.0, value_parser = crate::span_arg::seconds)]
     pub warmup: f64,
     /// Most memory growth after the warm-up that passes, in percent.
     #[arg(long, default_value_t = 1.0)]

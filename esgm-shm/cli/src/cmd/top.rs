@@ -21,7 +21,7 @@ pub struct Args {
     #[arg(long)]
     pub once: bool,
     /// Seconds between refreshes.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 1.0, value_parser = crate::span_arg::seconds)]
     pub interval: f64,
     /// Plain output only: stop after this many refreshes.
     #[arg(long)]

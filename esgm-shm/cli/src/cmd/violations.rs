@@ -16,7 +16,7 @@ pub struct Args {
     #[arg(long)]
     pub count: Option<usize>,
     /// Stop after this many seconds.
-    #[arg(long)]
+    #[arg(long, value_parser = crate::span_arg::seconds)]
     pub seconds: Option<f64>,
 }
 

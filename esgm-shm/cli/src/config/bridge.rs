@@ -86,11 +86,14 @@ pub fn bridge_worker(b: &BridgeDecl, program: &Path, base: &Path) -> anyhow::Res
         }
     }
     for limit in &b.max_rate {
-        let ok = limit
-            .split_once('=')
-            .is_some_and(|(t, hz)| !t.is_empty() && hz.parse::<f64>().is_ok_and(|r| r > 0.0));
-        if !ok {
+        let Some((t, hz)) = limit.split_once('=').filter(|(t, _)| !t.is_empty()) else {
             bail!("max_rate `{limit}`: expected <trajectory>=<Hz>, e.g. images=5");
+        };
+        let Ok(hz) = hz.trim().parse::<f64>() else {
+            bail!("max_rate `{limit}`: expected <trajectory>=<Hz>, e.g. images=5");
+        };
+        if let Err(e) = esgm_core::time::period_from_rate(hz) {
+            bail!("max_rate `{limit}` of `{t}`: {e}");
         }
     }
     let mut args: Vec<String> = Vec::new();
@@ -177,6 +180,8 @@ mod tests {
             (BridgeDecl { listen: vec!["7447".into()], ..decl() }, "<protocol>/<address>"),
             (BridgeDecl { import: vec!["plan".into()], ..decl() }, "<domain>/<trajectory>"),
             (BridgeDecl { max_rate: vec!["images=fast".into()], ..decl() }, "<trajectory>=<Hz>"),
+            (BridgeDecl { max_rate: vec!["images=1e-20".into()], ..decl() }, "100 years"),
+            (BridgeDecl { max_rate: vec!["images=inf".into()], ..decl() }, "finite"),
             (BridgeDecl { config: Some("nope.json5".into()), ..decl() }, "not found"),
         ];
         for (d, needle) in cases {

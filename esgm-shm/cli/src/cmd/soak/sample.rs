@@ -116,7 +116,10 @@ impl Counts {
 pub fn explained(cause: DropCause) -> bool {
     match cause {
         DropCause::Violation(_) | DropCause::Lost => true,
-        DropCause::InvalidType | DropCause::Reset | DropCause::Rejected(_) => false,
+        DropCause::InvalidType
+        | DropCause::Reset
+        | DropCause::Rejected(_)
+        | DropCause::Unpublished => false,
     }
 }
 
