@@ -104,3 +104,61 @@ fn a_second_coordinator_for_the_same_domain_is_refused() {
     let second = Coordinator::create(&domain, Registry::default());
     assert!(second.is_err());
 }
+
+/// A change the coordinator cannot save is undone and refused, never acknowledged and
+/// then lost in a crash; the failure is counted and shown in the answer to a ping
+/// (`esgm ps`), and the next change that can be saved is saved (issue 24).
+#[test]
+fn a_change_that_cannot_be_saved_is_undone_refused_and_counted() {
+    let domain = unique_domain("control_unsaved");
+    let dir = tempfile::tempdir().unwrap();
+    let state = esgm_shm::control::StateDir::at(dir.path());
+    let (_coordinator, _) = Coordinator::spawn_recovering(
+        &domain,
+        TypeRegistry::with_library(),
+        state.clone(),
+        esgm_shm::capacity::DomainLimits::default(),
+    )
+    .unwrap();
+    let client = ControlClient::connect(&domain, DEADLINE).unwrap();
+    let create = |name: &str| Request::CreateEntityStructureType {
+        type_name: name.into(),
+        entity_type: EntityStructureType::new(name).attr("x", ValueSort::Double),
+    };
+    let get = |name: &str| Request::GetEntityStructureType { type_name: name.into() };
+    let saves = |client: &ControlClient| match client.call(&Request::Ping).unwrap() {
+        Response::Pong { saves, .. } => saves,
+        other => panic!("{other:?}"),
+    };
+    client.call(&create("Saved")).unwrap();
+
+    // Writing the registry's temporary file fails, for root too: it is a directory.
+    let blocker = dir.path().join("registry.json.tmp");
+    std::fs::create_dir(&blocker).unwrap();
+    match client.call(&create("Unsaved")) {
+        Err(ControlClientError::Remote(ControlError::NotSaved { reason })) => {
+            assert!(reason.contains("registry.json.tmp"), "{reason}");
+        }
+        other => panic!("an unsaved change must be refused: {other:?}"),
+    }
+    assert!(
+        matches!(
+            client.call(&get("Unsaved")),
+            Err(ControlClientError::Remote(ControlError::Type(_)))
+        ),
+        "the refused change was undone"
+    );
+    assert!(matches!(client.call(&get("Saved")).unwrap(), Response::Type(_)));
+    let health = saves(&client);
+    assert_eq!(health.failures, 1);
+    assert!(health.failing.is_some());
+
+    std::fs::remove_dir(&blocker).unwrap();
+    client.call(&create("Later")).unwrap();
+    let health = saves(&client);
+    assert_eq!((health.failures, health.failing), (1, None));
+    let on_disk = state.load().unwrap().expect("a saved registry");
+    let names: Vec<&str> = on_disk.types.iter().map(|(n, _)| n.as_str()).collect();
+    assert!(names.contains(&"Saved") && names.contains(&"Later"), "{names:?}");
+    assert!(!names.contains(&"Unsaved"), "{names:?}");
+}

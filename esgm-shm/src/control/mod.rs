@@ -15,6 +15,7 @@
 pub mod attach;
 pub mod client;
 pub mod limits;
+pub mod persistence;
 pub mod processes;
 pub mod protocol;
 pub mod registry;
@@ -22,6 +23,7 @@ pub mod server;
 pub mod state;
 
 pub use client::{ControlClient, ControlClientError};
+pub use persistence::SaveHealth;
 pub use processes::{ProcessError, ProcessRecord, ProcessSpec, ProcessStatus};
 pub use protocol::{Assignment, ControlError, Request, Response, TrajectoryRecord, WriterPort};
 pub use registry::{Origin, Registry};

@@ -248,6 +248,9 @@ pub enum Response {
         /// again (its audit and its assignments).
         #[serde(default)]
         registry: u64,
+        /// How the coordinator's saves of the registry went.
+        #[serde(default)]
+        saves: super::persistence::SaveHealth,
     },
     /// A type.
     Type(EntityStructureType),
@@ -335,6 +338,14 @@ pub enum ControlError {
     #[error("not allowed: {reason}")]
     NotAllowed {
         /// Why.
+        reason: String,
+    },
+    /// The coordinator could not save the registry to its state directory, so it undid
+    /// the change rather than lose it in a crash: nothing was changed. Free the disk or
+    /// fix the directory's permissions, then retry (`esgm ps` shows the failures).
+    #[error("the change was not made: the coordinator cannot save its registry ({reason})")]
+    NotSaved {
+        /// Why the save failed.
         reason: String,
     },
 }

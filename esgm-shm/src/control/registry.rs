@@ -105,6 +105,20 @@ impl Registry {
         }
     }
 
+    /// Returns to `saved` (what was last saved, restored on `types`): what a change
+    /// that could not be saved undoes. The holdings reports and limits stay; the next
+    /// generation is never lowered (a generation is never given twice) and the version
+    /// is bumped, so every process looks again.
+    pub fn roll_back(&mut self, types: TypeRegistry, saved: Snapshot) -> Result<(), ControlError> {
+        let mut restored = Self::restore(types, saved)?;
+        restored.next_generation = restored.next_generation.max(self.next_generation);
+        restored.holdings = std::mem::take(&mut self.holdings);
+        restored.limits = self.limits;
+        restored.version = self.version + 1;
+        *self = restored;
+        Ok(())
+    }
+
     /// The registry's version, bumped by every change.
     pub fn version(&self) -> u64 {
         self.version
@@ -280,6 +294,8 @@ impl Registry {
                 version: env!("CARGO_PKG_VERSION").to_owned(),
                 pid: std::process::id(),
                 registry: self.version,
+                // The coordinator, which saves, fills it in.
+                saves: super::persistence::SaveHealth::default(),
             },
             Request::CreateEntityStructureType { type_name, entity_type } => {
                 self.catalog.types_mut().create_entity_structure_type(type_name, entity_type)?;

@@ -19,6 +19,7 @@ use iceoryx2::service::port_factory::request_response::PortFactory;
 use iceoryx2::service::port_factory::server::ServerCreateError;
 
 use super::limits::MAX_REQUEST_BYTES;
+use super::persistence::Persistence;
 use super::protocol::{ControlError, Request, Response, decode, encode};
 use super::registry::{Origin, Registry, changes_registry};
 use super::state::{StateDir, StateError};
@@ -208,7 +209,7 @@ pub struct Coordinator {
     /// A supervised process changed: clean up after dead processes now.
     cleanup_soon: bool,
     /// Where the registry is kept after each change (`None`: in memory only).
-    state: Option<StateDir>,
+    state: Option<Persistence>,
     /// The domain's coordinator lock, held while serving.
     _lock: Option<std::fs::File>,
     /// The domain's administration services, made here with the domain's limits (and
@@ -268,26 +269,29 @@ impl Coordinator {
         let failed = |source| CoordinatorError::State { domain: domain.to_owned(), source };
         let lock = state.lock().map_err(failed)?;
         let registry = match state.load().map_err(failed)? {
-            Some(snapshot) => {
-                Registry::restore(types, snapshot).map_err(|source| CoordinatorError::Restore {
+            Some(snapshot) => Registry::restore(types.clone(), snapshot).map_err(|source| {
+                CoordinatorError::Restore {
                     domain: domain.to_owned(),
                     path: state.registry_file(),
                     source: Box::new(source),
-                })?
-            }
-            None => Registry::new(types),
+                }
+            })?,
+            None => Registry::new(types.clone()),
         }
         .with_limits(limits);
         let recovered = registry.catalog().trajectories().count();
-        let coordinator = Self::serve_registry(domain, registry, Some(state), Some(lock))?;
-        coordinator.save_state();
+        let persistence = Persistence::new(state, types, &registry);
+        let mut coordinator =
+            Self::serve_registry(domain, registry, Some(persistence), Some(lock))?;
+        // What was restored is what is on disk: a failure here undoes nothing.
+        let _counted_and_logged = coordinator.save_state();
         Ok((coordinator, recovered))
     }
 
     fn serve_registry(
         domain: &str,
         registry: Registry,
-        state: Option<StateDir>,
+        state: Option<Persistence>,
         lock: Option<std::fs::File>,
     ) -> Result<Self, CoordinatorError> {
         let name = control_service(domain)?;
@@ -379,14 +383,12 @@ impl Coordinator {
         })
     }
 
-    /// Writes the registry to the state directory, if it has one. A failure is logged
-    /// and counted: the coordinator keeps serving, but a crash would lose the change.
-    fn save_state(&self) {
-        let Some(state) = &self.state else { return };
-        if let Err(e) = state.save(&self.registry.snapshot()) {
-            tracing::error!(domain = %self.domain, error = %e,
-                "cannot save the registry; a coordinator crash now would lose changes");
-        }
+    /// Writes the registry to the state directory, if it has one. On failure the
+    /// registry is back to what was last saved, and the error is what each change
+    /// since is answered with ([`Persistence`]).
+    fn save_state(&mut self) -> Result<(), ControlError> {
+        let Some(state) = &mut self.state else { return Ok(()) };
+        state.save(&mut self.registry)
     }
 
     /// Who sent `active`: the pid of the node its client port belongs to, as iceoryx2
@@ -458,15 +460,22 @@ impl Coordinator {
                 };
                 let (response, changes) = self.handle(&active);
                 changed |= changes;
-                batch.push((active, response));
+                batch.push((active, response, changes));
             }
             if batch.is_empty() {
                 return Ok(n);
             }
             if changed {
-                self.save_state();
+                if let Err(refusal) = self.save_state() {
+                    // Undone: no change of the batch stands, and each is told so.
+                    for (_, response, changes) in &mut batch {
+                        if *changes {
+                            *response = Response::Error(refusal.clone());
+                        }
+                    }
+                }
             }
-            for (active, response) in batch {
+            for (active, response, _) in batch {
                 if self.respond(&active, &response) {
                     n += 1;
                 }
@@ -489,7 +498,7 @@ impl Coordinator {
                 // An orderly stop: the next coordinator starts empty, and workers that
                 // find no coordinator and no state leave.
                 if let Some(state) = &self.state {
-                    if let Err(e) = state.remove_registry() {
+                    if let Err(e) = state.dir().remove_registry() {
                         tracing::error!(error = %e, "cannot forget the registry");
                     }
                 }
@@ -508,7 +517,10 @@ impl Coordinator {
                 if matches!(request, Request::ReportProcess { .. }) {
                     self.cleanup_soon = true;
                 }
-                let response = self.registry.handle_from(request, origin);
+                let mut response = self.registry.handle_from(request, origin);
+                if let (Response::Pong { saves, .. }, Some(state)) = (&mut response, &self.state) {
+                    *saves = state.health().clone();
+                }
                 let changed = persist && !matches!(response, Response::Error(_));
                 (response, changed)
             }

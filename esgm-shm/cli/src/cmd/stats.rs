@@ -71,9 +71,10 @@ pub fn run(domain: &str, json: bool) -> anyhow::Result<()> {
             println!("{line}");
         }
     }
-    let processes = super::ps::processes(domain)?;
+    let processes = super::ps::listed(&esgm)?;
     if !processes.is_empty() && !json {
         println!();
     }
-    super::ps::print(&processes, json)
+    super::ps::print(&processes, json)?;
+    super::ps::warn_of_unsaved(&esgm, json)
 }
