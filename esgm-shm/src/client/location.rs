@@ -57,6 +57,7 @@ pub(crate) enum Command {
     /// This process now serves sensors or units: poll for assignments.
     Serving,
     /// Test support: the location thread panics.
+    #[cfg(feature = "test-seams")]
     Panic,
 }
 
@@ -315,6 +316,7 @@ impl Location {
             Command::Destroy(name, reply) => {
                 let _ = reply.send(self.destroy(&name));
             }
+            #[cfg(feature = "test-seams")]
             Command::Panic => {
                 #[allow(clippy::panic, reason = "test support: a panic asked for")]
                 {

@@ -80,6 +80,7 @@ pub(crate) struct SharedMirrors {
     generation: AtomicU64,
     stop: AtomicBool,
     /// Test support: the receiver thread panics at its next wake-up.
+    #[cfg(feature = "test-seams")]
     panic_requested: AtomicBool,
     /// Wakes the receiver thread at once when the set changes (its doorbell service).
     doorbell: OnceLock<Notifier<ShmService>>,
@@ -128,14 +129,22 @@ impl SharedMirrors {
     }
 
     /// Test support: makes the receiver thread panic at its next wake-up.
+    #[cfg(feature = "test-seams")]
     pub fn request_panic(&self) {
         self.panic_requested.store(true, Ordering::Release);
         self.ring();
     }
 
-    /// True once [`SharedMirrors::request_panic`] was called.
-    pub fn panic_requested(&self) -> bool {
-        self.panic_requested.load(Ordering::Acquire)
+    /// Test support: panics (the receiver thread) once [`SharedMirrors::request_panic`]
+    /// was called. Without the `test-seams` feature, nothing.
+    pub fn panic_if_requested(&self) {
+        #[cfg(feature = "test-seams")]
+        if self.panic_requested.load(Ordering::Acquire) {
+            #[allow(clippy::panic, reason = "test support: a panic asked for")]
+            {
+                panic!("esgm-receiver: panic injected by a test");
+            }
+        }
     }
 
     /// True once [`SharedMirrors::stop`] was called.

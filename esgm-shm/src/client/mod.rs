@@ -277,6 +277,7 @@ impl ShmEsgmBuilder {
                 commands,
                 timeout,
                 holdings,
+                #[cfg(feature = "test-seams")]
                 mirrors,
                 thread,
                 admin,
@@ -331,6 +332,8 @@ struct Inner {
     commands: Sender<Command>,
     timeout: Duration,
     holdings: Arc<Holdings>,
+    /// Test support: what asks the receiver thread to panic.
+    #[cfg(feature = "test-seams")]
     mirrors: Arc<SharedMirrors>,
     thread: parking_lot::Mutex<Option<std::thread::JoinHandle<()>>>,
     admin: Arc<Admin>,
@@ -408,7 +411,9 @@ impl ShmEsgm {
 
     /// Test support, not an API: makes this connection's location thread and
     /// receiver thread panic, to check that nothing a value reads depends on them.
+    /// Only with the `test-seams` feature, which esgm-shm's own tests turn on.
     #[doc(hidden)]
+    #[cfg(feature = "test-seams")]
     pub fn inject_thread_panics_for_tests(&self) {
         if self.inner.commands.send(Command::Panic).is_err() {
             tracing::debug!("the location thread has stopped already");

@@ -168,12 +168,7 @@ fn poll(mirrors: &SharedMirrors) {
     while !mirrors.stopped() {
         std::thread::sleep(RECHECK);
         mirrors.lock().pump();
-        if mirrors.panic_requested() {
-            #[allow(clippy::panic, reason = "test support: a panic asked for")]
-            {
-                panic!("esgm-receiver: panic injected by a test");
-            }
-        }
+        mirrors.panic_if_requested();
     }
 }
 
@@ -278,12 +273,7 @@ fn wait_while_unchanged(
             next_sweep = Instant::now() + SWEEP;
         }
         drop(locked);
-        if mirrors.panic_requested() {
-            #[allow(clippy::panic, reason = "test support: a panic asked for")]
-            {
-                panic!("esgm-receiver: panic injected by a test");
-            }
-        }
+        mirrors.panic_if_requested();
     }
     drop(guards);
 }
