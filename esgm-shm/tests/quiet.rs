@@ -62,7 +62,7 @@ fn child(domain: &str) {
     let qos = TrajectoryQos { max_borrowed_samples: 40, ..TrajectoryQos::default() };
     let p = TrajectoryPublisher::builder("images", "Blob")
         .domain(domain)
-        .qos(qos.clone())
+        .qos(qos)
         .create(&node)
         .unwrap();
     let s = TrajectorySubscriber::builder("images", "Blob")

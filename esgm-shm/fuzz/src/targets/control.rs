@@ -22,7 +22,9 @@ use esgm_shm::control::limits::MAX_REQUEST_BYTES;
 use esgm_shm::control::protocol::{decode, encode};
 use esgm_shm::control::registry::changes_registry;
 use esgm_shm::control::state::Snapshot;
-use esgm_shm::control::{ControlError, Origin, ProcessStatus, Registry, Request, Response};
+use esgm_shm::control::{
+    ControlError, Origin, ProcessStatus, Registry, Request, Response, SaveHealth,
+};
 
 use crate::json::mutate_json;
 use crate::mutate::mutate;
@@ -251,7 +253,13 @@ impl Responses {
         let mut registry = new_registry();
         let mut answers: Vec<Response> =
             requests()?.into_iter().map(|r| registry.handle_from(r, Origin::Coordinator)).collect();
-        answers.push(Response::Pong { version: "0.1.0".into(), pid: u32::MAX, registry: u64::MAX });
+        answers.push(Response::Pong {
+            version: "0.1.0".into(),
+            pid: u32::MAX,
+            registry: u64::MAX,
+            saves: SaveHealth { failures: u64::MAX, failing: Some("disk full".into()) },
+        });
+        answers.push(Response::Error(ControlError::NotSaved { reason: "ü".into() }));
         answers.push(Response::Error(ControlError::TooLarge { bytes: usize::MAX, max: 1 }));
         answers.push(Response::Error(ControlError::BadRequest { reason: "ü".into() }));
         let seeds = answers.iter().map(response_bytes).collect::<Result<_, _>>()?;
