@@ -141,7 +141,9 @@ pub use qos::{DEFAULT_MAX_HISTORY, Delivery, TrajectoryQos, history_bound, histo
 pub use received::ReceivedSample;
 pub use sample_check::{SampleVerdict, check_sample};
 pub use service::{Cleanup, OpenError, ShmNode, ShmService, cleanup_dead_nodes, node_config};
-pub use service_name::{NameError, TrajectoryServiceNames, node_name, nodes_of, unique_domain};
+pub use service_name::{
+    NameError, TrajectoryServiceNames, node_name, nodes_of, processes_of, unique_domain,
+};
 pub use structure_loan::StructureLoan;
 pub use subscriber::{ReceiveError, SubscriberStats, TrajectorySubscriber, Validation};
 pub use type_id::type_id;

@@ -3,21 +3,9 @@
 //! command's build. The executable is looked for next to this one first (where cargo
 //! puts both), then on `PATH`.
 
+use std::os::unix::process::CommandExt;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-
-use anyhow::Context;
-
-/// An external subcommand ended with this exit code; `main` exits with it (the
-/// subcommand printed its own error).
-#[derive(Debug, thiserror::Error)]
-#[error("{program} exited with code {code}")]
-pub struct Exited {
-    /// The executable.
-    pub program: &'static str,
-    /// Its exit code.
-    pub code: i32,
-}
 
 fn executable_in(dir: &Path, program: &str) -> Option<PathBuf> {
     let candidate = dir.join(format!("{program}{}", std::env::consts::EXE_SUFFIX));
@@ -42,7 +30,10 @@ pub fn find(program: &str, package: &str) -> anyhow::Result<PathBuf> {
     )
 }
 
-/// Runs `program --domain <domain> args…` in the foreground and passes its exit code on.
+/// Becomes `program --domain <domain> args…` (the process image is replaced, as
+/// `exec` does): the subcommand *is* this process, with its pid, its signals and its
+/// exit code, so a SIGTERM to `esgm view` stops `esgm-view`, and no child is left
+/// mapping the domain when the command is stopped. Returns only if it cannot run.
 pub fn run(
     program: &'static str,
     package: &str,
@@ -50,16 +41,8 @@ pub fn run(
     args: &[String],
 ) -> anyhow::Result<()> {
     let exe = find(program, package)?;
-    let status = Command::new(&exe)
-        .args(["--domain", domain])
-        .args(args)
-        .status()
-        .with_context(|| format!("cannot run {}", exe.display()))?;
-    match status.code() {
-        Some(0) => Ok(()),
-        Some(code) => Err(Exited { program, code }.into()),
-        None => anyhow::bail!("{program} was stopped by a signal ({status})"),
-    }
+    let failed = Command::new(&exe).args(["--domain", domain]).args(args).exec();
+    Err(anyhow::Error::new(failed).context(format!("cannot run {}", exe.display())))
 }
 
 #[cfg(test)]

@@ -164,11 +164,6 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         // `esgm compare` found differences: its report said so, no error line.
         Err(e) if e.is::<cmd::compare::Differ>() => ExitCode::FAILURE,
-        // An external subcommand (`esgm view`): its own exit code (it printed its error).
-        Err(e) if e.is::<external::Exited>() => {
-            let code = e.downcast_ref::<external::Exited>().map_or(1, |x| x.code);
-            ExitCode::from(u8::try_from(code).unwrap_or(1))
-        }
         Err(e) => {
             // One line: the error and its causes, never a backtrace.
             eprintln!("esgm: {}", esgm_shm::process::one_line(e.chain()));

@@ -161,3 +161,88 @@ fn plot_from_a_recording_writes_a_png_and_names_bad_attributes() {
         assert!(!unknown.exists(), "no file is written for a refused plot");
     }
 }
+
+/// Waits until process `pid` has a node in `domain`.
+fn attached(domain: &str, pid: u32) {
+    let deadline = std::time::Instant::now() + common::PATIENCE;
+    while !esgm_shm::processes_of(domain).unwrap().contains_key(&pid) {
+        assert!(std::time::Instant::now() < deadline, "process {pid} never joined `{domain}`");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// Waits for `child` to exit; fails the test if it outlives `limit`.
+fn exits(child: &mut std::process::Child, limit: Duration, what: &str) {
+    let deadline = std::time::Instant::now() + limit;
+    while child.try_wait().unwrap().is_none() {
+        if std::time::Instant::now() > deadline {
+            let _ = child.kill();
+            panic!("{what} still runs after {limit:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// The pids whose parent is `pid`.
+fn children_of(pid: u32) -> Vec<u32> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(child) = entry.file_name().to_string_lossy().parse::<u32>() else { continue };
+        let stat = std::fs::read_to_string(entry.path().join("stat")).unwrap_or_default();
+        // `pid (comm) state ppid …`
+        let ppid = stat.rsplit_once(')').and_then(|(_, rest)| rest.split_whitespace().nth(1));
+        if ppid == Some(pid.to_string().as_str()) {
+            out.push(child);
+        }
+    }
+    out
+}
+
+/// `esgm view` stopped with SIGTERM leaves nothing running: the external subcommand is
+/// the process that got the signal, not a child that outlives it (issue 24: esgm-view
+/// kept running, mapping the domain).
+#[test]
+fn a_stopped_esgm_view_leaves_no_process_behind() {
+    let view = std::path::Path::new(common::ESGM).with_file_name("esgm-view");
+    if !view.is_file() {
+        assert!(std::env::var_os("CI").is_none(), "CI must build esgm-view ({})", view.display());
+        eprintln!("skipped: {} is not built (cargo build -p esgm-view)", view.display());
+        return;
+    }
+    let d = esgm_shm::unique_domain("cli-view-stop");
+    ok(&["--domain", &d, "up", "--detach"]);
+    let _down = Down(d.clone());
+    let mut run = std::process::Command::new(common::ESGM)
+        .args(["--domain", &d, "view", "--port", "0"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    attached(&d, run.id());
+    assert_eq!(children_of(run.id()), Vec::<u32>::new(), "esgm view runs esgm-view as a child");
+    // SAFETY: a signal to the child this test spawned.
+    assert_eq!(unsafe { libc::kill(run.id() as libc::pid_t, libc::SIGTERM) }, 0);
+    exits(&mut run, common::PATIENCE, "esgm view after SIGTERM");
+    assert!(!esgm_shm::processes_of(&d).unwrap().contains_key(&run.id()));
+}
+
+/// `esgm down` stops every process still attached to the domain, tools esgm did not
+/// start included (issue 24: they kept mapping the domain's shared memory).
+#[test]
+fn down_stops_the_processes_still_attached() {
+    let d = esgm_shm::unique_domain("cli-down-attached");
+    ok(&["--domain", &d, "up", "--detach"]);
+    let _down = Down(d.clone());
+    ok(&["--domain", &d, "traj", "create", "robot", "--primitive", "RobotState"]);
+    let mut echo = std::process::Command::new(common::ESGM)
+        .args(["--domain", &d, "echo", "robot"])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    attached(&d, echo.id());
+    let out = ok(&["--domain", &d, "down"]);
+    assert!(out.contains("stopped"), "{out}");
+    exits(&mut echo, Duration::from_secs(10), "esgm echo after esgm down");
+    assert!(esgm_shm::processes_of(&d).unwrap().is_empty());
+}

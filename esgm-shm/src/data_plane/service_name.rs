@@ -195,6 +195,29 @@ pub fn nodes_of(domain: &str) -> Result<Vec<(String, bool)>, iceoryx2::node::Nod
     Ok(out)
 }
 
+/// The live processes attached to `domain`: each pid with the names of its nodes
+/// there, this process included. What `esgm down` stops after the system it started.
+pub fn processes_of(
+    domain: &str,
+) -> Result<std::collections::BTreeMap<u32, Vec<String>>, iceoryx2::node::NodeListFailure> {
+    use iceoryx2::node::{Node, NodeState, NodeView};
+    let prefix = format!("{SERVICE_PREFIX}/{domain}/");
+    let mut out: std::collections::BTreeMap<u32, Vec<String>> = Default::default();
+    Node::<ShmService>::list(iceoryx2::config::Config::global_config(), |state| {
+        if let NodeState::Alive(v) = &state {
+            let name = v.details().as_ref().map(|d| d.name().as_str().to_owned());
+            let pid = v.id().pid::<ShmService>().ok().and_then(|p| u32::try_from(p.value()).ok());
+            if let (Some(name), Some(pid)) = (name, pid) {
+                if name.starts_with(&prefix) {
+                    out.entry(pid).or_default().push(name);
+                }
+            }
+        }
+        iceoryx2::prelude::CallbackProgression::Continue
+    })?;
+    Ok(out)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -66,17 +66,62 @@ pub fn run(domain: &str) -> anyhow::Result<()> {
     finish(domain)
 }
 
-/// Cleans up after dead processes and notes programs esgm did not start.
+/// How long the processes still attached once the system stopped have to leave after
+/// a SIGTERM.
+const LEAVE_WITHIN: Duration = Duration::from_secs(5);
+
+/// Cleans up after dead processes, then stops every process still attached to the
+/// domain (tools such as `esgm echo` or `esgm view`, and programs esgm did not start),
+/// and names those it could not stop: after `esgm down`, nothing maps the domain.
 fn finish(domain: &str) -> anyhow::Result<()> {
     cleanup_dead_nodes().context("cannot list nodes to clean up after dead processes")?;
+    stop_attached(domain)?;
     println!("stopped `{domain}`");
-    // Programs esgm did not start (a user's own) may still hold the domain's services.
-    let nodes = esgm_shm::nodes_of(domain).context("cannot list the domain's nodes")?;
-    let others: Vec<String> = nodes.into_iter().map(|(n, _)| n).collect();
-    if !others.is_empty() {
+    Ok(())
+}
+
+/// SIGTERM to every other process attached to `domain`; an error naming each one that
+/// is still attached after [`LEAVE_WITHIN`] (another user's, say, which this one may
+/// not signal).
+fn stop_attached(domain: &str) -> anyhow::Result<()> {
+    let me = std::process::id();
+    let attached = esgm_shm::processes_of(domain).context("cannot list the domain's nodes")?;
+    let others: Vec<(u32, Vec<String>)> = attached.into_iter().filter(|(p, _)| *p != me).collect();
+    if others.is_empty() {
+        return Ok(());
+    }
+    let mut refused = Vec::new();
+    for (pid, nodes) in &others {
         eprintln!(
-            "esgm: note: processes esgm did not start are still connected to `{domain}`: {}",
-            others.join(", ")
+            "esgm: stopping process {pid}, still attached to `{domain}` ({})",
+            nodes.join(", ")
+        );
+        let Ok(target) = libc::pid_t::try_from(*pid) else { continue };
+        // SAFETY: kill(2) with a pid read from the domain's live nodes; it only sends a
+        // signal.
+        if unsafe { libc::kill(target, libc::SIGTERM) } != 0 {
+            refused.push((*pid, std::io::Error::last_os_error()));
+        }
+    }
+    let deadline = Instant::now() + LEAVE_WITHIN;
+    while others.iter().any(|(pid, _)| alive(*pid)) && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let left: Vec<String> = others
+        .iter()
+        .filter(|(pid, _)| alive(*pid))
+        .map(|(pid, nodes)| {
+            let why = refused
+                .iter()
+                .find(|(p, _)| p == pid)
+                .map_or_else(|| "it ignored SIGTERM".to_owned(), |(_, e)| e.to_string());
+            format!("process {pid} ({}): {why}", nodes.join(", "))
+        })
+        .collect();
+    if !left.is_empty() {
+        bail!(
+            "`{domain}` stopped, but these processes are still attached to it: {}",
+            left.join("; ")
         );
     }
     Ok(())
