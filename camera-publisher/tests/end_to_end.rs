@@ -31,7 +31,10 @@ fn serves_the_scene_to_a_sampled_trajectory_and_leaves_with_the_coordinator() {
     );
     let esgm = ShmEsgm::builder().domain(&domain).connect().unwrap();
     camera.wait_for("the sensor `cam`", || {
-        esgm.sensors().contains(&("cam".to_owned(), Image::TYPE_NAME.to_owned())).then_some(())
+        esgm.sensors()
+            .unwrap()
+            .contains(&("cam".to_owned(), Image::TYPE_NAME.to_owned()))
+            .then_some(())
     });
 
     let images = esgm.create_entity_trajectory_structure("images", "cam", 0, 0, millis(100), 0, 5);

@@ -150,7 +150,7 @@ where
     );
 
     // Chapter 7: the tutorial's types are esgm's predefined library types.
-    let types = esgm.entity_structure_type_names();
+    let types = esgm.entity_structure_type_names()?;
     println!("  types       {}", types.join(", "));
 
     // 8.1: the robot pushes its states into a primitive trajectory. The seed's
@@ -209,7 +209,7 @@ where
     );
     println!("\n  {:<18} {:<10} {:<17} source", "trajectory", "kind", "type");
     for name in PIPELINE {
-        let Some(info) = esgm.trajectories().into_iter().find(|i| i.name == name) else {
+        let Some(info) = esgm.trajectories()?.into_iter().find(|i| i.name == name) else {
             continue;
         };
         let source = match (&info.source, info.inputs.as_slice()) {
@@ -296,7 +296,7 @@ where
         Ok(latest) => latest,
         Err(e) => {
             println!("  get_latest: {e}");
-            print_stats(esgm);
+            print_stats(esgm)?;
             if config.blobs == 0 {
                 println!(
                     "\nas expected: without blobs, BlobSelection has no value, so nothing follows"
@@ -329,7 +329,7 @@ where
         Err(e) => println!("  {label:<52} {e}"),
     }
 
-    print_stats(esgm);
+    print_stats(esgm)?;
 
     check(&scene, t0, &latest, &robot_state, &current_blob)
 }
@@ -338,14 +338,14 @@ where
 const PIPELINE: [&str; 5] = ["robot_state", "images", "blobs", "current_blob", "driving_direction"];
 
 /// The per-trajectory statistics (E7) as a table.
-fn print_stats(esgm: &impl Esgm) {
+fn print_stats(esgm: &impl Esgm) -> anyhow::Result<()> {
     let ms = |t: Option<Time>| {
         t.map_or_else(
             || "-".to_owned(),
             |t| format!("{:.2}", t as f64 / TIMEUNITS_PER_MILLI_SECOND as f64),
         )
     };
-    let stats = esgm.stats();
+    let stats = esgm.stats()?;
     println!(
         "\nstatistics\n  {:<18} {:>6} {:>8} {:>7} {:>11} {:>11} {:>6} {:>9} {:>7}",
         "trajectory",
@@ -377,6 +377,7 @@ fn print_stats(esgm: &impl Esgm) {
             worker(w.failures + w.panics + w.invalid_outputs),
         );
     }
+    Ok(())
 }
 
 /// Compares the last direction with the scene's ground truth: the largest disc in the

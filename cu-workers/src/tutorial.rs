@@ -44,7 +44,7 @@ mod tests {
         let esgm = InProcessEsgm::default();
         register_tutorial_units(&esgm).unwrap();
         let ty = |t: &str| InputType::Type(t.to_owned());
-        let mut units = esgm.comp_units();
+        let mut units = esgm.comp_units().unwrap();
         units.sort_by(|a, b| a.0.cmp(&b.0));
         assert_eq!(
             units,

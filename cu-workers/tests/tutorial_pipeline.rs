@@ -88,7 +88,7 @@ fn create_pipeline<E: Esgm>(esgm: &E, scene: &SyntheticScene) -> Trajectories<E:
 }
 
 fn worker(esgm: &impl Esgm, name: &str) -> WorkerStats {
-    esgm.stats().get(name).map(|r| r.worker).unwrap_or_default()
+    esgm.stats().unwrap().get(name).map(|r| r.worker).unwrap_or_default()
 }
 
 /// Calls a unit has finished (its output, if any, may still be entering the store).

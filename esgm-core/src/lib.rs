@@ -59,7 +59,7 @@ pub use entity::{AttributeField, Entity, FromEntityError};
 pub use entity_view::{ViewError, ViewField, ViewSource, view_field};
 pub use esgm::{
     CompUnit, ComputeError, CreateError, EntityTrajectoryStructure, Esgm, FlushError, InputType,
-    LookupError, RegistrationError, SensorError, SensorInterface, TrajectorySpec,
+    LookupError, RegistrationError, SensorError, SensorInterface, SystemError, TrajectorySpec,
 };
 pub use filter::{Filter, FilterError};
 pub use frame::{AttributeList, AttributeValuePair, EntityFrame, EntityStructure};

@@ -162,3 +162,34 @@ fn a_change_that_cannot_be_saved_is_undone_refused_and_counted() {
     assert!(names.contains(&"Saved") && names.contains(&"Later"), "{names:?}");
     assert!(!names.contains(&"Unsaved"), "{names:?}");
 }
+
+/// The system-wide calls of the `Esgm` interface fail when the coordinator does not
+/// answer, instead of listing this process's own view as if it were the system's
+/// (issue 24: a listing that looks complete and is not).
+#[test]
+fn system_calls_without_a_coordinator_are_errors_not_a_partial_view() {
+    use esgm_core::Esgm;
+    use esgm_core::SystemError;
+
+    let domain = unique_domain("control_gone");
+    let coordinator =
+        Coordinator::spawn(&domain, Registry::new(TypeRegistry::with_library())).unwrap();
+    let esgm = esgm_shm::ShmEsgm::builder()
+        .domain(&domain)
+        .timeout(Duration::from_secs(2))
+        .connect()
+        .unwrap();
+    esgm.create_trajectory(TrajectorySpec::primitive("mine", "RobotState")).unwrap();
+    assert_eq!(esgm.trajectories().unwrap().len(), 1);
+    drop(coordinator);
+
+    // This process still holds `mine`: a fallback would list it and look complete.
+    let unavailable = |r: Result<usize, SystemError>, what: &str| match r {
+        Err(SystemError::Unavailable { operation, .. }) => assert!(operation.contains(what)),
+        other => panic!("{what}: {other:?}"),
+    };
+    unavailable(esgm.trajectories().map(|t| t.len()), "trajectories");
+    unavailable(esgm.sensors().map(|s| s.len()), "sensors");
+    unavailable(esgm.comp_units().map(|u| u.len()), "units");
+    unavailable(esgm.entity_structure_type_names().map(|n| n.len()), "types");
+}

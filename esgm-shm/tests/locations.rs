@@ -152,7 +152,7 @@ fn a_temporal_function_is_sampled_where_its_unit_runs() {
     let drifting = user.create_trajectory(spec).unwrap();
     assert!(wait_for(|| drifting.stats().map(|s| s.stored >= 3).unwrap_or(false)));
     // Written in the unit's process: it holds the trajectory, the others mirror it.
-    let writes = |e: &ShmEsgm| e.local().stats().trajectories.contains_key("drifting");
+    let writes = |e: &ShmEsgm| e.local().stats().unwrap().trajectories.contains_key("drifting");
     assert!(writes(&planner));
     let s = drifting.get_latest().unwrap();
     // Interpolated along x = (t - (now - 1 s)) / 10 ms, then + 1 by the unit.
@@ -197,7 +197,7 @@ fn sampling_runs_where_the_sensor_is_and_units_where_they_are() {
     assert!(wait_for(|| doubled.stats().map(|s| s.stored >= 3).unwrap_or(false)));
     assert!(calls.load(std::sync::atomic::Ordering::Relaxed) >= 3);
     // Written where the data is made: the sensor's and the unit's processes.
-    let writers = |e: &ShmEsgm| e.local().stats().trajectories.len();
+    let writers = |e: &ShmEsgm| e.local().stats().unwrap().trajectories.len();
     assert!(
         writers(&camera) >= 1 && writers(&planner) >= 2,
         "odom at camera, doubled (+ odom replica) at planner"

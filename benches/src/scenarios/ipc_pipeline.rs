@@ -247,8 +247,8 @@ fn drive(
         .context("cannot reach the pipeline's coordinator")?;
     let started = Instant::now();
     loop {
-        let sensors = esgm.sensors();
-        let units = esgm.comp_units();
+        let sensors = esgm.sensors()?;
+        let units = esgm.comp_units()?;
         if sensors.iter().any(|(n, _)| n == "camera")
             && UNITS.iter().all(|u| units.iter().any(|(n, _, _)| n == u))
         {

@@ -119,6 +119,10 @@ impl LoadOptions {
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum LoadError {
+    /// The system could not list what it holds (across processes: the coordinator did
+    /// not answer).
+    #[error(transparent)]
+    System(#[from] esgm_core::SystemError),
     /// The recording cannot be read (the error names the file and the position).
     #[error(transparent)]
     Read(#[from] ReadError),
@@ -359,7 +363,7 @@ where
     }
 
     // 3. Names.
-    let existing: BTreeSet<String> = esgm.trajectories().into_iter().map(|t| t.name).collect();
+    let existing: BTreeSet<String> = esgm.trajectories()?.into_iter().map(|t| t.name).collect();
     for &i in &selected {
         let name = &rec.trajectories[i].info.name;
         if existing.contains(name) && !options.replace {

@@ -39,6 +39,10 @@ const TICK: Duration = Duration::from_millis(100);
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum RecorderError {
+    /// The system could not list its trajectories (across processes: the coordinator
+    /// did not answer).
+    #[error(transparent)]
+    System(#[from] esgm_core::SystemError),
     /// A trajectory to record does not exist.
     #[error("no trajectory `{0}` to record")]
     NoSuchTrajectory(String),
@@ -152,7 +156,7 @@ impl Recorder {
         E: Esgm,
         E::Trajectory: Send + 'static,
     {
-        let infos = esgm.trajectories();
+        let infos = esgm.trajectories()?;
         let mut plan: Vec<Planned<E::Trajectory>> = Vec::new();
         for name in names {
             let info = infos

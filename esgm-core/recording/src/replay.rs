@@ -153,6 +153,10 @@ impl Default for ReplayOptions {
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum ReplayError {
+    /// The system could not list what it holds (across processes: the coordinator did
+    /// not answer).
+    #[error(transparent)]
+    System(#[from] esgm_core::SystemError),
     /// The recording cannot be read.
     #[error(transparent)]
     Read(#[from] ReadError),
@@ -287,7 +291,7 @@ where
     let names: Vec<&str> = published.iter().chain(&recomputed).map(|t| t.name.as_str()).collect();
     check_and_register_types(esgm, rec, &names)?;
     let existing: BTreeMap<String, TrajectoryInfo> =
-        esgm.trajectories().into_iter().map(|t| (t.name.clone(), t)).collect();
+        esgm.trajectories()?.into_iter().map(|t| (t.name.clone(), t)).collect();
     for t in &published {
         if let Some(d) = existing.get(&t.name) {
             if d.type_name != t.type_name {
@@ -343,7 +347,7 @@ where
         handles.insert(t.name.clone(), h);
         report.published.insert(t.name.clone(), PublishCounts::default());
     }
-    let units: Vec<String> = esgm.comp_units().into_iter().map(|u| u.0).collect();
+    let units: Vec<String> = esgm.comp_units()?.into_iter().map(|u| u.0).collect();
     for t in &recomputed {
         if existing.contains_key(&t.name) {
             continue; // the domain computes it already

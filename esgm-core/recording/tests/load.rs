@@ -127,7 +127,7 @@ fn loaded_trajectories_answer_latest_between_at_and_approximating() {
     let images = esgm.get_entity_trajectory_structure("images").expect("loaded");
     assert_eq!(*images.get_at(1_300).expect("at").structure, image(3), "images exact");
     // Loaded as primitive trajectories (a computed one is loaded as what it produced).
-    let kinds: Vec<TrajectoryKind> = esgm.trajectories().iter().map(|t| t.kind).collect();
+    let kinds: Vec<TrajectoryKind> = esgm.trajectories().unwrap().iter().map(|t| t.kind).collect();
     assert_eq!(kinds, [TrajectoryKind::Primitive, TrajectoryKind::Primitive]);
 }
 
@@ -204,7 +204,7 @@ fn a_type_conflict_is_refused_before_anything_is_created() {
         ("RobotState", Some("dir"))
     );
     assert!(e.to_string().contains("RobotState") && e.to_string().contains("dir"), "{e}");
-    assert!(esgm.trajectories().is_empty(), "no trajectory created");
+    assert!(esgm.trajectories().unwrap().is_empty(), "no trajectory created");
     assert!(esgm.get_entity_structure_type("Image").is_err(), "no type registered");
 }
 
@@ -218,7 +218,7 @@ fn an_existing_trajectory_is_refused_by_name_unless_replaced() {
     esgm.create_primitive_entity_trajectory_structure("images", "Image").expect("create");
     let e = load(&esgm, &rec, &LoadOptions::default()).expect_err("exists");
     assert!(matches!(&e, LoadError::TrajectoryExists { name } if name == "images"), "{e}");
-    assert_eq!(esgm.trajectories().len(), 1, "robot_state was not created either");
+    assert_eq!(esgm.trajectories().unwrap().len(), 1, "robot_state was not created either");
     let report = load(&esgm, &rec, &LoadOptions::new().replace(true)).expect("replace");
     assert!(report.trajectories.iter().any(|t| t.name == "images" && t.replaced && t.stored == 3));
     let only = load(&InProcessEsgm::default(), &rec, &LoadOptions::new().only(["robot_state"]))

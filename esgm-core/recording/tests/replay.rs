@@ -123,7 +123,7 @@ fn a_type_that_differs_is_refused_naming_the_attribute_before_anything_is_publis
     .expect_err("a conflicting type");
     assert!(matches!(e, ReplayError::TypeMismatch { .. }), "{e}");
     assert!(e.to_string().contains("Marker") && e.to_string().contains("`x`"), "{e}");
-    assert!(esgm.trajectories().is_empty(), "nothing was created");
+    assert!(esgm.trajectories().unwrap().is_empty(), "nothing was created");
 }
 
 #[test]

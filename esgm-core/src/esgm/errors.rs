@@ -279,3 +279,33 @@ pub enum FlushError {
         reason: String,
     },
 }
+
+/// A system-wide call (E7's listings, statistics, reset and log level) could not reach
+/// what it concerns. Across processes, an answer built from part of the system would
+/// look complete and not be, so none is given: the error says what is missing.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error, serde::Serialize, serde::Deserialize)]
+#[non_exhaustive]
+pub enum SystemError {
+    /// The coordinator, or the domain's administration channel, could not be asked or
+    /// did not answer.
+    #[error("cannot {operation}: {reason}")]
+    Unavailable {
+        /// What was asked (`list the trajectories`, `reset the system`…).
+        operation: String,
+        /// Why it could not be.
+        reason: String,
+    },
+    /// Some processes of the domain did not answer in time (one is stuck or gone): the
+    /// operation reached only `answered` of `expected`.
+    #[error("cannot {operation}: {answered} of {expected} processes answered within {timeout:?}")]
+    Incomplete {
+        /// What was asked.
+        operation: String,
+        /// Processes that answered.
+        answered: usize,
+        /// Processes connected when it was asked.
+        expected: usize,
+        /// How long they had.
+        timeout: std::time::Duration,
+    },
+}

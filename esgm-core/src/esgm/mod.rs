@@ -19,7 +19,7 @@ mod limit;
 mod report;
 mod spec;
 
-pub use errors::{CreateError, FlushError, InputType, LookupError, RegistrationError};
+pub use errors::{CreateError, FlushError, InputType, LookupError, RegistrationError, SystemError};
 pub use interfaces::{CompUnit, ComputeError, SensorError, SensorInterface};
 pub use limit::{Limit, LimitReached};
 pub use report::{EsgmStats, LogLevel, MemoryStats, TrajectoryInfo, TrajectoryReport, WorkerStats};
@@ -160,7 +160,7 @@ pub trait Esgm: Send + Sync {
         type_name: &str,
     ) -> Result<EntityStructureType, TypeRegistryError>;
     /// The registered type names.
-    fn entity_structure_type_names(&self) -> Vec<String>;
+    fn entity_structure_type_names(&self) -> Result<Vec<String>, SystemError>;
 
     /// E2: a trajectory fed by pushes.
     fn create_primitive_entity_trajectory_structure(
@@ -223,7 +223,7 @@ pub trait Esgm: Send + Sync {
     /// E5: destroys a trajectory; its name can be reused.
     fn destroy_entity_trajectory_structure(&self, name: &str) -> Result<(), LookupError>;
     /// Every trajectory, for listings and graphs.
-    fn trajectories(&self) -> Vec<TrajectoryInfo>;
+    fn trajectories(&self) -> Result<Vec<TrajectoryInfo>, SystemError>;
 
     /// E6: registers a pull sensor producing structures of `type_name`.
     fn add_sensor_interface(
@@ -246,9 +246,9 @@ pub trait Esgm: Send + Sync {
     /// E6: removes a unit no trajectory uses.
     fn remove_comp_unit(&self, name: &str) -> Result<(), RegistrationError>;
     /// Registered sensors as (name, type).
-    fn sensors(&self) -> Vec<(String, String)>;
+    fn sensors(&self) -> Result<Vec<(String, String)>, SystemError>;
     /// Registered units as (name, output type, input types).
-    fn comp_units(&self) -> Vec<(String, String, Vec<InputType>)>;
+    fn comp_units(&self) -> Result<Vec<(String, String, Vec<InputType>)>, SystemError>;
 
     /// Waits for the runtime: returns once every structure added before the call has
     /// been processed by every unit, sync and merge (and what they produced by theirs),
@@ -259,16 +259,16 @@ pub trait Esgm: Send + Sync {
 
     /// E7: true if the ESGM answers.
     fn ping(&self) -> bool;
-    /// E7: empties every trajectory.
-    fn reset(&self);
+    /// E7: empties every trajectory (across processes: in every process, or an error).
+    fn reset(&self) -> Result<(), SystemError>;
     /// E7: statistics of every trajectory and its worker.
-    fn stats(&self) -> EsgmStats;
+    fn stats(&self) -> Result<EsgmStats, SystemError>;
     /// E7: memory in use.
-    fn memory_stats(&self) -> MemoryStats;
+    fn memory_stats(&self) -> Result<MemoryStats, SystemError>;
     /// E7: the log level.
     fn log_level(&self) -> LogLevel;
     /// E7: sets the log level. esgm logs through `tracing`; the level is applied by the
     /// process's subscriber (the `esgm` binaries install one that follows it). A
     /// library embedding the in-process runtime with its own subscriber reads it here.
-    fn set_log_level(&self, level: LogLevel);
+    fn set_log_level(&self, level: LogLevel) -> Result<(), SystemError>;
 }

@@ -30,7 +30,7 @@ use crate::catalog::Catalog;
 use crate::clock::{SharedClock, SystemClock};
 use crate::esgm::{
     CompUnit, CreateError, Esgm, EsgmStats, FlushError, InputType, LogLevel, LookupError,
-    MemoryStats, RegistrationError, SensorInterface, TrajectoryInfo, TrajectoryKind,
+    MemoryStats, RegistrationError, SensorInterface, SystemError, TrajectoryInfo, TrajectoryKind,
     TrajectoryReport, TrajectorySource, TrajectorySpec,
 };
 use crate::sample::Sample;
@@ -492,8 +492,8 @@ impl Esgm for InProcessEsgm {
             .map(|t| t.as_ref().clone())
     }
 
-    fn entity_structure_type_names(&self) -> Vec<String> {
-        self.inner.catalog.read().types().names()
+    fn entity_structure_type_names(&self) -> Result<Vec<String>, SystemError> {
+        Ok(self.inner.catalog.read().types().names())
     }
 
     fn create_trajectory(&self, spec: TrajectorySpec) -> Result<InProcessTrajectory, CreateError> {
@@ -531,8 +531,8 @@ impl Esgm for InProcessEsgm {
         Ok(())
     }
 
-    fn trajectories(&self) -> Vec<TrajectoryInfo> {
-        self.inner.catalog.read().trajectories().cloned().collect()
+    fn trajectories(&self) -> Result<Vec<TrajectoryInfo>, SystemError> {
+        Ok(self.inner.catalog.read().trajectories().cloned().collect())
     }
 
     fn add_sensor_interface(
@@ -574,17 +574,12 @@ impl Esgm for InProcessEsgm {
         Ok(())
     }
 
-    fn sensors(&self) -> Vec<(String, String)> {
-        self.inner.catalog.read().sensors().map(|s| (s.name.clone(), s.type_name.clone())).collect()
+    fn sensors(&self) -> Result<Vec<(String, String)>, SystemError> {
+        Ok(self.sensors_here())
     }
 
-    fn comp_units(&self) -> Vec<(String, String, Vec<InputType>)> {
-        self.inner
-            .catalog
-            .read()
-            .units()
-            .map(|u| (u.name.clone(), u.type_name.clone(), u.input_types.clone()))
-            .collect()
+    fn comp_units(&self) -> Result<Vec<(String, String, Vec<InputType>)>, SystemError> {
+        Ok(self.units_here())
     }
 
     fn flush(&self, deadline: std::time::Instant) -> Result<(), FlushError> {
@@ -595,13 +590,67 @@ impl Esgm for InProcessEsgm {
         !self.inner.shutdown.load(Ordering::Relaxed)
     }
 
-    fn reset(&self) {
+    fn reset(&self) -> Result<(), SystemError> {
+        self.reset_here();
+        Ok(())
+    }
+
+    fn stats(&self) -> Result<EsgmStats, SystemError> {
+        Ok(self.stats_here())
+    }
+
+    fn memory_stats(&self) -> Result<MemoryStats, SystemError> {
+        Ok(self.memory_here())
+    }
+
+    fn log_level(&self) -> LogLevel {
+        match self.inner.log_level.load(Ordering::Relaxed) {
+            0 => LogLevel::Error,
+            1 => LogLevel::Warn,
+            2 => LogLevel::Info,
+            3 => LogLevel::Debug,
+            _ => LogLevel::Trace,
+        }
+    }
+
+    fn set_log_level(&self, level: LogLevel) -> Result<(), SystemError> {
+        self.set_log_level_here(level);
+        Ok(())
+    }
+}
+
+/// This runtime's own answers to E7, which cannot fail: what its [`Esgm`] calls return,
+/// and what a connected process answers about itself when another process asks.
+impl InProcessEsgm {
+    /// Registered sensors as (name, type).
+    pub fn sensors_here(&self) -> Vec<(String, String)> {
+        self.inner.catalog.read().sensors().map(|s| (s.name.clone(), s.type_name.clone())).collect()
+    }
+
+    /// Registered units as (name, output type, input types).
+    pub fn units_here(&self) -> Vec<(String, String, Vec<InputType>)> {
+        self.inner
+            .catalog
+            .read()
+            .units()
+            .map(|u| (u.name.clone(), u.type_name.clone(), u.input_types.clone()))
+            .collect()
+    }
+
+    /// Empties every trajectory of this runtime.
+    pub fn reset_here(&self) {
         for cell in self.inner.cells() {
             cell.store.lock().reset();
         }
     }
 
-    fn stats(&self) -> EsgmStats {
+    /// Sets this runtime's log level.
+    pub fn set_log_level_here(&self, level: LogLevel) {
+        self.inner.log_level.store(level as u8, Ordering::Relaxed);
+    }
+
+    /// Statistics of every trajectory of this runtime and its worker.
+    pub fn stats_here(&self) -> EsgmStats {
         EsgmStats {
             trajectories: self
                 .inner
@@ -619,7 +668,8 @@ impl Esgm for InProcessEsgm {
         }
     }
 
-    fn memory_stats(&self) -> MemoryStats {
+    /// Memory this runtime's trajectories use.
+    pub fn memory_here(&self) -> MemoryStats {
         let mut seen = HashSet::new();
         let mut m = MemoryStats::default();
         for c in self.inner.cells() {
@@ -631,20 +681,6 @@ impl Esgm for InProcessEsgm {
             m.approx_bytes += store.approx_bytes(&mut seen);
         }
         m
-    }
-
-    fn log_level(&self) -> LogLevel {
-        match self.inner.log_level.load(Ordering::Relaxed) {
-            0 => LogLevel::Error,
-            1 => LogLevel::Warn,
-            2 => LogLevel::Info,
-            3 => LogLevel::Debug,
-            _ => LogLevel::Trace,
-        }
-    }
-
-    fn set_log_level(&self, level: LogLevel) {
-        self.inner.log_level.store(level as u8, Ordering::Relaxed);
     }
 }
 

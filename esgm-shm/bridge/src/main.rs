@@ -197,7 +197,12 @@ fn run(domain: &str, a: &RunArgs) -> anyhow::Result<()> {
     while !stop.load(Ordering::Relaxed) {
         std::thread::sleep(Duration::from_millis(50));
         if a.all && pinged.elapsed() >= Duration::from_millis(500) {
-            for info in esgm.trajectories() {
+            // A listing the coordinator did not give is tried again at the next round.
+            let listed = esgm.trajectories().unwrap_or_else(|e| {
+                tracing::debug!(error = %e, "cannot list the trajectories to export now");
+                Vec::new()
+            });
+            for info in listed {
                 if exported.contains(&info.name) || !key::is_name(&info.name) {
                     continue;
                 }

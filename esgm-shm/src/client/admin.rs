@@ -604,7 +604,7 @@ impl Answerer {
             }
             AdminOp::Stats => {
                 let written = self.written();
-                let stats = self.local.stats();
+                let stats = self.local.stats_here();
                 AdminAnswer::Stats(
                     stats
                         .trajectories
@@ -613,12 +613,12 @@ impl Answerer {
                         .collect(),
                 )
             }
-            AdminOp::Memory => AdminAnswer::Memory(self.local.memory_stats()),
+            AdminOp::Memory => AdminAnswer::Memory(self.local.memory_here()),
             AdminOp::SetLogLevel { level, process } => {
                 if process.as_ref().is_some_and(|p| *p != self.host) {
                     return AdminAnswer::LogLevel { applied: false, filter: false };
                 }
-                self.local.set_log_level(level);
+                self.local.set_log_level_here(level);
                 match crate::process::apply_log_level(level) {
                     Ok(filter) => {
                         tracing::info!(?level, "log level set by the domain");

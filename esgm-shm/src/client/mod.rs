@@ -80,7 +80,7 @@ use crossbeam_channel::Sender;
 use esgm_core::clock::SharedClock;
 use esgm_core::esgm::{
     CompUnit, CreateError, Esgm, EsgmStats, FlushError, InputType, LogLevel, LookupError,
-    MemoryStats, RegistrationError, SensorInterface, TrajectoryInfo, TrajectorySpec,
+    MemoryStats, RegistrationError, SensorInterface, SystemError, TrajectoryInfo, TrajectorySpec,
 };
 use esgm_core::{EntityStructureType, InProcessEsgm, InProcessTrajectory, TypeRegistryError};
 use iceoryx2::prelude::NodeBuilder;
@@ -623,14 +623,24 @@ impl ShmEsgm {
     }
 }
 
-/// A listing the coordinator did not give: the interface answers with what this
-/// process knows (a list cannot carry an error), and says why, once per call.
-fn unanswered(what: &str, answer: &Result<Response, ControlClientError>) {
-    match answer {
-        Err(e) => tracing::warn!(error = %e,
-            "the coordinator did not list the {what}; this process's own are listed instead"),
-        Ok(other) => tracing::warn!(answer = ?other,
-            "the coordinator listed the {what} in an unexpected form; this process's own are listed instead"),
+/// A listing the coordinator did not give, as the caller's error (never this
+/// process's own view, which would look complete and not be).
+fn unanswered(operation: &str, answer: Result<Response, ControlClientError>) -> SystemError {
+    let reason = match answer {
+        Err(e) => e.to_string(),
+        Ok(other) => format!("unexpected answer from the coordinator: {other:?}"),
+    };
+    SystemError::Unavailable { operation: operation.to_owned(), reason }
+}
+
+/// A domain-wide question that did not reach every process, as the caller's error.
+fn unreached(operation: &str, e: AdminError) -> SystemError {
+    let operation = operation.to_owned();
+    match e {
+        AdminError::Incomplete { answered, expected, timeout } => {
+            SystemError::Incomplete { operation, answered, expected, timeout }
+        }
+        e => SystemError::Unavailable { operation, reason: e.to_string() },
     }
 }
 
@@ -692,13 +702,10 @@ impl Esgm for ShmEsgm {
         }
     }
 
-    fn entity_structure_type_names(&self) -> Vec<String> {
+    fn entity_structure_type_names(&self) -> Result<Vec<String>, SystemError> {
         match self.control(Request::ListEntityStructureTypes) {
-            Ok(Response::Names(names)) => names,
-            other => {
-                unanswered("type names", &other);
-                self.inner.local.entity_structure_type_names()
-            }
+            Ok(Response::Names(names)) => Ok(names),
+            other => Err(unanswered("list the types", other)),
         }
     }
 
@@ -744,13 +751,10 @@ impl Esgm for ShmEsgm {
         )
     }
 
-    fn trajectories(&self) -> Vec<TrajectoryInfo> {
+    fn trajectories(&self) -> Result<Vec<TrajectoryInfo>, SystemError> {
         match self.control(Request::ListTrajectories) {
-            Ok(Response::Trajectories(t)) => t,
-            other => {
-                unanswered("trajectories", &other);
-                self.inner.local.trajectories()
-            }
+            Ok(Response::Trajectories(t)) => Ok(t),
+            other => Err(unanswered("list the trajectories", other)),
         }
     }
 
@@ -763,7 +767,7 @@ impl Esgm for ShmEsgm {
         // Registered here already: the coordinator would take it for a restarted
         // worker taking its place back, and the rollback below would remove the one
         // that serves.
-        if self.inner.local.sensors().iter().any(|(s, _)| s == sensor) {
+        if self.inner.local.sensors_here().iter().any(|(s, _)| s == sensor) {
             return Err(RegistrationError::SensorAlreadyExists { name: sensor.to_owned() });
         }
         let request = Request::AddSensorInterface {
@@ -804,7 +808,7 @@ impl Esgm for ShmEsgm {
         cu: Arc<dyn CompUnit>,
     ) -> Result<(), RegistrationError> {
         // As for sensors: a second registration here must not undo the first.
-        if self.inner.local.comp_units().iter().any(|(u, _, _)| u == name) {
+        if self.inner.local.units_here().iter().any(|(u, _, _)| u == name) {
             return Err(RegistrationError::CompUnitAlreadyExists { name: name.to_owned() });
         }
         let request = Request::AddCompUnit {
@@ -842,25 +846,19 @@ impl Esgm for ShmEsgm {
         Ok(())
     }
 
-    fn sensors(&self) -> Vec<(String, String)> {
+    fn sensors(&self) -> Result<Vec<(String, String)>, SystemError> {
         match self.control(Request::ListSensors) {
-            Ok(Response::Sensors(s)) => s.into_iter().map(|s| (s.name, s.type_name)).collect(),
-            other => {
-                unanswered("sensors", &other);
-                self.inner.local.sensors()
-            }
+            Ok(Response::Sensors(s)) => Ok(s.into_iter().map(|s| (s.name, s.type_name)).collect()),
+            other => Err(unanswered("list the sensors", other)),
         }
     }
 
-    fn comp_units(&self) -> Vec<(String, String, Vec<InputType>)> {
+    fn comp_units(&self) -> Result<Vec<(String, String, Vec<InputType>)>, SystemError> {
         match self.control(Request::ListCompUnits) {
             Ok(Response::CompUnits(u)) => {
-                u.into_iter().map(|u| (u.name, u.type_name, u.input_types)).collect()
+                Ok(u.into_iter().map(|u| (u.name, u.type_name, u.input_types)).collect())
             }
-            other => {
-                unanswered("units", &other);
-                self.inner.local.comp_units()
-            }
+            other => Err(unanswered("list the units", other)),
         }
     }
 
@@ -872,37 +870,25 @@ impl Esgm for ShmEsgm {
         self.flush_domain(deadline)
     }
 
-    fn reset(&self) {
-        if let Err(e) = self.reset_domain() {
-            tracing::warn!(error = %e, "reset did not reach every process");
-        }
+    fn reset(&self) -> Result<(), SystemError> {
+        self.reset_domain().map_err(|e| unreached("reset the system", e))
     }
 
-    fn stats(&self) -> EsgmStats {
-        self.domain_stats().unwrap_or_else(|e| {
-            tracing::warn!(error = %e, "domain statistics unavailable; this process's own instead");
-            self.inner.local.stats()
-        })
+    fn stats(&self) -> Result<EsgmStats, SystemError> {
+        self.domain_stats().map_err(|e| unreached("gather the statistics", e))
     }
 
-    fn memory_stats(&self) -> MemoryStats {
-        self.domain_memory().unwrap_or_else(|e| {
-            tracing::warn!(error = %e, "domain memory unavailable; this process's own instead");
-            self.inner.local.memory_stats()
-        })
+    fn memory_stats(&self) -> Result<MemoryStats, SystemError> {
+        self.domain_memory().map_err(|e| unreached("gather the memory statistics", e))
     }
 
     fn log_level(&self) -> LogLevel {
         self.inner.local.log_level()
     }
 
-    fn set_log_level(&self, level: LogLevel) {
-        match self.set_log_level_of(None, level) {
-            Ok(_) => {}
-            Err(e) => {
-                tracing::warn!(error = %e, "the log level did not reach every process");
-                self.inner.local.set_log_level(level);
-            }
-        }
+    fn set_log_level(&self, level: LogLevel) -> Result<(), SystemError> {
+        self.set_log_level_of(None, level)
+            .map(|_applied| ())
+            .map_err(|e| unreached("set the log level", e))
     }
 }

@@ -175,7 +175,15 @@ struct State {
 impl State {
     /// Creates channels for new trajectories and closes those of trajectories gone.
     fn follow(&self) {
-        let listed = self.esgm.trajectories();
+        // A listing the coordinator did not give changes nothing: the channels stay
+        // until a listing says their trajectory is gone.
+        let listed = match self.esgm.trajectories() {
+            Ok(listed) => listed,
+            Err(e) => {
+                tracing::warn!(error = %e, "cannot list the trajectories; channels kept as they are");
+                return;
+            }
+        };
         let mut channels = self.channels.lock();
         channels.retain(|_, w| {
             let keep = listed.iter().any(|i| i.name == w.trajectory);

@@ -61,7 +61,7 @@ pub fn types_structures_and_stats_by_name<H: Harness>(h: &H) {
     wait_visible(&w, &r);
     let first = r.get_nth_latest(1).unwrap();
     assert_eq!((first.valid_time, first.create_time), (t0 - 5, t0));
-    let stats = e.stats();
+    let stats = e.stats().unwrap();
     assert_eq!(stats.trajectories["p"].stats.added, 2);
     assert_eq!(stats.get("p").map(|p| p.info.type_name.as_str()), Some("Pair"));
     assert!(stats.get("nope").is_none());
@@ -69,9 +69,10 @@ pub fn types_structures_and_stats_by_name<H: Harness>(h: &H) {
         crate::wait_for(super::WAIT, || h
             .reader()
             .stats()
+            .unwrap()
             .get("p")
             .is_some_and(|p| p.stats.added == 2)),
         "the reader's stats by name: {:?}",
-        h.reader().stats().get("p")
+        h.reader().stats().unwrap().get("p")
     );
 }

@@ -22,7 +22,7 @@ fn digits(inputs: &[Sample], _qtime: Time) -> Result<EntityStructure, ComputeErr
 }
 
 fn worker_stats<H: Harness>(h: &H, name: &str) -> esgm_core::esgm::WorkerStats {
-    h.esgm().stats().get(name).map(|r| r.worker).unwrap_or_default()
+    h.esgm().stats().unwrap().get(name).map(|r| r.worker).unwrap_or_default()
 }
 
 /// E4: called on each update of any input with the latest of every input, in input

@@ -68,23 +68,23 @@ pub fn e7_acts_on_the_system_from_either_side<H: Harness>(h: &H) {
     wait_visible(&w, &r);
     let writer = w.stats().unwrap();
     for side in [h.esgm(), h.reader()] {
-        let s = side.stats();
+        let s = side.stats().unwrap();
         let seen = &s.trajectories["r"].stats;
         assert_eq!((seen.added, seen.violations), (writer.added, writer.violations));
         assert_eq!((seen.added, seen.violations), (4, 1));
-        assert!(side.memory_stats().stored_samples >= 4);
+        assert!(side.memory_stats().unwrap().stored_samples >= 4);
     }
-    h.reader().set_log_level(LogLevel::Debug);
+    h.reader().set_log_level(LogLevel::Debug).unwrap();
     assert_eq!(h.esgm().log_level(), LogLevel::Debug, "the writer's level, set by the reader");
     assert_eq!(h.reader().log_level(), LogLevel::Debug);
-    h.esgm().set_log_level(LogLevel::Info);
+    h.esgm().set_log_level(LogLevel::Info).unwrap();
     assert_eq!(h.reader().log_level(), LogLevel::Info, "the reader's level, set by the writer");
     // A whole-system reset from the reader empties the writer and every replica.
-    h.reader().reset();
+    h.reader().reset().unwrap();
     assert_eq!(contents(&w).unwrap(), vec![]);
     assert_eq!(contents(&r).unwrap(), vec![]);
     for side in [h.esgm(), h.reader()] {
-        assert_eq!(side.memory_stats().stored_samples, 0);
+        assert_eq!(side.memory_stats().unwrap().stored_samples, 0);
     }
 }
 

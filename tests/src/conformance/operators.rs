@@ -45,7 +45,7 @@ pub fn sync_exact<H: Harness>(h: &H) {
     assert_eq!(s.entity_type().unwrap(), w.entity_type().unwrap(), "the synthesized type");
     wait_visible(&w, &s);
     // a@10 and b@15 never found a partner: counted, not lost silently.
-    let discarded = || h.esgm().stats().get("ab").map(|r| r.worker.discarded);
+    let discarded = || h.esgm().stats().unwrap().get("ab").map(|r| r.worker.discarded);
     assert!(wait_for(WAIT, || discarded() == Some(2)), "discarded {:?}", discarded());
 }
 
@@ -105,7 +105,7 @@ pub fn sync_epsilon<H: Harness>(h: &H) {
     let second = sub.recv_timeout(WAIT).unwrap();
     assert_eq!((frame_x(&second, "a"), frame_x(&second, "b")), (Some(5.0), Some(4.0)));
     assert_eq!(member_times(&second, MEMBER_VALID_TIMES), Some(vec![t0 + 27, t0 + 30]));
-    let discarded = || h.esgm().stats().get("ab").map(|r| r.worker.discarded);
+    let discarded = || h.esgm().stats().unwrap().get("ab").map(|r| r.worker.discarded);
     assert!(wait_for(WAIT, || discarded() == Some(1)), "discarded {:?}", discarded());
     // A negative tolerance is refused when the trajectory is created, on either side.
     for side in [e, h.reader()] {
@@ -271,7 +271,7 @@ pub fn sampled_temporal_function<H: Harness>(h: &H) {
         )
         .unwrap();
     // A unit without compute_at: every tick is a counted failure, nothing is stored.
-    let failures = || e.stats().get("g").map(|r| r.worker.failures);
+    let failures = || e.stats().unwrap().get("g").map(|r| r.worker.failures);
     // Both samplers must take each tick before the clock moves on (a late sampler
     // skips a period, as it should).
     wait_stored(&f, 1);

@@ -23,7 +23,7 @@ pub fn types_create_get_destroy<H: Harness>(h: &H) {
     e.create_entity_structure_type("blob", t.clone()).unwrap();
     for side in [e, r] {
         assert_eq!(side.get_entity_structure_type("blob").unwrap(), t);
-        assert!(side.entity_structure_type_names().contains(&"blob".to_owned()));
+        assert!(side.entity_structure_type_names().unwrap().contains(&"blob".to_owned()));
         assert!(matches!(
             side.create_entity_structure_type("blob", t.clone()),
             Err(TypeRegistryError::EntityStructureTypeAlreadyExists { .. })
@@ -34,7 +34,7 @@ pub fn types_create_get_destroy<H: Harness>(h: &H) {
         let err = side.get_entity_structure_type("blob").unwrap_err();
         assert!(matches!(err, TypeRegistryError::NoSuchEntityStructureType { .. }));
         assert!(
-            side.entity_structure_type_names().contains(&"Image".to_owned()),
+            side.entity_structure_type_names().unwrap().contains(&"Image".to_owned()),
             "library types present"
         );
     }
@@ -151,7 +151,7 @@ pub fn stats_agree_across_locations<H: Harness>(h: &H) {
         dropped.sort_by_key(|(cause, _)| format!("{cause:?}"));
         (s.added, s.evicted, s.stored, s.violations, s.dropped_total, dropped)
     };
-    let seen = || h.reader().stats().get("r").map(|t| summary(t.stats.clone()));
+    let seen = || h.reader().stats().unwrap().get("r").map(|t| summary(t.stats.clone()));
     let agree = || seen() == w.stats().ok().map(summary);
     assert!(
         wait_for(WAIT, agree),

@@ -119,7 +119,7 @@ pub fn sensor_errors_and_panics_are_counted<H: Harness>(h: &H) {
     wait_visible(&w, &t);
     let xs: Vec<_> = t.get_between(Time::MIN, Time::MAX).unwrap().iter().map(|s| x_of(s)).collect();
     assert_eq!(xs, vec![Some(0.0), Some(4.0)]);
-    let w = e.stats().trajectories["f"].worker;
+    let w = e.stats().unwrap().trajectories["f"].worker;
     assert_eq!((w.calls, w.failures, w.panics, w.no_value, w.outputs), (5, 1, 1, 1, 2));
     assert!(e.ping());
     assert!(h.reader().ping());

@@ -173,7 +173,7 @@ fn drive(domain: &str, a: &Args, plan: &Plan) -> anyhow::Result<()> {
     let robot_state = esgm.get_entity_trajectory_structure("robot_state")?;
     println!("\n  {:<18} {:<10} {:<17} source", "trajectory", "kind", "type");
     for name in PIPELINE {
-        if let Some(i) = esgm.trajectories().into_iter().find(|i| i.name == name) {
+        if let Some(i) = esgm.trajectories()?.into_iter().find(|i| i.name == name) {
             let source = match (&i.source, i.inputs.as_slice()) {
                 (Some(s), []) => s.clone(),
                 (Some(s), inputs) => format!("{s}({})", inputs.join(", ")),

@@ -48,7 +48,7 @@ struct Flow {
 /// Prints (or draws) the graph.
 pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
     let esgm = connect(domain)?;
-    let list = esgm.trajectories();
+    let list = esgm.trajectories()?;
     let mut stats: BTreeMap<String, TrajectoryStats> = BTreeMap::new();
     for info in &list {
         match trajectory(&esgm, &info.name).and_then(|t| Ok(t.stats()?)) {

@@ -64,18 +64,20 @@ pub struct Args {
 /// Records until a stop condition, then prints the summary.
 pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
     let esgm = connect(domain)?;
-    let existing = || esgm.trajectories().into_iter().map(|t| t.name).collect::<Vec<_>>();
+    let existing = || -> anyhow::Result<Vec<String>> {
+        Ok(esgm.trajectories()?.into_iter().map(|t| t.name).collect())
+    };
     if a.wait {
         let give_up = a.duration.map(|d| Instant::now() + d);
         // Names with patterns wait for one match each; --all for any trajectory.
-        while select(&existing(), a).is_err() {
+        while select(&existing()?, a).is_err() {
             if give_up.is_some_and(|g| Instant::now() >= g) {
                 break;
             }
             std::thread::sleep(Duration::from_millis(50));
         }
     }
-    let names = select(&existing(), a)?;
+    let names = select(&existing()?, a)?;
     let options = RecordOptions::default()
         .compression(a.compression)
         .chunk_size(a.chunk_kib.saturating_mul(1024))

@@ -16,7 +16,7 @@ pub enum ListOnly {
 /// `esgm sensor list`.
 pub fn sensors(domain: &str, json: bool, _c: &ListOnly) -> anyhow::Result<()> {
     let esgm = connect(domain)?;
-    for (name, type_name) in esgm.sensors() {
+    for (name, type_name) in esgm.sensors()? {
         if json {
             println!("{}", json!({ "sensor": name, "type": type_name }));
         } else {
@@ -29,7 +29,7 @@ pub fn sensors(domain: &str, json: bool, _c: &ListOnly) -> anyhow::Result<()> {
 /// `esgm unit list`.
 pub fn units(domain: &str, json: bool, _c: &ListOnly) -> anyhow::Result<()> {
     let esgm = connect(domain)?;
-    for (name, type_name, inputs) in esgm.comp_units() {
+    for (name, type_name, inputs) in esgm.comp_units()? {
         if json {
             println!("{}", json!({ "unit": name, "type": type_name, "inputs": inputs }));
         } else {

@@ -16,7 +16,7 @@ use crate::show::ms;
 /// them instead.
 pub fn run(domain: &str, json: bool) -> anyhow::Result<()> {
     let esgm = connect(domain)?;
-    let list = esgm.trajectories();
+    let list = esgm.trajectories()?;
     let domain_stats = match esgm.domain_stats() {
         Ok(s) => Some(s),
         Err(e) => {

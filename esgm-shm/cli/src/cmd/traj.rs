@@ -35,7 +35,7 @@ pub fn run(domain: &str, json: bool, c: &TrajCommand) -> anyhow::Result<()> {
     let esgm = connect(domain)?;
     match c {
         TrajCommand::List => {
-            let list = esgm.trajectories();
+            let list = esgm.trajectories()?;
             if !json {
                 println!("{:<20} {:<10} {:<18} source", "trajectory", "kind", "type");
             }
@@ -55,7 +55,7 @@ pub fn run(domain: &str, json: bool, c: &TrajCommand) -> anyhow::Result<()> {
         }
         TrajCommand::Show { name } => {
             let t = trajectory(&esgm, name)?;
-            let info = esgm.trajectories().into_iter().find(|i| i.name == *name);
+            let info = esgm.trajectories()?.into_iter().find(|i| i.name == *name);
             let stats = t.stats()?;
             if json {
                 println!("{}", json!({ "info": info, "stats": stats }));

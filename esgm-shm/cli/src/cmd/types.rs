@@ -30,7 +30,7 @@ pub fn run(domain: &str, json: bool, c: &TypeCommand) -> anyhow::Result<()> {
     let esgm = connect(domain)?;
     match c {
         TypeCommand::List => {
-            for n in esgm.entity_structure_type_names() {
+            for n in esgm.entity_structure_type_names()? {
                 if json {
                     println!("{}", json!({ "type": n }));
                 } else {

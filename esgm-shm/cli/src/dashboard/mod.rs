@@ -117,7 +117,7 @@ impl Sampler {
     /// reader does) and closes those that went.
     pub fn follow_trajectories(&mut self) -> anyhow::Result<()> {
         let listed: HashSet<String> =
-            self.esgm.trajectories().into_iter().map(|info| info.name).collect();
+            self.esgm.trajectories()?.into_iter().map(|info| info.name).collect();
         self.handles.retain(|name, _| listed.contains(name));
         for name in listed {
             if !self.handles.contains_key(&name) {
@@ -137,7 +137,7 @@ impl Sampler {
     /// The system now.
     pub fn snapshot(&mut self) -> anyhow::Result<Snapshot> {
         self.follow_trajectories()?;
-        let infos = self.esgm.trajectories();
+        let infos = self.esgm.trajectories()?;
         // Each trajectory's writer's statistics (what was offered, dropped and why, its
         // subscribers); this process's replicas' where the writers do not answer.
         let (writers, note) = match self.esgm.domain_stats() {
