@@ -554,28 +554,50 @@ fn join(
     trajectory: &str,
     sample_wake: &EventSpec,
     readers: Readers,
-) -> Result<(), String> {
-    let join = join_service(domain, trajectory).map_err(|e| e.to_string())?;
+) -> Result<(), JoinError> {
+    let join = join_service(domain, trajectory).map_err(OpenError::from)?;
     let (listener, bell) = node.with(|node| {
-        let listener = sample_wake
-            .open(node)
-            .map_err(|e| e.to_string())?
-            .listener_builder()
-            .create()
-            .map_err(|e| format!("cannot listen to the writer: {e:?}"))?;
-        let bell = open_event_service(node, &join, EventCapacity::to_writer(readers))
-            .map_err(|e| e.to_string())?
+        let listener =
+            sample_wake.open(node)?.listener_builder().create().map_err(JoinError::Listen)?;
+        let bell = open_event_service(node, &join, EventCapacity::to_writer(readers))?
             .notifier_builder()
             .create()
-            .map_err(|e| format!("cannot ring the writer: {e:?}"))?;
-        Ok::<_, String>((listener, bell))
+            .map_err(JoinError::Ring)?;
+        Ok::<_, JoinError>((listener, bell))
     })?;
-    bell.notify().map_err(|e| format!("cannot ring the writer: {e:?}"))?;
+    bell.notify().map_err(JoinError::Notify)?;
     match timed_wait(&listener, JOIN_TIMEOUT) {
-        Ok(0) => Err(format!("no answer within {JOIN_TIMEOUT:?}")),
+        Ok(0) => Err(JoinError::NoAnswer { within: JOIN_TIMEOUT }),
         Ok(_) => Ok(()),
-        Err(e) => Err(format!("cannot wait for the writer: {e:?}")),
+        Err(e) => Err(JoinError::Wait(e)),
     }
+}
+
+/// Why a new reader's ring for its history ([`join`]) went unanswered: logged, since
+/// the history then comes with the writer's next sample or maintenance.
+#[derive(Debug, thiserror::Error)]
+enum JoinError {
+    /// The wake-up or join service could not be opened.
+    #[error(transparent)]
+    Open(#[from] OpenError),
+    /// No listener on the writer's wake-up.
+    #[error("cannot listen to the writer: {0:?}")]
+    Listen(iceoryx2::port::listener::ListenerCreateError),
+    /// No notifier on the join service.
+    #[error("cannot ring the writer: {0:?}")]
+    Ring(iceoryx2::port::notifier::NotifierCreateError),
+    /// The ring failed.
+    #[error("cannot ring the writer: {0:?}")]
+    Notify(iceoryx2::port::notifier::NotifierNotifyError),
+    /// Waiting for the writer's answer failed.
+    #[error("cannot wait for the writer: {0:?}")]
+    Wait(iceoryx2::port::listener::ListenerWaitError),
+    /// The writer did not answer in time.
+    #[error("no answer within {within:?}")]
+    NoAnswer {
+        /// How long it had.
+        within: Duration,
+    },
 }
 
 /// How long a process's first add to a trajectory waits for the writer to open its
