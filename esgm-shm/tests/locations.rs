@@ -225,8 +225,58 @@ fn sampling_runs_where_the_sensor_is_and_units_where_they_are() {
 
 /// Runs only inside the child process: serves the sensor `counter` and the unit
 /// `negate` until the parent's `done` trajectory has a sample.
+/// A trajectory whose writer exited without destroying it refuses adds with a typed
+/// error (issue 24: they were acknowledged as forwarded and lost). Its writer here is a
+/// short setup program, another process that exits.
+#[test]
+fn an_add_to_a_trajectory_whose_writer_exited_is_refused_not_lost() {
+    let c = coordinator("loc-orphan");
+    let setup = spawn_child("child_location", (ROLE, "setup"), (DOMAIN, c.domain()));
+    let (status, output) = reap(setup, TIMEOUT * 3);
+    assert!(status.success(), "the setup program failed:\n{output}");
+    let app = location(&c, "app");
+    let made = app.get_entity_trajectory_structure("made_by_setup").unwrap();
+    for blocking in [false, true] {
+        let added =
+            if blocking { made.add_blocking(state(2, 2.0)) } else { made.add(state(2, 2.0)) };
+        match added {
+            Err(esgm_core::AddError::WriterGone { trajectory, pid }) => {
+                assert_eq!(trajectory, "made_by_setup");
+                assert_ne!(pid, 0, "the registry recorded the writer's pid");
+            }
+            other => panic!("blocking {blocking}: {other:?}"),
+        }
+    }
+}
+
+/// The same when the writer leaves while a reader already sends it adds: the next add
+/// reaches no inbox, and says so.
+#[test]
+fn an_add_after_the_writer_left_is_refused_not_lost() {
+    let c = coordinator("loc-left");
+    let writer = location(&c, "writer");
+    let reader = location(&c, "reader");
+    let own = writer.create_primitive_entity_trajectory_structure("left", "RobotState").unwrap();
+    own.add(state(1, 1.0)).unwrap();
+    let there = reader.get_entity_trajectory_structure("left").unwrap();
+    assert_eq!(there.add(state(2, 2.0)).unwrap(), esgm_core::AddOutcome::Forwarded);
+    assert!(wait_for(|| own.get_latest().is_ok_and(|s| x(&s) == 2.0)));
+    drop(own);
+    drop(writer);
+    assert!(matches!(there.add(state(3, 3.0)), Err(esgm_core::AddError::WriterGone { .. })));
+}
+
 #[test]
 fn child_location() {
+    if std::env::var(ROLE).as_deref() == Ok("setup") {
+        let domain = std::env::var(DOMAIN).unwrap();
+        let esgm = ShmEsgm::builder().domain(&domain).host("setup").connect().unwrap();
+        esgm.create_primitive_entity_trajectory_structure("made_by_setup", "RobotState")
+            .unwrap()
+            .add(state(1, 1.0))
+            .unwrap();
+        return;
+    }
     if std::env::var(ROLE).as_deref() != Ok("serve") {
         return;
     }

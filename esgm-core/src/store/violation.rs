@@ -176,6 +176,16 @@ pub enum AddError {
     /// names the setting that raises it). Nothing was added.
     #[error(transparent)]
     LimitReached(#[from] crate::esgm::LimitReached),
+    /// The trajectory's writer was another process, which has exited without destroying
+    /// it: nobody serves its adds, so nothing was added (rather than sent to a queue
+    /// nobody reads). Create it again (`replace`), or add once a writer serves it.
+    #[error("trajectory `{trajectory}`: its writer (process {pid}) has exited; nothing was added")]
+    WriterGone {
+        /// The trajectory.
+        trajectory: String,
+        /// The writer's pid, as the registry recorded it (0: not recorded).
+        pid: u32,
+    },
     /// The trajectory's writer is in another process and the structure could not be
     /// sent to it (see the reason); nothing was added.
     #[error("trajectory `{trajectory}`: cannot reach its writer: {reason}")]

@@ -20,6 +20,7 @@
 //! adding thread; the writer's gate decides, and the structure comes back through
 //! replication.
 
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Weak};
 use std::time::Duration;
 
@@ -42,7 +43,7 @@ use super::settings::{
 };
 use super::shared_node::SharedNode;
 use crate::capacity::{EventCapacity, Readers};
-use crate::control::protocol::TrajectoryRecord;
+use crate::control::protocol::{TrajectoryRecord, WriterPort};
 use crate::holdings::{HoldingOwner, Holdings};
 use crate::publisher::{SampleSizing, TrajectoryPublisher};
 use crate::service::{EventSpec, OpenError, ShmService, open_event_service};
@@ -83,6 +84,9 @@ pub(crate) struct Import {
     /// Whether an arrival is the writer's, and which of its samples never arrived
     /// (the check every reader of another process's trajectory makes).
     check: WriterCheck<Arrival>,
+    /// The writer's pid, shared with the replica's outbox (which refuses adds once it
+    /// has exited).
+    writer_pid: Arc<AtomicU32>,
     /// Samples lost so far (the first is logged).
     lost: u64,
     /// Whose samples this import's held images count as, and how many it may hold.
@@ -204,8 +208,10 @@ impl Import {
         };
         // A replica destroyed meanwhile has no subscribers to feed.
         let _destroyed = replica.with_store(|s| s.set_feed(Arc::new(feed)));
+        let writer_pid = Arc::new(AtomicU32::new(record.port.map_or(0, |p| p.pid)));
         if primitive {
             let outbox = Outbox {
+                writer_pid: Arc::clone(&writer_pid),
                 trajectory: name.clone(),
                 type_name: type_name.to_owned(),
                 domain: domain.to_owned(),
@@ -226,6 +232,7 @@ impl Import {
             replica,
             rejected: 0,
             check: WriterCheck::new(record.port.map(|p| p.publisher)),
+            writer_pid,
             workers: Arc::default(),
             checker,
             verify: verify.clone(),
@@ -345,8 +352,9 @@ impl Import {
 
     /// The registry names `port` as the writer's (`None`: not yet): what was held from
     /// it is entered, in order, and what was held from any other port is rejected.
-    pub fn set_writer(&mut self, port: Option<u128>) {
-        for decided in self.check.set_writer(port) {
+    pub fn set_writer(&mut self, port: Option<WriterPort>) {
+        self.writer_pid.store(port.map_or(0, |p| p.pid), Ordering::Relaxed);
+        for decided in self.check.set_writer(port.map(|p| p.publisher)) {
             self.decide(decided);
         }
     }
@@ -638,6 +646,9 @@ pub(crate) fn writer_listens<E: std::fmt::Display>(
 #[derive(Debug)]
 struct Outbox {
     trajectory: String,
+    /// The writer's pid as the registry names it (0: not yet known), kept current by
+    /// the location thread ([`Import::set_writer`]).
+    writer_pid: Arc<AtomicU32>,
     type_name: String,
     domain: String,
     /// The trajectory's readers, which size its inbox and blocking-add services.
@@ -655,6 +666,12 @@ impl AddForwarder for Outbox {
     fn forward(&self, es: Arc<EntityStructure>, blocking: bool) -> Result<AddOutcome, AddError> {
         let unavailable =
             |reason: String| AddError::Unavailable { trajectory: self.trajectory.clone(), reason };
+        // A writer that exited serves no add: refuse, never acknowledge and lose.
+        let pid = self.writer_pid.load(Ordering::Relaxed);
+        let gone = || AddError::WriterGone { trajectory: self.trajectory.clone(), pid };
+        if pid != 0 && !crate::control::attach::process_alive(pid) {
+            return Err(gone());
+        }
         if blocking {
             let mut client = self.blocking.lock();
             if client.is_none() {
@@ -708,9 +725,13 @@ impl AddForwarder for Outbox {
         let Some(publisher) = inbox.as_ref() else {
             return Err(unavailable("the writer's inbox is not open".into()));
         };
-        publisher
+        let sent = publisher
             .publish(&es)
             .map_err(|e| unavailable(format!("cannot send to the writer's inbox: {e}")))?;
+        // The writer's inbox is gone (it left since it opened it): nobody got it.
+        if sent.subscribers == 0 {
+            return Err(gone());
+        }
         Ok(AddOutcome::Forwarded)
     }
 }

@@ -217,7 +217,7 @@ impl Location {
             for (name, i) in &mut mirrors.imports {
                 match now.get(name.as_str()) {
                     Some(p) if p.generation == i.generation => {
-                        i.set_writer(p.port.map(|w| w.publisher));
+                        i.set_writer(p.port);
                     }
                     Some(p) if p.type_name == i.type_name && p.writer != self.host => {
                         moved.push(name.clone());
@@ -470,7 +470,7 @@ impl Location {
             };
             if let Some(import) = self.mirrors.lock().imports.get_mut(&name) {
                 if import.generation == record.generation {
-                    import.set_writer(record.port.map(|p| p.publisher));
+                    import.set_writer(record.port);
                 }
             }
         }
