@@ -81,11 +81,24 @@ fn size_of(name: &str, prefix: &str) -> Option<f64> {
 /// One series of a log-log chart: its label and its points.
 type Series = (String, Vec<(f64, f64)>);
 
+/// How a log-log chart's x axis reads: its range (`None`: around the points) and its
+/// labels.
+struct XAxis {
+    range: Option<std::ops::Range<f64>>,
+    label: fn(f64) -> String,
+}
+
+impl Default for XAxis {
+    fn default() -> Self {
+        Self { range: None, label: number_label }
+    }
+}
+
 /// Draws `series` on a log-log chart; false (nothing drawn) if none has a point.
 fn log_log(
     path: &Path,
     caption: &str,
-    x_desc: &str,
+    (x_desc, x_axis): (&str, XAxis),
     y_desc: &str,
     series: &[Series],
 ) -> anyhow::Result<bool> {
@@ -93,7 +106,9 @@ fn log_log(
     if series.is_empty() {
         return Ok(false);
     }
-    let x = log_range(series.iter().flat_map(|(_, p)| p.iter().map(|&(x, _)| x)));
+    let x = x_axis
+        .range
+        .unwrap_or_else(|| log_range(series.iter().flat_map(|(_, p)| p.iter().map(|&(x, _)| x))));
     let y = log_range(series.iter().flat_map(|(_, p)| p.iter().map(|&(_, y)| y)));
     let root = BitMapBackend::new(path, SIZE).into_drawing_area();
     root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
@@ -108,7 +123,7 @@ fn log_log(
         .configure_mesh()
         .x_desc(x_desc)
         .y_desc(y_desc)
-        .x_label_formatter(&|v| number_label(*v))
+        .x_label_formatter(&|v| (x_axis.label)(*v))
         .y_label_formatter(&|v| number_label(*v))
         .light_line_style(RGBColor(238, 238, 238))
         .label_style(("sans-serif", 15))
@@ -158,7 +173,7 @@ fn domain_size(report: &Report, path: &Path) -> anyhow::Result<bool> {
     log_log(
         path,
         "cost against the domain's size",
-        "trajectories in the domain (log scale)",
+        ("trajectories in the domain (log scale)", XAxis::default()),
         "value, in the unit of each line (log scale)",
         &series,
     )
@@ -190,7 +205,7 @@ fn fan_out(report: &Report, path: &Path) -> anyhow::Result<bool> {
     log_log(
         path,
         "until the last of K reader processes holds it",
-        "reader processes K (log scale)",
+        ("reader processes K (log scale)", XAxis::default()),
         "latency (µs, log scale)",
         &series,
     )
@@ -229,50 +244,27 @@ fn latency_vs_payload(rows: &[&Measurement], wait: Wait, path: &Path) -> anyhow:
             }
         }
     }
+    let series: Vec<Series> = transports
+        .iter()
+        .map(|t| {
+            let points = rows
+                .iter()
+                .filter(|m| transport(m) == Some(t))
+                .map(|m| (m.payload_bytes.max(1) as f64, us(m.p50_ns)))
+                .collect();
+            ((*t).to_owned(), points)
+        })
+        .collect();
     // Always from the 64-byte floor to past the image, so runs compare.
-    let x = 16.0..4e6;
-    let y = log_range(rows.iter().map(|m| us(m.p50_ns)));
-    let root = BitMapBackend::new(path, SIZE).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(
-            format!("median one-way latency vs payload size ({} receivers)", wait.as_str()),
-            ("sans-serif", 24),
-        )
-        .margin(20)
-        .x_label_area_size(55)
-        .y_label_area_size(75)
-        .build_cartesian_2d(x.log_scale(), y.log_scale())
-        .map_err(|e| anyhow!("{e}"))?;
-    chart
-        .configure_mesh()
-        .x_desc("payload (bytes, log scale)")
-        .y_desc("p50 latency (µs, log scale)")
-        .x_label_formatter(&|v| bytes_label(*v))
-        .y_label_formatter(&|v| number_label(*v))
-        .light_line_style(RGBColor(238, 238, 238))
-        .label_style(("sans-serif", 15))
-        .axis_desc_style(("sans-serif", 17))
-        .draw()
-        .map_err(|e| anyhow!("{e}"))?;
-    for (i, t) in transports.iter().enumerate() {
-        let c = color(i);
-        let mut points: Vec<(f64, f64)> = rows
-            .iter()
-            .filter(|m| transport(m) == Some(t))
-            .map(|m| (m.payload_bytes.max(1) as f64, us(m.p50_ns)))
-            .collect();
-        points.sort_by(|a, b| a.0.total_cmp(&b.0));
-        chart
-            .draw_series(LineSeries::new(points.clone(), c.stroke_width(2)))
-            .map_err(|e| anyhow!("{e}"))?
-            .label(*t)
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], c.stroke_width(2)));
-        chart
-            .draw_series(points.into_iter().map(|p| Circle::new(p, 5, c.filled())))
-            .map_err(|e| anyhow!("{e}"))?;
-    }
-    Ok(finish(&mut chart, &root, SeriesLabelPosition::UpperLeft)?)
+    let x_axis = XAxis { range: Some(16.0..4e6), label: bytes_label };
+    log_log(
+        path,
+        &format!("median one-way latency vs payload size ({} receivers)", wait.as_str()),
+        ("payload (bytes, log scale)", x_axis),
+        "p50 latency (µs, log scale)",
+        &series,
+    )?;
+    Ok(())
 }
 
 fn cdf(rows: &[&Measurement], wait: Wait, path: &Path) -> anyhow::Result<()> {
