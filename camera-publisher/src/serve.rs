@@ -143,7 +143,7 @@ impl FrameSource for CameraSource {
 /// let args = CameraArgs::parse_from(["camera", "--name", "cam", "--width", "64", "--height", "48"]);
 /// let esgm = InProcessEsgm::default();
 /// serve(&esgm, &args)?;
-/// assert_eq!(esgm.sensors(), vec![("cam".to_owned(), "Image".to_owned())]);
+/// assert_eq!(esgm.sensors()?, vec![("cam".to_owned(), "Image".to_owned())]);
 /// # Ok::<(), anyhow::Error>(())
 /// ```
 pub fn serve<E: Esgm>(esgm: &E, args: &CameraArgs) -> anyhow::Result<()> {
