@@ -36,8 +36,8 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use esgm_core::esgm::{Esgm, LimitReached, LogLevel, MemoryStats, TrajectoryReport};
-use esgm_core::{InProcessEsgm, QueryError, ResetForwarder};
+use esgm_core::esgm::{Esgm, EsgmStats, LimitReached, LogLevel, MemoryStats, TrajectoryReport};
+use esgm_core::{DropCause, InProcessEsgm, QueryError, ResetForwarder};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
 use iceoryx2::port::subscriber::{Subscriber, SubscriberCreateError};
@@ -207,6 +207,107 @@ struct Envelope {
     from: String,
     id: u64,
     body: Body,
+}
+
+/// The channel's one decoder: a question or an answer, as another process published
+/// it. Its bytes are that process's to choose, so what reads the result (the answering
+/// thread, the asker's sums) must not trust any number in it.
+fn decode(bytes: &[u8]) -> Result<Envelope, serde_json::Error> {
+    serde_json::from_slice(bytes)
+}
+
+/// A message as [`decode`] reads it.
+fn encode(envelope: &Envelope) -> Result<Vec<u8>, serde_json::Error> {
+    serde_json::to_vec(envelope)
+}
+
+/// The answer `envelope` carries to question `id` of `host`, with the process that
+/// gave it; `None` for another asker's, a question, or an answer to a question given
+/// up on.
+fn answer_to(envelope: Envelope, host: &str, id: u64) -> Option<(String, AdminAnswer)> {
+    match envelope.body {
+        Body::Answer { to, answer } if envelope.id == id && to == host => {
+            Some((envelope.from, answer))
+        }
+        _ => None,
+    }
+}
+
+/// Every trajectory's statistics across the processes' answers: the writer's report,
+/// with what readers alone saw dropped (lost on the way, rejected bytes) added, so
+/// every sample is accounted for; a replica's own report where no writer answered.
+/// The counts come from other processes: they saturate, never wrap.
+pub(crate) fn combine_stats(answers: Answers) -> EsgmStats {
+    let mut stats = EsgmStats::default();
+    let mut from_writer = std::collections::BTreeSet::new();
+    let mut at_readers: Vec<(String, DropCause, u64)> = Vec::new();
+    for (_, answer) in answers {
+        let AdminAnswer::Stats(reports) = answer else { continue };
+        for (writes, report) in reports {
+            let name = report.info.name.clone();
+            if writes {
+                from_writer.insert(name.clone());
+                stats.trajectories.insert(name, report);
+            } else {
+                for (cause, n) in &report.stats.dropped {
+                    if matches!(cause, DropCause::Lost | DropCause::Rejected(_)) {
+                        at_readers.push((name.clone(), *cause, *n));
+                    }
+                }
+                if !from_writer.contains(&name) {
+                    stats.trajectories.entry(name).or_insert(report);
+                }
+            }
+        }
+    }
+    for (name, cause, n) in at_readers {
+        let Some(report) = stats.trajectories.get_mut(&name) else { continue };
+        if !from_writer.contains(&name) {
+            continue; // the report is a reader's own, already counting it
+        }
+        match report.stats.dropped.iter_mut().find(|(c, _)| *c == cause) {
+            Some((_, total)) => *total = total.saturating_add(n),
+            None => report.stats.dropped.push((cause, n)),
+        }
+        report.stats.dropped_total = report.stats.dropped_total.saturating_add(n);
+    }
+    stats
+}
+
+/// The memory of every answering process added up (saturating: the numbers are other
+/// processes').
+pub(crate) fn combine_memory(answers: &Answers) -> MemoryStats {
+    let mut total = MemoryStats::default();
+    for (_, answer) in answers {
+        if let AdminAnswer::Memory(m) = answer {
+            total.trajectories = total.trajectories.saturating_add(m.trajectories);
+            total.stored_samples = total.stored_samples.saturating_add(m.stored_samples);
+            total.held_samples = total.held_samples.saturating_add(m.held_samples);
+            total.approx_bytes = total.approx_bytes.saturating_add(m.approx_bytes);
+        }
+    }
+    total
+}
+
+/// What a flush round compares to the one before: per trajectory, what entered its
+/// stream (added and dropped, saturating) and its worker's calls.
+pub(crate) fn progress(stats: EsgmStats) -> Vec<(String, u64, u64)> {
+    stats
+        .trajectories
+        .into_iter()
+        .map(|(n, r)| (n, r.stats.added.saturating_add(r.stats.dropped_total), r.worker.calls))
+        .collect()
+}
+
+/// Trajectories the answering processes reset (saturating).
+fn resets(answers: &Answers) -> usize {
+    answers
+        .iter()
+        .map(|(_, a)| match a {
+            AdminAnswer::Done { reset } => *reset,
+            _ => 0,
+        })
+        .fold(0, usize::saturating_add)
 }
 
 /// A domain-wide question failed.
@@ -400,9 +501,8 @@ impl Admin {
         let deadline = Instant::now() + timeout;
         let send = |reason: String| AdminError::Send { reason };
         let id = self.next.fetch_add(1, Ordering::Relaxed);
-        let bytes =
-            serde_json::to_vec(&Envelope { from: self.host.clone(), id, body: Body::Ask(op) })
-                .map_err(|e| send(e.to_string()))?;
+        let bytes = encode(&Envelope { from: self.host.clone(), id, body: Body::Ask(op) })
+            .map_err(|e| send(e.to_string()))?;
         // Subscribed before asking, so that no answer can come first.
         let answers = port_within(
             deadline,
@@ -459,14 +559,8 @@ impl Admin {
                     }
                 };
                 any = true;
-                match serde_json::from_slice::<Envelope>(sample.payload()) {
-                    Ok(Envelope { from, id: got, body: Body::Answer { to, answer } })
-                        if got == id && to == self.host =>
-                    {
-                        collected.push((from, answer));
-                    }
-                    // Another asker's, or an answer to a question given up on.
-                    Ok(_) => {}
+                match decode(sample.payload()) {
+                    Ok(envelope) => collected.extend(answer_to(envelope, &self.host, id)),
                     Err(e) => tracing::warn!(error = %e, "malformed admin answer dropped"),
                 }
             }
@@ -519,7 +613,7 @@ impl Answerer {
                         break;
                     }
                 };
-                let envelope: Envelope = match serde_json::from_slice(sample.payload()) {
+                let envelope = match decode(sample.payload()) {
                     Ok(e) => e,
                     Err(e) => {
                         tracing::warn!(error = %e, "malformed admin question dropped");
@@ -528,7 +622,7 @@ impl Answerer {
                 };
                 drop(sample);
                 let Body::Ask(op) = envelope.body else { continue };
-                let answer = self.answer(op);
+                let answer = answer(&self.host, &self.local, &self.mirrors, op);
                 let reply = Envelope {
                     from: self.host.clone(),
                     id: envelope.id,
@@ -542,7 +636,7 @@ impl Answerer {
     }
 
     fn reply(&mut self, envelope: &Envelope) -> Result<(), String> {
-        let bytes = serde_json::to_vec(envelope).map_err(|e| e.to_string())?;
+        let bytes = encode(envelope).map_err(|e| e.to_string())?;
         if bytes.len() > MAX_MESSAGE {
             return Err(format!("the answer is {} bytes, more than {MAX_MESSAGE}", bytes.len()));
         }
@@ -569,71 +663,78 @@ impl Answerer {
             .map_err(|e| format!("{e:?}"))?;
         Ok(())
     }
+}
 
-    /// The trajectories this process writes.
-    fn written(&self) -> Vec<String> {
-        self.mirrors.lock().exports.keys().cloned().collect()
-    }
+/// The trajectories this process writes.
+fn written(mirrors: &SharedMirrors) -> Vec<String> {
+    mirrors.lock().exports.keys().cloned().collect()
+}
 
-    fn answer(&self, op: AdminOp) -> AdminAnswer {
-        match op {
-            AdminOp::Reset { trajectory } => {
-                let written = self.written();
-                let targets: Vec<&String> = match &trajectory {
-                    Some(t) => written.iter().filter(|w| *w == t).collect(),
-                    None => written.iter().collect(),
+/// This process's answer (it is `host`) to `op`, from its runtime and mirrors. The
+/// question comes from another process: nothing in it may make this panic.
+fn answer(host: &str, local: &InProcessEsgm, mirrors: &SharedMirrors, op: AdminOp) -> AdminAnswer {
+    match op {
+        AdminOp::Reset { trajectory } => {
+            let written = written(mirrors);
+            let targets: Vec<&String> = match &trajectory {
+                Some(t) => written.iter().filter(|w| *w == t).collect(),
+                None => written.iter().collect(),
+            };
+            let mut reset = 0;
+            for name in targets {
+                let done = local
+                    .get_entity_trajectory_structure(name)
+                    .map_err(|e| e.to_string())
+                    .and_then(|h| h.with_store(|s| s.reset()).map_err(|e| e.to_string()));
+                match done {
+                    Ok(()) => reset += 1,
+                    Err(e) => tracing::debug!(trajectory = %name, error = %e,
+                        "a trajectory to reset went meanwhile"),
+                }
+            }
+            AdminAnswer::Done { reset }
+        }
+        AdminOp::CatchUp => {
+            mirrors.lock().pump();
+            AdminAnswer::Done { reset: 0 }
+        }
+        AdminOp::Stats => {
+            let written = written(mirrors);
+            let stats = local.stats_here();
+            AdminAnswer::Stats(
+                stats
+                    .trajectories
+                    .into_iter()
+                    .map(|(name, report)| (written.contains(&name), report))
+                    .collect(),
+            )
+        }
+        AdminOp::Memory => AdminAnswer::Memory(local.memory_here()),
+        AdminOp::SetLogLevel { level, process } => {
+            if process.as_ref().is_some_and(|p| p != host) {
+                return AdminAnswer::LogLevel { applied: false, filter: false };
+            }
+            local.set_log_level_here(level);
+            match crate::process::apply_log_level(level) {
+                Ok(filter) => {
+                    tracing::info!(?level, "log level set by the domain");
+                    AdminAnswer::LogLevel { applied: true, filter }
+                }
+                Err(reason) => AdminAnswer::Failed { reason },
+            }
+        }
+        AdminOp::Flush { timeout } => {
+            // The asker's timeout, read from its bytes: one past what an instant holds
+            // is refused, not added (the addition panics).
+            let Some(deadline) = Instant::now().checked_add(timeout) else {
+                return AdminAnswer::Failed {
+                    reason: format!("a flush timeout of {timeout:?} is past any deadline"),
                 };
-                let mut reset = 0;
-                for name in targets {
-                    let done = self
-                        .local
-                        .get_entity_trajectory_structure(name)
-                        .map_err(|e| e.to_string())
-                        .and_then(|h| h.with_store(|s| s.reset()).map_err(|e| e.to_string()));
-                    match done {
-                        Ok(()) => reset += 1,
-                        Err(e) => tracing::debug!(trajectory = %name, error = %e,
-                            "a trajectory to reset went meanwhile"),
-                    }
-                }
-                AdminAnswer::Done { reset }
-            }
-            AdminOp::CatchUp => {
-                self.mirrors.lock().pump();
-                AdminAnswer::Done { reset: 0 }
-            }
-            AdminOp::Stats => {
-                let written = self.written();
-                let stats = self.local.stats_here();
-                AdminAnswer::Stats(
-                    stats
-                        .trajectories
-                        .into_iter()
-                        .map(|(name, report)| (written.contains(&name), report))
-                        .collect(),
-                )
-            }
-            AdminOp::Memory => AdminAnswer::Memory(self.local.memory_here()),
-            AdminOp::SetLogLevel { level, process } => {
-                if process.as_ref().is_some_and(|p| *p != self.host) {
-                    return AdminAnswer::LogLevel { applied: false, filter: false };
-                }
-                self.local.set_log_level_here(level);
-                match crate::process::apply_log_level(level) {
-                    Ok(filter) => {
-                        tracing::info!(?level, "log level set by the domain");
-                        AdminAnswer::LogLevel { applied: true, filter }
-                    }
-                    Err(reason) => AdminAnswer::Failed { reason },
-                }
-            }
-            AdminOp::Flush { timeout } => {
-                let deadline = Instant::now() + timeout;
-                self.mirrors.lock().pump();
-                match self.local.flush(deadline) {
-                    Ok(()) => AdminAnswer::Done { reset: 0 },
-                    Err(e) => AdminAnswer::Failed { reason: e.to_string() },
-                }
+            };
+            mirrors.lock().pump();
+            match local.flush(deadline) {
+                Ok(()) => AdminAnswer::Done { reset: 0 },
+                Err(e) => AdminAnswer::Failed { reason: e.to_string() },
             }
         }
     }
@@ -656,19 +757,149 @@ impl ResetForwarder for DomainReset {
         let admin = self.admin.upgrade().ok_or_else(|| unavailable("disconnected".into()))?;
         let op = AdminOp::Reset { trajectory: Some(trajectory.to_owned()) };
         let answers = admin.ask(op, self.timeout).map_err(|e| unavailable(e.to_string()))?;
-        let reset: usize = answers
-            .iter()
-            .map(|(_, a)| match a {
-                AdminAnswer::Done { reset } => *reset,
-                _ => 0,
-            })
-            .sum();
-        if reset == 0 {
+        if resets(&answers) == 0 {
             return Err(unavailable("no connected process writes it".into()));
         }
         if blocking {
             admin.ask(AdminOp::CatchUp, self.timeout).map_err(|e| unavailable(e.to_string()))?;
         }
         Ok(())
+    }
+}
+
+/// What [`AdminReader::read`] made of a batch of messages.
+#[doc(hidden)]
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct AdminRead {
+    /// Messages that did not decode (the channel drops them with a warning).
+    pub malformed: usize,
+    /// Questions answered.
+    pub questions: usize,
+    /// Answers taken as answers to the asker's question.
+    pub answers: usize,
+    /// Trajectories the answers say were reset.
+    pub reset: usize,
+    /// The answers' memory, added up.
+    pub memory: MemoryStats,
+    /// Trajectories in the answers' statistics, combined.
+    pub trajectories: usize,
+}
+
+/// Both ends of the admin channel reading other processes' bytes, without the
+/// channel: each message decoded as the admin thread and the asker decode it, a
+/// question answered from an empty runtime and the reply encoded and read back, the
+/// answers to the asker's question combined as `domain_stats`, `domain_memory`, a flush
+/// round and a domain reset combine them.
+///
+/// Public and hidden for esgm-fuzz alone: any process of the domain may publish on the
+/// channel, so the fuzzer must run this code on hostile bytes, and the channel's types
+/// stay private.
+#[doc(hidden)]
+#[derive(Debug, Default)]
+pub struct AdminReader {
+    local: InProcessEsgm,
+    mirrors: SharedMirrors,
+}
+
+impl AdminReader {
+    /// Reads `messages` as process `host` would that asked question `id`. `Err`: a
+    /// reply this process made did not encode or read back (the asker could not read
+    /// it), which no input may cause.
+    pub fn read(
+        &self,
+        host: &str,
+        id: u64,
+        messages: &[&[u8]],
+    ) -> Result<AdminRead, serde_json::Error> {
+        let mut read = AdminRead::default();
+        let mut answers = Answers::new();
+        for bytes in messages {
+            let Ok(envelope) = decode(bytes) else {
+                read.malformed += 1;
+                continue;
+            };
+            if let Body::Ask(op) = envelope.body {
+                read.questions += 1;
+                let answer = answer(host, &self.local, &self.mirrors, op);
+                let reply = Envelope {
+                    from: host.to_owned(),
+                    id: envelope.id,
+                    body: Body::Answer { to: envelope.from, answer },
+                };
+                decode(&encode(&reply)?)?;
+                continue;
+            }
+            answers.extend(answer_to(envelope, host, id));
+        }
+        read.answers = answers.len();
+        read.reset = resets(&answers);
+        read.memory = combine_memory(&answers);
+        read.trajectories = progress(combine_stats(answers)).len();
+        Ok(read)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use esgm_core::esgm::TrajectorySpec;
+
+    /// A report of a real trajectory, its counts as large as another process may claim.
+    fn huge_report() -> TrajectoryReport {
+        let local = InProcessEsgm::default();
+        local.create_trajectory(TrajectorySpec::primitive("r", "RobotState")).unwrap();
+        let mut report = local.stats_here().trajectories.remove("r").unwrap();
+        report.stats.added = u64::MAX;
+        report.stats.dropped = vec![(DropCause::Lost, u64::MAX)];
+        report.stats.dropped_total = u64::MAX;
+        report
+    }
+
+    #[test]
+    fn sums_of_other_processes_numbers_saturate() {
+        let report = huge_report();
+        let answers = vec![(
+            "w".to_owned(),
+            AdminAnswer::Stats(vec![(true, report.clone()), (false, report)]),
+        )];
+        let stats = combine_stats(answers);
+        let r = &stats.trajectories["r"].stats;
+        assert_eq!((r.dropped_total, r.dropped[0].1), (u64::MAX, u64::MAX));
+        assert_eq!(progress(stats)[0].1, u64::MAX);
+
+        let memory = MemoryStats {
+            trajectories: usize::MAX,
+            stored_samples: usize::MAX,
+            held_samples: usize::MAX,
+            approx_bytes: usize::MAX,
+        };
+        let answers: Answers = vec![
+            ("a".to_owned(), AdminAnswer::Memory(memory)),
+            ("b".to_owned(), AdminAnswer::Memory(memory)),
+        ];
+        assert_eq!(combine_memory(&answers), memory);
+
+        let done = || AdminAnswer::Done { reset: usize::MAX };
+        assert_eq!(resets(&vec![("a".to_owned(), done()), ("b".to_owned(), done())]), usize::MAX);
+    }
+
+    #[test]
+    fn a_flush_timeout_past_any_instant_is_refused() {
+        let (local, mirrors) = (InProcessEsgm::default(), SharedMirrors::default());
+        let op = AdminOp::Flush { timeout: Duration::MAX };
+        assert!(matches!(answer("h", &local, &mirrors, op), AdminAnswer::Failed { .. }));
+        let op = AdminOp::Flush { timeout: Duration::from_millis(10) };
+        assert!(matches!(answer("h", &local, &mirrors, op), AdminAnswer::Done { .. }));
+    }
+
+    #[test]
+    fn the_reader_answers_questions_and_combines_answers() {
+        let reader = AdminReader::default();
+        let question = br#"{"from":"b","id":7,"body":{"Ask":{"Flush":{"timeout":{"secs":18446744073709551615,"nanos":999999999}}}}}"#;
+        let answer =
+            br#"{"from":"b","id":1,"body":{"Answer":{"to":"a","answer":{"Done":{"reset":3}}}}}"#;
+        let read = reader.read("a", 1, &[question, answer, answer, b"{"]).unwrap();
+        assert_eq!((read.questions, read.answers, read.reset, read.malformed), (1, 2, 6, 1));
     }
 }

@@ -145,16 +145,7 @@ impl AddServer {
                 }
             };
             n += 1;
-            let outcome = match codec::decode_bytes(request.payload()) {
-                Ok(es) => handle.add_blocking(es),
-                // Bytes from another process that are not a structure: the caller
-                // learns why, nothing is added.
-                Err(e) => Err(AddError::Unavailable {
-                    trajectory: handle.name().to_owned(),
-                    reason: format!("the writer could not read the structure: {e}"),
-                }),
-            };
-            let answer = match encode(&outcome) {
+            let answer = match serve_request(handle, request.payload()) {
                 Ok(bytes) => bytes,
                 Err(e) => {
                     tracing::error!(error = %e, "cannot encode a blocking add's outcome");
@@ -171,6 +162,41 @@ impl AddServer {
             }
         }
     }
+}
+
+/// The writer's answer to one blocking add's bytes: the structure added through
+/// `handle` (the writer's gate), the outcome encoded for the replica; bytes that are
+/// not a structure are answered with why, and nothing is added. `Err`: the outcome
+/// did not encode (no answer is sent; the caller times out).
+///
+/// Public and hidden for esgm-fuzz: the bytes are another process's, so the fuzzer
+/// runs this, the code the writer runs, on hostile ones.
+#[doc(hidden)]
+pub fn serve_request(
+    handle: &InProcessTrajectory,
+    payload: &[u8],
+) -> Result<Vec<u8>, serde_json::Error> {
+    let outcome = match codec::decode_bytes(payload) {
+        Ok(es) => handle.add_blocking(es),
+        Err(e) => Err(AddError::Unavailable {
+            trajectory: handle.name().to_owned(),
+            reason: format!("the writer could not read the structure: {e}"),
+        }),
+    };
+    encode(&outcome)
+}
+
+/// The writer's answer to a blocking add of `trajectory`, as the replica reads it:
+/// the gate's outcome, or [`AddError::Unavailable`] when the bytes are not an answer.
+///
+/// Public and hidden for esgm-fuzz: the bytes are the writer process's, so the
+/// fuzzer runs this, the code the replica runs, on hostile ones.
+#[doc(hidden)]
+pub fn read_answer(trajectory: &str, answer: &[u8]) -> Result<AddOutcome, AddError> {
+    decode::<Result<AddOutcome, AddError>>(answer).map_err(|e| AddError::Unavailable {
+        trajectory: trajectory.to_owned(),
+        reason: format!("malformed answer from the writer: {e}"),
+    })?
 }
 
 /// The replica's end: sends a blocking add and waits for the writer's outcome.
@@ -250,11 +276,7 @@ impl AddClient {
         let mut pause = Duration::from_micros(2);
         loop {
             match pending.receive() {
-                Ok(Some(answer)) => {
-                    return decode::<Result<AddOutcome, AddError>>(answer.payload()).map_err(
-                        |e| unavailable(format!("malformed answer from the writer: {e}")),
-                    )?;
-                }
+                Ok(Some(answer)) => return read_answer(&self.trajectory, answer.payload()),
                 Ok(None) => {}
                 Err(e) => return Err(unavailable(format!("no answer from the writer: {e:?}"))),
             }

@@ -90,6 +90,12 @@ use crate::control::{ControlClient, ControlClientError};
 use crate::holdings::{HoldingStats, Holdings};
 pub use admin::AdminError;
 use admin::{Admin, AdminAnswer, AdminOp, DomainReset};
+#[doc(hidden)]
+pub use admin::{AdminRead, AdminReader};
+#[doc(hidden)]
+pub use blocking_add::{
+    read_answer as read_blocking_add_answer, serve_request as serve_blocking_add,
+};
 use location::{Command, Location, install};
 use mirrors::SharedMirrors;
 use receiver::Receiver as SampleReceiver;
@@ -469,45 +475,7 @@ impl ShmEsgm {
     /// writes it (a replica's, what it received, where no writer answered).
     pub fn domain_stats(&self) -> Result<EsgmStats, AdminError> {
         let answers = self.inner.admin.ask(AdminOp::Stats, self.inner.timeout)?;
-        let mut stats = EsgmStats::default();
-        let mut from_writer = std::collections::BTreeSet::new();
-        // What readers dropped on their side (lost on the way, rejected bytes): theirs
-        // alone, added to the writer's report so every sample is accounted for.
-        let mut at_readers: Vec<(String, esgm_core::DropCause, u64)> = Vec::new();
-        for (_, answer) in answers {
-            let AdminAnswer::Stats(reports) = answer else { continue };
-            for (writes, report) in reports {
-                let name = report.info.name.clone();
-                if writes {
-                    from_writer.insert(name.clone());
-                    stats.trajectories.insert(name, report);
-                } else {
-                    for (cause, n) in &report.stats.dropped {
-                        if matches!(
-                            cause,
-                            esgm_core::DropCause::Lost | esgm_core::DropCause::Rejected(_)
-                        ) {
-                            at_readers.push((name.clone(), *cause, *n));
-                        }
-                    }
-                    if !from_writer.contains(&name) {
-                        stats.trajectories.entry(name).or_insert(report);
-                    }
-                }
-            }
-        }
-        for (name, cause, n) in at_readers {
-            let Some(report) = stats.trajectories.get_mut(&name) else { continue };
-            if !from_writer.contains(&name) {
-                continue; // the report is a reader's own, already counting it
-            }
-            match report.stats.dropped.iter_mut().find(|(c, _)| *c == cause) {
-                Some((_, total)) => *total += n,
-                None => report.stats.dropped.push((cause, n)),
-            }
-            report.stats.dropped_total += n;
-        }
-        Ok(stats)
+        Ok(admin::combine_stats(answers))
     }
 
     /// E7 across the system: the memory of every connected process added up (a
@@ -515,16 +483,7 @@ impl ShmEsgm {
     /// counts three times).
     pub fn domain_memory(&self) -> Result<MemoryStats, AdminError> {
         let answers = self.inner.admin.ask(AdminOp::Memory, self.inner.timeout)?;
-        let mut total = MemoryStats::default();
-        for (_, answer) in answers {
-            if let AdminAnswer::Memory(m) = answer {
-                total.trajectories += m.trajectories;
-                total.stored_samples += m.stored_samples;
-                total.held_samples += m.held_samples;
-                total.approx_bytes += m.approx_bytes;
-            }
-        }
-        Ok(total)
+        Ok(admin::combine_memory(&answers))
     }
 
     /// E7: sets the log level of the process named `process` (its host name in the
@@ -589,11 +548,7 @@ impl ShmEsgm {
             let progress = self
                 .domain_stats()
                 .map_err(|e| FlushError::Unavailable { reason: e.to_string() })?;
-            let progress: Vec<(String, u64, u64)> = progress
-                .trajectories
-                .into_iter()
-                .map(|(n, r)| (n, r.stats.added + r.stats.dropped_total, r.worker.calls))
-                .collect();
+            let progress = admin::progress(progress);
             if previous.as_ref() == Some(&progress) {
                 return Ok(());
             }
