@@ -599,10 +599,71 @@ impl Walker {
     }
 }
 
+/// The most bytes a chunk's records may take uncompressed. The `mcap` reader makes
+/// room for them before it decompresses, so the size a damaged or crafted file claims
+/// is checked first ([`check_chunk_size`]); a claim past this is damage, not an
+/// allocation that aborts the process. The writer's chunks are 4 MiB, or one
+/// structure when it is larger.
+const MAX_CHUNK_RECORDS: u64 = 1 << 30;
+/// The most zstd expands: a run-length block of 128 KiB takes 4 bytes.
+const ZSTD_MAX_RATIO: u64 = 1 << 15;
+/// The most lz4 expands: a length byte stands for at most 255 bytes.
+const LZ4_MAX_RATIO: u64 = 256;
+/// Expansion allowed on top of the ratio (a frame's header and one block).
+const EXPANSION_SLACK: u64 = 1 << 17;
+
+/// A chunk's uncompressed size, refused when it cannot be its records': past
+/// [`MAX_CHUNK_RECORDS`], other than their length when they are not compressed, or
+/// more than its compression can make of them. `None` for a body too short to say (or
+/// an unknown compression), which the `mcap` reader refuses.
+fn check_chunk_size(body: &[u8]) -> Result<Option<u64>, String> {
+    let u64_at = |at: usize| {
+        // An 8-byte slice always makes a `[u8; 8]`.
+        let bytes: [u8; 8] = body.get(at..at.checked_add(8)?)?.try_into().ok()?;
+        Some(u64::from_le_bytes(bytes))
+    };
+    // message start time, end time, then the uncompressed size, CRC, compression name
+    // (u32 length + bytes) and the records' length.
+    let Some(uncompressed) = u64_at(16) else { return Ok(None) };
+    let Some(name_len) = body.get(28..32).and_then(|b| <[u8; 4]>::try_from(b).ok()) else {
+        return Ok(None);
+    };
+    let name_end = 32usize.saturating_add(u32::from_le_bytes(name_len) as usize);
+    let (Some(name), Some(records)) = (body.get(32..name_end), u64_at(name_end)) else {
+        return Ok(None);
+    };
+    let most = match name {
+        b"" => records,
+        b"zstd" => records.saturating_mul(ZSTD_MAX_RATIO).saturating_add(EXPANSION_SLACK),
+        b"lz4" => records.saturating_mul(LZ4_MAX_RATIO).saturating_add(EXPANSION_SLACK),
+        _ => return Ok(None),
+    };
+    if uncompressed > MAX_CHUNK_RECORDS {
+        return Err(format!(
+            "its records are {uncompressed} bytes uncompressed, more than this reader's \
+             limit of {MAX_CHUNK_RECORDS}"
+        ));
+    }
+    if name.is_empty() && uncompressed != records {
+        return Err(format!("{records} bytes of uncompressed records said to be {uncompressed}"));
+    }
+    if uncompressed > most {
+        return Err(format!(
+            "{records} compressed bytes cannot be {uncompressed} bytes uncompressed"
+        ));
+    }
+    Ok(Some(uncompressed))
+}
+
 /// The records inside one chunk, decompressed and checked against the chunk's CRC.
 fn chunk_records(opcode: u8, head: &[u8; 9], body: &[u8]) -> Result<Vec<Record<'static>>, String> {
+    // No record inside is longer than the chunk's records uncompressed (the reader
+    // makes room for a record's claimed length before decompressing it), nor any part
+    // of the chunk longer than the chunk.
+    let limit = check_chunk_size(body)?.unwrap_or(0).max(body.len() as u64);
     let mut reader = LinearReader::new_with_options(
         LinearReaderOptions::default()
+            .with_record_length_limit(usize::try_from(limit).unwrap_or(usize::MAX))
             .with_skip_start_magic(true)
             .with_skip_end_magic(true)
             .with_validate_chunk_crcs(true)
@@ -632,4 +693,48 @@ fn chunk_records(opcode: u8, head: &[u8; 9], body: &[u8]) -> Result<Vec<Record<'
         }
     }
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A chunk body: times, uncompressed size, CRC, compression and records' length.
+    fn chunk(uncompressed: u64, compression: &str, records: u64) -> Vec<u8> {
+        let mut body = vec![0u8; 16];
+        body.extend(uncompressed.to_le_bytes());
+        body.extend(0u32.to_le_bytes());
+        body.extend((compression.len() as u32).to_le_bytes());
+        body.extend(compression.as_bytes());
+        body.extend(records.to_le_bytes());
+        body
+    }
+
+    /// A crafted size made the `mcap` reader allocate it (3 PB in the fuzzer's case)
+    /// and abort the process: `esgm info` on a hostile file died.
+    #[test]
+    fn a_chunk_claiming_more_than_its_records_can_be_is_damage() {
+        assert!(check_chunk_size(&chunk(3_383_301_196_742_801, "zstd", 1000)).is_err());
+        assert!(check_chunk_size(&chunk(MAX_CHUNK_RECORDS + 1, "zstd", 1 << 20)).is_err());
+        assert!(check_chunk_size(&chunk(101, "", 100)).is_err());
+        assert!(check_chunk_size(&chunk(100 * 257 + EXPANSION_SLACK, "lz4", 100)).is_err());
+        assert!(check_chunk_size(&chunk(100, "", 100)).is_ok());
+        assert!(check_chunk_size(&chunk(4 << 20, "zstd", 200)).is_ok());
+        assert!(check_chunk_size(&chunk(4 << 20, "lz4", 1 << 15)).is_ok());
+        // Too short to say: left to the mcap reader.
+        assert!(check_chunk_size(&chunk(u64::MAX, "zstd", 1)[..20]).is_ok());
+    }
+
+    /// A record inside a chunk claiming a length past the chunk's made the `mcap`
+    /// reader allocate it before decompressing (the fuzzer saw 2.4 EB): an abort.
+    #[test]
+    fn a_record_longer_than_its_chunk_is_damage() {
+        let mut record = vec![0x05u8];
+        record.extend((u64::MAX / 2).to_le_bytes());
+        let mut body = chunk(record.len() as u64, "", record.len() as u64);
+        body.extend(&record);
+        let mut head = [OP_CHUNK; 9];
+        head[1..].copy_from_slice(&(body.len() as u64).to_le_bytes());
+        assert!(chunk_records(OP_CHUNK, &head, &body).is_err());
+    }
 }

@@ -15,6 +15,9 @@
 //! - **Its own binary.** Zenoh takes minutes to build on two cores; keeping it out of
 //!   `esgm-cli` keeps the demo's and the CLI's build as they were. `esgm bridge …`
 //!   runs this binary as git and cargo run their external subcommands.
+//! - **Zenoh is a feature** (`zenoh`, on by default; the binary needs it). Off, the
+//!   library is [`wire`] and the small helpers that need no session, so esgm-fuzz
+//!   fuzzes the wire decoder without a Zenoh build.
 //! - **Keys.** `esgm/<domain>/<trajectory>` ([`key`]): the data, and the exporter's
 //!   queryable for type, history and remote queries ([`serve`]).
 //! - **The payload is the shared-memory archive.** The exporter reads the trajectory's
@@ -35,12 +38,18 @@
 //!   bound from its queryable (`?esgm=history`).
 #![deny(missing_docs)]
 
+#[cfg(feature = "zenoh")]
 pub mod ask;
+#[cfg(feature = "zenoh")]
 pub mod export;
+#[cfg(feature = "zenoh")]
 pub mod import;
 pub mod key;
+#[cfg(feature = "zenoh")]
 pub mod remote;
+#[cfg(feature = "zenoh")]
 pub mod serve;
+#[cfg(feature = "zenoh")]
 pub mod session;
 pub mod stats;
 pub mod times;

@@ -1,14 +1,26 @@
-//! esgm-fuzz: a fuzzer for everything esgm decodes from another process — the codec's
-//! validation and access, a sample's header and payload as a reader checks them, the
-//! control protocol's requests and answers, and the configuration parser. Run it as
-//! `esgm-fuzz --seconds N`.
+//! esgm-fuzz: a fuzzer for everything esgm decodes from another process, host or file —
+//! the codec's validation and access, a sample's header and payload as a reader checks
+//! them, the control protocol's requests and answers, the admin channel's questions and
+//! answers, blocking adds (the writer's request, the replica's answer), the bridge's
+//! wire messages, recordings (MCAP files, damaged or crafted) and the configuration
+//! parser. Run it as `esgm-fuzz --seconds N`.
+//!
+//! # Build it with overflow checks
+//! `cargo build --profile fuzz -p esgm-fuzz` (then `target/fuzz/esgm-fuzz`): the
+//! workspace's `fuzz` profile is `release` with `overflow-checks = true`, so arithmetic
+//! on outside numbers that a release build would silently wrap panics and is a
+//! finding. A debug build (the tests') checks overflow too, only slower.
 //!
 //! # Design
 //! - **The code under test is the code that runs.** Each target calls the function a
 //!   reader, the coordinator, a client or `esgm apply` calls
 //!   ([`esgm_core::codec::access`], [`esgm_shm::check_sample`],
 //!   [`esgm_shm::control::protocol::decode`] and the coordinator's
-//!   [`esgm_shm::control::Registry`], [`esgm_cli::config::parse`]), never a copy.
+//!   [`esgm_shm::control::Registry`], [`esgm_shm::client::AdminReader`],
+//!   [`esgm_shm::client::serve_blocking_add`] and
+//!   [`esgm_shm::client::read_blocking_add_answer`], [`esgm_bridge::wire::decode`],
+//!   [`esgm_recording::Recording`], [`esgm_cli::config::parse`]), never a copy. Where
+//!   that code was private it is public and `#[doc(hidden)]` for this crate alone.
 //! - **Inputs** start from valid ones (encodings of the library's types, a compound of
 //!   every value sort, nesting up to the bound; a sample per structure and a reset;
 //!   requests of every kind and the registry's answers; the tutorial and a file with

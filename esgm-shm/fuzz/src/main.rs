@@ -14,8 +14,10 @@ use esgm_fuzz::runner::{self, Cases};
 use esgm_fuzz::supervise::{self, Plan};
 use esgm_fuzz::targets::{self, NAMES};
 
-/// Fuzzes the codec, the sample header, the control protocol and the configuration
-/// parser with mutated and random inputs; reports cases per second and findings.
+/// Fuzzes the codec, the sample header, the control protocol, the admin channel,
+/// blocking adds, the bridge's wire messages, recordings and the configuration parser
+/// with mutated and random inputs; reports cases per second and findings. Build it
+/// with `cargo build --profile fuzz -p esgm-fuzz` (release with overflow checks).
 #[derive(Debug, Parser)]
 #[command(name = "esgm-fuzz", version)]
 struct Args {

@@ -13,7 +13,9 @@ use esgm_fuzz::targets::NAMES;
 fn every_target_runs_briefly_without_findings() {
     let findings = tempfile::tempdir().unwrap();
     let mut child = Command::new(env!("CARGO_BIN_EXE_esgm-fuzz"))
-        .args(["--seconds", "10", "--seed", "16"])
+        // Two seconds per target (the nine of `NAMES`: recordings, the slowest, are
+        // files written and read, a few hundred cases a second in a debug build).
+        .args(["--seconds", &(2 * NAMES.len()).to_string(), "--seed", "16"])
         // A debug build on a loaded machine is slow: only a real hang may count.
         .args(["--hang-ms", "10000"])
         .arg("--findings")

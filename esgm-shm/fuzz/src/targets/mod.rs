@@ -1,14 +1,28 @@
-//! The targets: everything esgm decodes from another process.
+//! The targets: everything esgm decodes from another process, host or file.
 
+pub mod admin;
+pub mod blocking_add;
 pub mod codec;
 pub mod configuration;
 pub mod control;
+pub mod recording;
 pub mod sample;
+pub mod wire;
 
 use crate::target::{Broken, Target};
 
 /// The names `--target` takes, in the order a run visits them.
-pub const NAMES: [&str; 5] = ["codec", "sample", "request", "response", "config"];
+pub const NAMES: [&str; 9] = [
+    "codec",
+    "sample",
+    "request",
+    "response",
+    "admin",
+    "blocking-add",
+    "wire",
+    "recording",
+    "config",
+];
 
 /// The target called `name`, with its seeds made; `None` for an unknown name.
 pub fn by_name(name: &str) -> Option<Result<Box<dyn Target>, Broken>> {
@@ -20,6 +34,10 @@ pub fn by_name(name: &str) -> Option<Result<Box<dyn Target>, Broken>> {
         "sample" => boxed(sample::Sample::new()),
         "request" => boxed(control::Requests::new()),
         "response" => boxed(control::Responses::new()),
+        "admin" => boxed(admin::Admin::new()),
+        "blocking-add" => boxed(blocking_add::BlockingAdd::new()),
+        "wire" => boxed(wire::Wire::new()),
+        "recording" => boxed(recording::RecordingTarget::new()),
         "config" => boxed(Ok(configuration::Configuration::new())),
         _ => return None,
     })
