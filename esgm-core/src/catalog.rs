@@ -398,7 +398,8 @@ impl Catalog {
         }
         let mut registry = self.types.clone();
         let key = ty.name.clone();
-        let _ = registry.destroy_entity_structure_type(&key);
+        // A state type left from before is replaced; none there is fine too.
+        let _absent_is_fine = registry.destroy_entity_structure_type(&key);
         registry.create_entity_structure_type(key.clone(), ty).map_err(no_such_type)?;
         TypeChecker::new(&registry, &key).map_err(no_such_type)
     }

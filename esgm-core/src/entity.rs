@@ -199,6 +199,7 @@ impl<T: Entity> AttributeField for Vec<T> {
         Value::EntityFrameSeq(self.iter().map(|e| e.to_frame(T::TYPE_NAME)).collect())
     }
     fn from_value(value: &Value) -> Option<Self> {
+        // One element of another shape makes the whole value not a `Vec<T>`: `None` says so.
         value.as_frames()?.iter().map(|f| T::from_frame(f).ok()).collect()
     }
 }

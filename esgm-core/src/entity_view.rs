@@ -186,6 +186,7 @@ macro_rules! decoded {
         impl ViewField for $t {
             type View<'a> = $t;
             fn view_archived(value: &ArchivedValue) -> Option<$t> {
+                // A checked archive decodes; if not, the field reads as absent, like a wrong sort.
                 decode_value(value).ok().and_then(|v| <$t as AttributeField>::from_value(&v))
             }
             fn view_value(value: &Value) -> Option<$t> {
@@ -218,6 +219,7 @@ decoded!(
 impl<T: crate::entity::Entity> ViewField for Vec<T> {
     type View<'a> = Arc<[T]>;
     fn view_archived(value: &ArchivedValue) -> Option<Arc<[T]>> {
+        // A checked archive decodes; if not, the field reads as absent, like a wrong sort.
         decode_value(value).ok().and_then(|v| Self::view_value(&v))
     }
     fn view_value(value: &Value) -> Option<Arc<[T]>> {
@@ -235,6 +237,7 @@ pub fn view_nested<T: crate::entity::Entity + AttributeField>(value: &Value) -> 
 pub fn view_nested_archived<T: crate::entity::Entity + AttributeField>(
     value: &ArchivedValue,
 ) -> Option<Arc<T>> {
+    // A checked archive decodes; if not, the field reads as absent, like a wrong sort.
     decode_value(value).ok().and_then(|v| view_nested(&v))
 }
 

@@ -57,6 +57,7 @@ impl PixelBuffer {
     /// format or a size that does not fit in memory.
     pub fn heap_image(width: i64, height: i64, format: i64) -> Option<Self> {
         let bpp = Image::bytes_per_pixel(format)?;
+        // A negative side is an impossible size: `None`, as documented.
         let w = usize::try_from(width).ok()?;
         let h = usize::try_from(height).ok()?;
         Some(Self::heap(w.checked_mul(h)?.checked_mul(bpp)?))

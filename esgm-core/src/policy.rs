@@ -47,6 +47,7 @@ impl CacheConstraint {
         match usize::try_from(cache_size) {
             Ok(0) => Ok(CacheConstraint::All),
             Ok(n) => Ok(CacheConstraint::Elements(n)),
+            // `try_from` fails only for a negative size, which the error names.
             Err(_) => {
                 Err(PolicyError::illegal("cache_size", cache_size, "must be 0 (all) or positive"))
             }

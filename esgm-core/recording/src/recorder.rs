@@ -170,8 +170,15 @@ impl Recorder {
                     type_name: info.type_name.clone(),
                 }
             })?;
-            let lookup =
-                |n: &str| -> Option<EntityStructureType> { esgm.get_entity_structure_type(n).ok() };
+            // A nested type the registry cannot give is left out of the schema, with a warning.
+            let lookup = |n: &str| -> Option<EntityStructureType> {
+                esgm.get_entity_structure_type(n)
+                    .inspect_err(|e| {
+                        tracing::warn!(type_name = n, error = %e,
+                            "a nested type is left out of the schema")
+                    })
+                    .ok()
+            };
             let types = TypeSchema::collect(root, &lookup);
             let trajectory = esgm
                 .get_entity_trajectory_structure(name)
@@ -277,6 +284,8 @@ fn record_one<T: EntityTrajectoryStructure>(
     let mut batch: Vec<(Sample, i64)> = Vec::with_capacity(WRITE_BATCH);
     loop {
         let stopping = shared.stop.load(Ordering::Acquire);
+        // Timeout: nothing yet. TODO(issue 24): Closed (the trajectory destroyed) spins
+        // this loop, warning each pass; it should end the recording of this trajectory.
         let sample = if stopping { samples.try_recv() } else { samples.recv_timeout(TICK).ok() };
         let got = sample.is_some();
         if let Some(sample) = sample {

@@ -248,6 +248,7 @@ pub fn check_and_register_types<E: Esgm>(
                     });
                 }
             }
+            // Not in the domain (or unreadable): creating it below reports any real failure.
             Err(_) => missing.push((name, recorded)),
         }
     }

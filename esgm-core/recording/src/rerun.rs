@@ -163,6 +163,7 @@ pub fn rerun(
                     .into());
                 }
             }
+            // Not in the library (or unreadable): creating it reports any real failure.
             Err(_) => esgm
                 .create_entity_structure_type(name, t.clone())
                 .map_err(|e| plan_err(name, e.to_string()))?,
@@ -249,7 +250,15 @@ pub fn rerun(
                 let root = esgm
                     .get_entity_structure_type(&info.type_name)
                     .map_err(|e| plan_err(name, e.to_string()))?;
-                let lookup = |n: &str| esgm.get_entity_structure_type(n).ok();
+                // A nested type the registry cannot give is left out, with a warning.
+                let lookup = |n: &str| {
+                    esgm.get_entity_structure_type(n)
+                        .inspect_err(|e| {
+                            tracing::warn!(type_name = n, error = %e,
+                                "a nested type is left out of the schema")
+                        })
+                        .ok()
+                };
                 Some(w.add_trajectory(info.clone(), TypeSchema::collect(root, &lookup))?)
             }
             None => None,
@@ -348,6 +357,7 @@ fn propagate(
                         nodes[d].counts.failures += 1;
                         tracing::warn!(trajectory = %nodes[d].info.name, error = %e, "unit failed");
                     }
+                    // A panic: its payload was printed by the panic hook; counted and logged here.
                     Err(_) => {
                         nodes[d].counts.failures += 1;
                         tracing::error!(trajectory = %nodes[d].info.name, "unit panicked");

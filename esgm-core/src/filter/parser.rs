@@ -157,6 +157,7 @@ impl Parser<'_> {
         match token.kind {
             TokenKind::Int(v) => match i64::try_from(v) {
                 Ok(v) => Ok(Self::leaf(ExprKind::Int(v), span)),
+                // Out of range is the only way `try_from` fails, and the message says so.
                 Err(_) => Err(self.error(&token, format!("integer `{v}` is out of range"))),
             },
             TokenKind::Float(v) => Ok(Self::leaf(ExprKind::Float(v), span)),

@@ -171,6 +171,7 @@ impl<'a> Found<'a> {
             Value::EntityFrameSeq(v) => v.len(),
             _ => return None,
         };
+        // No length in memory exceeds `i64::MAX`.
         i64::try_from(n).ok()
     }
 }

@@ -83,7 +83,8 @@ pub(crate) struct TrajectoryCell {
 impl TrajectoryCell {
     /// Tells the release thread a sample was held, so it re-plans its next wake-up.
     pub fn kick_releaser(&self) {
-        let _ = self.kick.try_send(());
+        // Full: a kick is already pending; disconnected: the releaser has stopped.
+        let _kick_pending = self.kick.try_send(());
     }
 }
 

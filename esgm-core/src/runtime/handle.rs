@@ -79,6 +79,7 @@ impl InProcessTrajectory {
     /// with these pixels (as its `image_data`) is never copied — else on the heap.
     /// `None` for an unknown format or an impossible size.
     pub fn image_buffer(&self, width: i64, height: i64, format: i64) -> Option<PixelBuffer> {
+        // Only a destroyed trajectory has no store: its image goes on the heap.
         let own = self.with_store(|s| s.octets_allocator()).ok().flatten();
         own.and_then(|a| a.image(width, height, format))
             .or_else(|| PixelBuffer::heap_image(width, height, format))

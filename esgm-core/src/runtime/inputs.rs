@@ -76,6 +76,7 @@ pub(crate) fn run(
                     overflow.store(fan_in.overflowed(), Ordering::Relaxed);
                     on_sample(input, sample);
                 }
+                // Every input's sender is gone (destroyed, or the runtime stopping).
                 Err(_) => return,
             },
             // Only ever disconnection: the worker is being stopped.

@@ -396,6 +396,7 @@ impl InProcessEsgm {
             .map(|(i, (_, cell))| {
                 let mut store = cell.store.lock();
                 store.subscribe_tagged(&fan_in, i);
+                // An empty input has no latest sample, the only error here.
                 workers::InputState::new(store.get_latest().ok(), store.reset_counter())
             })
             .collect();

@@ -44,6 +44,7 @@ pub(crate) fn run(inner: Weak<Inner>, kicks: Receiver<()>) {
             // for nothing; each look at every store cost it a wake-up a second.
             match kicks.recv() {
                 Ok(()) => while kicks.try_recv().is_ok() {},
+                // The runtime is gone: nothing is left to release.
                 Err(_) => return,
             }
             continue;

@@ -345,6 +345,7 @@ pub(crate) fn sampled_generators(
                 let value = input.store.lock().generator(policy).value_at(t);
                 match value {
                     Ok(s) => values.push(s),
+                    // Every `value_at` error means no value at `t`: counted as such.
                     Err(_) => {
                         WorkerCounters::bump(&c.counters.no_value);
                         return;

@@ -168,6 +168,7 @@ impl<T> Subscription<T> {
             return Some(item);
         }
         self.feed();
+        // Empty or closed alike: nothing is waiting.
         self.receiver.try_recv().ok()
     }
 
@@ -214,6 +215,10 @@ impl<T: Send + 'static> Subscription<T> {
                     }
                 }
             })
+            // TODO(issue 24): return the error; that changes `spawn_callback`'s signature.
+            .map_err(
+                |e| tracing::error!(error = %e, "cannot start a callback thread; it never runs"),
+            )
             .ok();
         CallbackHandle { stop, thread }
     }
@@ -240,6 +245,7 @@ impl Drop for CallbackHandle {
             // Do not join from the callback thread itself (a callback dropping its
             // own handle would deadlock).
             if t.thread().id() != std::thread::current().id() {
+                // A callback's panic was reported by the panic hook; nothing to add here.
                 let _ = t.join();
             }
         }

@@ -210,7 +210,12 @@ fn run(domain: &str, a: &RunArgs) -> anyhow::Result<()> {
                 match export::lookup(&esgm, &info.name) {
                     Ok(r) if r.writer.starts_with("esgm-bridge-") => continue,
                     Ok(_) => {}
-                    Err(_) => continue,
+                    // Asked again on the next pass; said, so one never exported is seen.
+                    Err(e) => {
+                        tracing::debug!(trajectory = %info.name, error = %e,
+                            "cannot look up a trajectory to export now");
+                        continue;
+                    }
                 }
                 exported.insert(info.name.clone());
                 threads.push(export::spawn(export_site.clone(), export_options(a, &info.name)?)?);

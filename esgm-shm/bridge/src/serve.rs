@@ -125,6 +125,7 @@ fn answer(
             let handle = replica(site, handles, name)?;
             let samples = samples(&handle, ask, query)?;
             let k = key::data_key(domain, name);
+            // Only a trajectory destroyed since it was opened has no type; its samples still go.
             let type_name = handle.entity_type().map(|t| t.name).unwrap_or_default();
             for (i, s) in samples.iter().enumerate() {
                 let header = Header {
@@ -179,6 +180,7 @@ fn param<'a>(query: &'a Query, name: &str) -> Result<&'a str, String> {
 }
 
 fn samples(h: &InProcessTrajectory, ask: Ask, query: &Query) -> Result<Vec<Sample>, String> {
+    // Empty has no latest; a relative time then says it needs one.
     let latest = h.get_latest().ok().map(|s| s.structure.valid_time);
     let time = |name| times::resolve(param(query, name)?, latest);
     let one =

@@ -89,6 +89,7 @@ pub fn register<E: Esgm>(
                     .into());
                 }
             }
+            // Not here (or unreadable): creating it below reports any real failure.
             Err(_) => missing.push((name, def)),
         }
     }

@@ -15,6 +15,7 @@ fn executable_in(dir: &Path, program: &str) -> Option<PathBuf> {
 /// Where `program` is: next to this executable, else on `PATH`; the error names the
 /// executable, where it was looked for and the crate that builds it.
 pub fn find(program: &str, package: &str) -> anyhow::Result<PathBuf> {
+    // No path to this executable: `PATH` is searched next, and the error names both.
     let here = std::env::current_exe().ok().and_then(|e| e.parent().map(Path::to_path_buf));
     if let Some(found) = here.as_deref().and_then(|d| executable_in(d, program)) {
         return Ok(found);

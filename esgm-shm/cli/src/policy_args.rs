@@ -114,6 +114,7 @@ impl PolicyArgs {
 pub fn duration(s: &str) -> anyhow::Result<Time> {
     let ns = match s.trim().parse::<Time>() {
         Ok(ns) => ns,
+        // Not plain nanoseconds: the humantime error is the one reported.
         Err(_) => {
             let d = humantime::parse_duration(s.trim())
                 .map_err(|_| anyhow::anyhow!("`{s}` is not a duration like 250ms, 1s or 2m"))?;

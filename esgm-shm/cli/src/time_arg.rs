@@ -36,6 +36,7 @@ impl std::str::FromStr for TimeArg {
                 let d = t.duration_since(UNIX_EPOCH).context("time before 1970")?;
                 Ok(Self::Absolute(Time::try_from(d.as_nanos()).context("time too large")?))
             }
+            // The last form tried: the message lists every form, more use than RFC 3339's error.
             Err(_) => bail!(
                 "`{s}` is not a time: give nanoseconds, RFC 3339 (2026-11-21T10:00:00Z) or \
                  relative to the latest sample (-5s, -100ms)"

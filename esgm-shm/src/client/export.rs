@@ -308,6 +308,7 @@ impl Export {
         let readers = record.readers;
         let qos = handle_qos(handle, policy, readers);
         let images = has_octets(handle);
+        // Only a destroyed trajectory has no type; without one each sample is sized.
         let fixed = handle.entity_type().ok().as_ref().and_then(fixed_sample_len);
         let (publisher, own) = node.with(|node| {
             let mut publisher =

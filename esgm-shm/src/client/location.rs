@@ -61,6 +61,14 @@ pub(crate) enum Command {
     Panic,
 }
 
+/// Sends the answer to a `what` command. The caller stops waiting at its deadline and
+/// says so itself; an answer later than that has nobody to go to, which is logged.
+fn answer<T>(reply: &Sender<T>, what: &str, value: T) {
+    if reply.send(value).is_err() {
+        tracing::debug!(command = what, "the caller stopped waiting; its answer is dropped");
+    }
+}
+
 /// The seed's lookup error if the coordinator gave one, else `Unavailable`.
 pub(crate) fn lookup_error(e: ControlClientError) -> LookupError {
     match e {
@@ -149,6 +157,7 @@ impl Location {
             crossbeam_channel::select! {
                 recv(commands) -> c => match c {
                     Ok(c) => self.handle(c),
+                    // Every sender is gone: the connection is closing.
                     Err(_) => {
                         // The last word on this process's images, for whoever looks later.
                         self.reported.1 = Instant::now();
@@ -305,16 +314,16 @@ impl Location {
         match command {
             Command::Control(request, reply) => {
                 let request = *request;
-                let _ = reply.send(self.control.call(&request));
+                answer(&reply, "control", self.control.call(&request));
             }
             Command::Create(spec, reply) => {
-                let _ = reply.send(self.create(&spec));
+                answer(&reply, "create", self.create(&spec));
             }
             Command::Get(name, reply) => {
-                let _ = reply.send(self.get(&name));
+                answer(&reply, "get", self.get(&name));
             }
             Command::Destroy(name, reply) => {
-                let _ = reply.send(self.destroy(&name));
+                answer(&reply, "destroy", self.destroy(&name));
             }
             #[cfg(feature = "test-seams")]
             Command::Panic => {

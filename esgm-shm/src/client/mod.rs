@@ -353,6 +353,7 @@ impl Drop for Inner {
         drop(std::mem::replace(&mut self.commands, closed));
         if let Some(t) = self.thread.lock().take() {
             if t.thread().id() != std::thread::current().id() {
+                // A panic there was printed by the panic hook; a drop has nothing to add.
                 let _ = t.join();
             }
         }
@@ -455,6 +456,7 @@ impl ShmEsgm {
         }
         match answer.recv_timeout(self.inner.timeout * 3) {
             Ok(t) => t,
+            // Timed out, or the thread ended without answering: unavailable either way.
             Err(_) => unavailable(format!(
                 "no answer from the location thread within {:?}",
                 self.inner.timeout * 3

@@ -67,6 +67,7 @@ pub(crate) fn process_alive(pid: u32) -> bool {
         Ok(stat) => {
             stat.rsplit_once(')').is_some_and(|(_, rest)| !rest.trim_start().starts_with('Z'))
         }
+        // No stat to read: the process is gone.
         Err(_) => false,
     }
 }

@@ -133,6 +133,7 @@ impl Registry {
             type_name: self
                 .catalog
                 .trajectory(name)
+                // Placed and catalogued together, removed together: the lookup finds it.
                 .map(|t| t.type_name.clone())
                 .unwrap_or_default(),
         }

@@ -403,6 +403,7 @@ impl Coordinator {
                     origin = match u32::try_from(pid) {
                         Ok(p) if p == std::process::id() => Origin::Coordinator,
                         Ok(p) => Origin::Process(p),
+                        // A pid beyond u32 is none this host has: unknown, as when there is none.
                         Err(_) => Origin::Unknown,
                     };
                 }
@@ -648,6 +649,7 @@ impl Coordinator {
         match started.recv() {
             Ok(Ok(())) => {}
             Ok(Err(e)) => return Err(e),
+            // The thread ended without a word: it stopped (a panic is printed by the hook).
             Err(_) => return Err(CoordinatorError::Stopped),
         }
         Ok(CoordinatorThread { domain: domain.to_owned(), stop, thread: Some(thread) })

@@ -164,6 +164,7 @@ pub fn node_name(domain: &str, role: &str) -> iceoryx2::prelude::NodeName {
         name.pop();
     }
     iceoryx2::prelude::NodeName::new(&name)
+        // Cut to iceoryx2's length above; only a byte it refuses would need the fallbacks.
         .or_else(|_| iceoryx2::prelude::NodeName::new(SERVICE_PREFIX))
         .unwrap_or_default()
 }
@@ -206,11 +207,17 @@ pub fn processes_of(
     Node::<ShmService>::list(iceoryx2::config::Config::global_config(), |state| {
         if let NodeState::Alive(v) = &state {
             let name = v.details().as_ref().map(|d| d.name().as_str().to_owned());
+            // A node of the domain without a readable process id is warned about below.
             let pid = v.id().pid::<ShmService>().ok().and_then(|p| u32::try_from(p.value()).ok());
-            if let (Some(name), Some(pid)) = (name, pid) {
-                if name.starts_with(&prefix) {
+            match (name, pid) {
+                (Some(name), Some(pid)) if name.starts_with(&prefix) => {
                     out.entry(pid).or_default().push(name);
                 }
+                (Some(name), None) if name.starts_with(&prefix) => {
+                    tracing::warn!(node = %name,
+                        "a node of the domain has no readable process id");
+                }
+                _ => {}
             }
         }
         iceoryx2::prelude::CallbackProgression::Continue

@@ -218,7 +218,16 @@ impl State {
 
     fn channel(&self, name: &str, type_name: &str) -> anyhow::Result<(Encoding, Arc<RawChannel>)> {
         let ty = self.esgm.get_entity_structure_type(type_name)?;
-        let lookup = |n: &str| self.esgm.get_entity_structure_type(n).ok();
+        // A nested type the registry cannot give is left out of the schema, with a warning.
+        let lookup = |n: &str| {
+            self.esgm
+                .get_entity_structure_type(n)
+                .inspect_err(|e| {
+                    tracing::warn!(type_name = n, error = %e,
+                        "a nested type is left out of the schema")
+                })
+                .ok()
+        };
         let (encoding, schema) = Encoding::of(&ty, &lookup);
         let channel = ChannelBuilder::new(format!("/{name}"))
             .message_encoding(schema.message_encoding)

@@ -283,6 +283,7 @@ impl RawImageRef<'_> {
         // In i128: near i64::MIN the seconds alone overflow, the sum does not.
         let ns = i128::from(self.timestamp_sec) * i128::from(NANOS_PER_SECOND)
             + i128::from(self.timestamp_nsec);
+        // Out of range is the only failure, and `None` is documented for it.
         Time::try_from(ns).ok()
     }
 }

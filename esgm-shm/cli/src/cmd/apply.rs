@@ -39,6 +39,7 @@ pub fn apply_plan(domain: &str, plan: &Plan, json: bool) -> anyhow::Result<()> {
     let progress = crate::progress::ApplyProgress::start(json, plan.items().len());
     let result = config::apply::apply(domain, plan, &mut |o| {
         let line = if json {
+            // Plain strings and numbers: serializing cannot fail.
             serde_json::to_string(&o).unwrap_or_default()
         } else {
             format!("{:<10} {:<20} {:<10} (line {})", o.kind, o.name, o.change, o.line)

@@ -80,6 +80,7 @@ fn when(t: Option<Time>) -> String {
                 let at = std::time::UNIX_EPOCH + std::time::Duration::from_nanos(u);
                 format!("{} ({ns} ns)", humantime::format_rfc3339_nanos(at))
             }
+            // Before 1970: no calendar date to show, the nanoseconds alone.
             Err(_) => format!("{ns} ns"),
         },
     }

@@ -45,6 +45,7 @@ pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
     let entity_type = t.entity_type()?;
     let now = esgm.local().clock().now();
     let valid_time = match &a.valid_time {
+        // Empty has no latest; a relative time then says it needs one.
         Some(arg) => arg.resolve(t.get_latest_vtime().ok().map(|s| s.valid_time))?,
         None => now,
     };

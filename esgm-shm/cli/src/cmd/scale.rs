@@ -450,6 +450,7 @@ fn collect<T: serde::de::DeserializeOwned>(
                     }
                 }
             }
+            // Past the deadline (or every worker gone): the missing ones are named.
             Err(_) => {
                 let missing: Vec<String> =
                     (0..n).filter(|i| !got.contains_key(i)).map(|i| i.to_string()).collect();

@@ -420,10 +420,14 @@ impl Probe {
         let shm = probe::usage(&files).map_err(|e| gap("shared memory", &format!("{e:#}")));
         let host = probe::host_iceoryx2().map_err(|e| gap("/dev/shm", &format!("{e:#}")));
         let stats = self.esgm.domain_stats().map_err(|e| gap("trajectory counters", &e));
+        // Each failure is in `gaps` (`gap` above). The load and the host's files are
+        // context the verdict never judges; a failed shared-memory figure is marked.
         s.load = load.unwrap_or_default();
         s.processes = processes;
         s.shm_failed = shm.is_err();
+        // Zero only with `shm_failed` set: the verdict counts it as a failed check.
         s.shm = shm.unwrap_or_default();
+        // Context only; its failure is in `gaps`.
         s.host_iceoryx2 = host.unwrap_or_default();
         if let Ok(stats) = stats {
             s.trajectories =

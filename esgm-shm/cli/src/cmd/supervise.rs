@@ -293,6 +293,7 @@ pub fn alive(pid: u32) -> bool {
         Ok(stat) => {
             stat.rsplit_once(')').is_some_and(|(_, rest)| !rest.trim_start().starts_with('Z'))
         }
+        // No stat to read: the process is gone.
         Err(_) => false,
     }
 }

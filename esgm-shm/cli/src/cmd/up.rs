@@ -295,6 +295,7 @@ fn serve(
                 failing = true;
                 tracing::warn!(error = %e, "cannot list the declared processes; retrying");
             }
+            // Still failing: warned once when it started.
             Err(_) => {}
         }
         // Stopping: the workers leave once the coordinator is gone, and must not be

@@ -89,8 +89,8 @@ pub struct Snapshot {
     /// The memory of every connected process's trajectories, added up (`None` when the
     /// processes did not answer).
     pub memory: Option<MemoryStats>,
-    /// Why the statistics are this process's replicas' rather than the writers' (the
-    /// domain's processes did not answer), if they are.
+    /// Why the statistics are this process's replicas' rather than the writers', or
+    /// the memory figures are missing (the domain's processes did not answer), if so.
     pub note: Option<String>,
 }
 
@@ -149,12 +149,20 @@ impl Sampler {
                 )),
             ),
         };
-        let memory = self.esgm.domain_memory().ok();
+        // Unanswered, the memory line says why instead of vanishing.
+        let (memory, note) = match self.esgm.domain_memory() {
+            Ok(m) => (Some(m), note),
+            Err(e) => {
+                let why = format!("the memory figures are unavailable ({e})");
+                (None, Some(note.map_or(why.clone(), |n| format!("{n}; {why}"))))
+            }
+        };
         let mut trajectories = Vec::with_capacity(infos.len());
         for info in infos {
             let Some(t) = self.handles.get(&info.name) else { continue };
             let from_writer =
                 writers.as_ref().and_then(|w| w.get(&info.name)).map(|r| r.stats.clone());
+            // Only a trajectory destroyed since the listing has no stats: it leaves the table.
             let Some(s) = from_writer.or_else(|| t.stats().ok()) else { continue };
             let mut losses = BTreeMap::new();
             let mut violations = BTreeMap::new();
@@ -171,6 +179,7 @@ impl Sampler {
             if s.missed_sample_points > 0 {
                 losses.insert("missed_sample_points".into(), s.missed_sample_points);
             }
+            // Empty (or destroyed since): no size to estimate.
             let bytes = t.get_latest().ok().map(|latest| {
                 let one = latest.structure.approx_bytes(&mut HashSet::new()) as u64;
                 one * s.stored as u64

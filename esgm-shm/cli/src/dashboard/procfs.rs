@@ -47,6 +47,7 @@ fn cpus() -> usize {
 
 /// utime + stime of `pid` (fields 14 and 15 of `/proc/<pid>/stat`).
 fn process_ticks(pid: u32) -> Option<u64> {
+    // An exited process has no stat: no figure for it.
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
     parse_process_ticks(&stat)
 }
@@ -56,6 +57,7 @@ fn parse_process_ticks(stat: &str) -> Option<u64> {
     // fields are counted from the last `)`.
     let rest = &stat[stat.rfind(')')? + 1..];
     let mut fields = rest.split_whitespace().skip(11); // fields 3..=13
+    // A field that is not a number: no figure, as for a missing one.
     let utime: u64 = fields.next()?.parse().ok()?;
     let stime: u64 = fields.next()?.parse().ok()?;
     Some(utime + stime)
@@ -63,23 +65,27 @@ fn parse_process_ticks(stat: &str) -> Option<u64> {
 
 /// Every CPU's time, all states summed (the `cpu` line of `/proc/stat`).
 fn machine_ticks() -> Option<u64> {
+    // No `/proc` (not Linux): no CPU figures.
     let stat = std::fs::read_to_string("/proc/stat").ok()?;
     parse_machine_ticks(&stat)
 }
 
 fn parse_machine_ticks(stat: &str) -> Option<u64> {
     let line = stat.lines().find(|l| l.starts_with("cpu "))?;
+    // A field that is not a number: no figure, as for a missing one.
     line.split_whitespace().skip(1).map(|v| v.parse::<u64>().ok()).sum()
 }
 
 /// The resident set of `pid` in bytes (`VmRSS` of `/proc/<pid>/status`).
 pub fn rss_bytes(pid: u32) -> Option<u64> {
     let status = std::fs::read_to_string(Path::new("/proc").join(pid.to_string()).join("status"));
+    // An exited process has no status: no figure for it.
     parse_rss(&status.ok()?)
 }
 
 fn parse_rss(status: &str) -> Option<u64> {
     let line = status.lines().find(|l| l.starts_with("VmRSS:"))?;
+    // A field that is not a number: no figure, as for a missing one.
     let kb: u64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kb * 1024)
 }

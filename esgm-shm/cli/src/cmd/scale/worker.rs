@@ -157,6 +157,7 @@ pub fn run(domain: &str, a: &WorkerArgs) -> anyhow::Result<()> {
     stop.store(true, Ordering::Release);
     match latencies.lock() {
         Ok(mut all) => report.latency_us = std::mem::take(&mut *all),
+        // Poisoned: a reader panicked, which the report says.
         Err(_) => report.errors.push("a reader thread panicked".into()),
     }
     println!("REPORT {}", serde_json::to_string(&report)?);
@@ -251,6 +252,7 @@ impl Phases {
         while *p < at {
             p = match changed.wait(p) {
                 Ok(p) => p,
+                // Poisoned: the thread that panicked reports it; stop waiting.
                 Err(_) => return,
             };
         }

@@ -47,6 +47,7 @@ fn parse_status(text: &str) -> Option<Resident> {
         text.lines()
             .find_map(|l| l.strip_prefix(name)?.strip_prefix(':'))
             .and_then(|v| v.trim().strip_suffix("kB"))
+            // Not a number: the caller reports the field as missing.
             .and_then(|v| v.trim().parse::<u64>().ok())
             .map(|kb| kb * 1024)
     };
@@ -134,6 +135,7 @@ pub fn load_average() -> anyhow::Result<[f64; 3]> {
 
 fn parse_loadavg(text: &str) -> Option<[f64; 3]> {
     let mut it = text.split_whitespace().map(str::parse::<f64>);
+    // Not a number: the caller reports the file as malformed.
     Some([it.next()?.ok()?, it.next()?.ok()?, it.next()?.ok()?])
 }
 
