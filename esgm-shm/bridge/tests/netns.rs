@@ -10,12 +10,16 @@
 //! link is taken down and up; the importer resumes and every sample host A wrote is
 //! either added on host B or counted as lost.
 //!
-//! Where namespaces cannot be created (not root, no `ip`), the test is skipped with a
-//! printed reason.
+//! Where namespaces cannot be created (not root, no `ip` or `unshare`), the test fails
+//! in CI (`CI` set) and elsewhere is skipped with a note on the terminal.
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 mod common;
+
+/// Skipped outside CI, failed in CI, without root, `ip` or `unshare` (the cli tests' helper).
+#[path = "../../cli/tests/common/capability.rs"]
+mod capability;
 
 use std::io::{BufRead, BufReader, Write};
 use std::process::{Child, ChildStdin, Command, Stdio};
@@ -233,12 +237,13 @@ fn two_hosts_that_share_only_a_network() {
         return;
     }
     let _one = one_at_a_time();
-    let net = match Network::create() {
-        Ok(n) => n,
-        Err(reason) => {
-            println!("skipped: cannot create network namespaces here ({reason})");
-            return;
-        }
+    // Each host runs in a mount namespace of its own too.
+    let unshare = capability::runs("unshare", &["--mount", "true"]);
+    if capability::needs("mount namespaces (unshare --mount)", unshare).is_none() {
+        return;
+    }
+    let Some(net) = capability::needs("network namespaces (ip netns)", Network::create()) else {
+        return;
     };
     let pid = std::process::id();
     let (domain_a, domain_b) = (format!("netns-a-{pid}"), format!("netns-b-{pid}"));

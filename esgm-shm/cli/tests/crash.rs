@@ -6,12 +6,15 @@
 // Test helpers outside #[test] fns: a failed unwrap is a failed test with a message.
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
+mod common;
+
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
+use common::capability;
 use esgm_shm::control::{ControlClient, Request, Response};
 
 const ESGM: &str = env!("CARGO_BIN_EXE_esgm");
@@ -404,9 +407,9 @@ fn down_stops_a_system_whose_coordinator_crashed() {
 #[test]
 fn the_demo_leaves_no_file_in_shared_memory() {
     let _one = ONE_SYSTEM.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-    let probe = Command::new("unshare").args(["-rm", "true"]).status();
-    if !probe.is_ok_and(|s| s.success()) {
-        eprintln!("skipped: no user namespaces here (unshare -rm), so no private /dev/shm");
+    // A private /dev/shm: a user and mount namespace.
+    let namespaces = capability::runs("unshare", &["-rm", "true"]);
+    if capability::needs("user namespaces (unshare -rm)", namespaces).is_none() {
         return;
     }
     let script = format!(

@@ -91,3 +91,6 @@ impl Drop for StopOnDrop {
         }
     }
 }
+
+/// Tests that need root, namespaces or a binary beside `esgm`: skipped, or failed in CI.
+pub mod capability;
