@@ -145,11 +145,13 @@ pub fn run(domain: &str, args: &RobotArgs) -> anyhow::Result<()> {
 
 #[cfg(test)]
 mod tests {
-    #![allow(clippy::unwrap_used)]
+    #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
     use super::*;
     use clap::Parser;
-    use esgm_core::{InProcessEsgm, SimClock, secs};
+    use esgm_core::{EntityTrajectoryStructure, InProcessEsgm};
+    use esgm_shm::control::protocol::{Request, Response};
+    use esgm_shm::control::{Coordinator, Registry};
 
     fn parse(args: &[&str]) -> Result<RobotArgs, clap::Error> {
         RobotArgs::try_parse_from(std::iter::once("robot").chain(args.iter().copied()))
@@ -164,15 +166,76 @@ mod tests {
         assert!(parse(&["--period", "fast"]).is_err());
     }
 
+    /// Where the registry says `trajectory` is written: its writer, its generation and
+    /// the writer's publisher port.
+    fn placement(esgm: &ShmEsgm, trajectory: &str) -> (String, u64, Option<u128>) {
+        let Response::Placements(list) = esgm.control(Request::ListPlacements).unwrap() else {
+            panic!("the coordinator did not list placements");
+        };
+        let p = list.into_iter().find(|p| p.name == trajectory).unwrap();
+        (p.writer, p.generation, p.port.map(|w| w.publisher))
+    }
+
+    /// Waits up to [`DEADLINE`] for `done`, failing the test with `what` after it.
+    fn wait_until(what: &str, mut done: impl FnMut() -> bool) {
+        let deadline = Instant::now() + DEADLINE;
+        while !done() {
+            assert!(Instant::now() < deadline, "{what} within {DEADLINE:?}");
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    const DEADLINE: Duration = Duration::from_secs(60);
+
+    /// A robot process that restarts (the supervisor starts it again under the same
+    /// name) takes its trajectory back: the same generation (not created anew, so its
+    /// readers keep it), the registry names the new robot's publisher port as the
+    /// writer's, every state it adds is accepted, and a reader that followed the first
+    /// robot receives the new one's states.
     #[test]
     fn takes_its_trajectory_back_after_a_restart() {
-        let esgm = InProcessEsgm::builder().clock(SimClock::shared(secs(1))).create();
-        esgm.create_primitive_entity_trajectory_structure("driving_direction", "DrivingDirection")
+        let domain = esgm_shm::unique_domain("robot-restart");
+        let registry = Registry::new(esgm_core::TypeRegistry::with_library());
+        let _coordinator = Coordinator::spawn(&domain, registry).unwrap();
+        let args = parse(&["--period", "20ms"]).unwrap();
+        let connect = |host: &str| ShmEsgm::builder().domain(&domain).host(host).connect().unwrap();
+        let observer = connect("observer");
+        observer
+            .create_primitive_entity_trajectory_structure("driving_direction", "DrivingDirection")
             .unwrap();
-        let args = parse(&["--period", "1s"]).unwrap();
-        let clock = esgm.clock().clone();
-        start(&esgm, clock.clone(), &args).unwrap().stop();
-        start(&esgm, clock, &args).unwrap().stop();
+
+        // The first robot process: publishes, then goes (as a killed process would,
+        // without destroying its trajectory).
+        let first = connect(&args.process_name());
+        let robot = start(&first, first.local().clock().clone(), &args).unwrap();
+        wait_until("the first robot published nothing", || robot.stats().published >= 3);
+        let states = observer.get_entity_trajectory_structure(&args.trajectory).unwrap();
+        wait_until("the observer received none of the first robot's states", || {
+            states.get_latest().is_ok()
+        });
+        let (writer, generation, port) = placement(&observer, &args.trajectory);
+        assert_eq!(writer, args.process_name());
+        let first_port = port.expect("the first robot registered its publisher port");
+        robot.stop();
+        drop(first);
+        let last_before = states.get_latest().unwrap().structure.valid_time;
+
+        // The restarted robot process, under the same name.
+        let second = connect(&args.process_name());
+        let robot = start(&second, second.local().clock().clone(), &args).unwrap();
+        wait_until("the restarted robot published nothing", || robot.stats().published >= 3);
+        let (writer, generation_after, port) = placement(&observer, &args.trajectory);
+        assert_eq!(writer, args.process_name());
+        assert_eq!(generation_after, generation, "the trajectory was created anew");
+        let port = port.expect("the restarted robot registered its publisher port");
+        assert_ne!(port, first_port, "the registry still names the first robot's port");
+        // Its adds arrive, at the reader that followed the first robot.
+        wait_until("the observer received none of the restarted robot's states", || {
+            states.get_latest().is_ok_and(|s| s.structure.valid_time > last_before)
+        });
+        let stats = robot.stats();
+        robot.stop();
+        assert_eq!((stats.dropped, stats.failures), (0, 0), "{stats:?}");
     }
 
     #[test]
