@@ -190,6 +190,8 @@ fn record_info_kill_rerun_replay_and_compare_the_tutorial() {
             "robot_state",
             "images",
             "--wait",
+            "--flush",
+            "200ms",
             "-o",
             &path("replayed.mcap"),
         ])
@@ -214,7 +216,34 @@ fn record_info_kill_rerun_replay_and_compare_the_tutorial() {
         long,
     );
     assert!(replay.contains("created `images`"), "{replay}");
-    std::thread::sleep(Duration::from_secs(1));
+    // Interrupted once its flushed file holds every replayed structure, not after a
+    // guess at how long that takes.
+    let wanted = [("images", count(&live, "images")), ("robot_state", count(&live, "robot_state"))];
+    let deadline = Instant::now() + long;
+    loop {
+        let (code, out, err) = run(&["--json", "info", &path("replayed.mcap")], long);
+        let counts: Vec<(&str, u64)> = match (code, serde_json::from_str::<serde_json::Value>(&out))
+        {
+            (Some(0), Ok(partial)) => wanted
+                .iter()
+                .map(|(name, _)| {
+                    let found = partial["trajectories"].as_array().and_then(|all| {
+                        all.iter().find(|t| t["name"] == *name).and_then(|t| t["count"].as_u64())
+                    });
+                    (*name, found.unwrap_or(0))
+                })
+                .collect(),
+            _ => Vec::new(),
+        };
+        if counts == wanted {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "the recorder did not record the replay within {long:?}: {counts:?} of {wanted:?}\n{err}"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
     let stop = Command::new("kill").args(["-INT", &recorder.id().to_string()]).status().unwrap();
     assert!(stop.success());
     let recorded = finish(recorder, long, "record");
