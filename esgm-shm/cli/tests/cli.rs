@@ -108,6 +108,28 @@ fn demo_follows_the_largest_blob_and_leaves_nothing_behind() {
     ] {
         assert!(o.stdout.contains(expected), "missing `{expected}` in:\n{}", o.stdout);
     }
+    // Images crossed processes in shared memory, and nobody copied one.
+    let table = o
+        .stdout
+        .split_once("images in shared memory, per process")
+        .and_then(|(_, rest)| rest.split_once("image copies in all:"))
+        .unwrap_or_else(|| panic!("no table of image copies in:\n{}", o.stdout));
+    // `process  read held  sent in place  copies`, after the header line.
+    let rows: Vec<Vec<&str>> = table
+        .0
+        .lines()
+        .skip(2)
+        .map(|l| l.split_whitespace().collect())
+        .filter(|r: &Vec<&str>| !r.is_empty())
+        .collect();
+    let column = |row: &[&str], i: usize| row[i].parse::<u64>().unwrap();
+    let sent: u64 = rows.iter().map(|r| column(r, 2)).sum();
+    let read: u64 = rows.iter().map(|r| column(r, 1)).sum();
+    assert!(sent > 0 && read > 0, "no image was sent and read in shared memory:\n{}", o.stdout);
+    for row in &rows {
+        assert_eq!(column(row, 3), 0, "{} copied images:\n{}", row[0], o.stdout);
+    }
+    assert_eq!(table.1.lines().next().map(str::trim), Some("0"), "{}", o.stdout);
     assert!(coordinator_is_gone(&d));
     assert_nothing_left(&d);
 }

@@ -45,7 +45,8 @@ const PIPELINE: [&str; 5] = ["robot_state", "images", "blobs", "current_blob", "
 /// The system, as a configuration file (also shipped as an example of the format).
 const TUTORIAL: &str = include_str!("../../tutorial.toml");
 
-/// Runs the demo; an inconsistent result is an error (exit 1).
+/// Runs the demo; an inconsistent result, or an image a process copied, is an error
+/// (exit 1).
 pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
     if a.seconds.is_nan() || a.seconds <= 0.0 {
         bail!("--seconds must be positive, got {}", a.seconds);
@@ -202,13 +203,21 @@ fn drive(domain: &str, a: &Args, plan: &Plan) -> anyhow::Result<()> {
     let t0 = t0.unwrap_or(latest.structure.valid_time);
     queries(&directions, &latest, t0)?;
     stage_latencies(&stages)?;
-    image_copies(&esgm)?;
-    check(a, &latest, &current_blob)
+    let copies = image_copies(&esgm)?;
+    check(a, &latest, &current_blob)?;
+    if copies > 0 {
+        bail!(
+            "the processes copied {copies} images; every image must cross processes in \
+             shared memory, uncopied (the table above names who copied)"
+        );
+    }
+    Ok(())
 }
 
-/// Per process, the images it read and sent in shared memory, and the copies it made
-/// (its last report to the coordinator, at most a second old).
-fn image_copies(esgm: &ShmEsgm) -> anyhow::Result<()> {
+/// Prints, per process, the images it read and sent in shared memory, and the copies it
+/// made (its last report to the coordinator, at most a second old); returns the copies
+/// of all.
+fn image_copies(esgm: &ShmEsgm) -> anyhow::Result<u64> {
     let Response::Holdings(list) = esgm.control(Request::ListHoldings)? else {
         bail!("the coordinator did not list the processes' images");
     };
@@ -227,7 +236,7 @@ images in shared memory, per process
         println!("  {:<30} {:>10} {:>14} {:>7}", host, s.held_total, s.sent_in_place, s.copies());
     }
     println!("  image copies in all: {copies}");
-    Ok(())
+    Ok(copies)
 }
 
 fn since(t0: Time, t: Time) -> f64 {
