@@ -247,6 +247,7 @@ fn print_direction(s: &Sample, t0: Time, robot_state: &impl EntityTrajectoryStru
     let Ok(d) = DrivingDirection::from_structure(&s.structure) else { return };
     let heading = robot_state
         .get_closest_at_or_before(s.structure.valid_time)
+        // No robot state yet (or not a `RobotState`): the heading prints as NaN.
         .ok()
         .and_then(|r| RobotState::from_structure(&r.structure).ok())
         .map_or(f64::NAN, |r| r.dir);
