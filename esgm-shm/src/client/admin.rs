@@ -667,7 +667,7 @@ impl Answerer {
 
 /// The trajectories this process writes.
 fn written(mirrors: &SharedMirrors) -> Vec<String> {
-    mirrors.lock().exports.keys().cloned().collect()
+    mirrors.exports().into_iter().map(|(name, _)| name).collect()
 }
 
 /// This process's answer (it is `host`) to `op`, from its runtime and mirrors. The
@@ -695,7 +695,7 @@ fn answer(host: &str, local: &InProcessEsgm, mirrors: &SharedMirrors, op: AdminO
             AdminAnswer::Done { reset }
         }
         AdminOp::CatchUp => {
-            mirrors.lock().pump();
+            mirrors.pump();
             AdminAnswer::Done { reset: 0 }
         }
         AdminOp::Stats => {
@@ -731,7 +731,7 @@ fn answer(host: &str, local: &InProcessEsgm, mirrors: &SharedMirrors, op: AdminO
                     reason: format!("a flush timeout of {timeout:?} is past any deadline"),
                 };
             };
-            mirrors.lock().pump();
+            mirrors.pump();
             match local.flush(deadline) {
                 Ok(()) => AdminAnswer::Done { reset: 0 },
                 Err(e) => AdminAnswer::Failed { reason: e.to_string() },

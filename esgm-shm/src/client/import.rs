@@ -425,6 +425,7 @@ impl ReplicaFeed for ImportFeed {
             trajectory: self.trajectory.clone(),
             node: self.node.clone(),
             mirrors: Weak::clone(&self.mirrors),
+            import: Weak::new(),
             worker: None,
         }))
     }
@@ -435,6 +436,7 @@ impl ReplicaFeed for ImportFeed {
             trajectory: self.trajectory.clone(),
             node: self.node.clone(),
             mirrors: Weak::clone(&self.mirrors),
+            import: Weak::new(),
             worker: Some(None),
         }))
     }
@@ -454,6 +456,9 @@ struct ImportWaiter {
     trajectory: String,
     node: SharedNode,
     mirrors: Weak<SharedMirrors>,
+    /// The import listened to, fed without a look-up in the set of mirrors; it is gone
+    /// (the upgrade fails) once the set dropped it.
+    import: Weak<parking_lot::Mutex<Import>>,
     /// A worker's waiter: the import's count of waiting workers it is counted in (see
     /// [`Import::receiver_wakes`]); `None` for a user's subscription.
     worker: Option<Option<Arc<std::sync::atomic::AtomicUsize>>>,
@@ -470,15 +475,17 @@ impl ImportWaiter {
     /// changed); false if there is no import to listen to.
     fn listen(&mut self) -> bool {
         let Some(mirrors) = self.mirrors.upgrade() else { return false };
-        let current = mirrors
-            .lock()
-            .imports
-            .get(&self.trajectory)
-            .and_then(|i| i.sample_wake().map(|w| (i.generation, w, Arc::clone(&i.workers))));
-        let Some((generation, wake, workers)) = current else {
+        let import = mirrors.import(&self.trajectory);
+        let current = import.as_ref().and_then(|i| {
+            let i = i.lock();
+            i.sample_wake().map(|w| (i.generation, w, Arc::clone(&i.workers)))
+        });
+        let (Some(import), Some((generation, wake, workers))) = (import, current) else {
+            self.import = Weak::new();
             self.stand_down();
             return false;
         };
+        self.import = Arc::downgrade(&import);
         if self.listening.as_ref().is_some_and(|(g, _)| *g == generation) {
             return true;
         }
@@ -521,9 +528,12 @@ impl ImportWaiter {
 
 impl FeedWaiter for ImportWaiter {
     fn feed(&mut self) {
-        let Some(mirrors) = self.mirrors.upgrade() else { return };
-        if let Some(import) = mirrors.lock().imports.get_mut(&self.trajectory) {
-            import.pump();
+        let import = match self.import.upgrade() {
+            Some(import) => Some(import),
+            None => self.mirrors.upgrade().and_then(|m| m.import(&self.trajectory)),
+        };
+        if let Some(import) = import {
+            import.lock().pump();
         }
     }
 

@@ -212,9 +212,9 @@ impl Location {
         let now: std::collections::BTreeMap<_, _> =
             placements.iter().map(|p| (p.name.as_str(), p)).collect();
         let (stale, moved, unreported) = {
-            let mut mirrors = self.mirrors.lock();
             let (mut stale, mut moved, mut unreported) = (Vec::new(), Vec::new(), Vec::new());
-            for (name, e) in &mirrors.exports {
+            for (name, e) in &self.mirrors.exports() {
+                let e = e.lock();
                 let current = now.get(name.as_str());
                 if current.is_none_or(|p| p.generation != e.generation || p.writer != self.host) {
                     stale.push(name.clone());
@@ -223,7 +223,8 @@ impl Location {
                     unreported.push((name.clone(), e.generation, e.publisher()));
                 }
             }
-            for (name, i) in &mut mirrors.imports {
+            for (name, i) in &self.mirrors.imports() {
+                let mut i = i.lock();
                 match now.get(name.as_str()) {
                     Some(p) if p.generation == i.generation => {
                         i.set_writer(p.port);
@@ -283,7 +284,7 @@ impl Location {
                 // The former stream's end: readers forget it, as the writer's did.
                 let _destroyed = replica.with_store(|s| s.reset());
                 import.pump();
-                self.mirrors.change(|m| m.imports.insert(name.to_owned(), import));
+                self.mirrors.change(|m| m.insert_import(name.to_owned(), import));
                 tracing::info!(trajectory = %name, generation = record.generation,
                     "following a re-pointed trajectory");
             }
@@ -340,8 +341,8 @@ impl Location {
     }
 
     fn maintain(&mut self) {
-        for e in self.mirrors.lock().exports.values() {
-            e.update_connections();
+        for (_, e) in self.mirrors.exports() {
+            e.lock().update_connections();
         }
         self.verify_writers();
         self.report_holdings();
@@ -448,7 +449,7 @@ impl Location {
             Ok(())
         })?;
         if let Some(export) = export {
-            self.mirrors.change(|m| m.exports.insert(spec.name.clone(), export));
+            self.mirrors.change(|m| m.insert_export(spec.name.clone(), export));
         }
         Ok(handle)
     }
@@ -461,13 +462,8 @@ impl Location {
     /// (a writer that just started or restarted), and lets them enter or be rejected.
     fn verify_writers(&mut self) {
         let waiting: Vec<String> = {
-            let mirrors = self.mirrors.lock();
-            mirrors
-                .imports
-                .iter()
-                .filter(|(_, i)| i.awaits_writer())
-                .map(|(n, _)| n.clone())
-                .collect()
+            let imports = self.mirrors.imports();
+            imports.into_iter().filter(|(_, i)| i.lock().awaits_writer()).map(|(n, _)| n).collect()
         };
         for name in waiting {
             let record = match self.record(&name) {
@@ -477,7 +473,8 @@ impl Location {
                     continue;
                 }
             };
-            if let Some(import) = self.mirrors.lock().imports.get_mut(&name) {
+            if let Some(import) = self.mirrors.import(&name) {
+                let mut import = import.lock();
                 if import.generation == record.generation {
                     import.set_writer(record.port);
                 }
@@ -528,7 +525,7 @@ impl Location {
                 let _destroyed = handle.with_store(|s| s.forward_resets(Arc::clone(&self.resets)));
                 // The history the writer already handed over, at once.
                 import.pump();
-                self.mirrors.change(|m| m.imports.insert(name.clone(), import));
+                self.mirrors.change(|m| m.insert_import(name.clone(), import));
                 Ok(handle)
             }
             Err(e) => {

@@ -1,10 +1,14 @@
 //! What a connection mirrors through shared memory — the trajectories it exports and
 //! imports — shared by the location thread, which changes the set, and the receiver
 //! thread, which feeds it from other processes.
+//!
+//! Each mirrored trajectory is its own object under its own lock ([`Mirror`]); the
+//! set's lock guards only the index by name, and is never held while a mirror is
+//! locked. A wake-up serves one trajectory and waits for no other (issue 23).
 
 use std::collections::BTreeMap;
-use std::sync::OnceLock;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, OnceLock};
 
 use iceoryx2::port::notifier::Notifier;
 
@@ -14,61 +18,64 @@ use super::export::Export;
 use super::import::Import;
 use crate::service::{EventSpec, ShmService};
 
-/// What a wake-up service's notifications are for (the receiver thread serves that
-/// one mirror alone).
-#[derive(Debug, Clone, PartialEq, Eq)]
+/// One mirrored trajectory's import or export: a self-contained object with its own
+/// lock. The receiver thread, a subscription that waits on its writer and the
+/// location thread each lock the one trajectory they work on, never the whole set, so
+/// nothing on the data path waits for, or grows with, the other trajectories.
+pub(crate) type Mirror<T> = Arc<Mutex<T>>;
+
+/// What a wake-up service's notifications are for: the one mirror the receiver
+/// thread serves when it rings, held directly (no lookup by name, no lock on the set).
+#[derive(Debug, Clone)]
 pub(crate) enum Route {
     /// An import's samples or violations arrived.
-    Import(String),
+    Import(Mirror<Import>),
     /// Another process added to an export's inbox (or asks for its blocking adds).
-    Inbox(String),
+    Inbox(Mirror<Export>),
     /// A new reader of an export asks for its history.
-    Join(String),
+    Join(Mirror<Export>),
 }
 
-/// The exports and imports of one connection.
-#[derive(Debug, Default)]
-pub(crate) struct Mirrors {
-    pub exports: BTreeMap<String, Export>,
-    pub imports: BTreeMap<String, Import>,
-}
-
-impl Mirrors {
-    /// Every wake-up service that other processes notify for this connection, with
-    /// what its notifications are for: each import's samples and violations, each
-    /// export's join service and each primitive export's inbox.
-    pub fn wake_routes(&self) -> Vec<(EventSpec, Route)> {
-        let imports = self.imports.iter().flat_map(|(name, i)| {
-            i.receiver_wakes().iter().map(move |w| (*w, Route::Import(name.clone())))
-        });
-        let exports = self.exports.iter().flat_map(|(name, e)| {
-            let inbox = e.inbox_wake().map(|w| (w, Route::Inbox(name.clone())));
-            inbox.into_iter().chain([(e.join_wake(), Route::Join(name.clone()))])
-        });
-        imports.chain(exports).collect()
-    }
-
-    /// Serves what `route` is for; returns how many samples, adds or violations were
-    /// taken. `rung`: its service rang (else this is a look for what may have come
-    /// before its listener existed).
-    pub fn serve(&mut self, route: &Route, rung: bool) -> usize {
-        match route {
-            Route::Import(name) => self.imports.get_mut(name).map_or(0, Import::pump),
-            Route::Inbox(name) => self.exports.get(name).map_or(0, |e| e.take_inbox(rung)),
-            Route::Join(name) => {
-                if let Some(e) = self.exports.get(name) {
-                    e.welcome();
-                }
+impl Route {
+    /// Serves what this route is for; returns how many samples, adds or violations
+    /// were taken. `rung`: its service rang (else this is a look for what may have
+    /// come before its listener existed). Locks this route's mirror only.
+    pub fn serve(&self, rung: bool) -> usize {
+        match self {
+            Route::Import(import) => import.lock().pump(),
+            Route::Inbox(export) => export.lock().take_inbox(rung),
+            Route::Join(export) => {
+                export.lock().welcome();
                 0
             }
         }
     }
+}
 
-    /// Takes everything other processes sent: adds to the inboxes of the exports,
-    /// samples, resets and violations of the imports; returns how many there were.
-    pub fn pump(&mut self) -> usize {
-        let inboxes: usize = self.exports.values().map(|e| e.take_inbox(false)).sum();
-        inboxes + self.imports.values_mut().map(Import::pump).sum::<usize>()
+/// The exports and imports of one connection, by trajectory name. The map is only the
+/// index: each entry is locked on its own ([`Mirror`]).
+#[derive(Debug, Default)]
+pub(crate) struct Mirrors {
+    pub exports: BTreeMap<String, Mirror<Export>>,
+    pub imports: BTreeMap<String, Mirror<Import>>,
+}
+
+impl Mirrors {
+    /// Adds `import` under `name` (replacing and returning the one before).
+    pub fn insert_import(&mut self, name: String, import: Import) -> Option<Mirror<Import>> {
+        self.imports.insert(name, Arc::new(Mutex::new(import)))
+    }
+
+    /// Adds `export` under `name` (replacing and returning the one before).
+    pub fn insert_export(&mut self, name: String, export: Export) -> Option<Mirror<Export>> {
+        self.exports.insert(name, Arc::new(Mutex::new(export)))
+    }
+
+    /// Every mirror, as routes that take all they hold: for a sweep, done after the set's
+    /// lock is released.
+    fn everything(&self) -> Vec<Route> {
+        let exports = self.exports.values().map(|e| Route::Inbox(Arc::clone(e)));
+        exports.chain(self.imports.values().map(|i| Route::Import(Arc::clone(i)))).collect()
     }
 }
 
@@ -87,10 +94,56 @@ pub(crate) struct SharedMirrors {
 }
 
 impl SharedMirrors {
-    /// The mirrors, to read or pump. Never held across a control call: the receiver
-    /// thread pumps under it.
+    /// The set of mirrors, to look one up or list them. Held only for that: a mirror
+    /// is served under its own lock, after this one is released.
     pub fn lock(&self) -> MutexGuard<'_, Mirrors> {
         self.mirrors.lock()
+    }
+
+    /// The import of `name`, if this process reads it from another.
+    pub fn import(&self, name: &str) -> Option<Mirror<Import>> {
+        self.mirrors.lock().imports.get(name).cloned()
+    }
+
+    /// Every export (each to lock on its own).
+    pub fn exports(&self) -> Vec<(String, Mirror<Export>)> {
+        let mirrors = self.mirrors.lock();
+        mirrors.exports.iter().map(|(n, e)| (n.clone(), Arc::clone(e))).collect()
+    }
+
+    /// Every import (each to lock on its own).
+    pub fn imports(&self) -> Vec<(String, Mirror<Import>)> {
+        let mirrors = self.mirrors.lock();
+        mirrors.imports.iter().map(|(n, i)| (n.clone(), Arc::clone(i))).collect()
+    }
+
+    /// Every wake-up service that other processes notify for this connection, with
+    /// what its notifications are for: each import's samples and violations, each
+    /// export's join service and each primitive export's inbox. Each mirror is locked
+    /// after the set's lock is released (never one inside the other).
+    pub fn wake_routes(&self) -> Vec<(EventSpec, Route)> {
+        let (exports, imports) = (self.exports(), self.imports());
+        let imports = imports.into_iter().flat_map(|(_, i)| {
+            let wakes = i.lock().receiver_wakes().to_vec();
+            wakes.into_iter().map(move |w| (w, Route::Import(Arc::clone(&i))))
+        });
+        let exports = exports.into_iter().flat_map(|(_, e)| {
+            let (inbox, join) = {
+                let locked = e.lock();
+                (locked.inbox_wake(), locked.join_wake())
+            };
+            let inbox = inbox.map(|w| (w, Route::Inbox(Arc::clone(&e))));
+            inbox.into_iter().chain([(join, Route::Join(e))])
+        });
+        imports.chain(exports).collect()
+    }
+
+    /// Takes everything other processes sent: adds to the inboxes of the exports,
+    /// samples, resets and violations of the imports; returns how many there were.
+    /// The set's lock is held only to list them; each is served under its own.
+    pub fn pump(&self) -> usize {
+        let everything = self.mirrors.lock().everything();
+        everything.iter().map(|route| route.serve(false)).sum()
     }
 
     /// Changes the set of mirrors with `f` and tells the receiver to listen again.

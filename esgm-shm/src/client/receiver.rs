@@ -11,8 +11,8 @@
 //! wake-up: this one.
 //!
 //! Cost proportional to use: a wake-up serves the one mirror its service belongs to
-//! ([`Route`]), looked up by the WaitSet's attachment id, whatever the number of
-//! mirrors. When the set changes (a generation the location bumps and then rings the
+//! ([`Route`]), looked up by the WaitSet's attachment id, under that mirror's own lock,
+//! whatever the number of mirrors. When the set changes (a generation the location bumps and then rings the
 //! receiver's *doorbell*, an event service of its own), it listens to the services
 //! that came and stops listening to those that went, keeping the others' listeners,
 //! and serves the new ones once. Services it could not listen to are served every
@@ -125,7 +125,7 @@ fn run(node_name: &NodeName, doorbell: &EventSpec, mirrors: &SharedMirrors) {
     };
     while !mirrors.stopped() {
         let generation = mirrors.generation();
-        let wanted = mirrors.lock().wake_routes();
+        let wanted = mirrors.wake_routes();
         let names: HashSet<ServiceName> = wanted.iter().map(|(spec, _)| spec.name).collect();
         listening.retain(|name, _| names.contains(name));
         let mut fresh = Vec::new();
@@ -149,14 +149,11 @@ fn run(node_name: &NodeName, doorbell: &EventSpec, mirrors: &SharedMirrors) {
         let routes: HashMap<ServiceName, Route> =
             wanted.into_iter().map(|(spec, route)| (spec.name, route)).collect();
         // What arrived before the new listeners existed would not wake them.
-        {
-            let mut locked = mirrors.lock();
-            for route in &fresh {
-                locked.serve(route, false);
-            }
-            for route in &unheard {
-                locked.serve(route, true);
-            }
+        for route in &fresh {
+            route.serve(false);
+        }
+        for route in &unheard {
+            route.serve(true);
         }
         let set = Listening { listeners: &listening, routes: &routes, unheard: &unheard };
         wait_while_unchanged(mirrors, generation, bell.as_ref(), &set);
@@ -167,7 +164,7 @@ fn run(node_name: &NodeName, doorbell: &EventSpec, mirrors: &SharedMirrors) {
 fn poll(mirrors: &SharedMirrors) {
     while !mirrors.stopped() {
         std::thread::sleep(RECHECK);
-        mirrors.lock().pump();
+        mirrors.pump();
         mirrors.panic_if_requested();
     }
 }
@@ -213,7 +210,7 @@ fn wait_while_unchanged(
             tracing::warn!(error = ?e, "cannot create a WaitSet; polling");
             while !mirrors.stopped() && mirrors.generation() == generation {
                 std::thread::sleep(RECHECK);
-                mirrors.lock().pump();
+                mirrors.pump();
             }
             return;
         }
@@ -259,20 +256,19 @@ fn wait_while_unchanged(
         if fired.is_empty() && set.unheard.is_empty() && !sweep {
             continue;
         }
-        let mut locked = mirrors.lock();
+        // Each route locks its own mirror: a wake-up waits for no other trajectory.
         for (name, _) in &fired {
             if let Some(route) = name.as_ref().and_then(|n| set.routes.get(n)) {
-                locked.serve(route, true);
+                route.serve(true);
             }
         }
         for route in set.unheard {
-            locked.serve(route, true);
+            route.serve(true);
         }
         if sweep {
-            locked.pump();
+            mirrors.pump();
             next_sweep = Instant::now() + SWEEP;
         }
-        drop(locked);
         mirrors.panic_if_requested();
     }
     drop(guards);
