@@ -3,6 +3,8 @@
 //
 //   ros1_pingpong pong <topic-prefix> <spin|block>
 //   ros1_pingpong ping <topic-prefix> <spin|block> <bytes> <samples> <warmup>
+//   ros1_pingpong reader <topic-prefix> block
+//   ros1_pingpong writer <topic-prefix> block <bytes> <samples> <readers>
 //
 // Both processes talk through a rosmaster (ROS_MASTER_URI) over TCPROS on loopback,
 // with TCP_NODELAY. A message is a std_msgs/UInt8MultiArray carrying <bytes> bytes
@@ -12,6 +14,12 @@
 // monotonic clock, from just before publish() (the message is filled before) until
 // the answer's callback has run and read the last byte. `spin` polls the callback
 // queue without sleeping; `block` waits on it. Every wait has a deadline (exit 2).
+//
+// The fan-out rows (ros1-fanout-K, beside esgm's fanout-K): one `writer` publishes a
+// message every 2 ms on <prefix>/tf once <readers> `reader` processes are connected,
+// stamped with the system clock (CLOCK_REALTIME, as esgm-bench's SystemClock) in bytes
+// 8..16. Each reader prints `h <seq> <ns>` per message: the time from that stamp until
+// its callback ran. esgm-bench takes, per message, the last reader's figure.
 #include <ros/callback_queue.h>
 #include <ros/ros.h>
 #include <std_msgs/UInt8MultiArray.h>
@@ -20,6 +28,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
+#include <ctime>
 #include <string>
 
 namespace {
@@ -138,6 +147,77 @@ int ping(const std::string& prefix, bool spin, size_t bytes, long samples, long 
     return 0;
 }
 
+int64_t realtime_ns() {
+    timespec ts{};
+    clock_gettime(CLOCK_REALTIME, &ts);
+    return static_cast<int64_t>(ts.tv_sec) * 1000000000LL + ts.tv_nsec;
+}
+
+struct FanoutReader {
+    void on(const std_msgs::UInt8MultiArray::ConstPtr& m) {
+        const int64_t now = realtime_ns();
+        const uint64_t seq = seq_of(m->data);
+        if (seq == kStop) {
+            stopped = true;
+            return;
+        }
+        int64_t sent = 0;
+        if (m->data.size() >= 16) std::memcpy(&sent, m->data.data() + 8, sizeof sent);
+        std::printf("h %llu %lld\n", static_cast<unsigned long long>(seq),
+                    static_cast<long long>(now - sent));
+    }
+    bool stopped = false;
+};
+
+int fanout_reader(const std::string& prefix) {
+    ros::NodeHandle nh;
+    FanoutReader reader;
+    ros::Subscriber sub = nh.subscribe(prefix + "/tf", 16, &FanoutReader::on, &reader,
+                                       ros::TransportHints().tcpNoDelay());
+    auto* queue = ros::getGlobalCallbackQueue();
+    const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(300.0);
+    while (!reader.stopped) {
+        if (!ros::ok() || ros::WallTime::now() > deadline) {
+            std::fprintf(stderr, "reader: no end within 300 s\n");
+            return 2;
+        }
+        queue->callAvailable(ros::WallDuration(0.05));
+    }
+    std::fflush(stdout);
+    return 0;
+}
+
+int fanout_writer(const std::string& prefix, size_t bytes, long samples, uint32_t readers) {
+    ros::NodeHandle nh;
+    ros::Publisher pub = nh.advertise<std_msgs::UInt8MultiArray>(prefix + "/tf", 16);
+    const ros::WallTime deadline = ros::WallTime::now() + ros::WallDuration(120.0);
+    while (pub.getNumSubscribers() < readers) {
+        if (!ros::ok() || ros::WallTime::now() > deadline) {
+            std::fprintf(stderr, "writer: %u of %u readers connected within 120 s\n",
+                         pub.getNumSubscribers(), readers);
+            return 2;
+        }
+        ros::WallDuration(0.01).sleep();
+    }
+    // Every reader connected: let their TCPROS links settle, as esgm's row does.
+    ros::WallDuration(0.5).sleep();
+    std_msgs::UInt8MultiArray msg;
+    msg.data.assign(bytes < 16 ? 16 : bytes, 0);
+    for (long i = 0; i < samples; ++i) {
+        const uint64_t seq = static_cast<uint64_t>(i);
+        std::memcpy(msg.data.data(), &seq, sizeof seq);
+        const int64_t now = realtime_ns();
+        std::memcpy(msg.data.data() + 8, &now, sizeof now);
+        pub.publish(msg);
+        ros::WallDuration(0.002).sleep();
+    }
+    ros::WallDuration(0.5).sleep();
+    std::memcpy(msg.data.data(), &kStop, sizeof kStop);
+    pub.publish(msg);
+    ros::WallDuration(0.5).sleep();
+    return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -150,6 +230,11 @@ int main(int argc, char** argv) {
     ros::init(argc, argv, "esgm_bench_" + role, ros::init_options::AnonymousName |
                                                      ros::init_options::NoSigintHandler);
     if (role == "pong") return pong(prefix, spin);
+    if (role == "reader") return fanout_reader(prefix);
+    if (role == "writer" && argc >= 7) {
+        return fanout_writer(prefix, std::stoul(argv[4]), std::stol(argv[5]),
+                             static_cast<uint32_t>(std::stoul(argv[6])));
+    }
     if (role == "ping" && argc >= 7) {
         return ping(prefix, spin, std::stoul(argv[4]), std::stol(argv[5]), std::stol(argv[6]));
     }

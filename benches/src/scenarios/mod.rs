@@ -43,7 +43,9 @@
 //! - [`ipc_scale`]: `scale-{connect,first-add,idle}-<n>` for domains of 10, 100 and
 //!   1,000 trajectories, against the domain of 10, with memory rows;
 //! - [`ipc_fanout`]: `fanout-<k>`, one writer and k reader connections, until the last
-//!   reader holds the structure, against `fanout-1`.
+//!   reader holds the structure, against `fanout-1`;
+//! - [`ros1_fanout`]: `ros1-fanout-<k>`, the same through roscpp with k reader
+//!   processes, against `fanout-<k>` (when the ROS 1 peer is built).
 //!
 //! The recordings issue (14) adds, after `pipeline-*` (before `memory`):
 //! - [`record_small`]: `record-small`, `record-small-none`, `RobotState`s from another
@@ -87,6 +89,7 @@ pub mod ipc_uds_small;
 pub mod record_image;
 pub mod record_small;
 pub mod replay_max;
+pub mod ros1_fanout;
 pub mod ros1_peer;
 #[cfg(feature = "zenoh")]
 pub mod zenoh_echo;
@@ -129,6 +132,10 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(ipc_fanout::Fanout::EIGHT),
         Box::new(ipc_fanout::Fanout::THIRTY_TWO),
         Box::new(ipc_fanout::Fanout::SIXTY_FOUR),
+        Box::new(ros1_fanout::Ros1Fanout::ONE),
+        Box::new(ros1_fanout::Ros1Fanout::EIGHT),
+        Box::new(ros1_fanout::Ros1Fanout::THIRTY_TWO),
+        Box::new(ros1_fanout::Ros1Fanout::SIXTY_FOUR),
         Box::new(record_small::RecordSmall),
         Box::new(file_write_image::FileWriteImage),
         Box::new(record_image::RecordImage),

@@ -124,7 +124,58 @@ impl Scenario for Ros1 {
     }
 }
 
-fn which(program: &str) -> Option<PathBuf> {
+/// A private `rosmaster` on a free loopback port, with a `ROS_HOME` of its own; killed
+/// and its home removed when dropped.
+pub(super) struct Master {
+    /// Its port on 127.0.0.1.
+    pub port: u16,
+    home: PathBuf,
+    process: Guard,
+}
+
+impl Master {
+    /// Starts one (pinned to `cores` with taskset when given).
+    pub fn start(cores: Option<String>) -> anyhow::Result<Self> {
+        let port = TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .context("finding a free loopback port")?
+            .port();
+        let home =
+            std::env::temp_dir().join(format!("esgm-bench-ros-{}-{port}", std::process::id()));
+        std::fs::create_dir_all(&home).context("creating ROS_HOME")?;
+        let rosmaster = which("rosmaster").context("rosmaster is not installed")?;
+        let mut master = command(&rosmaster, cores);
+        master
+            .args(["--core", "-p", &port.to_string()])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null());
+        let mut this = Self { port, home, process: Guard::none() };
+        this.env(&mut master);
+        this.process = Guard::new(master.spawn().context("starting rosmaster")?);
+        Ok(this)
+    }
+
+    /// Points a ROS 1 process at this master, on loopback.
+    pub fn env(&self, c: &mut Command) {
+        c.env("ROS_MASTER_URI", format!("http://127.0.0.1:{}", self.port))
+            .env("ROS_IP", "127.0.0.1")
+            .env("ROS_HOME", &self.home)
+            .env("ROS_LOG_DIR", self.home.join("log"))
+            .stdin(Stdio::null());
+    }
+}
+
+impl Drop for Master {
+    fn drop(&mut self) {
+        // The master ends before its home goes.
+        self.process = Guard::none();
+        if let Err(e) = std::fs::remove_dir_all(&self.home) {
+            eprintln!("esgm-bench: cannot remove {}: {e}", self.home.display());
+        }
+    }
+}
+
+pub(super) fn which(program: &str) -> Option<PathBuf> {
     std::env::var_os("PATH")?
         .to_str()?
         .split(':')
@@ -133,21 +184,40 @@ fn which(program: &str) -> Option<PathBuf> {
 }
 
 /// A child that is killed if dropped before it exits.
-struct Guard(Child);
+pub(super) struct Guard(Option<Child>);
+
+impl Guard {
+    /// No child.
+    fn none() -> Self {
+        Self(None)
+    }
+
+    /// Holds `child`.
+    pub fn new(child: Child) -> Self {
+        Self(Some(child))
+    }
+
+    /// The child (a guard made with [`Guard::new`] always has one).
+    pub fn child(&mut self) -> anyhow::Result<&mut Child> {
+        self.0.as_mut().context("no child process")
+    }
+}
 
 impl Drop for Guard {
     fn drop(&mut self) {
-        if let Ok(None) = self.0.try_wait() {
-            let _ = self.0.kill();
+        let Some(child) = self.0.as_mut() else { return };
+        // Already exited, or gone: nothing to kill.
+        if let Ok(None) = child.try_wait() {
+            let _ = child.kill();
         }
-        let _ = self.0.wait();
+        let _ = child.wait();
     }
 }
 
 /// `program`, pinned to `core` with `taskset` when pinning. Children inherit the
 /// affinity of the (pinned) measuring thread, so without this under `--pin` every ROS
 /// process would share the measuring core.
-fn command(program: &std::path::Path, core: Option<String>) -> Command {
+pub(super) fn command(program: &std::path::Path, core: Option<String>) -> Command {
     match core {
         Some(core) => {
             let mut c = Command::new("taskset");
@@ -173,30 +243,15 @@ fn run_pair(
         Some((m, p)) => (Some(m.to_string()), Some(p.to_string()), Some(format!("{m},{p}"))),
         None => (None, None, None),
     };
-    let port = TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .context("finding a free loopback port")?
-        .port();
-    let home = std::env::temp_dir().join(format!("esgm-bench-ros-{}-{port}", std::process::id()));
-    std::fs::create_dir_all(&home).context("creating ROS_HOME")?;
-    let env = |c: &mut Command| {
-        c.env("ROS_MASTER_URI", format!("http://127.0.0.1:{port}"))
-            .env("ROS_IP", "127.0.0.1")
-            .env("ROS_HOME", &home)
-            .env("ROS_LOG_DIR", home.join("log"))
-            .stdin(Stdio::null());
-    };
-    let rosmaster = which("rosmaster").context("rosmaster is not installed")?;
-    let mut master = command(&rosmaster, master_cores);
-    master.args(["--core", "-p", &port.to_string()]).stdout(Stdio::null()).stderr(Stdio::null());
-    env(&mut master);
-    let _master = Guard(master.spawn().context("starting rosmaster")?);
+    let master = Master::start(master_cores)?;
+    let port = master.port;
+    let env = |c: &mut Command| master.env(c);
     let prefix = format!("/esgm_bench_{}_{port}", std::process::id());
     let wait = if mode == WaitMode::Spin { "spin" } else { "block" };
     let mut pong = command(program, pong_core);
     pong.args(["pong", &prefix, wait]).stdout(Stdio::null()).stderr(Stdio::null());
     env(&mut pong);
-    let _pong = Guard(pong.spawn().context("starting the ROS 1 pong process")?);
+    let _pong = Guard::new(pong.spawn().context("starting the ROS 1 pong process")?);
     let mut ping = command(program, ping_core);
     ping.args([
         "ping",
@@ -209,9 +264,9 @@ fn run_pair(
     .stdout(Stdio::piped())
     .stderr(Stdio::piped());
     env(&mut ping);
-    let mut ping = Guard(ping.spawn().context("starting the ROS 1 ping process")?);
-    let mut out = ping.0.stdout.take().context("ping stdout")?;
-    let mut err = ping.0.stderr.take().context("ping stderr")?;
+    let mut ping = Guard::new(ping.spawn().context("starting the ROS 1 ping process")?);
+    let mut out = ping.child()?.stdout.take().context("ping stdout")?;
+    let mut err = ping.child()?.stderr.take().context("ping stderr")?;
     let reader = std::thread::spawn(move || {
         let mut s = String::new();
         let _ = out.read_to_string(&mut s);
@@ -224,7 +279,7 @@ fn run_pair(
     });
     let started = Instant::now();
     let status = loop {
-        if let Some(status) = ping.0.try_wait().context("waiting for ping")? {
+        if let Some(status) = ping.child()?.try_wait().context("waiting for ping")? {
             break status;
         }
         if started.elapsed() > RUN_TIMEOUT {
@@ -234,7 +289,6 @@ fn run_pair(
     };
     let stdout = reader.join().unwrap_or_default();
     let stderr = err_reader.join().unwrap_or_default();
-    let _ = std::fs::remove_dir_all(&home);
     if !status.success() {
         bail!("the ROS 1 ping process failed ({status}): {}", stderr.trim());
     }
