@@ -235,29 +235,27 @@ where
     // The valid time of the last direction printed, to let the last one through.
     let printed = Arc::new(AtomicI64::new(Time::MIN));
     let printed_by_callback = Arc::clone(&printed);
-    let callback = driving_dir.subscribe(SubscribeOptions::default())?.spawn_callback(move |s| {
-        printed_by_callback.store(s.valid_time, Ordering::Relaxed);
-        let Ok(direction) = DrivingDirection::from_structure(&s) else { return };
-        let heading = states
-            .get_at(s.valid_time)
-            .ok()
-            .and_then(|r| RobotState::from_structure(&r).ok())
-            .map_or(f64::NAN, |r| r.dir);
-        let t = turn(heading, direction.dir);
-        println!(
-            "  {:>7.3}  {:>11.2}  {:>9.2}  {:>6.2} {:<5}  {:>5.2}  {:>8.2}",
-            since(t0, s.valid_time),
-            heading,
-            direction.dir,
-            t,
-            side(t),
-            direction.speed,
-            s.add_delay() as f64 / TIMEUNITS_PER_MILLI_SECOND as f64,
-        );
-    });
-    if callback.failed_to_start() {
-        bail!("could not start the subscription's callback thread");
-    }
+    let callback =
+        driving_dir.subscribe(SubscribeOptions::default())?.spawn_callback(move |s| {
+            printed_by_callback.store(s.valid_time, Ordering::Relaxed);
+            let Ok(direction) = DrivingDirection::from_structure(&s) else { return };
+            let heading = states
+                .get_at(s.valid_time)
+                .ok()
+                .and_then(|r| RobotState::from_structure(&r).ok())
+                .map_or(f64::NAN, |r| r.dir);
+            let t = turn(heading, direction.dir);
+            println!(
+                "  {:>7.3}  {:>11.2}  {:>9.2}  {:>6.2} {:<5}  {:>5.2}  {:>8.2}",
+                since(t0, s.valid_time),
+                heading,
+                direction.dir,
+                t,
+                side(t),
+                direction.speed,
+                s.add_delay() as f64 / TIMEUNITS_PER_MILLI_SECOND as f64,
+            );
+        })?;
 
     std::thread::sleep(config.run_for);
 

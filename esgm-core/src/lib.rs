@@ -72,9 +72,10 @@ pub use policy::{
 pub use runtime::{InProcessEsgm, InProcessTrajectory};
 pub use sample::Sample;
 pub use store::{
-    AddError, AddForwarder, AddOutcome, DropCause, FeedWaiter, PolicyViolation, QueryError,
-    Rejection, ReplicaFeed, ResetForwarder, StoreEvent, StoreTap, SubscribeOptions, Subscription,
-    SubscriptionId, TapId, TrajectoryStats, TrajectoryStore,
+    AddError, AddForwarder, AddOutcome, CallbackError, CallbackHandle, DropCause, FeedWaiter,
+    PolicyViolation, QueryError, RecvError, Rejection, ReplicaFeed, ResetForwarder, StoreEvent,
+    StoreTap, SubscribeOptions, Subscription, SubscriptionId, TapId, TrajectoryStats,
+    TrajectoryStore,
 };
 pub use time::{TIMEUNITS_PER_MILLI_SECOND, TIMEUNITS_PER_SECOND, Time, micros, millis, secs};
 pub use type_check::{InvalidType, TypeChecker};

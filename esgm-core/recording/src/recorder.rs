@@ -19,7 +19,7 @@ use std::time::{Duration, Instant};
 use esgm_core::clock::{Clock, SystemClock};
 use esgm_core::{
     DropCause, EntityStructureType, EntityTrajectoryStructure, Esgm, PolicyViolation, QueryError,
-    Sample, SubscribeOptions, Subscription,
+    RecvError, Sample, SubscribeOptions, Subscription,
 };
 use parking_lot::Mutex;
 
@@ -88,6 +88,9 @@ pub struct TrajectoryCounts {
     pub lost: u64,
     /// Policy violations seen.
     pub violations: u64,
+    /// The trajectory was destroyed while it was recorded: its recording ended there
+    /// (what it held until then is in the file).
+    pub ended: bool,
 }
 
 impl RecorderStats {
@@ -284,9 +287,18 @@ fn record_one<T: EntityTrajectoryStructure>(
     let mut batch: Vec<(Sample, i64)> = Vec::with_capacity(WRITE_BATCH);
     loop {
         let stopping = shared.stop.load(Ordering::Acquire);
-        // Timeout: nothing yet. TODO(issue 24): Closed (the trajectory destroyed) spins
-        // this loop, warning each pass; it should end the recording of this trajectory.
-        let sample = if stopping { samples.try_recv() } else { samples.recv_timeout(TICK).ok() };
+        // Timeout: nothing yet. Closed: the trajectory was destroyed (its subscription
+        // ended, and everything it held was taken): its recording ends below.
+        let (sample, closed) = if stopping {
+            (samples.try_recv(), false)
+        } else {
+            match samples.recv_timeout(TICK) {
+                Ok(sample) => (Some(sample), false),
+                Err(RecvError::Timeout) => (None, false),
+                // Closed, or whatever else ends a subscription.
+                Err(_) => (None, true),
+            }
+        };
         let got = sample.is_some();
         if let Some(sample) = sample {
             // What else is queued goes under the same lock of the writer and of the
@@ -337,6 +349,12 @@ fn record_one<T: EntityTrajectoryStructure>(
                 "the recorder fell behind its subscription buffer",
             );
             shared.count(name, |c| c.recorder_overflow += n);
+        }
+        if closed {
+            // A destroyed trajectory has no statistics left to read.
+            tracing::info!(trajectory = name, "the trajectory was destroyed; its recording ends");
+            shared.count(name, |c| c.ended = true);
+            return;
         }
         match trajectory.stats() {
             Ok(stats) => {

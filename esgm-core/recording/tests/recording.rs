@@ -324,6 +324,43 @@ fn a_live_recorder_keeps_violations_and_counts_what_it_misses() {
 }
 
 #[test]
+fn a_trajectory_destroyed_while_recorded_ends_its_recording_and_keeps_what_it_held() {
+    let esgm = InProcessEsgm::default();
+    esgm.create_primitive_entity_trajectory_structure("robot_state", "RobotState").expect("create");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("destroyed.mcap");
+    let writer = RecordingWriter::create(&path, RecordOptions::default()).expect("create");
+    let recorder =
+        Recorder::start(&esgm, &["robot_state".to_owned()], writer, 1024).expect("start");
+    let t = esgm.get_entity_trajectory_structure("robot_state").expect("get");
+    for i in 0..5 {
+        t.add(robot(i)).expect("add");
+    }
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while recorder.stats().recorded() < 5 {
+        assert!(Instant::now() < deadline, "not recorded: {:?}", recorder.stats());
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    drop(t);
+    esgm.destroy_entity_trajectory_structure("robot_state").expect("destroy");
+    while !recorder.stats().trajectories["robot_state"].ended {
+        assert!(
+            Instant::now() < deadline,
+            "the recording of a destroyed trajectory did not end: {:?}",
+            recorder.stats()
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let (summary, stats) = recorder.stop().expect("stop");
+    assert_eq!(stats.missed(), 0);
+    assert_eq!(summary.structures["robot_state"], 5);
+    assert_eq!(
+        Recording::open(&path).expect("open").trajectory("robot_state").expect("in it").count,
+        5
+    );
+}
+
+#[test]
 fn a_recorder_that_falls_behind_counts_each_miss() {
     let esgm = InProcessEsgm::default();
     esgm.create_primitive_entity_trajectory_structure("robot_state", "RobotState").expect("create");

@@ -52,8 +52,8 @@ use subscription::Subscribers;
 pub use query::QueryError;
 pub use stats::TrajectoryStats;
 pub use subscription::{
-    CallbackHandle, FanIn, FeedWaiter, RecvError, ReplicaFeed, SubscribeOptions, Subscription,
-    SubscriptionId,
+    CallbackError, CallbackHandle, FanIn, FeedWaiter, RecvError, ReplicaFeed, SubscribeOptions,
+    Subscription, SubscriptionId,
 };
 pub use violation::{AddError, AddForwarder, AddOutcome, DropCause, PolicyViolation, Rejection};
 

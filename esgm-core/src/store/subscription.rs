@@ -197,15 +197,18 @@ impl<T> Subscription<T> {
 
 impl<T: Send + 'static> Subscription<T> {
     /// Calls `callback` on a thread of its own for every item, until the subscription
-    /// ends or the returned handle is dropped (the seed's `SubscriptionProxy`).
-    pub fn spawn_callback<F>(self, mut callback: F) -> CallbackHandle
+    /// ends or the returned handle is dropped (the seed's `SubscriptionProxy`). Fails
+    /// when the OS refuses the thread: a callback that would never run is an error the
+    /// caller sees, not a log line.
+    pub fn spawn_callback<F>(self, mut callback: F) -> Result<CallbackHandle, CallbackError>
     where
         F: FnMut(T) + Send + 'static,
     {
         let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
         let stop_thread = Arc::clone(&stop);
+        let trajectory = self.id.0;
         let thread = std::thread::Builder::new()
-            .name(format!("esgm-callback-{}", self.id.0))
+            .name(format!("esgm-callback-{trajectory}"))
             .spawn(move || {
                 while !stop_thread.load(Ordering::Relaxed) {
                     match self.recv_timeout(Duration::from_millis(50)) {
@@ -215,27 +218,26 @@ impl<T: Send + 'static> Subscription<T> {
                     }
                 }
             })
-            // TODO(issue 24): return the error; that changes `spawn_callback`'s signature.
-            .map_err(
-                |e| tracing::error!(error = %e, "cannot start a callback thread; it never runs"),
-            )
-            .ok();
-        CallbackHandle { stop, thread }
+            .map_err(CallbackError::NoThread)?;
+        Ok(CallbackHandle { stop, thread: Some(thread) })
     }
+}
+
+/// [`Subscription::spawn_callback`] failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum CallbackError {
+    /// The OS refused the callback's thread (a process at its thread limit).
+    #[error("cannot start the subscription's callback thread: {0}")]
+    NoThread(#[source] std::io::Error),
 }
 
 /// Keeps a callback subscription alive; dropping it stops the callback thread.
 #[derive(Debug)]
 pub struct CallbackHandle {
     stop: Arc<std::sync::atomic::AtomicBool>,
+    /// Taken when dropped, to join it.
     thread: Option<std::thread::JoinHandle<()>>,
-}
-
-impl CallbackHandle {
-    /// True if the callback thread could not be started (the OS refused a thread).
-    pub fn failed_to_start(&self) -> bool {
-        self.thread.is_none()
-    }
 }
 
 impl Drop for CallbackHandle {
