@@ -11,13 +11,13 @@
 
 use std::io::Read;
 use std::process::Stdio;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use anyhow::{Context as _, bail};
 
 use super::ipc_fanout::Fanout;
 use super::ipc_payload::Kind;
-use super::ros1_peer::{Guard, HOW, Master, command, program, which};
+use super::ros1_peer::{Guard, HOW, Master, Pinning, command, program, read_all, which};
 use crate::latency::Latency;
 use crate::report::{Measurement, Method, Wait};
 use crate::scenario::{Context, Scenario};
@@ -118,13 +118,8 @@ fn run_fanout(
     warmup: u64,
     cores: Option<(usize, usize)>,
 ) -> anyhow::Result<Latency> {
-    if cores.is_some() && which("taskset").is_none() {
-        bail!("--pin needs taskset (util-linux) to pin the ROS 1 processes");
-    }
-    let (writer_core, reader_core, master_cores) = match cores {
-        Some((m, p)) => (Some(m.to_string()), Some(p.to_string()), Some(format!("{m},{p}"))),
-        None => (None, None, None),
-    };
+    let Pinning { measuring: writer_core, peer: reader_core, master: master_cores } =
+        Pinning::of(cores)?;
     let master = Master::start(master_cores)?;
     let prefix = format!("/esgm_bench_fanout_{}_{}", std::process::id(), master.port);
     let total = samples + warmup;
@@ -134,12 +129,7 @@ fn run_fanout(
         reader.args(["reader", &prefix, "block"]).stdout(Stdio::piped()).stderr(Stdio::null());
         master.env(&mut reader);
         let mut guard = Guard::new(reader.spawn().context("starting a ROS 1 reader")?);
-        let mut out = guard.child()?.stdout.take().context("reader stdout")?;
-        let collect = std::thread::spawn(move || {
-            let mut s = String::new();
-            let _ = out.read_to_string(&mut s);
-            s
-        });
+        let collect = read_all(guard.child()?.stdout.take().context("reader stdout")?);
         readers.push((guard, collect));
     }
     let mut writer = command(program, writer_core);
@@ -149,16 +139,7 @@ fn run_fanout(
         .stderr(Stdio::piped());
     master.env(&mut writer);
     let mut writer = Guard::new(writer.spawn().context("starting the ROS 1 writer")?);
-    let started = Instant::now();
-    let status = loop {
-        if let Some(status) = writer.child()?.try_wait().context("waiting for the writer")? {
-            break status;
-        }
-        if started.elapsed() > RUN_TIMEOUT {
-            bail!("the ROS 1 writer did not finish within {RUN_TIMEOUT:?}");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    };
+    let status = writer.wait("the ROS 1 writer", RUN_TIMEOUT)?;
     if !status.success() {
         let mut stderr = String::new();
         if let Some(mut err) = writer.child()?.stderr.take() {
@@ -170,13 +151,7 @@ fn run_fanout(
     let mut last = vec![0u64; usize::try_from(total)?];
     let mut lost = 0u64;
     for (mut guard, collect) in readers {
-        let deadline = Instant::now() + Duration::from_secs(30);
-        while guard.child()?.try_wait()?.is_none() {
-            if Instant::now() > deadline {
-                bail!("a ROS 1 reader did not end after the writer's stop");
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
+        guard.wait("a ROS 1 reader, after the writer's stop,", Duration::from_secs(30))?;
         let out =
             collect.join().map_err(|_| anyhow::anyhow!("a reader's output thread panicked"))?;
         let mut seen = vec![false; last.len()];

@@ -15,7 +15,7 @@
 use std::io::Read;
 use std::net::TcpListener;
 use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
+use std::process::{Child, Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, bail};
@@ -201,6 +201,62 @@ impl Guard {
     pub fn child(&mut self) -> anyhow::Result<&mut Child> {
         self.0.as_mut().context("no child process")
     }
+
+    /// Waits for the child, `what`, to exit: an error past `timeout` (it is then
+    /// killed when the guard drops).
+    pub fn wait(&mut self, what: &str, timeout: Duration) -> anyhow::Result<ExitStatus> {
+        let started = Instant::now();
+        loop {
+            if let Some(status) =
+                self.child()?.try_wait().with_context(|| format!("waiting for {what}"))?
+            {
+                return Ok(status);
+            }
+            if started.elapsed() > timeout {
+                bail!("{what} did not finish within {timeout:?}");
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+/// Reads all of `from` on a thread of its own (a child's pipe, which would block the
+/// child if nobody read it), to join for the text.
+pub(super) fn read_all(mut from: impl Read + Send + 'static) -> std::thread::JoinHandle<String> {
+    std::thread::spawn(move || {
+        let mut s = String::new();
+        // What was read before an error is all there is.
+        let _ = from.read_to_string(&mut s);
+        s
+    })
+}
+
+/// The cores of a ROS 1 run's processes under `--pin` (all `None` without it): the
+/// measuring side's, the peers', and the master's (both).
+pub(super) struct Pinning {
+    /// The ping or writer process.
+    pub measuring: Option<String>,
+    /// The pong or reader processes.
+    pub peer: Option<String>,
+    /// rosmaster.
+    pub master: Option<String>,
+}
+
+impl Pinning {
+    /// From the run's (measuring, peer) cores; pinning needs `taskset`.
+    pub fn of(cores: Option<(usize, usize)>) -> anyhow::Result<Self> {
+        let Some((m, p)) = cores else {
+            return Ok(Self { measuring: None, peer: None, master: None });
+        };
+        if which("taskset").is_none() {
+            bail!("--pin needs taskset (util-linux) to pin the ROS 1 processes");
+        }
+        Ok(Self {
+            measuring: Some(m.to_string()),
+            peer: Some(p.to_string()),
+            master: Some(format!("{m},{p}")),
+        })
+    }
 }
 
 impl Drop for Guard {
@@ -236,13 +292,8 @@ fn run_pair(
     warmup: u64,
     cores: Option<(usize, usize)>,
 ) -> anyhow::Result<Latency> {
-    if cores.is_some() && which("taskset").is_none() {
-        bail!("--pin needs taskset (util-linux) to pin the ROS 1 processes");
-    }
-    let (ping_core, pong_core, master_cores) = match cores {
-        Some((m, p)) => (Some(m.to_string()), Some(p.to_string()), Some(format!("{m},{p}"))),
-        None => (None, None, None),
-    };
+    let Pinning { measuring: ping_core, peer: pong_core, master: master_cores } =
+        Pinning::of(cores)?;
     let master = Master::start(master_cores)?;
     let port = master.port;
     let env = |c: &mut Command| master.env(c);
@@ -265,28 +316,9 @@ fn run_pair(
     .stderr(Stdio::piped());
     env(&mut ping);
     let mut ping = Guard::new(ping.spawn().context("starting the ROS 1 ping process")?);
-    let mut out = ping.child()?.stdout.take().context("ping stdout")?;
-    let mut err = ping.child()?.stderr.take().context("ping stderr")?;
-    let reader = std::thread::spawn(move || {
-        let mut s = String::new();
-        let _ = out.read_to_string(&mut s);
-        s
-    });
-    let err_reader = std::thread::spawn(move || {
-        let mut s = String::new();
-        let _ = err.read_to_string(&mut s);
-        s
-    });
-    let started = Instant::now();
-    let status = loop {
-        if let Some(status) = ping.child()?.try_wait().context("waiting for ping")? {
-            break status;
-        }
-        if started.elapsed() > RUN_TIMEOUT {
-            bail!("the ROS 1 ping process did not finish within {RUN_TIMEOUT:?}");
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    };
+    let reader = read_all(ping.child()?.stdout.take().context("ping stdout")?);
+    let err_reader = read_all(ping.child()?.stderr.take().context("ping stderr")?);
+    let status = ping.wait("the ROS 1 ping process", RUN_TIMEOUT)?;
     let stdout = reader.join().unwrap_or_default();
     let stderr = err_reader.join().unwrap_or_default();
     if !status.success() {

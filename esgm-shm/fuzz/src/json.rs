@@ -7,6 +7,36 @@ use serde_json::{Map, Number, Value};
 
 use crate::rng::Rng;
 
+/// JSON's own tokens, which a text mutation of any JSON protocol splices in: its
+/// punctuation and words, numbers at their limits and escapes that are not text.
+const JSON_TOKENS: [&str; 19] = [
+    "{",
+    "}",
+    "[",
+    "]",
+    "\"",
+    ":",
+    ",",
+    "null",
+    "true",
+    "false",
+    "18446744073709551615",
+    "9223372036854775807",
+    "-1",
+    "-0.0",
+    "1e999",
+    "\\",
+    "\"\\u0000\"",
+    "\"\\ud800\"",
+    "\"\\uDBFF\\uDFFF\"",
+];
+
+/// The tokens a target's text mutations splice: JSON's own and `words`, the
+/// protocol's (its variant names, fields and values that matter to it).
+pub fn json_tokens(words: &[&'static str]) -> Vec<&'static str> {
+    JSON_TOKENS.iter().chain(words).copied().collect()
+}
+
 /// Applies one or two tree mutations to the JSON in `data`; `None` if it is not JSON.
 pub fn mutate_json(rng: &mut Rng, data: &[u8], others: &[Vec<u8>]) -> Option<Vec<u8>> {
     let mut tree: Value = serde_json::from_slice(data).ok()?;

@@ -9,12 +9,14 @@
 //! same answer twice adds its counts twice). Promises checked beyond "no panic": every
 //! reply this process makes reads back, and every seed decodes.
 
+use std::sync::LazyLock;
+
 use esgm_core::esgm::{Esgm, MemoryStats, TrajectorySpec};
 use esgm_core::{DropCause, InProcessEsgm};
 use esgm_shm::client::AdminReader;
 use serde_json::json;
 
-use crate::json::mutate_json;
+use crate::json::{json_tokens, mutate_json};
 use crate::mutate::mutate;
 use crate::rng::Rng;
 use crate::target::{Broken, Target};
@@ -24,33 +26,22 @@ use crate::text::mutate_text;
 const HOST: &str = "esgm-fuzz";
 const QUESTION: u64 = 1;
 
-/// JSON's punctuation, the channel's variant names and numbers at their limits.
-const TOKENS: [&str; 24] = [
-    "{",
-    "}",
-    "[",
-    "]",
-    "\"",
-    ":",
-    ",",
-    "null",
-    "true",
-    "18446744073709551615",
-    "9223372036854775807",
-    "-1",
-    "1e999",
-    "\"Ask\"",
-    "\"Answer\"",
-    "\"Flush\"",
-    "\"Stats\"",
-    "\"Memory\"",
-    "\"Done\"",
-    "\"Failed\"",
-    "\"Lost\"",
-    "{\"secs\":18446744073709551615,\"nanos\":999999999}",
-    "\"esgm-fuzz\"",
-    "\n",
-];
+/// JSON's tokens, the channel's variant names and a duration at its limit.
+static TOKENS: LazyLock<Vec<&str>> = LazyLock::new(|| {
+    json_tokens(&[
+        "\"Ask\"",
+        "\"Answer\"",
+        "\"Flush\"",
+        "\"Stats\"",
+        "\"Memory\"",
+        "\"Done\"",
+        "\"Failed\"",
+        "\"Lost\"",
+        "{\"secs\":18446744073709551615,\"nanos\":999999999}",
+        "\"esgm-fuzz\"",
+        "\n",
+    ])
+});
 
 /// The admin target.
 #[derive(Debug)]

@@ -10,7 +10,7 @@
 //! ones filled. Promises checked beyond "no panic": every answer the writer makes reads
 //! back as an outcome (the replica can read it), and every seed is served or read.
 
-use std::sync::{Mutex, PoisonError};
+use std::sync::{LazyLock, Mutex, PoisonError};
 
 use esgm_core::codec;
 use esgm_core::esgm::{Esgm, TrajectorySpec};
@@ -21,7 +21,7 @@ use esgm_core::{
 use esgm_shm::client::{read_blocking_add_answer, serve_blocking_add};
 use esgm_shm::control::protocol::{decode, encode};
 
-use crate::json::mutate_json;
+use crate::json::{json_tokens, mutate_json};
 use crate::mutate::mutate;
 use crate::rng::Rng;
 use crate::structures;
@@ -36,25 +36,16 @@ const REQUEST: u8 = b'R';
 /// The writer's trajectory.
 const TRAJECTORY: &str = "robot_state";
 
-/// JSON's punctuation, the outcomes' variant names and numbers at their limits.
-const TOKENS: [&str; 16] = [
-    "{",
-    "}",
-    "[",
-    "]",
-    "\"",
-    ":",
-    ",",
-    "null",
-    "\"Ok\"",
-    "\"Err\"",
-    "\"Held\"",
-    "\"PolicyViolation\"",
-    "\"release_at\":-9223372036854775808",
-    "18446744073709551615",
-    "1e999",
-    "\"\\ud800\"",
-];
+/// JSON's tokens, the outcomes' variant names and a release time at its limit.
+static TOKENS: LazyLock<Vec<&str>> = LazyLock::new(|| {
+    json_tokens(&[
+        "\"Ok\"",
+        "\"Err\"",
+        "\"Held\"",
+        "\"PolicyViolation\"",
+        "\"release_at\":-9223372036854775808",
+    ])
+});
 
 /// The writer's runtime and its trajectory.
 struct Writer {

@@ -11,7 +11,7 @@
 //! decodes.
 
 use std::path::Path;
-use std::sync::{Mutex, PoisonError};
+use std::sync::{LazyLock, Mutex, PoisonError};
 
 use esgm_cli::config;
 use esgm_core::TypeRegistry;
@@ -26,46 +26,32 @@ use esgm_shm::control::{
     ControlError, Origin, ProcessStatus, Registry, Request, Response, SaveHealth,
 };
 
-use crate::json::mutate_json;
+use crate::json::{json_tokens, mutate_json};
 use crate::mutate::mutate;
 use crate::rng::Rng;
 use crate::target::{Broken, Target};
 use crate::targets::configuration::seed_files;
 use crate::text::mutate_text;
 
-/// JSON's punctuation and words, and the protocol's variant names.
-const JSON_TOKENS: [&str; 30] = [
-    "{",
-    "}",
-    "[",
-    "]",
-    "\"",
-    ":",
-    ",",
-    "null",
-    "true",
-    "false",
-    "\"\\u0000\"",
-    "\"\\ud800\"",
-    "\\",
-    "\"\\uDBFF\\uDFFF\"",
-    "{\"Ping\":null}",
-    "\"Ping\"",
-    "\"Shutdown\"",
-    "\"CreateTrajectory\"",
-    "\"DestroyEntityTrajectoryStructure\"",
-    "\"ReportProcess\"",
-    "\"DeclareProcess\"",
-    "\"AddCompUnit\"",
-    "\"GetTypeDefinitions\"",
-    "\"Sort\"",
-    "\"Type\"",
-    "\"pid\":1",
-    "\"name\":\"\"",
-    "\"name\":\"a/b\"",
-    "1e999",
-    "-0.0",
-];
+/// JSON's tokens and the protocol's variant names and fields.
+static TOKENS: LazyLock<Vec<&str>> = LazyLock::new(|| {
+    json_tokens(&[
+        "{\"Ping\":null}",
+        "\"Ping\"",
+        "\"Shutdown\"",
+        "\"CreateTrajectory\"",
+        "\"DestroyEntityTrajectoryStructure\"",
+        "\"ReportProcess\"",
+        "\"DeclareProcess\"",
+        "\"AddCompUnit\"",
+        "\"GetTypeDefinitions\"",
+        "\"Sort\"",
+        "\"Type\"",
+        "\"pid\":1",
+        "\"name\":\"\"",
+        "\"name\":\"a/b\"",
+    ])
+});
 
 /// Valid requests: every kind, with the library's types and the configuration seeds'
 /// types, processes and trajectories, in an order that builds a registry up.
@@ -152,7 +138,7 @@ fn control_input(rng: &mut Rng, seeds: &[Vec<u8>]) -> Vec<u8> {
         1..=10 => mutate_json(rng, seed, seeds).unwrap_or_else(|| seed.clone()),
         11..=16 => {
             let mut data = seed.clone();
-            mutate_text(rng, &mut data, seeds, &JSON_TOKENS);
+            mutate_text(rng, &mut data, seeds, &TOKENS);
             data
         }
         _ => {
