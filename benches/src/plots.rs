@@ -181,26 +181,28 @@ fn domain_size(report: &Report, path: &Path) -> anyhow::Result<bool> {
 
 /// Latency until the last of K readers holds a structure, against K.
 fn fan_out(report: &Report, path: &Path) -> anyhow::Result<bool> {
-    let rows = |prefix: &str, p99: bool| -> Vec<(f64, f64)> {
+    let rows = |prefix: &str, p99: bool, wait: Wait| -> Vec<(f64, f64)> {
         report
             .scenarios
             .iter()
+            .filter(|m| m.wait == wait)
             .filter_map(|m| {
                 let ns = if p99 { m.p99_ns } else { m.p50_ns };
                 Some((size_of(&m.name, prefix)?, us(ns)))
             })
             .collect()
     };
-    let esgm = rows("fanout-", false);
+    let esgm = rows("fanout-", false, Wait::Event);
     // One wake-up per reader: K times the single reader's median.
     let one = esgm.iter().find(|&&(k, _)| k == 1.0).map(|&(_, us)| us);
     let bound: Vec<(f64, f64)> =
         one.map(|one| esgm.iter().map(|&(k, _)| (k, k * one)).collect()).unwrap_or_default();
     let series = [
         ("esgm p50".to_owned(), esgm),
-        ("esgm p99".to_owned(), rows("fanout-", true)),
+        ("esgm p99".to_owned(), rows("fanout-", true, Wait::Event)),
         ("one wake-up per reader (K × fanout-1 p50)".to_owned(), bound),
-        ("ROS 1 (roscpp) p50".to_owned(), rows("ros1-fanout-", false)),
+        ("ROS 1 (roscpp) p50".to_owned(), rows("ros1-fanout-", false, Wait::Event)),
+        ("esgm busy-wait readers p50".to_owned(), rows("fanout-", false, Wait::Spin)),
     ];
     log_log(
         path,

@@ -4,7 +4,8 @@
 //!
 //! The writer adds a small structure stamped with the system clock, every 2 ms (a
 //! `tf`-like stream at a rate every reader keeps up with); each reader's subscription
-//! (blocking: a reader that does not burn a core) takes it and notes when it held it.
+//! takes it and notes when it held it: blocking (a reader that does not burn a core,
+//! the `event` row) or busy-waiting (polling and yielding, the `spin` row).
 //! A row's sample is, per structure, the time until the *last* reader held it: the
 //! figure a stream read by every process is held to. The physical floor grows by one
 //! wake-up per reader (iceoryx2 notifies each listener), so `fanout-<k>` is compared
@@ -71,6 +72,21 @@ impl Scenario for Fanout {
             return Ok(Vec::new());
         }
         iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
+        let mut rows = vec![self.measure(ctx, Wait::Event)?];
+        // Busy-waiting readers beyond the cores take turns on them: a reader that missed
+        // structures is reported with its count, without losing the blocking row.
+        match self.measure(ctx, Wait::Spin) {
+            Ok(row) => rows.push(row),
+            Err(e) => ctx.skip(self.name, format!("busy-wait readers: {e:#}")),
+        }
+        Ok(rows)
+    }
+}
+
+impl Fanout {
+    /// One row: `wait` says whether the readers block on their subscription or
+    /// busy-wait on it (polling, yielding the core between polls).
+    fn measure(&self, ctx: &Context, wait: Wait) -> anyhow::Result<Measurement> {
         let domain = unique_domain("esgm-bench-fanout");
         let coordinator = Coordinator::spawn(&domain, Registry::new(TypeRegistry::with_library()))
             .with_context(|| format!("could not start a coordinator for {domain}"))?;
@@ -95,7 +111,14 @@ impl Scenario for Fanout {
                 // (valid time = sequence, held at) of every structure received.
                 let mut held = Vec::with_capacity(samples);
                 while !stop.load(Ordering::Acquire) {
-                    if let Ok(s) = sub.recv_timeout(Duration::from_millis(50)) {
+                    let got = match wait {
+                        Wait::Event => sub.recv_timeout(Duration::from_millis(50)).ok(),
+                        Wait::Spin => sub.try_recv().or_else(|| {
+                            std::thread::yield_now();
+                            None
+                        }),
+                    };
+                    if let Some(s) = got {
                         held.push((s.structure.valid_time, SystemClock.now()));
                     }
                 }
@@ -143,12 +166,16 @@ impl Scenario for Fanout {
         }
         if lost > 0 {
             // A reader that missed structures did not keep up: every sample must arrive.
-            bail!("{lost} receptions missing over {} readers", self.k);
+            bail!("{lost} receptions missing over {} readers ({})", self.k, wait.as_str());
         }
+        let strategy = match wait {
+            Wait::Event => "block (a subscription)",
+            Wait::Spin => "busy-wait (try_recv, yielding between polls)",
+        };
         let mut row = latency
-            .measurement(self.name, Wait::Event)
+            .measurement(self.name, wait)
             .method(Method::SystemClock)
-            .wait_strategy("block (a subscription)")
+            .wait_strategy(strategy)
             .payload_bytes(esgm_core::codec::encoded_len(&Kind::Small.make(0))? as u64)
             .if_empty("no structure reached every reader")
             .note(format!(
@@ -162,6 +189,6 @@ impl Scenario for Fanout {
         drop(tf);
         drop(writer);
         drop(coordinator);
-        Ok(vec![row])
+        Ok(row)
     }
 }
