@@ -47,6 +47,9 @@
 //! - [`ros1_fanout`]: `ros1-fanout-<k>`, the same through roscpp with k reader
 //!   processes, against `fanout-<k>` (when the ROS 1 peer is built).
 //!
+//! The silent-failures issue (24) adds [`control_churn`]: `control-ping` and
+//! `control-ping-churn`, a client's call to the coordinator while others churn.
+//!
 //! The recordings issue (14) adds, after `pipeline-*` (before `memory`):
 //! - [`record_small`]: `record-small`, `record-small-none`, `RobotState`s from another
 //!   process recorded by the `Recorder` (zstd, none): structures/s in batches, losses
@@ -61,6 +64,7 @@
 //! `BENCHMARKS.md` at the repository root has a run's results and what they mean.
 
 pub mod bridge;
+pub mod control_churn;
 pub mod file_write_image;
 pub mod inproc_chain3;
 pub mod inproc_echo;
@@ -136,6 +140,7 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(ros1_fanout::Ros1Fanout::EIGHT),
         Box::new(ros1_fanout::Ros1Fanout::THIRTY_TWO),
         Box::new(ros1_fanout::Ros1Fanout::SIXTY_FOUR),
+        Box::new(control_churn::ControlChurn),
         Box::new(record_small::RecordSmall),
         Box::new(file_write_image::FileWriteImage),
         Box::new(record_image::RecordImage),
