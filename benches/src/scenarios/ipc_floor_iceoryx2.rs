@@ -7,6 +7,11 @@
 //! trip, with both processes busy-polling `receive` (`spin`), and with both blocking on
 //! an iceoryx2 event service that the sender notifies after each send (`event`) — what
 //! esgm's blocking subscribers do, so this is their floor too.
+//!
+//! `floor-iceoryx2` uses iceoryx2's plain `ipc` service type. esgm's ports are its
+//! thread-safe variant (`ipc_threadsafe`, a lock around each port, so that any thread of
+//! a process may use them); `floor-iceoryx2-threadsafe` is the same hop on that variant,
+//! so the lock's share of esgm's distance to the floor is known (issue 27).
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -17,10 +22,13 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
-use iceoryx2::prelude::{Node, ServiceName, ZeroCopySend, ipc};
+use iceoryx2::prelude::{
+    LogLevel, Node, NodeBuilder, ServiceName, SignalHandlingMode, ZeroCopySend, ipc,
+    ipc_threadsafe, set_log_level,
+};
 use iceoryx2::sample_mut::SampleMut;
+use iceoryx2::service::Service;
 
-use super::ipc_node::raw_ipc_node;
 use crate::latency::Latency;
 use crate::patience::Patience;
 use crate::peer_process::FINISH_TIMEOUT;
@@ -31,6 +39,8 @@ use crate::wait_mode::WaitMode;
 
 /// The scenario's name.
 pub const NAME: &str = "floor-iceoryx2";
+/// The same hop on iceoryx2's thread-safe service type, esgm's.
+pub const THREADSAFE: &str = "floor-iceoryx2-threadsafe";
 
 /// The message: 64 bytes, a sequence number and a body.
 #[derive(Debug, Clone, Copy, ZeroCopySend)]
@@ -49,44 +59,84 @@ const HELLO: u64 = 0;
 const STOP: u64 = u64::MAX;
 const HELLO_EVERY: Duration = Duration::from_millis(1);
 
-/// See the module docs.
+/// See the module docs: the plain service type (`floor-iceoryx2`), or the thread-safe
+/// one (`floor-iceoryx2-threadsafe`).
 #[derive(Debug, Clone, Copy, Default)]
-pub struct FloorIceoryx2;
+pub struct FloorIceoryx2 {
+    /// On `ipc_threadsafe` rather than `ipc`.
+    pub threadsafe: bool,
+}
+
+impl FloorIceoryx2 {
+    /// The floor: iceoryx2's plain service type.
+    pub const PLAIN: FloorIceoryx2 = FloorIceoryx2 { threadsafe: false };
+    /// The same on the thread-safe type esgm uses.
+    pub const THREADSAFE: FloorIceoryx2 = FloorIceoryx2 { threadsafe: true };
+}
 
 impl Scenario for FloorIceoryx2 {
     fn name(&self) -> &'static str {
-        NAME
+        if self.threadsafe { THREADSAFE } else { NAME }
     }
 
     fn summary(&self) -> &'static str {
-        "raw iceoryx2 publish-subscribe of a 64-byte struct, process -> process: the floor"
+        if self.threadsafe {
+            "raw iceoryx2 (thread-safe ports, as esgm's) publish-subscribe of a 64-byte struct, process -> process"
+        } else {
+            "raw iceoryx2 publish-subscribe of a 64-byte struct, process -> process: the floor"
+        }
     }
 
     fn run(&self, ctx: &Context) -> anyhow::Result<Vec<Measurement>> {
-        WaitMode::SPIN_AND_BLOCK.iter().map(|&mode| measure(ctx, mode)).collect()
+        let name = self.name();
+        WaitMode::SPIN_AND_BLOCK
+            .iter()
+            .map(|&mode| match self.threadsafe {
+                false => measure::<ipc::Service>(ctx, name, mode),
+                true => measure::<ipc_threadsafe::Service>(ctx, name, mode),
+            })
+            .collect()
     }
 
     fn run_peer(&self, role: &PeerRole) -> anyhow::Result<Vec<String>> {
-        let node = raw_ipc_node()?;
-        let ends = Ends::open(&node, &role.domain, "pong", "ping", role.wait)?;
-        let mut patience = Patience::alone();
-        loop {
-            let seq = ends.receive(&mut patience, "ping", |_| true)?;
-            if seq == STOP {
-                return Ok(Vec::new());
-            }
-            ends.send(ends.loan(seq)?)?;
+        match self.threadsafe {
+            false => pong::<ipc::Service>(role),
+            true => pong::<ipc_threadsafe::Service>(role),
         }
     }
 }
 
-fn measure(ctx: &Context, mode: WaitMode) -> anyhow::Result<Measurement> {
+/// A node of service type `S`, signal handling off and iceoryx2's log cut to errors
+/// (see `ipc_node`).
+fn node<S: Service>() -> anyhow::Result<Node<S>> {
+    set_log_level(LogLevel::Error);
+    NodeBuilder::new()
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<S>()
+        .context("could not create an iceoryx2 node")
+}
+
+/// The peer's side: answers every ping until the stop.
+fn pong<S: Service>(role: &PeerRole) -> anyhow::Result<Vec<String>> {
+    let node = node::<S>()?;
+    let ends = Ends::open(&node, &role.domain, "pong", "ping", role.wait)?;
+    let mut patience = Patience::alone();
+    loop {
+        let seq = ends.receive(&mut patience, "ping", |_| true)?;
+        if seq == STOP {
+            return Ok(Vec::new());
+        }
+        ends.send(ends.loan(seq)?)?;
+    }
+}
+
+fn measure<S: Service>(ctx: &Context, name: &str, mode: WaitMode) -> anyhow::Result<Measurement> {
     let samples = ctx.samples(100_000, 10_000);
     let warmup = ctx.warmup(samples);
     let domain = unique_domain("esgm-bench");
-    let node = raw_ipc_node()?;
+    let node = node::<S>()?;
     let ends = Ends::open(&node, &domain, "ping", "pong", mode)?;
-    let mut peer = ctx.spawn_peer_process(NAME, mode, &domain)?;
+    let mut peer = ctx.spawn_peer_process(name, mode, &domain)?;
     let mut patience = Patience::for_peer(&mut peer);
 
     // A message sent before the peer's subscriber connected is lost: ping until it
@@ -120,26 +170,27 @@ fn measure(ctx: &Context, mode: WaitMode) -> anyhow::Result<Measurement> {
     ends.send(ends.loan(STOP)?)?;
     peer.finish(FINISH_TIMEOUT)?;
 
-    Ok(latency
-        .measurement(NAME, mode.wait())
+    let row = latency
+        .measurement(name, mode.wait())
         .payload_bytes(size_of::<Message>() as u64)
         .method(Method::HalfRoundTrip)
-        .wait_strategy(mode.label()))
+        .wait_strategy(mode.label());
+    Ok(if name == NAME { row } else { row.baseline(NAME) })
 }
 
 /// One process's ends of the ping-pong: it sends on one service and receives on the
 /// other; when blocking, each service has an event service beside it for wake-ups.
 #[derive(Debug)]
-struct Ends {
-    publisher: Publisher<ipc::Service, Message, ()>,
-    subscriber: Subscriber<ipc::Service, Message, ()>,
-    notifier: Option<Notifier<ipc::Service>>,
-    listener: Option<Listener<ipc::Service>>,
+struct Ends<S: Service> {
+    publisher: Publisher<S, Message, ()>,
+    subscriber: Subscriber<S, Message, ()>,
+    notifier: Option<Notifier<S>>,
+    listener: Option<Listener<S>>,
 }
 
-impl Ends {
+impl<S: Service> Ends<S> {
     fn open(
-        node: &Node<ipc::Service>,
+        node: &Node<S>,
         domain: &str,
         send_on: &str,
         receive_on: &str,
@@ -176,13 +227,13 @@ impl Ends {
     }
 
     /// A loaned message with sequence `seq`, written and ready to send.
-    fn loan(&self, seq: u64) -> anyhow::Result<SampleMut<ipc::Service, Message, ()>> {
+    fn loan(&self, seq: u64) -> anyhow::Result<SampleMut<S, Message, ()>> {
         let sample = self.publisher.loan_uninit().context("could not loan a message")?;
         Ok(sample.write_payload(Message { seq, body: [seq as u8; 56] }))
     }
 
     /// Sends, and wakes the other process if it blocks.
-    fn send(&self, message: SampleMut<ipc::Service, Message, ()>) -> anyhow::Result<()> {
+    fn send(&self, message: SampleMut<S, Message, ()>) -> anyhow::Result<()> {
         message.send().context("could not send a message")?;
         if let Some(notifier) = &self.notifier {
             notifier.notify().context("could not notify")?;

@@ -3,7 +3,7 @@
 use anyhow::Context as _;
 use esgm_shm::ShmNode;
 use iceoryx2::prelude::{
-    CallbackProgression, Config, LogLevel, Node, NodeBuilder, NodeState, SignalHandlingMode, ipc,
+    CallbackProgression, Config, LogLevel, Node, NodeBuilder, NodeState, SignalHandlingMode,
     set_log_level,
 };
 
@@ -18,17 +18,6 @@ pub fn ipc_node() -> anyhow::Result<ShmNode> {
     NodeBuilder::new()
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<esgm_shm::ShmService>()
-        .context("could not create an iceoryx2 node")
-}
-
-/// A node of iceoryx2's single-threaded service type, for the raw floor: esgm's ports
-/// are the thread-safe variant ([`esgm_shm::ShmService`]), whose lock the floor does
-/// not pay, so a ratio to the floor includes it.
-pub fn raw_ipc_node() -> anyhow::Result<Node<ipc::Service>> {
-    set_log_level(LogLevel::Error);
-    NodeBuilder::new()
-        .signal_handling_mode(SignalHandlingMode::Disabled)
-        .create::<ipc::Service>()
         .context("could not create an iceoryx2 node")
 }
 

@@ -16,7 +16,8 @@
 //! measuring process's id). Latency is half a round trip; `spin` rows busy-poll,
 //! `event` rows block, and esgm adds its default strategy as `-default` rows
 //! ([`crate::wait_mode`]).
-//! - [`ipc_floor_iceoryx2`]: the floor, raw iceoryx2 with a 64-byte message;
+//! - [`ipc_floor_iceoryx2`]: the floor, raw iceoryx2 with a 64-byte message, and the
+//!   same on the thread-safe service type esgm uses (`floor-iceoryx2-threadsafe`);
 //! - [`ipc_uds_small`] and [`ipc_uds_image`]: the baselines, the codec's bytes through a
 //!   Unix socket ([`ipc_uds_echo`], [`ipc_uds_frames`]);
 //! - [`ipc_esgm_small`] and [`ipc_esgm_image`]: esgm-shm's trajectories, a small
@@ -109,7 +110,8 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(inproc_hop_image::InprocHopImage),
         Box::new(inproc_chain3::InprocChain3),
         Box::new(inproc_sampling_jitter::InprocSamplingJitter),
-        Box::new(ipc_floor_iceoryx2::FloorIceoryx2),
+        Box::new(ipc_floor_iceoryx2::FloorIceoryx2::PLAIN),
+        Box::new(ipc_floor_iceoryx2::FloorIceoryx2::THREADSAFE),
         Box::new(ipc_uds_small::UdsSmall),
         Box::new(ipc_esgm_small::EsgmSmall),
         Box::new(ipc_esgm_image::EsgmImage),
