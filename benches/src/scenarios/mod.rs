@@ -18,6 +18,8 @@
 //! ([`crate::wait_mode`]).
 //! - [`ipc_floor_iceoryx2`]: the floor, raw iceoryx2 with a 64-byte message, and the
 //!   same on the thread-safe service type esgm uses (`floor-iceoryx2-threadsafe`);
+//! - [`ipc_floor_futex`]: `floor-futex`, the wake-up alone through a futex word in
+//!   shared memory (issue 27);
 //! - [`ipc_uds_small`] and [`ipc_uds_image`]: the baselines, the codec's bytes through a
 //!   Unix socket ([`ipc_uds_echo`], [`ipc_uds_frames`]);
 //! - [`ipc_esgm_small`] and [`ipc_esgm_image`]: esgm-shm's trajectories, a small
@@ -79,6 +81,7 @@ pub mod ipc_esgm_echo;
 pub mod ipc_esgm_image;
 pub mod ipc_esgm_small;
 pub mod ipc_fanout;
+pub mod ipc_floor_futex;
 pub mod ipc_floor_iceoryx2;
 pub mod ipc_memory;
 pub mod ipc_node;
@@ -112,6 +115,7 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(inproc_sampling_jitter::InprocSamplingJitter),
         Box::new(ipc_floor_iceoryx2::FloorIceoryx2::PLAIN),
         Box::new(ipc_floor_iceoryx2::FloorIceoryx2::THREADSAFE),
+        Box::new(ipc_floor_futex::FloorFutex),
         Box::new(ipc_uds_small::UdsSmall),
         Box::new(ipc_esgm_small::EsgmSmall),
         Box::new(ipc_esgm_image::EsgmImage),
