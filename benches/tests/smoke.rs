@@ -105,9 +105,19 @@ fn quick_hop_small_writes_the_json_report() {
 
 #[test]
 fn quick_floor_iceoryx2_runs_against_a_peer_process() {
+    // `--only` takes every scenario whose name contains it: the floor on iceoryx2's plain
+    // service type and on the thread-safe one esgm uses.
     let (stdout, report) = run_quick("floor-iceoryx2");
     assert!(stdout.contains("floor-iceoryx2"), "the table lacks the scenario:\n{stdout}");
-    assert_eq!(rows(&report), [key("floor-iceoryx2", "event"), key("floor-iceoryx2", "spin")]);
+    assert_eq!(
+        rows(&report),
+        [
+            key("floor-iceoryx2", "event"),
+            key("floor-iceoryx2", "spin"),
+            key("floor-iceoryx2-threadsafe", "event"),
+            key("floor-iceoryx2-threadsafe", "spin"),
+        ]
+    );
     for row in report["scenarios"].as_array().unwrap() {
         assert_eq!(row["payload_bytes"], 64, "{row}");
     }
