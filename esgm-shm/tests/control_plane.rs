@@ -95,6 +95,9 @@ fn no_coordinator_is_a_clear_error() {
     let err = ControlClient::connect(&domain, Duration::from_millis(200)).unwrap_err();
     assert!(matches!(err, ControlClientError::NoCoordinator { .. }), "{err}");
     assert!(err.to_string().contains("esgm up"));
+    // One line for a user, in esgm's words: no iceoryx2 type names.
+    assert!(!err.to_string().contains("RequestResponse"), "{err}");
+    assert!(std::error::Error::source(&err).is_none(), "{err}");
 }
 
 #[test]

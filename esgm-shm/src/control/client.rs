@@ -30,8 +30,18 @@ pub enum ControlClientError {
     #[error("cannot create a node: {0}")]
     Node(#[source] NodeCreationFailure),
     /// No coordinator serves this domain; start one with `esgm up`.
-    #[error("no coordinator is running for domain `{domain}` (start one with `esgm up`): {source}")]
+    #[error("no coordinator is running for domain `{domain}` (start one with `esgm up`)")]
     NoCoordinator {
+        /// The domain.
+        domain: String,
+    },
+    /// The domain's control service is there but cannot be opened: made by another
+    /// version of esgm, or left damaged by a crash. `esgm down` and `esgm up` make it
+    /// anew.
+    #[error(
+        "the control service of domain `{domain}` cannot be opened (another esgm version made it, or a crash damaged it; restart the domain with `esgm down` and `esgm up`): {source}"
+    )]
+    ControlServiceUnusable {
         /// The domain.
         domain: String,
         /// iceoryx2's reason.
@@ -160,7 +170,12 @@ impl ControlClient {
                 RequestResponseOpenError::InsufficientPermissions => {
                     ControlClientError::NotAllowed { domain: domain.to_owned() }
                 }
-                source => ControlClientError::NoCoordinator { domain: domain.to_owned(), source },
+                RequestResponseOpenError::DoesNotExist => {
+                    ControlClientError::NoCoordinator { domain: domain.to_owned() }
+                }
+                source => {
+                    ControlClientError::ControlServiceUnusable { domain: domain.to_owned(), source }
+                }
             })?;
         // A crashed process's client holds its room until someone cleans up after it.
         let lacks_room =
