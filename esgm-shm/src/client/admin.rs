@@ -544,7 +544,10 @@ impl Admin {
         while collected.len() < expected {
             if !cleaned && Instant::now() >= clean_after {
                 cleaned = true;
-                crate::control::server::log_cleanup(crate::service::cleanup_dead_nodes());
+                crate::control::server::log_cleanup(
+                    crate::service::cleanup_dead_nodes(),
+                    crate::service::CleanupReporter::Bystander,
+                );
                 expected = expected.min(connected());
                 continue;
             }

@@ -240,7 +240,10 @@ impl ControlClient {
                 // A coordinator that crashed still counts as the server until someone
                 // cleans up after it (nobody scans for dead nodes at connect): if
                 // cleaning up leaves no server, nobody serves, which is not slowness.
-                crate::control::server::log_cleanup(crate::service::cleanup_dead_nodes());
+                crate::control::server::log_cleanup(
+                    crate::service::cleanup_dead_nodes(),
+                    crate::service::CleanupReporter::Bystander,
+                );
                 if self.service.dynamic_config().number_of_servers() == 0 {
                     return Err(ControlClientError::NotServing { domain: self.domain.clone() });
                 }

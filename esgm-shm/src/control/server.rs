@@ -301,7 +301,7 @@ impl Coordinator {
             .name(&crate::service_name::node_name(domain, "coordinator"))
             .create::<ShmService>()
             .map_err(CoordinatorError::Node)?;
-        log_cleanup(cleanup_dead_nodes());
+        log_cleanup(cleanup_dead_nodes(), crate::service::CleanupReporter::Owner);
         let builder = || {
             node.service_builder(&name)
                 .request_response::<[u8], [u8]>()
@@ -698,7 +698,7 @@ impl Coordinator {
                 self.sleep(until_cleanup.min(idle));
             }
             if Instant::now() >= next_cleanup || std::mem::take(&mut self.cleanup_soon) {
-                log_cleanup(cleanup_dead_nodes());
+                log_cleanup(cleanup_dead_nodes(), crate::service::CleanupReporter::Owner);
                 next_cleanup = Instant::now() + cleanup_every;
             }
         }
@@ -757,11 +757,14 @@ impl Drop for CoordinatorThread {
 
 pub use crate::service::cleanup_dead_nodes;
 
-/// Logs the outcome of a [`cleanup_dead_nodes`] that runs in the background.
-pub fn log_cleanup(outcome: Result<usize, iceoryx2::node::NodeListFailure>) {
+/// Logs the outcome of a [`cleanup_dead_nodes`] that runs in the background, as
+/// `reporter` should ([`DeadNodeCleanup::log`](crate::service::DeadNodeCleanup::log)).
+pub fn log_cleanup(
+    outcome: Result<crate::service::DeadNodeCleanup, iceoryx2::node::NodeListFailure>,
+    reporter: crate::service::CleanupReporter,
+) {
     match outcome {
-        Ok(0) => {}
-        Ok(removed) => tracing::info!(removed, "cleaned up resources of dead processes"),
+        Ok(cleaned) => cleaned.log(reporter),
         Err(e) => tracing::warn!(error = %e, "cannot list nodes to clean up after dead processes"),
     }
 }

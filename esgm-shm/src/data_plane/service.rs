@@ -54,31 +54,75 @@ pub enum Cleanup {
     None,
 }
 
-/// Removes what crashed processes left in shared memory (iceoryx2's dead-node cleanup);
-/// returns how many dead nodes were cleaned. A dead node that cannot be cleaned is
-/// logged with the reason; an error means the nodes could not even be listed. It reads
-/// every node of the host: call it when room is needed, or seldom.
-pub fn cleanup_dead_nodes() -> Result<usize, iceoryx2::node::NodeListFailure> {
+/// What one [`cleanup_dead_nodes`] did: the dead nodes it cleaned, and those it could
+/// not, with iceoryx2's reason for each. It logs nothing itself: the coordinator, whose
+/// job the cleanup is, reports failures as warnings ([`DeadNodeCleanup::log`]), while a
+/// process that only needed room reports them at debug level, so that a dead process
+/// of another domain (or one a concurrent cleaner is finishing) never adds a line to a
+/// user's command.
+#[derive(Debug, Default)]
+#[must_use = "a cleanup's failures are reported by logging or inspecting it"]
+pub struct DeadNodeCleanup {
+    /// Dead nodes whose resources this call removed.
+    pub removed: usize,
+    /// Dead nodes left in place, by node id, with the reason.
+    pub failed: Vec<(String, iceoryx2::node::NodeCleanupFailure)>,
+}
+
+/// Who reports a [`DeadNodeCleanup`], which sets how loudly its failures are logged.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CleanupReporter {
+    /// The coordinator (or `esgm up`/`down`), which owns the domain's housekeeping: a
+    /// dead node it cannot clean is a warning someone should act on.
+    Owner,
+    /// Any other process, which cleaned up only because it needed room or a server:
+    /// failures are the owner's to report, and are logged at debug level.
+    Bystander,
+}
+
+impl DeadNodeCleanup {
+    /// Logs what this cleanup did as `reporter` should: removals at info level,
+    /// failures at warn (owner) or debug (bystander) level, one line per node.
+    pub fn log(&self, reporter: CleanupReporter) {
+        if self.removed > 0 {
+            tracing::info!(removed = self.removed, "cleaned up resources of dead processes");
+        }
+        for (node, error) in &self.failed {
+            match reporter {
+                CleanupReporter::Owner => {
+                    tracing::warn!(%node, ?error, "cannot clean up after a dead process")
+                }
+                CleanupReporter::Bystander => {
+                    tracing::debug!(%node, ?error, "cannot clean up after a dead process")
+                }
+            }
+        }
+    }
+}
+
+/// Removes what crashed processes left in shared memory (iceoryx2's dead-node cleanup)
+/// and says what it did ([`DeadNodeCleanup`]); an error means the nodes could not even
+/// be listed. It reads every node of the host: call it when room is needed, or seldom.
+pub fn cleanup_dead_nodes() -> Result<DeadNodeCleanup, iceoryx2::node::NodeListFailure> {
     use iceoryx2::node::{NodeCleanupFailure, NodeState, NodeView};
-    let mut removed = 0;
+    let mut outcome = DeadNodeCleanup::default();
     Node::<ShmService>::list(iceoryx2::config::Config::global_config(), |state| {
         if let NodeState::Dead(view) = state {
             let id = format!("{:?}", view.id());
             match view.try_remove_stale_resources() {
-                Ok(()) => removed += 1,
+                Ok(()) => outcome.removed += 1,
                 // Someone else cleans it (another coordinator, a process that needs
                 // the room).
                 Err(
                     NodeCleanupFailure::ResourcesAlreadyCleanedUp
                     | NodeCleanupFailure::AnotherInstanceIsCleaningUpTheNode,
                 ) => {}
-                Err(e) => tracing::warn!(node = %id, error = ?e,
-                    "cannot clean up after a dead process"),
+                Err(e) => outcome.failed.push((id, e)),
             }
         }
         iceoryx2::prelude::CallbackProgression::Continue
     })?;
-    Ok(removed)
+    Ok(outcome)
 }
 
 /// How long opening a service of a shared domain is retried while iceoryx2 refuses it
@@ -118,8 +162,7 @@ pub fn with_room<T, E>(
     match open() {
         Err(e) if lacks_room(&e) => {
             match cleanup_dead_nodes() {
-                Ok(0) => {}
-                Ok(removed) => tracing::info!(removed, "cleaned up after dead processes"),
+                Ok(cleaned) => cleaned.log(CleanupReporter::Bystander),
                 Err(list) => tracing::debug!(error = %list, "cannot list nodes to clean up"),
             }
             // Again even if this cleanup found nobody: another process (the

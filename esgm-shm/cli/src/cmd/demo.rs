@@ -99,9 +99,10 @@ pub fn stop(
         coordinator.wait().context("cannot reap the coordinator")?;
     }
     let cleaned = cleanup_dead_nodes().context("cannot list nodes to clean up")?;
-    if cleaned > 0 {
-        println!("cleaned up after {cleaned} processes that did not leave");
+    if cleaned.removed > 0 {
+        println!("cleaned up after {} processes that did not leave", cleaned.removed);
     }
+    cleaned.log(esgm_shm::CleanupReporter::Owner);
     if let Err(e) = std::fs::remove_dir_all(state.path()) {
         eprintln!("esgm: cannot remove {}: {e}", state.path().display());
     }

@@ -74,7 +74,9 @@ const LEAVE_WITHIN: Duration = Duration::from_secs(5);
 /// domain (tools such as `esgm echo` or `esgm view`, and programs esgm did not start),
 /// and names those it could not stop: after `esgm down`, nothing maps the domain.
 fn finish(domain: &str) -> anyhow::Result<()> {
-    cleanup_dead_nodes().context("cannot list nodes to clean up after dead processes")?;
+    cleanup_dead_nodes()
+        .context("cannot list nodes to clean up after dead processes")?
+        .log(esgm_shm::CleanupReporter::Owner);
     stop_attached(domain)?;
     println!("stopped `{domain}`");
     Ok(())

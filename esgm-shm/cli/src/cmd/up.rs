@@ -316,7 +316,7 @@ fn serve(
     supervisor.wait_all(Duration::from_secs(10));
     drop(supervisor);
     drop(coordinator);
-    log_cleanup(cleanup_dead_nodes());
+    log_cleanup(cleanup_dead_nodes(), esgm_shm::CleanupReporter::Owner);
     tracing::info!("coordinator stopped");
     match applying.map(std::thread::JoinHandle::join) {
         Some(Ok(false)) => bail!("the configuration could not be applied; stopped"),
