@@ -37,8 +37,8 @@ pub enum TypeRegistryError {
     /// coordinator.
     #[error("the ESGM is unavailable: {reason}")]
     Unavailable {
-        /// What failed.
-        reason: String,
+        /// Why.
+        reason: crate::esgm::Unreachable,
     },
 }
 

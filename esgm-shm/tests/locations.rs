@@ -223,47 +223,88 @@ fn sampling_runs_where_the_sensor_is_and_units_where_they_are() {
     camera.remove_sensor_interface("odometry").unwrap();
 }
 
-/// Runs only inside the child process: serves the sensor `counter` and the unit
-/// `negate` until the parent's `done` trajectory has a sample.
-/// A trajectory whose writer exited without destroying it refuses adds with a typed
-/// error (issue 24: they were acknowledged as forwarded and lost). Its writer here is a
-/// short setup program, another process that exits.
+/// A trajectory whose writer exited without destroying it is taken over by the next
+/// process that adds to it (issue 24: such adds were acknowledged as forwarded and
+/// lost). Its writer here is a short setup program, another process that exits before
+/// anyone read it, so its sample left with it; a third process reads the stream from
+/// the new writer. (The history a replica holds is kept: the next test.)
 #[test]
-fn an_add_to_a_trajectory_whose_writer_exited_is_refused_not_lost() {
+fn a_trajectory_whose_writer_exited_is_taken_over_by_the_next_adder() {
     let c = coordinator("loc-orphan");
     let setup = spawn_child("child_location", (ROLE, "setup"), (DOMAIN, c.domain()));
     let (status, output) = reap(setup, TIMEOUT * 3);
     assert!(status.success(), "the setup program failed:\n{output}");
     let app = location(&c, "app");
     let made = app.get_entity_trajectory_structure("made_by_setup").unwrap();
-    for blocking in [false, true] {
-        let added =
-            if blocking { made.add_blocking(state(2, 2.0)) } else { made.add(state(2, 2.0)) };
-        match added {
-            Err(esgm_core::AddError::WriterGone { trajectory, pid }) => {
-                assert_eq!(trajectory, "made_by_setup");
-                assert_ne!(pid, 0, "the registry recorded the writer's pid");
-            }
-            other => panic!("blocking {blocking}: {other:?}"),
-        }
-    }
+    assert_eq!(made.add(state(2, 2.0)).unwrap(), AddOutcome::Added, "served here now");
+    assert_eq!(made.add_blocking(state(3, 3.0)).unwrap(), AddOutcome::Added);
+    let xs: Vec<f64> = made.get_between(0, 10).unwrap().iter().map(x).collect();
+    assert_eq!(xs, [2.0, 3.0]);
+    // The registry names this process as the writer, and readers elsewhere follow.
+    use esgm_shm::control::protocol::{Request, Response};
+    let Ok(Response::Placements(placements)) = app.control(Request::ListPlacements) else {
+        panic!("no placements")
+    };
+    let placed = placements.iter().find(|p| p.name == "made_by_setup").unwrap();
+    assert_eq!(placed.writer, "app");
+    let reader = location(&c, "reader");
+    let there = reader.get_entity_trajectory_structure("made_by_setup").unwrap();
+    let all = |t: &esgm_core::InProcessTrajectory| -> Vec<f64> {
+        t.get_between(0, 10).map(|s| s.iter().map(x).collect()).unwrap_or_default()
+    };
+    assert!(wait_for(|| all(&there) == [2.0, 3.0]), "the reader holds {:?}", all(&there));
+    // And its adds reach the new writer.
+    assert_eq!(there.add(state(4, 4.0)).unwrap(), AddOutcome::Forwarded);
+    assert!(wait_for(|| all(&made) == [2.0, 3.0, 4.0]), "the writer holds {:?}", all(&made));
 }
 
-/// The same when the writer leaves while a reader already sends it adds: the next add
-/// reaches no inbox, and says so.
+/// The same when the writer closes its connection while its process lives on (it
+/// releases the trajectory), and a reader already sends it adds: until the reader has
+/// taken it over, an add is refused with a typed error, never acknowledged and lost.
+/// The new writer keeps the history its replica held, and another reader that was
+/// already there follows it to the new writer with that history.
 #[test]
-fn an_add_after_the_writer_left_is_refused_not_lost() {
+fn a_trajectory_released_by_its_writer_is_taken_over_with_its_history() {
     let c = coordinator("loc-left");
     let writer = location(&c, "writer");
     let reader = location(&c, "reader");
     let own = writer.create_primitive_entity_trajectory_structure("left", "RobotState").unwrap();
     own.add(state(1, 1.0)).unwrap();
     let there = reader.get_entity_trajectory_structure("left").unwrap();
-    assert_eq!(there.add(state(2, 2.0)).unwrap(), esgm_core::AddOutcome::Forwarded);
+    let other = location(&c, "other");
+    let elsewhere = other.get_entity_trajectory_structure("left").unwrap();
+    assert_eq!(there.add(state(2, 2.0)).unwrap(), AddOutcome::Forwarded);
     assert!(wait_for(|| own.get_latest().is_ok_and(|s| x(&s) == 2.0)));
+    assert!(wait_for(|| there.get_latest().is_ok_and(|s| x(&s) == 2.0)));
     drop(own);
     drop(writer);
-    assert!(matches!(there.add(state(3, 3.0)), Err(esgm_core::AddError::WriterGone { .. })));
+    let deadline = Instant::now() + TIMEOUT;
+    let taken = loop {
+        match there.add(state(3, 3.0)) {
+            Ok(outcome) => break outcome,
+            Err(AddError::WriterGone { trajectory, .. }) if Instant::now() < deadline => {
+                assert_eq!(trajectory, "left");
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            Err(e) => panic!("an add after the writer left: {e:?}"),
+        }
+    };
+    assert_eq!(taken, AddOutcome::Added);
+    let all = |t: &esgm_core::InProcessTrajectory| -> Vec<f64> {
+        t.get_between(0, 10).map(|s| s.iter().map(x).collect()).unwrap_or_default()
+    };
+    assert_eq!(all(&there), [1.0, 2.0, 3.0]);
+    assert!(
+        wait_for(|| all(&elsewhere) == [1.0, 2.0, 3.0]),
+        "the other reader holds {:?}",
+        all(&elsewhere)
+    );
+    assert_eq!(elsewhere.add(state(4, 4.0)).unwrap(), AddOutcome::Forwarded);
+    assert!(
+        wait_for(|| all(&there) == [1.0, 2.0, 3.0, 4.0]),
+        "the new writer holds {:?}",
+        all(&there)
+    );
 }
 
 #[test]

@@ -152,14 +152,8 @@ fn robot(i: u64) -> esgm_core::EntityStructure {
 fn write(path: &std::path::Path, n: u64) -> anyhow::Result<f64> {
     let mut w = RecordingWriter::create(path, RecordOptions::default())
         .with_context(|| format!("could not create {}", path.display()))?;
-    let info = TrajectoryInfo {
-        name: TRAJECTORY.into(),
-        kind: TrajectoryKind::Primitive,
-        type_name: "RobotState".into(),
-        source: None,
-        inputs: vec![],
-        policy: FluentStreamPolicy::default().cache(CacheConstraint::Elements(CACHE)),
-    };
+    let info = TrajectoryInfo::new(TRAJECTORY, TrajectoryKind::Primitive, "RobotState")
+        .policy(FluentStreamPolicy::default().cache(CacheConstraint::Elements(CACHE)));
     let id = w
         .add_trajectory(info, TypeSchema::collect(RobotState::entity_structure_type(), &|_| None))
         .context("declaring the trajectory")?;

@@ -525,9 +525,13 @@ fn query_to_add(trajectory: &str, e: esgm_core::QueryError) -> AddError {
         esgm_core::QueryError::NoSuchEntityStructure { trajectory } => {
             AddError::NoSuchEntityStructure { trajectory }
         }
-        other => {
-            AddError::Unavailable { trajectory: trajectory.to_owned(), reason: other.to_string() }
+        esgm_core::QueryError::Unavailable { reason, .. } => {
+            AddError::Unavailable { trajectory: trajectory.to_owned(), reason }
         }
+        other => AddError::Unavailable {
+            trajectory: trajectory.to_owned(),
+            reason: esgm_core::esgm::Unreachable::refused(esgm_core::esgm::Peer::Writer, other),
+        },
     }
 }
 

@@ -20,14 +20,7 @@ use esgm_recording::{
 };
 
 fn info(name: &str, type_name: &str, policy: FluentStreamPolicy) -> TrajectoryInfo {
-    TrajectoryInfo {
-        name: name.into(),
-        kind: TrajectoryKind::Computed,
-        type_name: type_name.into(),
-        source: Some("unit".into()),
-        inputs: vec![],
-        policy,
-    }
+    TrajectoryInfo::new(name, TrajectoryKind::Computed, type_name).source("unit").policy(policy)
 }
 
 fn robot(i: i64) -> EntityStructure {

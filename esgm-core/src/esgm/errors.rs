@@ -127,8 +127,8 @@ pub enum CreateError {
     /// coordinator.
     #[error("the ESGM is unavailable: {reason}")]
     Unavailable {
-        /// What failed.
-        reason: String,
+        /// Why.
+        reason: crate::esgm::Unreachable,
     },
 }
 
@@ -155,8 +155,8 @@ pub enum LookupError {
     /// coordinator.
     #[error("the ESGM is unavailable: {reason}")]
     Unavailable {
-        /// What failed.
-        reason: String,
+        /// Why.
+        reason: crate::esgm::Unreachable,
     },
 }
 
@@ -214,8 +214,8 @@ pub enum RegistrationError {
     /// coordinator.
     #[error("the ESGM is unavailable: {reason}")]
     Unavailable {
-        /// What failed.
-        reason: String,
+        /// Why.
+        reason: crate::esgm::Unreachable,
     },
 }
 
@@ -276,7 +276,7 @@ pub enum FlushError {
     #[error("cannot flush the system: {reason}")]
     Unavailable {
         /// Why.
-        reason: String,
+        reason: crate::esgm::Unreachable,
     },
 }
 
@@ -293,7 +293,7 @@ pub enum SystemError {
         /// What was asked (`list the trajectories`, `reset the system`…).
         operation: String,
         /// Why it could not be.
-        reason: String,
+        reason: crate::esgm::Unreachable,
     },
     /// Some processes of the domain did not answer in time (one is stuck or gone): the
     /// operation reached only `answered` of `expected`.

@@ -21,6 +21,40 @@ pub struct TrajectoryInfo {
     pub policy: FluentStreamPolicy,
 }
 
+impl TrajectoryInfo {
+    /// The listing of `name`, of `kind` and `type_name`, with no source, no inputs and
+    /// the default policy: what a recording or a tool declares, before it sets the
+    /// rest with [`Self::policy`] and [`Self::source`].
+    pub fn new(
+        name: impl Into<String>,
+        kind: TrajectoryKind,
+        type_name: impl Into<String>,
+    ) -> Self {
+        Self {
+            name: name.into(),
+            kind,
+            type_name: type_name.into(),
+            source: None,
+            inputs: Vec::new(),
+            policy: FluentStreamPolicy::default(),
+        }
+    }
+
+    /// The same listing with `policy`.
+    #[must_use]
+    pub fn policy(mut self, policy: FluentStreamPolicy) -> Self {
+        self.policy = policy;
+        self
+    }
+
+    /// The same listing fed by the sensor or unit `source`.
+    #[must_use]
+    pub fn source(mut self, source: impl Into<String>) -> Self {
+        self.source = Some(source.into());
+        self
+    }
+}
+
 /// Counters of the worker that feeds a sampled, computed or operator trajectory.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 pub struct WorkerStats {

@@ -59,8 +59,15 @@ impl InProcessTrajectory {
         f: impl FnOnce(&mut TrajectoryStore) -> Result<AddOutcome, AddError>,
     ) -> Result<AddOutcome, AddError> {
         let cell = self.cell().ok_or_else(|| self.gone_a())?;
+        // A writer elsewhere that is gone: this process asks to take the trajectory
+        // over first (outside the store's lock, which the transport needs to make
+        // this store the writer's), so the add is served, never sent to nobody.
+        let forwarder = cell.store.lock().add_forwarder();
+        if let Some(f) = forwarder.filter(|f| f.writer_gone()) {
+            f.take_over(&self.descriptor.name)?;
+        }
         let mut store = cell.store.lock();
-        if !cell.external_adds && !store.forwards_adds() {
+        if !cell.external_adds && !store.accepts_adds() {
             return Err(AddError::OperationNotSupported {
                 trajectory: self.descriptor.name.clone(),
                 operation: operation.into(),

@@ -153,6 +153,7 @@ impl TrajectoryStoreBuilder {
             resets: Arc::default(),
             tap: None,
             forward: None,
+            adopted: false,
             feed: None,
             octets_allocator: None,
             reset_forwarder: None,
@@ -187,6 +188,8 @@ pub struct TrajectoryStore {
     tap: Option<(TapId, Box<dyn StoreTap>)>,
     /// A replica's adds go to the trajectory's writer elsewhere.
     forward: Option<Arc<dyn AddForwarder>>,
+    /// This replica became the writer's store ([`Self::adopt_adds`]).
+    adopted: bool,
     /// A replica's subscribers may wait for its writer themselves.
     feed: Option<Arc<dyn ReplicaFeed>>,
     /// Where this trajectory's producers get image buffers (its shared memory).
@@ -523,6 +526,28 @@ impl TrajectoryStore {
     /// too.
     pub fn reset_forwarder(&self) -> Option<Arc<dyn ResetForwarder>> {
         self.reset_forwarder.clone()
+    }
+
+    /// Makes this replica the writer's store: adds are admitted here, through this
+    /// store's own gate, from now on; none are forwarded. The history it holds stays.
+    /// What a transport does when this process takes over a trajectory whose writer
+    /// is gone ([`AddForwarder::take_over`]).
+    pub fn adopt_adds(&mut self) {
+        self.forward = None;
+        self.adopted = true;
+        // Its subscribers are fed by its own adds now, not by a writer elsewhere.
+        self.feed = None;
+    }
+
+    /// True if adds may be made through this store: it forwards them to a writer
+    /// elsewhere, or it was adopted as the writer's ([`Self::adopt_adds`]).
+    pub fn accepts_adds(&self) -> bool {
+        self.forward.is_some() || self.adopted
+    }
+
+    /// The forwarder of adds, if they go to a writer elsewhere.
+    pub fn add_forwarder(&self) -> Option<Arc<dyn AddForwarder>> {
+        self.forward.clone()
     }
 
     /// True if adds are forwarded to a writer elsewhere.

@@ -176,9 +176,11 @@ pub enum AddError {
     /// names the setting that raises it). Nothing was added.
     #[error(transparent)]
     LimitReached(#[from] crate::esgm::LimitReached),
-    /// The trajectory's writer was another process, which has exited without destroying
-    /// it: nobody serves its adds, so nothing was added (rather than sent to a queue
-    /// nobody reads). Create it again (`replace`), or add once a writer serves it.
+    /// The trajectory's writer was another process, which has exited (or let it go)
+    /// without destroying it, and this process could not take it over: its writer is
+    /// supervised and is being restarted, or it went while this add was on its way.
+    /// Nothing was added (rather than sent to a queue nobody reads). Add again: the
+    /// next add takes it over where that is allowed, or reaches the restarted writer.
     #[error("trajectory `{trajectory}`: its writer (process {pid}) has exited; nothing was added")]
     WriterGone {
         /// The trajectory.
@@ -193,7 +195,7 @@ pub enum AddError {
         /// The trajectory.
         trajectory: String,
         /// Why.
-        reason: String,
+        reason: crate::esgm::Unreachable,
     },
 }
 
@@ -205,4 +207,21 @@ pub trait AddForwarder: Send + Sync + std::fmt::Debug {
     /// for the writer's gate and answers its outcome, a violation included
     /// ([`AddError::PolicyViolation`]), as an add in the writer's process would (T4).
     fn forward(&self, es: Arc<EntityStructure>, blocking: bool) -> Result<AddOutcome, AddError>;
+
+    /// True if the writer is known to be gone (its process exited, or it released the
+    /// trajectory), so that an add would reach nobody. Asked before each add, without
+    /// the store's lock: it must be cheap. The default knows of no writer that leaves.
+    fn writer_gone(&self) -> bool {
+        false
+    }
+
+    /// Asks to write `trajectory` here, since its writer is gone. Called without the
+    /// store's lock, which the transport takes to make this store the writer's
+    /// ([`crate::TrajectoryStore::adopt_adds`]). `Ok` means the add may go on: this
+    /// store now admits adds itself, or another live writer serves them. An error is
+    /// the add's. The default refuses ([`AddError::WriterGone`]), as for a writer that
+    /// cannot be replaced.
+    fn take_over(&self, trajectory: &str) -> Result<(), AddError> {
+        Err(AddError::WriterGone { trajectory: trajectory.to_owned(), pid: 0 })
+    }
 }

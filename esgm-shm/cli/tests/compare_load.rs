@@ -31,14 +31,8 @@ fn write(path: &Path, y4: f64) {
         .order(OrderConstraint::Monotone)
         .delay(DelayConstraint::Max(50_000_000))
         .reorder(false);
-    let info = TrajectoryInfo {
-        name: "robot_state".into(),
-        kind: TrajectoryKind::Primitive,
-        type_name: "RobotState".into(),
-        source: None,
-        inputs: vec![],
-        policy,
-    };
+    let info =
+        TrajectoryInfo::new("robot_state", TrajectoryKind::Primitive, "RobotState").policy(policy);
     let mut w = RecordingWriter::create(path, RecordOptions::default()).unwrap();
     let t = w
         .add_trajectory(info, TypeSchema::collect(RobotState::entity_structure_type(), &|_| None))

@@ -69,16 +69,11 @@ fn top_once_prints_every_trajectory_and_the_coordinator() {
 fn recording(path: &std::path::Path) {
     use esgm_core::esgm::{TrajectoryInfo, TrajectoryKind};
     use esgm_core::library::{Image, RobotState};
-    use esgm_core::{Entity, FluentStreamPolicy};
+    use esgm_core::Entity;
     use esgm_recording::{RecordOptions, RecordingWriter, TypeSchema};
 
-    let info = |name: &str, type_name: &str| TrajectoryInfo {
-        name: name.into(),
-        kind: TrajectoryKind::Primitive,
-        type_name: type_name.into(),
-        source: None,
-        inputs: vec![],
-        policy: FluentStreamPolicy::default(),
+    let info = |name: &str, type_name: &str| {
+        TrajectoryInfo::new(name, TrajectoryKind::Primitive, type_name)
     };
     let mut w = RecordingWriter::create(path, RecordOptions::default()).unwrap();
     let robot = w

@@ -36,7 +36,9 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use esgm_core::esgm::{Esgm, EsgmStats, LimitReached, LogLevel, MemoryStats, TrajectoryReport};
+use esgm_core::esgm::{
+    Esgm, EsgmStats, LimitReached, LogLevel, MemoryStats, Peer, TrajectoryReport, Unreachable,
+};
 use esgm_core::{DropCause, InProcessEsgm, QueryError, ResetForwarder};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
@@ -86,7 +88,7 @@ impl AdminServices {
     pub fn open(node: &ShmNode, domain: &str, limits: &DomainLimits) -> Result<Self, AdminError> {
         let (questions, answers, wake) = names(domain)?;
         let unavailable = |what: &str, e: &dyn std::fmt::Debug| AdminError::Unavailable {
-            reason: format!("{what}: {e:?}"),
+            reason: Unreachable::transport(Peer::Processes, format!("{what}: {e:?}")),
         };
         let processes = limits.process_ports();
         let questions = open_channel(node, &questions, ASKERS, processes, limits)
@@ -325,11 +327,18 @@ pub enum AdminError {
         /// The deadline.
         timeout: Duration,
     },
-    /// The question could not be sent (see the reason).
+    /// The question could not be sent, or a process refused it (see the reason).
     #[error("cannot ask the domain's processes: {reason}")]
     Send {
         /// Why.
-        reason: String,
+        reason: Unreachable,
+    },
+    /// No connected process has this name (`esgm ps` lists the supervised ones; a
+    /// program's name is the host it connected as).
+    #[error("no connected process is called `{name}`")]
+    NoSuchProcess {
+        /// The name asked for.
+        name: String,
     },
     /// The domain has as many processes as it admits ([`crate::capacity`]).
     #[error(transparent)]
@@ -338,8 +347,22 @@ pub enum AdminError {
     #[error("the administration channel is not running: {reason}")]
     Unavailable {
         /// Why.
-        reason: String,
+        reason: Unreachable,
     },
+}
+
+impl From<AdminError> for Unreachable {
+    /// The cause of an `Unavailable` error of the seed's operations: a question to
+    /// the domain's processes that failed.
+    fn from(e: AdminError) -> Self {
+        match e {
+            AdminError::Send { reason } | AdminError::Unavailable { reason } => reason,
+            AdminError::Incomplete { timeout, .. } => {
+                Unreachable::no_answer(Peer::Processes, timeout)
+            }
+            e => Unreachable::refused(Peer::Processes, e),
+        }
+    }
 }
 
 /// A collected set of answers: `(process, answer)`.
@@ -365,7 +388,9 @@ impl std::fmt::Debug for Admin {
 
 fn names(domain: &str) -> Result<(ServiceName, ServiceName, ServiceName), AdminError> {
     let name = |s: String| {
-        ServiceName::new(&s).map_err(|e| AdminError::Unavailable { reason: format!("{s}: {e:?}") })
+        ServiceName::new(&s).map_err(|e| AdminError::Unavailable {
+            reason: Unreachable::transport(Peer::Processes, format!("{s}: {e:?}")),
+        })
     };
     let prefix = crate::service_name::SERVICE_PREFIX;
     Ok((
@@ -404,7 +429,7 @@ impl Admin {
         mirrors: Arc<SharedMirrors>,
     ) -> Result<Arc<Self>, AdminError> {
         let unavailable = |what: &str, e: &dyn std::fmt::Debug| AdminError::Unavailable {
-            reason: format!("{what}: {e:?}"),
+            reason: Unreachable::transport(Peer::Processes, format!("{what}: {e:?}")),
         };
         let services =
             node.with(|node| AdminServices::open(node, domain, &DomainLimits::default()))?;
@@ -463,7 +488,9 @@ impl Admin {
         let thread = std::thread::Builder::new()
             .name("esgm-admin".to_owned())
             .spawn(move || answerer.run())
-            .map_err(|e| AdminError::Unavailable { reason: e.to_string() })?;
+            .map_err(|e| AdminError::Unavailable {
+                reason: Unreachable::transport(Peer::Connection, format!("no admin thread: {e}")),
+            })?;
         *admin.thread.lock() = Some(thread);
         Ok(admin)
     }
@@ -499,7 +526,9 @@ impl Admin {
     /// Asks every connected process `op` and waits up to `timeout` for all of them.
     pub fn ask(&self, op: AdminOp, timeout: Duration) -> Result<Answers, AdminError> {
         let deadline = Instant::now() + timeout;
-        let send = |reason: String| AdminError::Send { reason };
+        let send = |reason: String| AdminError::Send {
+            reason: Unreachable::transport(Peer::Processes, reason),
+        };
         let id = self.next.fetch_add(1, Ordering::Relaxed);
         let bytes = encode(&Envelope { from: self.host.clone(), id, body: Body::Ask(op) })
             .map_err(|e| send(e.to_string()))?;
@@ -755,16 +784,21 @@ pub(crate) struct DomainReset {
 
 impl ResetForwarder for DomainReset {
     fn reset(&self, trajectory: &str, blocking: bool) -> Result<(), QueryError> {
-        let unavailable =
-            |reason: String| QueryError::Unavailable { trajectory: trajectory.to_owned(), reason };
-        let admin = self.admin.upgrade().ok_or_else(|| unavailable("disconnected".into()))?;
+        let unavailable = |reason: Unreachable| QueryError::Unavailable {
+            trajectory: trajectory.to_owned(),
+            reason,
+        };
+        let admin = self.admin.upgrade().ok_or_else(|| unavailable(Unreachable::Closing))?;
         let op = AdminOp::Reset { trajectory: Some(trajectory.to_owned()) };
-        let answers = admin.ask(op, self.timeout).map_err(|e| unavailable(e.to_string()))?;
+        let answers = admin.ask(op, self.timeout).map_err(|e| unavailable(e.into()))?;
         if resets(&answers) == 0 {
-            return Err(unavailable("no connected process writes it".into()));
+            return Err(unavailable(Unreachable::refused(
+                Peer::Writer,
+                "no connected process writes it",
+            )));
         }
         if blocking {
-            admin.ask(AdminOp::CatchUp, self.timeout).map_err(|e| unavailable(e.to_string()))?;
+            admin.ask(AdminOp::CatchUp, self.timeout).map_err(|e| unavailable(e.into()))?;
         }
         Ok(())
     }

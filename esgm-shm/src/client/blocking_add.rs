@@ -16,7 +16,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use esgm_core::codec;
-use esgm_core::esgm::Limit;
+use esgm_core::esgm::{Limit, Peer, Unreachable};
 use esgm_core::{
     AddError, AddOutcome, EntityStructure, EntityTrajectoryStructure, InProcessTrajectory,
 };
@@ -180,7 +180,10 @@ pub fn serve_request(
         Ok(es) => handle.add_blocking(es),
         Err(e) => Err(AddError::Unavailable {
             trajectory: handle.name().to_owned(),
-            reason: format!("the writer could not read the structure: {e}"),
+            reason: Unreachable::malformed(
+                Peer::Writer,
+                format!("a structure it cannot read: {e}"),
+            ),
         }),
     };
     encode(&outcome)
@@ -195,7 +198,7 @@ pub fn serve_request(
 pub fn read_answer(trajectory: &str, answer: &[u8]) -> Result<AddOutcome, AddError> {
     decode::<Result<AddOutcome, AddError>>(answer).map_err(|e| AddError::Unavailable {
         trajectory: trajectory.to_owned(),
-        reason: format!("malformed answer from the writer: {e}"),
+        reason: Unreachable::malformed(Peer::Writer, e),
     })?
 }
 
@@ -246,28 +249,31 @@ impl AddClient {
 
     /// Adds `es` through the writer's gate and returns its outcome.
     pub fn add(&self, es: &Arc<EntityStructure>) -> Result<AddOutcome, AddError> {
-        let unavailable =
-            |reason: String| AddError::Unavailable { trajectory: self.trajectory.clone(), reason };
-        let bytes = codec::encode(es).map_err(|e| unavailable(e.to_string()))?;
+        let unavailable = |reason: Unreachable| AddError::Unavailable {
+            trajectory: self.trajectory.clone(),
+            reason,
+        };
+        let transport = |detail: String| unavailable(Unreachable::transport(Peer::Writer, detail));
+        let bytes = codec::encode(es).map_err(|e| transport(e.to_string()))?;
         // The writer opens its server when an adder first rings (see `Export`).
         let serving = || {
             iceoryx2::prelude::PortFactory::dynamic_config(&self.service).number_of_servers() > 0
         };
         if !super::import::writer_listens(serving, || self.ring.notify().map(|_| ())) {
-            return Err(unavailable(format!(
-                "the writer did not open its blocking adds within {:?}",
-                super::import::WRITER_OPENS
+            return Err(unavailable(Unreachable::no_answer(
+                Peer::Writer,
+                super::import::WRITER_OPENS,
             )));
         }
         let pending = self
             .client
             .loan_slice_uninit(bytes.len())
-            .map_err(|e| unavailable(format!("cannot loan a request: {e:?}")))?
+            .map_err(|e| transport(format!("cannot loan a request: {e:?}")))?
             .write_from_slice(&bytes)
             .send()
-            .map_err(|e| unavailable(format!("cannot send to the writer: {e:?}")))?;
+            .map_err(|e| transport(format!("cannot send: {e:?}")))?;
         if pending.number_of_server_connections() == 0 {
-            return Err(unavailable("the writer stopped serving blocking adds".into()));
+            return Err(transport("it stopped serving blocking adds".into()));
         }
         if let Err(e) = self.ring.notify() {
             tracing::debug!(error = ?e, "cannot wake the writer; it polls");
@@ -278,11 +284,12 @@ impl AddClient {
             match pending.receive() {
                 Ok(Some(answer)) => return read_answer(&self.trajectory, answer.payload()),
                 Ok(None) => {}
-                Err(e) => return Err(unavailable(format!("no answer from the writer: {e:?}"))),
+                Err(e) => return Err(transport(format!("cannot receive its answer: {e:?}"))),
             }
             if Instant::now() >= deadline {
-                return Err(unavailable(format!(
-                    "the writer did not answer within {BLOCKING_ADD_TIMEOUT:?}"
+                return Err(unavailable(Unreachable::no_answer(
+                    Peer::Writer,
+                    BLOCKING_ADD_TIMEOUT,
                 )));
             }
             if pause < Duration::from_micros(50) {

@@ -402,6 +402,11 @@ impl Export {
         })
     }
 
+    /// True for a primitive trajectory's export (other processes add to it).
+    pub fn is_primitive(&self) -> bool {
+        self.inbox.is_some()
+    }
+
     /// The inbox's wake-up service (primitive trajectories), which adders ring.
     pub fn inbox_wake(&self) -> Option<EventSpec> {
         self.inbox.as_ref().map(|i| i.wake)

@@ -20,11 +20,10 @@
 //! adding thread; the writer's gate decides, and the structure comes back through
 //! replication.
 
-use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::{Arc, Weak};
 use std::time::Duration;
 
-use esgm_core::esgm::TrajectoryKind;
+use esgm_core::esgm::{Peer, TrajectoryKind, Unreachable};
 use esgm_core::{
     AddError, AddForwarder, AddOutcome, EntityStructure, EntityStructureType,
     EntityTrajectoryStructure, FeedWaiter, InProcessTrajectory, Rejection, ReplicaFeed,
@@ -42,6 +41,7 @@ use super::settings::{
     own_subscriber,
 };
 use super::shared_node::SharedNode;
+use super::takeover::{TakeOverAsk, WriterLiveness};
 use crate::capacity::{EventCapacity, Readers};
 use crate::control::protocol::{TrajectoryRecord, WriterPort};
 use crate::holdings::{HoldingOwner, Holdings};
@@ -62,6 +62,9 @@ pub(crate) struct ImportSite<'a> {
     pub mirrors: &'a Arc<SharedMirrors>,
     /// Rings the location thread to ask the registry who writes (see `Import::arrive`).
     pub verify: &'a crossbeam_channel::Sender<()>,
+    /// Where an adder asks the location thread to take the trajectory over once its
+    /// writer is gone ([`super::takeover`]).
+    pub take_over: &'a crossbeam_channel::Sender<TakeOverAsk>,
     /// True for a short-lived tool's connection, which may use the ports a trajectory
     /// keeps beyond its `readers` ([`crate::capacity`]); a long-lived reader counts
     /// itself against them.
@@ -84,9 +87,9 @@ pub(crate) struct Import {
     /// Whether an arrival is the writer's, and which of its samples never arrived
     /// (the check every reader of another process's trajectory makes).
     check: WriterCheck<Arrival>,
-    /// The writer's pid, shared with the replica's outbox (which refuses adds once it
-    /// has exited).
-    writer_pid: Arc<AtomicU32>,
+    /// What is known of the writer, shared with the replica's outbox (which asks to
+    /// take the trajectory over once the writer is gone).
+    writer: Arc<WriterLiveness>,
     /// Samples lost so far (the first is logged).
     lost: u64,
     /// Whose samples this import's held images count as, and how many it may hold.
@@ -145,7 +148,7 @@ impl Import {
         replica: InProcessTrajectory,
         record: &TrajectoryRecord,
     ) -> Result<Self, OpenError> {
-        let ImportSite { node, domain, holdings, mirrors, verify, tool } = *at;
+        let ImportSite { node, domain, holdings, mirrors, verify, take_over, tool } = *at;
         let readers = record.readers;
         let (type_name, policy) = (&record.info.type_name, &record.info.policy);
         let primitive = record.info.kind == TrajectoryKind::Primitive;
@@ -208,10 +211,13 @@ impl Import {
         };
         // A replica destroyed meanwhile has no subscribers to feed.
         let _destroyed = replica.with_store(|s| s.set_feed(Arc::new(feed)));
-        let writer_pid = Arc::new(AtomicU32::new(record.port.map_or(0, |p| p.pid)));
+        let writer = Arc::new(WriterLiveness::new(record.port.map_or(0, |p| p.pid)));
+        writer.set_released(record.released);
         if primitive {
             let outbox = Outbox {
-                writer_pid: Arc::clone(&writer_pid),
+                writer: Arc::clone(&writer),
+                generation,
+                take_over: take_over.clone(),
                 trajectory: name.clone(),
                 type_name: type_name.to_owned(),
                 domain: domain.to_owned(),
@@ -232,7 +238,7 @@ impl Import {
             replica,
             rejected: 0,
             check: WriterCheck::new(record.port.map(|p| p.publisher)),
-            writer_pid,
+            writer,
             workers: Arc::default(),
             checker,
             verify: verify.clone(),
@@ -345,6 +351,17 @@ impl Import {
         }
     }
 
+    /// The writer's pid as the registry last recorded it (0: none).
+    pub fn writer_pid(&self) -> u32 {
+        self.writer.pid()
+    }
+
+    /// The registry says whether the writer released the trajectory (an adder may
+    /// take it over).
+    pub fn set_released(&self, released: bool) {
+        self.writer.set_released(released);
+    }
+
     /// True while samples wait for the registry to name the writer's port.
     pub fn awaits_writer(&self) -> bool {
         self.check.awaits_writer()
@@ -353,7 +370,7 @@ impl Import {
     /// The registry names `port` as the writer's (`None`: not yet): what was held from
     /// it is entered, in order, and what was held from any other port is rejected.
     pub fn set_writer(&mut self, port: Option<WriterPort>) {
-        self.writer_pid.store(port.map_or(0, |p| p.pid), Ordering::Relaxed);
+        self.writer.set_pid(port.map_or(0, |p| p.pid));
         for decided in self.check.set_writer(port.map(|p| p.publisher)) {
             self.decide(decided);
         }
@@ -656,9 +673,13 @@ pub(crate) fn writer_listens<E: std::fmt::Display>(
 #[derive(Debug)]
 struct Outbox {
     trajectory: String,
-    /// The writer's pid as the registry names it (0: not yet known), kept current by
-    /// the location thread ([`Import::set_writer`]).
-    writer_pid: Arc<AtomicU32>,
+    /// What is known of the writer, kept current by the location thread
+    /// ([`Import::set_writer`], [`Import::set_released`]).
+    writer: Arc<WriterLiveness>,
+    /// The generation this replica mirrors (a take-over is asked for it).
+    generation: u64,
+    /// Where a take-over is asked ([`super::takeover`]).
+    take_over: crossbeam_channel::Sender<TakeOverAsk>,
     type_name: String,
     domain: String,
     /// The trajectory's readers, which size its inbox and blocking-add services.
@@ -674,12 +695,16 @@ struct Outbox {
 
 impl AddForwarder for Outbox {
     fn forward(&self, es: Arc<EntityStructure>, blocking: bool) -> Result<AddOutcome, AddError> {
-        let unavailable =
-            |reason: String| AddError::Unavailable { trajectory: self.trajectory.clone(), reason };
-        // A writer that exited serves no add: refuse, never acknowledge and lose.
-        let pid = self.writer_pid.load(Ordering::Relaxed);
+        let unavailable = |detail: String| AddError::Unavailable {
+            trajectory: self.trajectory.clone(),
+            reason: Unreachable::transport(Peer::Writer, detail),
+        };
+        // A writer that is gone serves no add: refuse, never acknowledge and lose. (The
+        // handle asked to take the trajectory over before this add; a writer that went
+        // since, or one nobody may replace, ends here.)
+        let pid = self.writer.pid();
         let gone = || AddError::WriterGone { trajectory: self.trajectory.clone(), pid };
-        if pid != 0 && !crate::control::attach::process_alive(pid) {
+        if self.writer.gone() {
             return Err(gone());
         }
         if blocking {
@@ -726,9 +751,10 @@ impl AddForwarder for Outbox {
             // The writer opens its inbox when an adder first rings (see `Export`); an
             // add sent before would reach nobody.
             if !writer_listens(|| publisher.subscriber_count() > 0, || publisher.welcome()) {
-                return Err(unavailable(format!(
-                    "the writer did not open its inbox within {WRITER_OPENS:?}"
-                )));
+                return Err(AddError::Unavailable {
+                    trajectory: self.trajectory.clone(),
+                    reason: Unreachable::no_answer(Peer::Writer, WRITER_OPENS),
+                });
             }
             *inbox = Some(publisher);
         }
@@ -738,10 +764,20 @@ impl AddForwarder for Outbox {
         let sent = publisher
             .publish(&es)
             .map_err(|e| unavailable(format!("cannot send to the writer's inbox: {e}")))?;
-        // The writer's inbox is gone (it left since it opened it): nobody got it.
+        // The writer's inbox is gone (it left since it opened it): nobody got it. The
+        // next add asks to take the trajectory over.
         if sent.subscribers == 0 {
+            self.writer.set_released(true);
             return Err(gone());
         }
         Ok(AddOutcome::Forwarded)
+    }
+
+    fn writer_gone(&self) -> bool {
+        self.writer.gone()
+    }
+
+    fn take_over(&self, trajectory: &str) -> Result<(), AddError> {
+        super::takeover::ask(&self.take_over, trajectory, self.generation)
     }
 }

@@ -13,14 +13,15 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, Sender};
-use esgm_core::esgm::{CreateError, Esgm, LookupError, TrajectorySpec};
-use esgm_core::{EntityStructureType, InProcessEsgm, InProcessTrajectory};
+use esgm_core::esgm::{CreateError, Esgm, LookupError, Peer, TrajectorySpec, Unreachable};
+use esgm_core::{AddError, EntityStructureType, InProcessEsgm, InProcessTrajectory};
 
 use super::export::Export;
 use super::import::{Import, ImportSite};
 use super::mirrors::SharedMirrors;
 use super::receiver::Receiver as SampleReceiver;
 use super::shared_node::SharedNode;
+use super::takeover::TakeOverAsk;
 use crate::control::protocol::{Assignment, ControlError, Request, Response, TrajectoryRecord};
 use crate::control::{ControlClient, ControlClientError};
 use crate::holdings::{HoldingStats, Holdings};
@@ -73,7 +74,7 @@ fn answer<T>(reply: &Sender<T>, what: &str, value: T) {
 pub(crate) fn lookup_error(e: ControlClientError) -> LookupError {
     match e {
         ControlClientError::Remote(ControlError::Lookup(e)) => e,
-        e => LookupError::Unavailable { reason: e.to_string() },
+        e => LookupError::Unavailable { reason: e.into() },
     }
 }
 
@@ -83,7 +84,9 @@ pub(crate) fn trajectory_record(
 ) -> Result<TrajectoryRecord, LookupError> {
     match answer.map_err(lookup_error)? {
         Response::Trajectory(r) => Ok(*r),
-        other => Err(LookupError::Unavailable { reason: format!("{other:?}") }),
+        other => Err(LookupError::Unavailable {
+            reason: Unreachable::malformed(Peer::Coordinator, format!("{other:?}")),
+        }),
     }
 }
 
@@ -132,6 +135,9 @@ pub(crate) struct Location {
     /// ([`Location::verify_writers`]) rather than at its next maintenance tick: the
     /// samples held meanwhile borrow shared memory.
     pub verify: (Sender<()>, Receiver<()>),
+    /// Adders of replicas whose writer is gone ask here to take them over
+    /// ([`super::takeover`]).
+    pub takeovers: (Sender<TakeOverAsk>, Receiver<TakeOverAsk>),
     /// A short-lived tool's connection ([`crate::ShmEsgmBuilder::tool`]).
     pub tool: bool,
     /// The registry's version and this process's mirrors' generation at the last
@@ -154,6 +160,7 @@ impl Location {
             }
             let timeout = due.saturating_duration_since(Instant::now());
             let verify = self.verify.1.clone();
+            let takeovers = self.takeovers.1.clone();
             crossbeam_channel::select! {
                 recv(commands) -> c => match c {
                     Ok(c) => self.handle(c),
@@ -162,10 +169,18 @@ impl Location {
                         // The last word on this process's images, for whoever looks later.
                         self.reported.1 = Instant::now();
                         self.report_holdings();
+                        self.release_primitives();
                         return;
                     }
                 },
                 recv(verify) -> _ => self.verify_writers(),
+                recv(takeovers) -> ask => {
+                    if let Ok(ask) = ask {
+                        let outcome = self.take_over(&ask.trajectory, ask.generation);
+                        // The adder may have stopped waiting.
+                        let _gone = ask.reply.send(outcome);
+                    }
+                }
                 default(timeout) => {}
             }
             if self.serving && Instant::now() >= next_assignments {
@@ -228,6 +243,7 @@ impl Location {
                 match now.get(name.as_str()) {
                     Some(p) if p.generation == i.generation => {
                         i.set_writer(p.port);
+                        i.set_released(p.released);
                     }
                     Some(p) if p.type_name == i.type_name && p.writer != self.host => {
                         moved.push(name.clone());
@@ -277,6 +293,7 @@ impl Location {
             holdings: &self.holdings,
             mirrors: &self.mirrors,
             verify: &self.verify.0,
+            take_over: &self.takeovers.0,
             tool: self.tool,
         };
         match Import::start(&site, replica.clone(), &record) {
@@ -377,7 +394,7 @@ impl Location {
             Ok(Response::Trajectory(r)) => *r,
             Ok(other) => return Err(unexpected(&other)),
             Err(ControlClientError::Remote(ControlError::Create(e))) => return Err(e),
-            Err(e) => return Err(CreateError::Unavailable { reason: e.to_string() }),
+            Err(e) => return Err(CreateError::Unavailable { reason: e.into() }),
         };
         if !spec.replace {
             // The registry had no such name: what this process still holds under it
@@ -442,7 +459,9 @@ impl Location {
             let mut register = |port| report_writer(control, &spec.name, record.generation, port);
             let started =
                 Export::start(node, domain, handle, record, repointed, holdings, &mut register)
-                    .map_err(|e| CreateError::Unavailable { reason: e.to_string() })?;
+                    .map_err(|e| CreateError::Unavailable {
+                        reason: Unreachable::transport(Peer::Processes, e),
+                    })?;
             // A store destroyed meanwhile needs no resets.
             let _destroyed = handle.with_store(|s| s.forward_resets(Arc::clone(resets)));
             export = Some(started);
@@ -456,6 +475,88 @@ impl Location {
 
     fn report_writer(&mut self, name: &str, generation: u64, publisher: u128) {
         report_writer(&self.control, name, generation, publisher);
+    }
+
+    /// Takes `name` over, its writer being gone ([`super::takeover`]): the registry
+    /// places it here, the replica's store becomes the writer's with the history it
+    /// holds, and an export publishes it (a reset, then that history, so readers
+    /// elsewhere hold what this process holds). `Ok` also when the registry names a
+    /// live writer elsewhere (another process took it over first): the add goes there.
+    fn take_over(&mut self, name: &str, generation: u64) -> Result<(), AddError> {
+        let unavailable =
+            |reason: Unreachable| AddError::Unavailable { trajectory: name.to_owned(), reason };
+        let request = Request::TakeOverTrajectory {
+            trajectory: name.to_owned(),
+            generation,
+            host: self.host.clone(),
+        };
+        let pid = self.mirrors.import(name).map_or(0, |i| i.lock().writer_pid());
+        let gone = |pid| AddError::WriterGone { trajectory: name.to_owned(), pid };
+        let record = match self.control.call(&request) {
+            Ok(Response::Trajectory(r)) => *r,
+            Ok(other) => {
+                let answer = format!("{other:?}");
+                return Err(unavailable(Unreachable::malformed(Peer::Coordinator, answer)));
+            }
+            // Nobody may take it over (its writer is supervised, and comes back).
+            Err(ControlClientError::Remote(ControlError::NotAllowed { reason })) => {
+                tracing::debug!(trajectory = %name, %reason, "not taken over");
+                return Err(gone(pid));
+            }
+            Err(e) => return Err(unavailable(e.into())),
+        };
+        if record.generation != generation {
+            // Destroyed and created anew meanwhile: the audit follows it.
+            return Err(gone(0));
+        }
+        if record.writer != self.host {
+            let Some(import) = self.mirrors.import(name) else { return Err(gone(0)) };
+            let mut import = import.lock();
+            import.set_released(false);
+            import.set_writer(record.port);
+            return Ok(());
+        }
+        let replica = self.local.get_entity_trajectory_structure(name).map_err(|_| gone(pid))?;
+        drop(self.mirrors.change(|m| m.imports.remove(name)));
+        replica.with_store(|s| s.adopt_adds()).map_err(|_| gone(pid))?;
+        let control = &self.control;
+        let mut register = |port| report_writer(control, name, record.generation, port);
+        let export = Export::start(
+            &self.node,
+            &self.domain,
+            &replica,
+            &record,
+            true,
+            &self.holdings,
+            &mut register,
+        )
+        .map_err(|e| {
+            tracing::warn!(trajectory = %name, error = %e,
+                "took over a trajectory but cannot publish it; adds here stay here");
+            unavailable(Unreachable::transport(Peer::Processes, e))
+        })?;
+        self.mirrors.change(|m| m.insert_export(name.to_owned(), export));
+        tracing::info!(trajectory = %name, generation, "took over a trajectory whose writer is gone");
+        Ok(())
+    }
+
+    /// Lets the primitive trajectories this process writes go, as its connection
+    /// closes without destroying them: another process may take them over at once,
+    /// while this process lives on.
+    fn release_primitives(&mut self) {
+        for (name, export) in self.mirrors.exports() {
+            let (generation, primitive) = {
+                let e = export.lock();
+                (e.generation, e.is_primitive())
+            };
+            if !primitive {
+                continue;
+            }
+            let request = Request::ReleaseWriter { trajectory: name.clone(), generation };
+            if let Err(e) = self.control.call(&request) {
+                tracing::debug!(trajectory = %name, error = %e, "cannot release a trajectory");
+            }
+        }
     }
 
     /// Asks the registry whose port the samples are that readers here hold unverified
@@ -477,6 +578,7 @@ impl Location {
                 let mut import = import.lock();
                 if import.generation == record.generation {
                     import.set_writer(record.port);
+                    import.set_released(record.released);
                 }
             }
         }
@@ -491,14 +593,22 @@ impl Location {
             LookupError::NoSuchEntityStructure { name, suggestion } => {
                 CreateError::NoSuchEntityStructure { name, suggestion }
             }
-            other => CreateError::Unavailable { reason: other.to_string() },
+            LookupError::Unavailable { reason } => CreateError::Unavailable { reason },
+            other => {
+                CreateError::Unavailable { reason: Unreachable::refused(Peer::Coordinator, other) }
+            }
         })?;
         if record.writer == self.host {
             // Assigned here but not built yet (its creator asked another process).
             self.poll_assignments();
             return match self.local.get_entity_trajectory_structure(name) {
                 Ok(_) => Ok(()),
-                Err(e) => Err(CreateError::Unavailable { reason: e.to_string() }),
+                Err(_) => Err(CreateError::Unavailable {
+                    reason: Unreachable::refused(
+                        Peer::Connection,
+                        format!("`{name}` is assigned here but could not be built yet"),
+                    ),
+                }),
             };
         }
         self.replica(&record).map(|_| ())
@@ -517,6 +627,7 @@ impl Location {
             holdings: &self.holdings,
             mirrors: &self.mirrors,
             verify: &self.verify.0,
+            take_over: &self.takeovers.0,
             tool: self.tool,
         };
         match Import::start(&site, handle.clone(), record) {
@@ -535,7 +646,9 @@ impl Location {
                 }
                 Err(match e {
                     OpenError::LimitReached(limit) => CreateError::LimitReached(limit),
-                    e => CreateError::Unavailable { reason: e.to_string() },
+                    e => {
+                        CreateError::Unavailable { reason: Unreachable::transport(Peer::Writer, e) }
+                    }
                 })
             }
         }
@@ -576,7 +689,7 @@ impl Location {
         self.replica(&record).map_err(|e| match e {
             CreateError::LimitReached(limit) => LookupError::LimitReached(limit),
             CreateError::Unavailable { reason } => LookupError::Unavailable { reason },
-            e => LookupError::Unavailable { reason: e.to_string() },
+            e => LookupError::Unavailable { reason: Unreachable::refused(Peer::Connection, e) },
         })
     }
 
@@ -640,7 +753,7 @@ pub(crate) fn install(local: &InProcessEsgm, types: &[(String, EntityStructureTy
 }
 
 fn unexpected(r: &Response) -> CreateError {
-    CreateError::Unavailable { reason: format!("unexpected answer from the coordinator: {r:?}") }
+    CreateError::Unavailable { reason: Unreachable::malformed(Peer::Coordinator, format!("{r:?}")) }
 }
 
 /// Names this process's publisher port as the writer's of `name`, so that readers

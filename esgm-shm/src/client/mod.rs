@@ -71,6 +71,7 @@ pub mod prelude;
 mod receiver;
 mod settings;
 mod shared_node;
+mod takeover;
 
 use crate::service::ShmService;
 use std::sync::Arc;
@@ -80,7 +81,8 @@ use crossbeam_channel::Sender;
 use esgm_core::clock::SharedClock;
 use esgm_core::esgm::{
     CompUnit, CreateError, Esgm, EsgmStats, FlushError, InputType, LogLevel, LookupError,
-    MemoryStats, RegistrationError, SensorInterface, SystemError, TrajectoryInfo, TrajectorySpec,
+    MemoryStats, Peer, RegistrationError, SensorInterface, SystemError, TrajectoryInfo,
+    TrajectorySpec, Unreachable,
 };
 use esgm_core::{EntityStructureType, InProcessEsgm, InProcessTrajectory, TypeRegistryError};
 use iceoryx2::prelude::NodeBuilder;
@@ -265,6 +267,7 @@ impl ShmEsgmBuilder {
             reported: (HoldingStats::default(), std::time::Instant::now()),
             resets,
             verify: crossbeam_channel::bounded(1),
+            takeovers: crossbeam_channel::unbounded(),
             tool: self.tool,
             looked,
             _receiver: receiver,
@@ -448,19 +451,16 @@ impl ShmEsgm {
     fn ask<T>(
         &self,
         make: impl FnOnce(Sender<T>) -> Command,
-        unavailable: impl FnOnce(String) -> T,
+        unavailable: impl FnOnce(Unreachable) -> T,
     ) -> T {
         let (reply, answer) = crossbeam_channel::bounded(1);
         if self.inner.commands.send(make(reply)).is_err() {
-            return unavailable("the location thread has stopped".into());
+            return unavailable(Unreachable::Closing);
         }
         match answer.recv_timeout(self.inner.timeout * 3) {
             Ok(t) => t,
             // Timed out, or the thread ended without answering: unavailable either way.
-            Err(_) => unavailable(format!(
-                "no answer from the location thread within {:?}",
-                self.inner.timeout * 3
-            )),
+            Err(_) => unavailable(Unreachable::no_answer(Peer::Connection, self.inner.timeout * 3)),
         }
     }
 
@@ -505,14 +505,15 @@ impl ShmEsgm {
             match answer {
                 AdminAnswer::LogLevel { applied: true, .. } => applied.push(host),
                 AdminAnswer::Failed { reason } => {
-                    return Err(AdminError::Send { reason: format!("{host}: {reason}") });
+                    return Err(AdminError::Send {
+                        reason: Unreachable::refused(Peer::Processes, format!("{host}: {reason}")),
+                    });
                 }
                 _ => {}
             }
         }
         if applied.is_empty() {
-            let reason = format!("no connected process is called `{}`", process.unwrap_or("*"));
-            return Err(AdminError::Unavailable { reason });
+            return Err(AdminError::NoSuchProcess { name: process.unwrap_or("*").to_owned() });
         }
         applied.sort();
         Ok(applied)
@@ -538,7 +539,7 @@ impl ShmEsgm {
                         waiting_for: format!("{} of {expected} processes", expected - answered),
                     });
                 }
-                Err(e) => return Err(FlushError::Unavailable { reason: e.to_string() }),
+                Err(e) => return Err(FlushError::Unavailable { reason: e.into() }),
             };
             for (host, answer) in &answers {
                 if let AdminAnswer::Failed { reason } = answer {
@@ -547,9 +548,8 @@ impl ShmEsgm {
                     });
                 }
             }
-            let progress = self
-                .domain_stats()
-                .map_err(|e| FlushError::Unavailable { reason: e.to_string() })?;
+            let progress =
+                self.domain_stats().map_err(|e| FlushError::Unavailable { reason: e.into() })?;
             let progress = admin::progress(progress);
             if previous.as_ref() == Some(&progress) {
                 return Ok(());
@@ -584,8 +584,8 @@ impl ShmEsgm {
 /// process's own view, which would look complete and not be).
 fn unanswered(operation: &str, answer: Result<Response, ControlClientError>) -> SystemError {
     let reason = match answer {
-        Err(e) => e.to_string(),
-        Ok(other) => format!("unexpected answer from the coordinator: {other:?}"),
+        Err(e) => e.into(),
+        Ok(other) => Unreachable::malformed(Peer::Coordinator, format!("{other:?}")),
     };
     SystemError::Unavailable { operation: operation.to_owned(), reason }
 }
@@ -597,14 +597,14 @@ fn unreached(operation: &str, e: AdminError) -> SystemError {
         AdminError::Incomplete { answered, expected, timeout } => {
             SystemError::Incomplete { operation, answered, expected, timeout }
         }
-        e => SystemError::Unavailable { operation, reason: e.to_string() },
+        e => SystemError::Unavailable { operation, reason: e.into() },
     }
 }
 
 fn type_error(e: ControlClientError) -> TypeRegistryError {
     match e {
         ControlClientError::Remote(ControlError::Type(e)) => e,
-        e => TypeRegistryError::Unavailable { reason: e.to_string() },
+        e => TypeRegistryError::Unavailable { reason: e.into() },
     }
 }
 
@@ -614,7 +614,7 @@ fn registration_error(e: ControlClientError) -> RegistrationError {
         ControlClientError::Remote(ControlError::Type(
             TypeRegistryError::NoSuchEntityStructureType { name, suggestion },
         )) => RegistrationError::NoSuchEntityStructureType { name, suggestion },
-        e => RegistrationError::Unavailable { reason: e.to_string() },
+        e => RegistrationError::Unavailable { reason: e.into() },
     }
 }
 
@@ -655,7 +655,9 @@ impl Esgm for ShmEsgm {
         let request = Request::GetEntityStructureType { type_name: type_name.to_owned() };
         match self.control(request).map_err(type_error)? {
             Response::Type(t) => Ok(t),
-            other => Err(TypeRegistryError::Unavailable { reason: format!("{other:?}") }),
+            other => Err(TypeRegistryError::Unavailable {
+                reason: Unreachable::malformed(Peer::Coordinator, format!("{other:?}")),
+            }),
         }
     }
 
@@ -694,8 +696,9 @@ impl Esgm for ShmEsgm {
             Some((_, t)) => Ok(t),
             // A synthesized type (state over generators) lives with its writer.
             None => self.get_entity_trajectory_structure(name).and_then(|h| {
-                esgm_core::EntityTrajectoryStructure::entity_type(&h)
-                    .map_err(|e| LookupError::Unavailable { reason: e.to_string() })
+                esgm_core::EntityTrajectoryStructure::entity_type(&h).map_err(|e| {
+                    LookupError::Unavailable { reason: Unreachable::transport(Peer::Writer, e) }
+                })
             }),
         }
     }

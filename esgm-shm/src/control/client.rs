@@ -16,7 +16,7 @@ use super::protocol::{ControlError, Request, Response, decode, encode};
 use crate::capacity::DomainLimits;
 use crate::service::ShmNode;
 use crate::service_name::{NameError, control_service};
-use esgm_core::esgm::LimitReached;
+use esgm_core::esgm::{LimitReached, Peer, Unreachable};
 use iceoryx2::service::port_factory::PortFactory as _;
 
 /// A control call failed before an answer arrived.
@@ -118,11 +118,32 @@ pub enum ControlClientError {
     #[error("the location thread is unavailable: {reason}")]
     LocationUnavailable {
         /// What happened.
-        reason: String,
+        reason: Unreachable,
     },
     /// The coordinator answered with the seed's error.
     #[error(transparent)]
     Remote(#[from] ControlError),
+}
+
+impl From<ControlClientError> for Unreachable {
+    /// The cause of an `Unavailable` error of the seed's operations: a call to the
+    /// coordinator that failed, by what the caller can do about it.
+    fn from(e: ControlClientError) -> Self {
+        match e {
+            ControlClientError::NoCoordinator { domain }
+            | ControlClientError::NotServing { domain } => Unreachable::NoCoordinator { domain },
+            ControlClientError::Timeout { timeout, .. } => {
+                Unreachable::no_answer(Peer::Coordinator, timeout)
+            }
+            ControlClientError::LocationUnavailable { reason } => reason,
+            ControlClientError::Remote(e) => Unreachable::refused(Peer::Coordinator, e),
+            e
+            @ (ControlClientError::ProtocolMismatch { .. } | ControlClientError::Malformed(_)) => {
+                Unreachable::malformed(Peer::Coordinator, e)
+            }
+            e => Unreachable::transport(Peer::Coordinator, e),
+        }
+    }
 }
 
 /// Asks one domain's coordinator. Like every iceoryx2 port it stays on the thread that

@@ -105,7 +105,12 @@ pub fn check_request(request: &Request) -> Result<(), ControlError> {
         }
         Request::GetEntityTrajectoryStructure { name }
         | Request::DestroyEntityTrajectoryStructure { name }
-        | Request::ReportWriter { trajectory: name, .. } => check_name("trajectory", name),
+        | Request::ReportWriter { trajectory: name, .. }
+        | Request::ReleaseWriter { trajectory: name, .. } => check_name("trajectory", name),
+        Request::TakeOverTrajectory { trajectory, host, .. } => {
+            check_name("trajectory", trajectory)?;
+            check_name("host", host)
+        }
         Request::ReportHoldings { host, .. } | Request::Assignments { host } => {
             check_name("host", host)
         }

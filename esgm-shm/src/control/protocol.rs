@@ -164,6 +164,31 @@ pub enum Request {
         /// The publisher port's id (`UniquePublisherId::value`).
         publisher: u128,
     },
+    /// The writer of a primitive trajectory stops serving it without destroying it
+    /// (its connection closes), so that another process may take it over
+    /// ([`Request::TakeOverTrajectory`]) while the writer's process lives on. Accepted
+    /// from the process that holds the writer's port.
+    ReleaseWriter {
+        /// The trajectory.
+        trajectory: String,
+        /// Its generation: a release of a former generation is refused.
+        generation: u64,
+    },
+    /// `host` asks to write a primitive trajectory whose writer is gone: the writer's
+    /// process exited, or it released the trajectory. The answer is the trajectory's
+    /// record, whose `writer` is `host` when granted, else whoever writes it (a live
+    /// writer, or another process that took it over first). Refused
+    /// ([`ControlError::NotAllowed`]) for a trajectory that is not primitive (its
+    /// sensor or unit has a home) or whose writer the coordinator supervises (it is
+    /// restarted, and takes its trajectory back).
+    TakeOverTrajectory {
+        /// The trajectory.
+        trajectory: String,
+        /// The generation the asking process mirrors: the former writer's.
+        generation: u64,
+        /// The asking process.
+        host: String,
+    },
 }
 
 /// The one publisher port readers of a trajectory accept samples and resets from, and
@@ -207,6 +232,9 @@ pub struct TrajectoryRecord {
     /// The writer's publisher port, once it has reported it ([`Request::ReportWriter`]).
     #[serde(default)]
     pub port: Option<WriterPort>,
+    /// The writer let it go ([`Request::ReleaseWriter`]): an adder may take it over.
+    #[serde(default)]
+    pub released: bool,
     /// How many processes may read it at once: the capacity every process opens its
     /// services with ([`crate::capacity`]); the spec's `readers`, else the domain's
     /// default.
@@ -228,6 +256,10 @@ pub struct PlacementRecord {
     /// The writer's publisher port, once reported ([`TrajectoryRecord::port`]).
     #[serde(default)]
     pub port: Option<WriterPort>,
+    /// The writer let the trajectory go ([`Request::ReleaseWriter`]): an adder may take
+    /// it over.
+    #[serde(default)]
+    pub released: bool,
 }
 
 /// A coordinator's answer.

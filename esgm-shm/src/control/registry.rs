@@ -25,6 +25,10 @@ struct Placement {
     spec: TrajectorySpec,
     /// The writer's publisher port, once reported ([`Request::ReportWriter`]).
     port: Option<WriterPort>,
+    /// The writer stopped serving it without destroying it ([`Request::ReleaseWriter`]):
+    /// another process may take it over. Not saved: after a coordinator restart, a
+    /// writer whose process lives is taken to serve.
+    released: bool,
 }
 
 /// Names, types, sensors, units and trajectories of one esgm system.
@@ -130,6 +134,7 @@ impl Registry {
             writer: p.writer.clone(),
             generation: p.generation,
             port: p.port,
+            released: p.released,
             type_name: self
                 .catalog
                 .trajectory(name)
@@ -249,6 +254,7 @@ impl Registry {
                     generation: t.generation,
                     spec: t.spec,
                     port: t.port,
+                    released: false,
                 },
             );
         }
@@ -271,17 +277,17 @@ impl Registry {
             // process needs to check the states it receives.
             Err(_) => self.state_definitions(&info),
         };
-        let (writer, generation, port, asked) = self
+        let (writer, generation, port, asked, released) = self
             .placement
             .get(name)
-            .map(|p| (p.writer.clone(), p.generation, p.port, p.spec.readers))
+            .map(|p| (p.writer.clone(), p.generation, p.port, p.spec.readers, p.released))
             .unwrap_or_default();
         // Checked when it was created; a saved spec whose readers exceed a domain
         // restarted with fewer processes is served with the most it may have.
         let readers = self.limits.readers_of(asked).unwrap_or(Readers(
             asked.unwrap_or(self.limits.readers).min(self.limits.max_processes),
         ));
-        Ok(TrajectoryRecord { info, types, writer, generation, port, readers })
+        Ok(TrajectoryRecord { info, types, writer, generation, port, readers, released })
     }
 
     /// The pid a process reported for `name`, if any.
@@ -373,8 +379,10 @@ impl Registry {
                 let generation = self.next_generation;
                 self.next_generation += 1;
                 self.catalog.insert_trajectory(resolved.info);
-                self.placement
-                    .insert(name.clone(), Placement { writer, generation, spec, port: None });
+                self.placement.insert(
+                    name.clone(),
+                    Placement { writer, generation, spec, port: None, released: false },
+                );
                 Response::Trajectory(Box::new(self.record(&name)?))
             }
             Request::GetEntityTrajectoryStructure { name } => {
@@ -434,7 +442,93 @@ impl Registry {
                 self.report_writer(&trajectory, generation, publisher, origin)?;
                 Response::Done
             }
+            Request::ReleaseWriter { trajectory, generation } => {
+                self.release_writer(&trajectory, generation, origin)?;
+                Response::Done
+            }
+            Request::TakeOverTrajectory { trajectory, generation, host } => {
+                self.take_over(&trajectory, generation, host)?;
+                Response::Trajectory(Box::new(self.record(&trajectory)?))
+            }
         })
+    }
+
+    /// Marks `trajectory` as served by nobody, at its writer's word (`origin` must hold
+    /// the writer's port): another process may take it over.
+    fn release_writer(
+        &mut self,
+        trajectory: &str,
+        generation: u64,
+        origin: Origin,
+    ) -> Result<(), ControlError> {
+        self.catalog.trajectory(trajectory)?;
+        let placement = self.placement.get_mut(trajectory);
+        let Some(placement) = placement.filter(|p| p.generation == generation) else {
+            return Err(ControlError::NotAllowed {
+                reason: format!(
+                    "`{trajectory}` generation {generation} is not placed: nothing to release"
+                ),
+            });
+        };
+        let holder = placement.port.map(|p| p.pid);
+        let allowed = match origin {
+            Origin::Coordinator => true,
+            Origin::Process(pid) => holder == Some(pid),
+            Origin::Unknown => false,
+        };
+        if !allowed {
+            return Err(ControlError::NotAllowed {
+                reason: format!("only the process that writes `{trajectory}` may release it"),
+            });
+        }
+        placement.port = None;
+        placement.released = true;
+        Ok(())
+    }
+
+    /// Places `trajectory` at `host` if its writer is gone: its process exited (its
+    /// reported port's pid is not alive) or it released the trajectory. A trajectory
+    /// still served, or a request about a former generation, is left as it is (the
+    /// record answered says who writes it).
+    fn take_over(
+        &mut self,
+        trajectory: &str,
+        generation: u64,
+        host: String,
+    ) -> Result<(), ControlError> {
+        let info = self.catalog.trajectory(trajectory)?;
+        if info.kind != TrajectoryKind::Primitive {
+            return Err(ControlError::NotAllowed {
+                reason: format!(
+                    "`{trajectory}` is {:?}: its writer is where its sensor or unit is, and cannot move",
+                    info.kind
+                ),
+            });
+        }
+        let supervised = |writer: &str| self.processes.list().iter().any(|p| p.spec.name == writer);
+        let Some(placement) = self.placement.get(trajectory) else { return Ok(()) };
+        if placement.generation != generation {
+            return Ok(());
+        }
+        if supervised(&placement.writer) {
+            return Err(ControlError::NotAllowed {
+                reason: format!(
+                    "`{trajectory}` is written by `{}`, which the coordinator restarts; it takes the trajectory back",
+                    placement.writer
+                ),
+            });
+        }
+        let gone = placement.released
+            || placement.port.is_some_and(|p| !super::attach::process_alive(p.pid));
+        if gone {
+            if let Some(p) = self.placement.get_mut(trajectory) {
+                tracing::info!(%trajectory, from = %p.writer, to = %host, "writer taken over");
+                p.writer = host;
+                p.port = None;
+                p.released = false;
+            }
+        }
+        Ok(())
     }
 
     /// Records the publisher port `origin` writes `trajectory` with. Refused for a
@@ -738,6 +832,104 @@ mod tests {
         let e = err(r.handle(Request::GetEntityStructureType { type_name: huge }));
         assert!(matches!(e, ControlError::IllegalName { .. }), "{e:?}");
         assert!(r.catalog().trajectories().next().is_none());
+    }
+
+    /// The pid of a process that has exited (a child reaped here): a writer gone.
+    fn dead_pid() -> u32 {
+        let mut child = std::process::Command::new("true").spawn().unwrap();
+        let pid = child.id();
+        child.wait().unwrap();
+        pid
+    }
+
+    fn writer_of(r: &mut Registry, name: &str) -> (String, u64, Option<WriterPort>) {
+        match r.handle(Request::GetEntityTrajectoryStructure { name: name.into() }) {
+            Response::Trajectory(t) => (t.writer, t.generation, t.port),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_trajectory_is_taken_over_only_once_its_writer_is_gone() {
+        use super::super::processes::ProcessSpec;
+        let mut r = registry();
+        let create = |name: &str, host: &str| Request::CreateTrajectory {
+            spec: TrajectorySpec::primitive(name, "RobotState"),
+            host: host.into(),
+        };
+        assert!(matches!(r.handle(create("live", "a")), Response::Trajectory(_)));
+        assert!(matches!(r.handle(create("dead", "b")), Response::Trajectory(_)));
+        assert!(matches!(r.handle(create("freed", "c")), Response::Trajectory(_)));
+        assert!(matches!(r.handle(create("kept", "cam")), Response::Trajectory(_)));
+        let report = |name: &str, generation, pid| {
+            (Request::ReportWriter { trajectory: name.into(), generation, publisher: 9 }, pid)
+        };
+        let me = std::process::id();
+        let dead = dead_pid();
+        for (name, pid) in [("live", me), ("dead", dead), ("freed", me), ("kept", dead)] {
+            let (_, generation, _) = writer_of(&mut r, name);
+            let (q, pid) = report(name, generation, pid);
+            assert!(matches!(r.handle_from(q, Origin::Process(pid)), Response::Done));
+        }
+        let take = |r: &mut Registry, name: &str| {
+            let (_, generation, _) = writer_of(r, name);
+            r.handle(Request::TakeOverTrajectory {
+                trajectory: name.into(),
+                generation,
+                host: "taker".into(),
+            })
+        };
+        // A live writer keeps it: the answer names it.
+        let Response::Trajectory(t) = take(&mut r, "live") else { panic!() };
+        assert_eq!((t.writer.as_str(), t.port.map(|p| p.pid)), ("a", Some(me)));
+        // A writer whose process exited gives it up; the new writer reports its port.
+        let Response::Trajectory(t) = take(&mut r, "dead") else { panic!() };
+        assert_eq!((t.writer.as_str(), t.port), ("taker", None));
+        // A writer that released it gives it up while its process lives; only the
+        // port's holder may release it, and only its generation.
+        let (_, generation, _) = writer_of(&mut r, "freed");
+        let release =
+            |generation| Request::ReleaseWriter { trajectory: "freed".into(), generation };
+        let e = err(r.handle_from(release(generation), Origin::Process(dead)));
+        assert!(matches!(e, ControlError::NotAllowed { .. }), "{e:?}");
+        let e = err(r.handle_from(release(generation + 1), Origin::Process(me)));
+        assert!(matches!(e, ControlError::NotAllowed { .. }), "{e:?}");
+        assert!(matches!(r.handle_from(release(generation), Origin::Process(me)), Response::Done));
+        let Response::Trajectory(t) = take(&mut r, "freed") else { panic!() };
+        assert_eq!(t.writer, "taker");
+        // A supervised writer comes back and takes its trajectory back: refused.
+        let spec =
+            ProcessSpec { name: "cam".into(), program: "x".into(), args: vec![], env: vec![] };
+        assert!(matches!(r.handle(Request::DeclareProcess { spec }), Response::Done));
+        let e = err(take(&mut r, "kept"));
+        assert!(
+            matches!(&e, ControlError::NotAllowed { reason } if reason.contains("restarts")),
+            "{e:?}"
+        );
+        // A sampled trajectory lives where its sensor is.
+        assert!(matches!(
+            r.handle(Request::AddSensorInterface {
+                sensor: "odo".into(),
+                type_name: "RobotState".into(),
+                host: "b".into(),
+            }),
+            Response::Done
+        ));
+        let sampled = TrajectorySpec::sampled("odom", "odo", 10).unwrap();
+        assert!(matches!(
+            r.handle(Request::CreateTrajectory { spec: sampled, host: "b".into() }),
+            Response::Trajectory(_)
+        ));
+        let e = err(take(&mut r, "odom"));
+        assert!(matches!(e, ControlError::NotAllowed { .. }), "{e:?}");
+        // A former generation is answered with the current record, unchanged.
+        let stale = r.handle(Request::TakeOverTrajectory {
+            trajectory: "live".into(),
+            generation: 999,
+            host: "taker".into(),
+        });
+        let Response::Trajectory(t) = stale else { panic!("{stale:?}") };
+        assert_eq!(t.writer, "a");
     }
 
     #[test]

@@ -508,9 +508,9 @@ impl Coordinator {
             Ok(request) => {
                 let persist = changes_registry(&request);
                 let origin = match &request {
-                    Request::ReportProcess { .. } | Request::ReportWriter { .. } => {
-                        self.origin(active)
-                    }
+                    Request::ReportProcess { .. }
+                    | Request::ReportWriter { .. }
+                    | Request::ReleaseWriter { .. } => self.origin(active),
                     _ => Origin::Unknown,
                 };
                 // A supervised process changed (it exited, perhaps crashed): what it

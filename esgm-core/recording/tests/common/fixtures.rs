@@ -4,19 +4,12 @@
 
 use esgm_core::esgm::{TrajectoryInfo, TrajectoryKind};
 use esgm_core::library::{Image, RobotState};
-use esgm_core::{Entity, EntityStructure, FluentStreamPolicy};
+use esgm_core::{Entity, EntityStructure};
 use esgm_recording::TypeSchema;
 
 /// A trajectory declaration with no policy, no source and no inputs.
 pub fn info(name: &str, kind: TrajectoryKind, type_name: &str) -> TrajectoryInfo {
-    TrajectoryInfo {
-        name: name.into(),
-        kind,
-        type_name: type_name.into(),
-        source: None,
-        inputs: vec![],
-        policy: FluentStreamPolicy::default(),
-    }
+    TrajectoryInfo::new(name, kind, type_name)
 }
 
 /// A primitive trajectory's declaration.

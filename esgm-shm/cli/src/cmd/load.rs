@@ -9,7 +9,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use esgm_core::Esgm;
-use esgm_core::esgm::CreateError;
+use esgm_core::esgm::{CreateError, LookupError, Peer, Unreachable};
 use esgm_recording::{LoadOptions, LoadReport, Recording, load_with};
 use esgm_shm::control::{ControlClientError, ControlError, Request, Response};
 
@@ -45,13 +45,15 @@ pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
             | Err(ControlClientError::Remote(ControlError::Create(e))) => return Err(e),
             Ok(other) => {
                 return Err(CreateError::Unavailable {
-                    reason: format!("unexpected answer {other:?}"),
+                    reason: Unreachable::malformed(Peer::Coordinator, format!("{other:?}")),
                 });
             }
-            Err(e) => return Err(CreateError::Unavailable { reason: e.to_string() }),
+            Err(e) => return Err(CreateError::Unavailable { reason: e.into() }),
         }
-        esgm.get_entity_trajectory_structure(&name)
-            .map_err(|e| CreateError::Unavailable { reason: e.to_string() })
+        esgm.get_entity_trajectory_structure(&name).map_err(|e| match e {
+            LookupError::Unavailable { reason } => CreateError::Unavailable { reason },
+            e => CreateError::Unavailable { reason: Unreachable::refused(Peer::Coordinator, e) },
+        })
     })
     .with_context(|| format!("cannot load {} into `{domain}`", a.file.display()))?;
     if json {

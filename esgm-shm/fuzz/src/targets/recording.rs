@@ -18,7 +18,7 @@ use std::path::PathBuf;
 
 use esgm_core::esgm::{TrajectoryInfo, TrajectoryKind};
 use esgm_core::library::{Image, RobotState};
-use esgm_core::{Entity, FluentStreamPolicy};
+use esgm_core::Entity;
 use esgm_recording::{
     Compression, EventKind, RecordOptions, RecordedEvent, Recording, RecordingWriter, TypeSchema,
 };
@@ -45,14 +45,7 @@ pub struct RecordingTarget {
 }
 
 fn info(name: &str, kind: TrajectoryKind, type_name: &str) -> TrajectoryInfo {
-    TrajectoryInfo {
-        name: name.into(),
-        kind,
-        type_name: type_name.into(),
-        source: None,
-        inputs: vec![],
-        policy: FluentStreamPolicy::default(),
-    }
+    TrajectoryInfo::new(name, kind, type_name)
 }
 
 /// A recording of robot states and images (with their Foxglove views), a violation

@@ -146,14 +146,11 @@ mod tests {
     #[test]
     fn counts_list_every_cause_with_a_count() {
         let mut report = TrajectoryReport {
-            info: esgm_core::esgm::TrajectoryInfo {
-                name: "images".into(),
-                kind: esgm_core::esgm::TrajectoryKind::Sampled,
-                type_name: "Image".into(),
-                source: None,
-                inputs: Vec::new(),
-                policy: esgm_core::FluentStreamPolicy::default(),
-            },
+            info: esgm_core::esgm::TrajectoryInfo::new(
+                "images",
+                esgm_core::esgm::TrajectoryKind::Sampled,
+                "Image",
+            ),
             stats: esgm_core::TrajectoryStats {
                 added: 90,
                 dropped: vec![(DropCause::Lost, 3), (DropCause::Reset, 0)],
