@@ -15,7 +15,24 @@ use std::sync::OnceLock;
 use esgm_core::esgm::LogLevel;
 
 /// Replaces the process's log filter (installed by [`init_logging`]).
-type SetFilter = Box<dyn Fn(&str) -> Result<(), String> + Send + Sync>;
+type SetFilter = Box<dyn Fn(&str) -> Result<(), LogFilterError> + Send + Sync>;
+
+/// The process's log filter could not be replaced ([`apply_log_level`]).
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum LogFilterError {
+    /// The level's directive did not parse (a bug: esgm makes it).
+    #[error("the log filter `{directive}` does not parse: {source}")]
+    Parse {
+        /// The directive.
+        directive: String,
+        /// Why.
+        source: tracing_subscriber::filter::ParseError,
+    },
+    /// The running subscriber is gone (the process is exiting).
+    #[error("cannot replace the log filter: {0}")]
+    Reload(#[from] tracing_subscriber::reload::Error),
+}
 
 /// The running filter's reload handle, once [`init_logging`] installed it.
 static LOG_FILTER: OnceLock<SetFilter> = OnceLock::new();
@@ -35,9 +52,9 @@ pub fn init_logging() {
         .with(tracing_subscriber::fmt::layer().with_writer(std::io::stderr))
         .init();
     let set: SetFilter = Box::new(move |directives: &str| {
-        let filter =
-            tracing_subscriber::EnvFilter::try_new(directives).map_err(|e| e.to_string())?;
-        handle.reload(filter).map_err(|e| e.to_string())
+        let filter = tracing_subscriber::EnvFilter::try_new(directives)
+            .map_err(|source| LogFilterError::Parse { directive: directives.to_owned(), source })?;
+        Ok(handle.reload(filter)?)
     });
     if LOG_FILTER.set(set).is_err() {
         tracing::warn!("init_logging called twice; the first filter stays reloadable");
@@ -62,7 +79,7 @@ pub fn share_domain(domain: &str) -> Result<Option<access::Widener>, access::Acc
 /// [`init_logging`] installed a reloadable one: `Ok(true)` once applied, `Ok(false)`
 /// for a process whose logging is its own (a library user's subscriber; it reads the
 /// level from `Esgm::log_level`).
-pub fn apply_log_level(level: LogLevel) -> Result<bool, String> {
+pub fn apply_log_level(level: LogLevel) -> Result<bool, LogFilterError> {
     let Some(set) = LOG_FILTER.get() else { return Ok(false) };
     set(level_directive(level)).map(|()| true)
 }

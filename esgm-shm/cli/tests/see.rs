@@ -67,9 +67,9 @@ fn top_once_prints_every_trajectory_and_the_coordinator() {
 
 /// A recording of robot states (x = i / 2, y = -i, 100 ms apart) and a few images.
 fn recording(path: &std::path::Path) {
+    use esgm_core::Entity;
     use esgm_core::esgm::{TrajectoryInfo, TrajectoryKind};
     use esgm_core::library::{Image, RobotState};
-    use esgm_core::Entity;
     use esgm_recording::{RecordOptions, RecordingWriter, TypeSchema};
 
     let info = |name: &str, type_name: &str| {

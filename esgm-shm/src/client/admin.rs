@@ -752,7 +752,7 @@ fn answer(host: &str, local: &InProcessEsgm, mirrors: &SharedMirrors, op: AdminO
                     tracing::info!(?level, "log level set by the domain");
                     AdminAnswer::LogLevel { applied: true, filter }
                 }
-                Err(reason) => AdminAnswer::Failed { reason },
+                Err(e) => AdminAnswer::Failed { reason: e.to_string() },
             }
         }
         AdminOp::Flush { timeout } => {

@@ -21,23 +21,38 @@ pub const MAX_NAME_LEN: usize = 100;
 /// attributes still fits.
 pub const MAX_REQUEST_BYTES: usize = 256 * 1024;
 
-/// Why a name is refused (see [`ControlError::IllegalName`]).
-pub fn name_problem(name: &str) -> Option<String> {
+/// The rule of names a name breaks ([`ControlError::IllegalName`]).
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error, serde::Serialize, serde::Deserialize)]
+#[non_exhaustive]
+pub enum NameRule {
+    /// A name has at least one character.
+    #[error("it is empty")]
+    Empty,
+    /// A name is at most [`MAX_NAME_LEN`] bytes long.
+    #[error("it is {len} bytes long; at most {max} are allowed")]
+    TooLong {
+        /// Its length in bytes.
+        len: usize,
+        /// The most allowed.
+        max: usize,
+    },
+    /// A name has no `/` (it becomes part of service and file names), no whitespace
+    /// and no control character.
+    #[error("it contains {0:?}; `/`, spaces and control characters are not allowed")]
+    BadCharacter(char),
+}
+
+/// Why a name is refused (see [`ControlError::IllegalName`]); `None` if it is fine.
+pub fn name_problem(name: &str) -> Option<NameRule> {
     if name.is_empty() {
-        return Some("it is empty".to_owned());
+        return Some(NameRule::Empty);
     }
     if name.len() > MAX_NAME_LEN {
-        return Some(format!(
-            "it is {} bytes long; at most {MAX_NAME_LEN} are allowed",
-            name.len()
-        ));
+        return Some(NameRule::TooLong { len: name.len(), max: MAX_NAME_LEN });
     }
-    if let Some(c) = name.chars().find(|c| *c == '/' || c.is_control() || c.is_whitespace()) {
-        return Some(format!(
-            "it contains {c:?}; `/`, spaces and control characters are not allowed"
-        ));
-    }
-    None
+    name.chars()
+        .find(|c| *c == '/' || c.is_control() || c.is_whitespace())
+        .map(NameRule::BadCharacter)
 }
 
 /// Checks one name; `what` says what it names (`"trajectory"`, `"type"`…).

@@ -61,13 +61,14 @@ pub enum ProcessError {
         /// A declared name close to it.
         suggestion: Option<String>,
     },
-    /// The declaration cannot be run (an empty name or program).
-    #[error("process `{name}` cannot be run: {reason}")]
-    IllegalProcess {
+    /// The declaration has no name: give the process one.
+    #[error("a process declaration has an empty name")]
+    EmptyName,
+    /// The declaration names no program to run: give it the executable's path or name.
+    #[error("process `{name}` cannot be run: its program is empty")]
+    EmptyProgram {
         /// The process.
         name: String,
-        /// What is wrong.
-        reason: String,
     },
 }
 
@@ -82,15 +83,11 @@ impl ProcessTable {
     /// configuration twice is harmless); another one under the same name replaces it
     /// and the supervisor restarts the process with the new one.
     pub fn declare(&mut self, spec: ProcessSpec) -> Result<(), ProcessError> {
-        let illegal = |reason: &str| ProcessError::IllegalProcess {
-            name: spec.name.clone(),
-            reason: reason.to_owned(),
-        };
         if spec.name.trim().is_empty() {
-            return Err(illegal("the name is empty"));
+            return Err(ProcessError::EmptyName);
         }
         if spec.program.trim().is_empty() {
-            return Err(illegal("the program is empty"));
+            return Err(ProcessError::EmptyProgram { name: spec.name.clone() });
         }
         match self.rows.get_mut(&spec.name) {
             Some(row) if row.spec == spec => {}
@@ -166,7 +163,7 @@ mod tests {
         }
         let mut empty = spec("x", &[]);
         empty.program = " ".into();
-        assert!(matches!(t.declare(empty), Err(ProcessError::IllegalProcess { .. })));
+        assert!(matches!(t.declare(empty), Err(ProcessError::EmptyProgram { .. })));
         assert!(t.report("nope", ProcessStatus::default()).is_err());
         assert_eq!(t.list().len(), 1);
     }

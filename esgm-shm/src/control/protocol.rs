@@ -329,12 +329,6 @@ pub enum ControlError {
     /// A process operation failed.
     #[error(transparent)]
     Process(#[from] ProcessError),
-    /// The request could not be understood (a client of another version?).
-    #[error("bad request: {reason}")]
-    BadRequest {
-        /// What was wrong with it.
-        reason: String,
-    },
     /// The request is not in this coordinator's protocol: the client is another esgm
     /// version. Use the same esgm for the coordinator and its clients.
     #[error(
@@ -354,8 +348,8 @@ pub enum ControlError {
         what: String,
         /// The name (shortened if long).
         name: String,
-        /// What is wrong with it.
-        reason: String,
+        /// The rule it breaks.
+        reason: super::limits::NameRule,
     },
     /// The request is larger than the coordinator accepts; split it.
     #[error("request of {bytes} bytes refused; the coordinator accepts at most {max}")]
@@ -365,12 +359,12 @@ pub enum ControlError {
         /// The limit ([`super::limits::MAX_REQUEST_BYTES`]).
         max: usize,
     },
-    /// The asking process may not do this (a process reports on itself only, or the
-    /// supervisor on the processes it runs).
+    /// The asking process may not do this: the rule it broke says why (a process
+    /// reports on itself only, only a writer releases its trajectory, …).
     #[error("not allowed: {reason}")]
     NotAllowed {
-        /// Why.
-        reason: String,
+        /// The rule.
+        reason: super::refusal::Refusal,
     },
     /// The coordinator could not save the registry to its state directory, so it undid
     /// the change rather than lose it in a crash: nothing was changed. Free the disk or

@@ -14,6 +14,7 @@ use super::processes::ProcessTable;
 use super::protocol::{
     Assignment, ControlError, PlacementRecord, Request, Response, TrajectoryRecord, WriterPort,
 };
+use super::refusal::Refusal;
 use super::state::{SNAPSHOT_VERSION, SavedTrajectory, Snapshot};
 use crate::capacity::{DomainLimits, Readers};
 use crate::holdings::HoldingStats;
@@ -464,11 +465,10 @@ impl Registry {
         self.catalog.trajectory(trajectory)?;
         let placement = self.placement.get_mut(trajectory);
         let Some(placement) = placement.filter(|p| p.generation == generation) else {
-            return Err(ControlError::NotAllowed {
-                reason: format!(
-                    "`{trajectory}` generation {generation} is not placed: nothing to release"
-                ),
-            });
+            return Err(not_allowed(Refusal::NotPlaced {
+                trajectory: trajectory.to_owned(),
+                generation,
+            }));
         };
         let holder = placement.port.map(|p| p.pid);
         let allowed = match origin {
@@ -477,9 +477,7 @@ impl Registry {
             Origin::Unknown => false,
         };
         if !allowed {
-            return Err(ControlError::NotAllowed {
-                reason: format!("only the process that writes `{trajectory}` may release it"),
-            });
+            return Err(not_allowed(Refusal::NotTheWriter { trajectory: trajectory.to_owned() }));
         }
         placement.port = None;
         placement.released = true;
@@ -498,12 +496,10 @@ impl Registry {
     ) -> Result<(), ControlError> {
         let info = self.catalog.trajectory(trajectory)?;
         if info.kind != TrajectoryKind::Primitive {
-            return Err(ControlError::NotAllowed {
-                reason: format!(
-                    "`{trajectory}` is {:?}: its writer is where its sensor or unit is, and cannot move",
-                    info.kind
-                ),
-            });
+            return Err(not_allowed(Refusal::CannotMove {
+                trajectory: trajectory.to_owned(),
+                kind: info.kind,
+            }));
         }
         let supervised = |writer: &str| self.processes.list().iter().any(|p| p.spec.name == writer);
         let Some(placement) = self.placement.get(trajectory) else { return Ok(()) };
@@ -511,12 +507,10 @@ impl Registry {
             return Ok(());
         }
         if supervised(&placement.writer) {
-            return Err(ControlError::NotAllowed {
-                reason: format!(
-                    "`{trajectory}` is written by `{}`, which the coordinator restarts; it takes the trajectory back",
-                    placement.writer
-                ),
-            });
+            return Err(not_allowed(Refusal::Supervised {
+                trajectory: trajectory.to_owned(),
+                writer: placement.writer.clone(),
+            }));
         }
         let gone = placement.released
             || placement.port.is_some_and(|p| !super::attach::process_alive(p.pid));
@@ -547,35 +541,32 @@ impl Registry {
             Origin::Coordinator => std::process::id(),
             Origin::Process(pid) => pid,
             Origin::Unknown => {
-                return Err(ControlError::NotAllowed {
-                    reason: format!(
-                        "a process the coordinator cannot identify may not name the writer of `{trajectory}`"
-                    ),
-                });
+                return Err(not_allowed(Refusal::UnknownOrigin {
+                    action: format!("name the writer of `{trajectory}`"),
+                }));
             }
         };
         self.catalog.trajectory(trajectory)?;
         let Some(placement) = self.placement.get_mut(trajectory) else {
-            return Err(ControlError::NotAllowed {
-                reason: format!("`{trajectory}` has no writer placed"),
-            });
+            return Err(not_allowed(Refusal::NotPlaced {
+                trajectory: trajectory.to_owned(),
+                generation,
+            }));
         };
         if placement.generation != generation {
-            return Err(ControlError::NotAllowed {
-                reason: format!(
-                    "`{trajectory}` is generation {}, not {generation}: the report is about a former trajectory",
-                    placement.generation
-                ),
-            });
+            return Err(not_allowed(Refusal::FormerGeneration {
+                trajectory: trajectory.to_owned(),
+                current: placement.generation,
+                asked: generation,
+            }));
         }
         if let Some(held) = placement.port {
             if held.pid != pid && super::attach::process_alive(held.pid) {
-                return Err(ControlError::NotAllowed {
-                    reason: format!(
-                        "process {held_pid} writes `{trajectory}`; process {pid} may not take it over while it lives",
-                        held_pid = held.pid
-                    ),
-                });
+                return Err(not_allowed(Refusal::WriterLives {
+                    trajectory: trajectory.to_owned(),
+                    holder: held.pid,
+                    pid,
+                }));
             }
         }
         placement.port = Some(WriterPort { publisher, pid });
@@ -665,16 +656,19 @@ fn check_origin(request: &Request, origin: Origin) -> Result<(), ControlError> {
     match origin {
         Origin::Coordinator => Ok(()),
         Origin::Process(pid) if status.pid == Some(pid) => Ok(()),
-        Origin::Process(pid) => Err(ControlError::NotAllowed {
-            reason: format!(
-                "process {pid} may not report on `{name}` (pid {}); only its supervisor or itself may",
-                status.pid.map_or_else(|| "none".to_owned(), |p| p.to_string())
-            ),
-        }),
-        Origin::Unknown => Err(ControlError::NotAllowed {
-            reason: format!("a process the coordinator cannot identify may not report on `{name}`"),
-        }),
+        Origin::Process(pid) => Err(not_allowed(Refusal::NotItsRecord {
+            pid,
+            process: name.clone(),
+            reported: status.pid,
+        })),
+        Origin::Unknown => {
+            Err(not_allowed(Refusal::UnknownOrigin { action: format!("report on `{name}`") }))
+        }
     }
+}
+
+fn not_allowed(reason: Refusal) -> ControlError {
+    ControlError::NotAllowed { reason }
 }
 
 #[cfg(test)]
@@ -903,7 +897,7 @@ mod tests {
         assert!(matches!(r.handle(Request::DeclareProcess { spec }), Response::Done));
         let e = err(take(&mut r, "kept"));
         assert!(
-            matches!(&e, ControlError::NotAllowed { reason } if reason.contains("restarts")),
+            matches!(&e, ControlError::NotAllowed { reason: Refusal::Supervised { .. } }),
             "{e:?}"
         );
         // A sampled trajectory lives where its sensor is.

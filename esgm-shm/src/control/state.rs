@@ -103,15 +103,33 @@ pub enum StateError {
         /// The cause.
         source: std::io::Error,
     },
-    /// The state file is not a snapshot this esgm can read; move it away to start
-    /// afresh.
-    #[error("{} is not a registry state this esgm can read: {reason}", path.display())]
+    /// The state file is not a snapshot at all (damaged or not esgm's): move it away
+    /// to start afresh.
+    #[error("{} is not a registry state this esgm can read: {source}", path.display())]
     Unreadable {
         /// The file.
         path: PathBuf,
-        /// Why.
-        reason: String,
+        /// What did not parse.
+        source: serde_json::Error,
     },
+    /// The state file is a snapshot of another format version (another esgm): use
+    /// that esgm, or move the file away to start afresh.
+    #[error(
+        "{} is a registry state of format version {found}; this esgm reads {expected}",
+        path.display()
+    )]
+    OtherVersion {
+        /// The file.
+        path: PathBuf,
+        /// Its format version.
+        found: u32,
+        /// The version this esgm reads.
+        expected: u32,
+    },
+    /// The registry could not be written out as a snapshot (a bug: every part of it
+    /// is serialisable).
+    #[error("cannot write the registry as a snapshot: {0}")]
+    Unwritable(#[source] serde_json::Error),
     /// Another coordinator serves this domain (it holds the lock).
     #[error("another coordinator holds {}", path.display())]
     Locked {
@@ -225,14 +243,12 @@ impl StateDir {
             Err(e) => return Err(io("cannot read", &path)(e)),
         };
         let snapshot: Snapshot = serde_json::from_slice(&bytes)
-            .map_err(|e| StateError::Unreadable { path: path.clone(), reason: e.to_string() })?;
+            .map_err(|source| StateError::Unreadable { path: path.clone(), source })?;
         if snapshot.version != SNAPSHOT_VERSION {
-            return Err(StateError::Unreadable {
+            return Err(StateError::OtherVersion {
                 path,
-                reason: format!(
-                    "format version {}, this esgm reads {SNAPSHOT_VERSION}",
-                    snapshot.version
-                ),
+                found: snapshot.version,
+                expected: SNAPSHOT_VERSION,
             });
         }
         Ok(Some(snapshot))
@@ -242,8 +258,7 @@ impl StateDir {
     pub fn save(&self, snapshot: &Snapshot) -> Result<(), StateError> {
         let path = self.registry_file();
         let tmp = self.dir.join("registry.json.tmp");
-        let bytes = serde_json::to_vec_pretty(snapshot)
-            .map_err(|e| StateError::Unreadable { path: path.clone(), reason: e.to_string() })?;
+        let bytes = serde_json::to_vec_pretty(snapshot).map_err(StateError::Unwritable)?;
         let mut file = File::create(&tmp).map_err(io("cannot create", &tmp))?;
         file.write_all(&bytes).map_err(io("cannot write", &tmp))?;
         file.sync_all().map_err(io("cannot sync", &tmp))?;
@@ -312,7 +327,11 @@ mod tests {
         let mut newer = snapshot();
         newer.version = SNAPSHOT_VERSION + 1;
         dir.save(&newer).unwrap();
-        assert!(matches!(dir.load(), Err(StateError::Unreadable { .. })));
+        assert!(matches!(
+            dir.load(),
+            Err(StateError::OtherVersion { found, expected: SNAPSHOT_VERSION, .. })
+                if found == SNAPSHOT_VERSION + 1
+        ));
         std::fs::remove_dir_all(dir.path()).unwrap();
     }
 

@@ -247,7 +247,18 @@ impl Responses {
         });
         answers.push(Response::Error(ControlError::NotSaved { reason: "ü".into() }));
         answers.push(Response::Error(ControlError::TooLarge { bytes: usize::MAX, max: 1 }));
-        answers.push(Response::Error(ControlError::BadRequest { reason: "ü".into() }));
+        answers.push(Response::Error(ControlError::NotAllowed {
+            reason: esgm_shm::control::Refusal::WriterLives {
+                trajectory: "ü".into(),
+                holder: u32::MAX,
+                pid: 0,
+            },
+        }));
+        answers.push(Response::Error(ControlError::IllegalName {
+            what: "trajectory".into(),
+            name: "a/b".into(),
+            reason: esgm_shm::control::limits::NameRule::BadCharacter('/'),
+        }));
         let seeds = answers.iter().map(response_bytes).collect::<Result<_, _>>()?;
         Ok(Self { seeds })
     }

@@ -16,9 +16,9 @@
 
 use std::path::PathBuf;
 
+use esgm_core::Entity;
 use esgm_core::esgm::{TrajectoryInfo, TrajectoryKind};
 use esgm_core::library::{Image, RobotState};
-use esgm_core::Entity;
 use esgm_recording::{
     Compression, EventKind, RecordOptions, RecordedEvent, Recording, RecordingWriter, TypeSchema,
 };
