@@ -141,8 +141,8 @@ pub use qos::{DEFAULT_MAX_HISTORY, Delivery, TrajectoryQos, history_bound, histo
 pub use received::ReceivedSample;
 pub use sample_check::{SampleVerdict, check_sample};
 pub use service::{
-    Cleanup, CleanupReporter, DeadNodeCleanup, OpenError, ShmNode, ShmService, cleanup_dead_nodes,
-    node_config,
+    Cleanup, CleanupFailure, CleanupReporter, DeadNodeCleanup, OpenError, ShmNode, ShmService,
+    cleanup_dead_nodes, node_config,
 };
 pub use service_name::{
     NameError, TrajectoryServiceNames, node_name, nodes_of, processes_of, unique_domain,

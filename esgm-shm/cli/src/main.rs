@@ -121,6 +121,10 @@ enum Command {
     /// Carry trajectories to and from other hosts over Zenoh (runs `esgm-bridge`).
     #[command(disable_help_flag = true)]
     Bridge(cmd::bridge::Args),
+    /// ROS 2 topics in as trajectories, trajectories out as ROS 2 topics, over DDS
+    /// without a ROS installation (runs `esgm-ros2`).
+    #[command(disable_help_flag = true)]
+    Ros2(cmd::ros2::Args),
     /// Run one of the system's processes (started by `esgm demo`; also by hand).
     #[command(subcommand, hide = true)]
     Worker(cmd::worker::Role),

@@ -65,8 +65,20 @@ pub enum Cleanup {
 pub struct DeadNodeCleanup {
     /// Dead nodes whose resources this call removed.
     pub removed: usize,
-    /// Dead nodes left in place, by node id, with the reason.
-    pub failed: Vec<(String, iceoryx2::node::NodeCleanupFailure)>,
+    /// Dead nodes left in place.
+    pub failed: Vec<CleanupFailure>,
+}
+
+/// A dead node [`cleanup_dead_nodes`] could not clean.
+#[derive(Debug)]
+pub struct CleanupFailure {
+    /// The node's id.
+    pub node: String,
+    /// Its name, if its details could still be read (`None`: a remnant, whose details
+    /// went with an earlier, interrupted cleanup; it holds no shared memory).
+    pub name: Option<String>,
+    /// iceoryx2's reason.
+    pub error: iceoryx2::node::NodeCleanupFailure,
 }
 
 /// Who reports a [`DeadNodeCleanup`], which sets how loudly its failures are logged.
@@ -87,14 +99,14 @@ impl DeadNodeCleanup {
         if self.removed > 0 {
             tracing::info!(removed = self.removed, "cleaned up resources of dead processes");
         }
-        for (node, error) in &self.failed {
-            match reporter {
-                CleanupReporter::Owner => {
-                    tracing::warn!(%node, ?error, "cannot clean up after a dead process")
+        for CleanupFailure { node, name, error } in &self.failed {
+            // A remnant without details (an interrupted cleanup's leftovers: tags, no
+            // memory) is not worth anyone's attention; it cannot be cleaned either.
+            match (reporter, name) {
+                (CleanupReporter::Owner, Some(name)) => {
+                    tracing::warn!(%node, %name, ?error, "cannot clean up after a dead process")
                 }
-                CleanupReporter::Bystander => {
-                    tracing::debug!(%node, ?error, "cannot clean up after a dead process")
-                }
+                _ => tracing::debug!(%node, ?name, ?error, "cannot clean up after a dead process"),
             }
         }
     }
@@ -108,7 +120,8 @@ pub fn cleanup_dead_nodes() -> Result<DeadNodeCleanup, iceoryx2::node::NodeListF
     let mut outcome = DeadNodeCleanup::default();
     Node::<ShmService>::list(iceoryx2::config::Config::global_config(), |state| {
         if let NodeState::Dead(view) = state {
-            let id = format!("{:?}", view.id());
+            let node = format!("{:?}", view.id());
+            let name = view.details().as_ref().map(|d| d.name().as_str().to_owned());
             match view.try_remove_stale_resources() {
                 Ok(()) => outcome.removed += 1,
                 // Someone else cleans it (another coordinator, a process that needs
@@ -117,7 +130,7 @@ pub fn cleanup_dead_nodes() -> Result<DeadNodeCleanup, iceoryx2::node::NodeListF
                     NodeCleanupFailure::ResourcesAlreadyCleanedUp
                     | NodeCleanupFailure::AnotherInstanceIsCleaningUpTheNode,
                 ) => {}
-                Err(e) => outcome.failed.push((id, e)),
+                Err(error) => outcome.failed.push(CleanupFailure { node, name, error }),
             }
         }
         iceoryx2::prelude::CallbackProgression::Continue

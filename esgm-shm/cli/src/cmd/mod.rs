@@ -20,6 +20,7 @@ pub mod record;
 pub mod registry;
 pub mod replay;
 pub mod reset;
+pub mod ros2;
 pub mod scale;
 pub mod soak;
 pub mod stats;
@@ -87,6 +88,7 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Compare(a) => compare::run(json, a),
         Command::Load(a) => load::run(domain, json, a),
         Command::Bridge(a) => bridge::run(domain, json, a),
+        Command::Ros2(a) => ros2::run(domain, a),
         Command::Soak(a) => soak::run(domain, a),
         Command::Scale(a) => scale::run(domain, a),
         Command::ScaleWorker(a) => scale::worker::run(domain, a),

@@ -40,6 +40,7 @@ pub mod apply;
 pub mod bridge;
 pub mod decl;
 pub mod generate;
+pub mod ros2;
 
 use std::path::{Path, PathBuf};
 
@@ -68,6 +69,8 @@ struct SystemFile {
     trajectories: Vec<Spanned<TrajectoryDecl>>,
     #[serde(default, rename = "bridge")]
     bridges: Vec<Spanned<bridge::BridgeDecl>>,
+    #[serde(default, rename = "ros2")]
+    ros2: Vec<Spanned<ros2::Ros2Decl>>,
 }
 
 /// Something wrong in a configuration file, at a line.
@@ -100,8 +103,8 @@ pub enum Serves {
     Unit(String),
     /// Structures pushed into this trajectory.
     Pushes(String),
-    /// Trajectories carried to and from other hosts, by this bridge (nothing to
-    /// register: its imports appear when the other host sends).
+    /// Trajectories carried to and from other hosts or a ROS 2 graph, by this bridge
+    /// (nothing to register: its imports appear when the other side sends).
     Bridge(String),
 }
 
@@ -219,6 +222,16 @@ pub fn parse(file: &str, text: &str, base: &Path) -> Result<Plan, ConfigError> {
         for b in &parsed.bridges {
             let line = line_of(b.span().start);
             let worker = bridge::bridge_worker(b.get_ref(), &program, base)
+                .map_err(|e| plan.error(line, format!("{e:#}")))?;
+            plan.workers.push(Item { line, what: worker });
+        }
+    }
+    if !parsed.ros2.is_empty() {
+        let line = line_of(parsed.ros2[0].span().start);
+        let program = ros2::ros2_program().map_err(|e| plan.error(line, format!("{e:#}")))?;
+        for d in &parsed.ros2 {
+            let line = line_of(d.span().start);
+            let worker = ros2::ros2_worker(d.get_ref(), &program)
                 .map_err(|e| plan.error(line, format!("{e:#}")))?;
             plan.workers.push(Item { line, what: worker });
         }

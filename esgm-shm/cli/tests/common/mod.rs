@@ -94,3 +94,4 @@ impl Drop for StopOnDrop {
 
 /// Tests that need root, namespaces or a binary beside `esgm`: skipped, or failed in CI.
 pub mod capability;
+pub mod netns;

@@ -1,0 +1,338 @@
+//! Importing: a ROS 2 topic read into a primitive trajectory this process writes.
+//!
+//! `--import /camera/image_raw:sensor_msgs/msg/Image[=camera]` subscribes to the topic
+//! and adds each message, converted ([`crate::mapping`]), to the trajectory (by default
+//! named after the topic: `camera_image_raw`), made with the library type if it does
+//! not exist. An image's pixels are written once, into the trajectory's shared memory.
+//! A message that does not decode, does not map or is refused by the trajectory's gate
+//! is counted with its cause and logged (the first of each cause per topic at warn,
+//! the rest at debug).
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use esgm_core::esgm::TrajectorySpec;
+use esgm_core::{
+    CacheConstraint, Clock as _, CreateError, EntityStructure, EntityTrajectoryStructure, Esgm,
+    FluentStreamPolicy, InProcessTrajectory, LookupError, SystemClock,
+};
+use esgm_shm::ShmEsgm;
+use ros2_client::dds::rustdds::mio1::{Events, Interest, Poll, Token};
+use ros2_client::{Node, Subscription};
+use serde::de::DeserializeOwned;
+
+use crate::mapping::{self, MappingError, RosType};
+use crate::msgs;
+use crate::node::{NodeError, TopicQos, topic_name};
+use crate::stats::{Direction, LossCause, Stats, TopicCounters};
+
+/// One `--import`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ImportSpec {
+    /// The ROS 2 topic (absolute).
+    pub topic: String,
+    /// Its message type.
+    pub ros_type: RosType,
+    /// The trajectory it goes into.
+    pub trajectory: String,
+}
+
+/// An `--import` that cannot be carried out.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum ImportError {
+    /// The spec is not `TOPIC:TYPE[=TRAJECTORY]`.
+    #[error(
+        "`{spec}`: write it as TOPIC:TYPE[=TRAJECTORY], e.g. /camera/image_raw:sensor_msgs/msg/Image"
+    )]
+    Syntax {
+        /// What was given.
+        spec: String,
+    },
+    /// The type does not map.
+    #[error(transparent)]
+    Mapping(#[from] MappingError),
+    /// The topic or its subscription.
+    #[error(transparent)]
+    Node(#[from] NodeError),
+    /// The trajectory exists with another type.
+    #[error("trajectory `{trajectory}` holds `{has}`, not the `{wants}` that {topic} maps to")]
+    WrongType {
+        /// The trajectory.
+        trajectory: String,
+        /// Its type.
+        has: String,
+        /// The type the topic maps to.
+        wants: String,
+        /// The topic.
+        topic: String,
+    },
+    /// The trajectory could not be made.
+    #[error("cannot make trajectory `{trajectory}`: {source}")]
+    Create {
+        /// The trajectory.
+        trajectory: String,
+        /// Why (boxed: it is large, and rare).
+        source: Box<CreateError>,
+    },
+    /// The trajectory could not be looked up.
+    #[error("cannot look up trajectory `{trajectory}`: {source}")]
+    Lookup {
+        /// The trajectory.
+        trajectory: String,
+        /// Why.
+        source: LookupError,
+    },
+    /// The import thread could not be started.
+    #[error("cannot start the thread importing {topic}: {source}")]
+    Thread {
+        /// The topic.
+        topic: String,
+        /// The OS's reason.
+        source: std::io::Error,
+    },
+}
+
+impl ImportSpec {
+    /// Parses `TOPIC:TYPE[=TRAJECTORY]`.
+    pub fn parse(spec: &str) -> Result<Self, ImportError> {
+        let syntax = || ImportError::Syntax { spec: spec.to_owned() };
+        let (topic, rest) = spec.split_once(':').ok_or_else(syntax)?;
+        let (ros_type, trajectory) = match rest.split_once('=') {
+            Some((t, name)) => (t, Some(name.to_owned())),
+            None => (rest, None),
+        };
+        if topic.is_empty() || ros_type.is_empty() || trajectory.as_deref() == Some("") {
+            return Err(syntax());
+        }
+        let ros_type = RosType::parse(ros_type)?;
+        let trajectory = trajectory.unwrap_or_else(|| trajectory_for(topic));
+        Ok(Self { topic: topic.to_owned(), ros_type, trajectory })
+    }
+}
+
+/// The trajectory a topic goes into by default: its name without the leading `/`,
+/// with `/` as `_` (`/camera/image_raw` → `camera_image_raw`).
+pub fn trajectory_for(topic: &str) -> String {
+    topic.trim_start_matches('/').replace('/', "_")
+}
+
+/// A message type that can be imported.
+trait Importable: DeserializeOwned + Send + 'static {
+    /// The message as a structure for `trajectory`, received at `now`.
+    fn structure(
+        &self,
+        trajectory: &InProcessTrajectory,
+        now: i64,
+    ) -> Result<EntityStructure, MappingError>;
+}
+
+impl Importable for msgs::Image {
+    fn structure(
+        &self,
+        t: &InProcessTrajectory,
+        now: i64,
+    ) -> Result<EntityStructure, MappingError> {
+        mapping::image_in(self, t, now)
+    }
+}
+
+impl Importable for msgs::Pose2D {
+    fn structure(
+        &self,
+        t: &InProcessTrajectory,
+        now: i64,
+    ) -> Result<EntityStructure, MappingError> {
+        Ok(mapping::pose_in(self, t.name(), now))
+    }
+}
+
+impl Importable for msgs::Vector3 {
+    fn structure(
+        &self,
+        t: &InProcessTrajectory,
+        now: i64,
+    ) -> Result<EntityStructure, MappingError> {
+        Ok(mapping::velocity_in(self, t.name(), now))
+    }
+}
+
+/// The trajectory `spec` goes into: the existing one if its type is the topic's, else
+/// a new primitive one of the library type, caching the topic's keep-last depth (what
+/// a late ROS 2 reader of a transient-local topic would get).
+fn trajectory(
+    esgm: &ShmEsgm,
+    spec: &ImportSpec,
+    qos: TopicQos,
+) -> Result<InProcessTrajectory, ImportError> {
+    let wants = spec.ros_type.esgm_type();
+    let lookup = |source| ImportError::Lookup { trajectory: spec.trajectory.clone(), source };
+    match esgm.get_entity_trajectory_structure_type(&spec.trajectory) {
+        Ok(t) if t.name == wants => {}
+        Ok(t) => {
+            return Err(ImportError::WrongType {
+                trajectory: spec.trajectory.clone(),
+                has: t.name,
+                wants: wants.to_owned(),
+                topic: spec.topic.clone(),
+            });
+        }
+        Err(LookupError::NoSuchEntityStructure { .. }) => {
+            let policy = FluentStreamPolicy::default().cache(CacheConstraint::Elements(qos.depth));
+            let created = esgm.create_trajectory(
+                TrajectorySpec::primitive(&spec.trajectory, wants).policy(policy),
+            );
+            match created {
+                Ok(t) => return Ok(t),
+                // Made meanwhile by someone else: looked up below.
+                Err(CreateError::EntityStructureAlreadyExists { .. }) => {}
+                Err(source) => {
+                    return Err(ImportError::Create {
+                        trajectory: spec.trajectory.clone(),
+                        source: Box::new(source),
+                    });
+                }
+            }
+        }
+        Err(e) => return Err(lookup(e)),
+    }
+    esgm.get_entity_trajectory_structure(&spec.trajectory).map_err(lookup)
+}
+
+/// Subscribes to `spec.topic` on `node` and starts the thread that imports it, until
+/// `stop`.
+pub fn spawn(
+    node: &mut Node,
+    esgm: &ShmEsgm,
+    spec: &ImportSpec,
+    qos: TopicQos,
+    stats: &Stats,
+    stop: &Arc<AtomicBool>,
+) -> Result<std::thread::JoinHandle<()>, ImportError> {
+    let handle = trajectory(esgm, spec, qos)?;
+    let counters = stats.topic(&spec.topic, &spec.trajectory, Direction::Import);
+    match spec.ros_type {
+        RosType::Image => start::<msgs::Image>(node, spec, qos, handle, counters, stop),
+        RosType::Pose2D => start::<msgs::Pose2D>(node, spec, qos, handle, counters, stop),
+        RosType::Vector3 => start::<msgs::Vector3>(node, spec, qos, handle, counters, stop),
+    }
+}
+
+fn start<M: Importable>(
+    node: &mut Node,
+    spec: &ImportSpec,
+    qos: TopicQos,
+    handle: InProcessTrajectory,
+    counters: Arc<TopicCounters>,
+    stop: &Arc<AtomicBool>,
+) -> Result<std::thread::JoinHandle<()>, ImportError> {
+    let create = |what, e: &dyn std::fmt::Debug| NodeError::Create {
+        what,
+        topic: spec.topic.clone(),
+        detail: format!("{e:?}"),
+    };
+    let topic = node
+        .create_topic(&topic_name(&spec.topic)?, spec.ros_type.message_type_name(), &qos.profile())
+        .map_err(|e| create("topic", &e))?;
+    let subscription: Subscription<M> =
+        node.create_subscription(&topic, None).map_err(|e| create("subscription", &e))?;
+    let stop = Arc::clone(stop);
+    let topic = spec.topic.clone();
+    std::thread::Builder::new()
+        .name(format!("ros2-import-{}", spec.trajectory))
+        .spawn(move || run(subscription, &handle, &counters, &topic, &stop))
+        .map_err(|source| ImportError::Thread { topic: spec.topic.clone(), source })
+}
+
+/// How long the import thread sleeps before it looks at `stop` again.
+const STOP_CHECK: Duration = Duration::from_millis(100);
+
+fn run<M: Importable>(
+    mut subscription: Subscription<M>,
+    handle: &InProcessTrajectory,
+    counters: &TopicCounters,
+    topic: &str,
+    stop: &AtomicBool,
+) {
+    let mut warned = [false; 3];
+    let mut warn = |cause: LossCause, detail: &dyn std::fmt::Display| {
+        let i = match cause {
+            LossCause::Malformed => 0,
+            LossCause::Unconvertible => 1,
+            _ => 2,
+        };
+        if std::mem::replace(&mut warned[i], true) {
+            tracing::debug!(%topic, ?cause, %detail, "a ROS 2 message not imported");
+        } else {
+            tracing::warn!(%topic, ?cause, %detail,
+                "a ROS 2 message not imported (counted; further ones of this cause at debug level)");
+        }
+    };
+    // Readiness, with a timeout to look at `stop`; without it, a poll of `take` now and then.
+    let mut poll = Poll::new()
+        .and_then(|p| {
+            p.registry().register(&mut subscription, Token(0), Interest::READABLE)?;
+            Ok(p)
+        })
+        .map_err(|e| tracing::warn!(%topic, error = %e, "cannot wait for messages; polling"))
+        .ok();
+    let mut events = Events::with_capacity(4);
+    while !stop.load(Ordering::Relaxed) {
+        match &mut poll {
+            Some(p) => {
+                if let Err(e) = p.poll(&mut events, Some(STOP_CHECK)) {
+                    tracing::debug!(%topic, error = %e, "interrupted wait for messages");
+                }
+            }
+            None => std::thread::sleep(Duration::from_millis(5)),
+        }
+        // Edge-triggered: take everything that has arrived.
+        loop {
+            match subscription.take() {
+                Ok(Some((message, _info))) => {
+                    let now = SystemClock.now();
+                    match message.structure(handle, now) {
+                        Ok(es) => match handle.add(es) {
+                            Ok(_) => counters.passed(),
+                            Err(e) => {
+                                counters.lost(LossCause::Refused, 1);
+                                warn(LossCause::Refused, &e);
+                            }
+                        },
+                        Err(e) => {
+                            counters.lost(LossCause::Unconvertible, 1);
+                            warn(LossCause::Unconvertible, &e);
+                        }
+                    }
+                }
+                Ok(None) => break,
+                Err(e) => {
+                    counters.lost(LossCause::Malformed, 1);
+                    warn(LossCause::Malformed, &format_args!("{e:?}"));
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+
+    #[test]
+    fn specs_parse_and_name_their_trajectory() {
+        let s = ImportSpec::parse("/camera/image_raw:sensor_msgs/msg/Image").unwrap();
+        assert_eq!((s.ros_type, s.trajectory.as_str()), (RosType::Image, "camera_image_raw"));
+        let s = ImportSpec::parse("/odom2d:geometry_msgs/msg/Pose2D=robot_state").unwrap();
+        assert_eq!((s.ros_type, s.trajectory.as_str()), (RosType::Pose2D, "robot_state"));
+        for bad in ["/camera", ":sensor_msgs/msg/Image", "/c:sensor_msgs/msg/Image="] {
+            assert!(matches!(ImportSpec::parse(bad), Err(ImportError::Syntax { .. })), "{bad}");
+        }
+        assert!(matches!(
+            ImportSpec::parse("/scan:sensor_msgs/msg/LaserScan"),
+            Err(ImportError::Mapping(MappingError::UnknownMessage { .. }))
+        ));
+    }
+}

@@ -1,0 +1,157 @@
+//! `esgm-ros2`: esgm beside ROS 2 (see the crate docs of `esgm_ros2`). Usually run as
+//! `esgm ros2 …`.
+
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::Context as _;
+use clap::Parser;
+use esgm_core::Esgm as _;
+use esgm_ros2::export::{self, ExportSpec};
+use esgm_ros2::import::{self, ImportSpec};
+use esgm_ros2::node::{self, TopicQos};
+use esgm_ros2::stats::Stats;
+use esgm_shm::ShmEsgm;
+
+/// esgm-ros2 — ROS 2 topics in as trajectories, trajectories out as ROS 2 topics.
+#[derive(Debug, Parser)]
+#[command(name = "esgm-ros2", version, about)]
+struct Cli {
+    /// The local esgm system (one coordinator per domain).
+    #[arg(long, env = "ESGM_DOMAIN", default_value = "esgm")]
+    domain: String,
+    /// The ROS 2 domain to join, as ROS 2 takes it.
+    #[arg(long, env = "ROS_DOMAIN_ID", default_value_t = 0)]
+    ros_domain_id: u16,
+    /// The node's name on the ROS 2 graph (`/esgm/<name>`; default `esgm_<domain>`).
+    #[arg(long)]
+    node_name: Option<String>,
+    /// Import a ROS 2 topic: `TOPIC:TYPE[=TRAJECTORY]`, e.g.
+    /// `/camera/image_raw:sensor_msgs/msg/Image`; repeatable.
+    #[arg(long, value_name = "TOPIC:TYPE[=TRAJECTORY]")]
+    import: Vec<String>,
+    /// Export a trajectory as a ROS 2 topic: `TRAJECTORY[=TOPIC]` (default topic
+    /// `/<trajectory>`); repeatable.
+    #[arg(long, value_name = "TRAJECTORY[=TOPIC]")]
+    export: Vec<String>,
+    /// Read imported topics best effort (matches sensor drivers that publish best
+    /// effort; a reliable reader, the default, does not).
+    #[arg(long)]
+    best_effort: bool,
+    /// Keep-last depth of every topic.
+    #[arg(long, default_value_t = 10)]
+    depth: usize,
+    /// Print every topic's counters as JSON lines this often (e.g. `1s`).
+    #[arg(long, value_parser = humantime::parse_duration)]
+    report_every: Option<Duration>,
+    /// Check the settings and exit, joining nothing (`esgm apply` checks a `[[ros2]]`
+    /// with it).
+    #[arg(long)]
+    check: bool,
+}
+
+fn main() -> ExitCode {
+    esgm_shm::process::init_logging();
+    let cli = Cli::parse();
+    match run(&cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("esgm-ros2: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: &Cli) -> anyhow::Result<()> {
+    let imports: Vec<ImportSpec> =
+        cli.import.iter().map(|s| ImportSpec::parse(s)).collect::<Result<_, _>>()?;
+    let exports: Vec<ExportSpec> =
+        cli.export.iter().map(|s| ExportSpec::parse(s)).collect::<Result<_, _>>()?;
+    anyhow::ensure!(
+        !imports.is_empty() || !exports.is_empty(),
+        "nothing to do: give at least one --import TOPIC:TYPE or --export TRAJECTORY"
+    );
+    anyhow::ensure!(cli.depth > 0, "--depth must be at least 1, not {}", cli.depth);
+    if cli.check {
+        return Ok(());
+    }
+    let domain = &cli.domain;
+    let esgm = ShmEsgm::builder()
+        .domain(domain)
+        .host(format!("esgm-ros2-{}", std::process::id()))
+        .connect()
+        .with_context(|| format!("cannot reach the esgm system `{domain}`"))?;
+    let name = cli.node_name.clone().unwrap_or_else(|| node::default_node_name(domain));
+    let mut ros = node::join(cli.ros_domain_id, &name)?;
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = Arc::clone(&stop);
+        ctrlc::set_handler(move || stop.store(true, Ordering::Relaxed))
+            .context("installing the Ctrl-C/SIGTERM handler")?;
+    }
+    let stats = Stats::default();
+    let qos = TopicQos { reliable: true, depth: cli.depth };
+    let mut threads = Vec::new();
+    for spec in &imports {
+        let import_qos = TopicQos { reliable: !cli.best_effort, ..qos };
+        threads.push(import::spawn(&mut ros, &esgm, spec, import_qos, &stats, &stop)?);
+    }
+    for spec in &exports {
+        threads.push(export::spawn(&mut ros, &esgm, spec, qos, &stats, &stop)?);
+    }
+    println!(
+        "esgm-ros2: esgm domain `{domain}`, ROS 2 domain {} as /esgm/{name}: importing {:?}, exporting {:?}",
+        cli.ros_domain_id,
+        imports.iter().map(|s| format!("{} -> {}", s.topic, s.trajectory)).collect::<Vec<_>>(),
+        exports.iter().map(|s| format!("{} -> {}", s.trajectory, s.topic)).collect::<Vec<_>>(),
+    );
+    let mut reported = Instant::now();
+    let mut pinged = Instant::now();
+    let mut coordinator_gone = None::<Instant>;
+    while !stop.load(Ordering::Relaxed) {
+        std::thread::sleep(Duration::from_millis(50));
+        if pinged.elapsed() >= Duration::from_millis(500) {
+            pinged = Instant::now();
+            if esgm.ping() {
+                coordinator_gone = None;
+            } else if coordinator_gone.get_or_insert_with(Instant::now).elapsed()
+                > Duration::from_secs(3)
+            {
+                stop.store(true, Ordering::Relaxed);
+                eprintln!("esgm-ros2: the coordinator of `{domain}` is gone; stopping");
+            }
+        }
+        if cli.report_every.is_some_and(|every| reported.elapsed() >= every) {
+            reported = Instant::now();
+            report(&stats);
+        }
+    }
+    for t in threads {
+        if t.join().is_err() {
+            tracing::error!("an esgm-ros2 thread panicked");
+        }
+    }
+    report(&stats);
+    Ok(())
+}
+
+/// Prints every topic's counters, a JSON line each.
+fn report(stats: &Stats) {
+    use std::io::Write as _;
+    let mut out = std::io::stdout().lock();
+    for topic in stats.snapshot() {
+        match serde_json::to_string(&topic) {
+            Ok(line) => {
+                if writeln!(out, "{line}").is_err() {
+                    return;
+                }
+            }
+            Err(e) => tracing::error!(error = %e, "cannot write a report line"),
+        }
+    }
+    if let Err(e) = out.flush() {
+        tracing::debug!(error = %e, "cannot flush the report");
+    }
+}

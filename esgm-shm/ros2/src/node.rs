@@ -1,0 +1,111 @@
+//! The ROS 2 node `esgm ros2` is on the graph, and the QoS of its topics.
+//!
+//! **Names.** Topics are absolute ROS 2 names (`/camera/image_raw`), which DDS sees as
+//! `rt/camera/image_raw`, as every ROS 2 middleware on DDS writes them. The node is
+//! `/esgm/<name>` (by default `esgm_<domain>`, so `ros2 node list` shows which esgm
+//! system it bridges).
+//!
+//! **QoS**, as ROS 2's defaults: reliable, keep-last `depth` (10), volatile. An import
+//! may ask for best effort (`--best-effort`), which also matches best-effort sensor
+//! drivers (`rclcpp::SensorDataQoS`); a reliable reader never matches them.
+
+use ros2_client::qos::{Durability, History};
+use ros2_client::{Context, ContextOptions, Name, Node, NodeName, NodeOptions, QosProfile};
+
+/// How a topic is delivered.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TopicQos {
+    /// Reliable (ROS 2's default) or best effort.
+    pub reliable: bool,
+    /// Keep-last depth.
+    pub depth: usize,
+}
+
+impl Default for TopicQos {
+    fn default() -> Self {
+        Self { reliable: true, depth: 10 }
+    }
+}
+
+impl TopicQos {
+    /// As `ros2-client` takes it.
+    pub fn profile(self) -> QosProfile {
+        let base = QosProfile::publisher_default()
+            .durability(Durability::Volatile)
+            .history(History::KeepLast { depth: self.depth });
+        if self.reliable {
+            base.reliability_reliable(ros2_client::qos::WhenFull::DEFAULT)
+        } else {
+            base.reliability_best_effort()
+        }
+    }
+}
+
+/// Joining the ROS 2 graph failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum NodeError {
+    /// The DDS participant could not be made (no network interface, a domain id past
+    /// what DDS ports allow).
+    #[error("cannot join ROS 2 domain {domain_id}: {detail}")]
+    Participant {
+        /// `ROS_DOMAIN_ID`.
+        domain_id: u16,
+        /// DDS's words.
+        detail: String,
+    },
+    /// The node's name is not a ROS 2 name.
+    #[error("`{name}` is not a ROS 2 node name: {detail}")]
+    NodeName {
+        /// The name.
+        name: String,
+        /// Why.
+        detail: String,
+    },
+    /// A topic's name is not a ROS 2 name (absolute, letters, digits, `_` and `/`).
+    #[error("`{topic}` is not a ROS 2 topic name: {detail}")]
+    TopicName {
+        /// The name.
+        topic: String,
+        /// Why.
+        detail: String,
+    },
+    /// The node, a topic, a publisher or a subscription could not be made.
+    #[error("cannot create the {what} of `{topic}`: {detail}")]
+    Create {
+        /// What.
+        what: &'static str,
+        /// The topic (or node).
+        topic: String,
+        /// DDS's words.
+        detail: String,
+    },
+}
+
+/// Joins ROS 2 domain `domain_id` as the node `/esgm/<name>`.
+pub fn join(domain_id: u16, name: &str) -> Result<Node, NodeError> {
+    let context = Context::with_options(ContextOptions::new().domain_id(domain_id))
+        .map_err(|e| NodeError::Participant { domain_id, detail: e.to_string() })?;
+    let node_name = NodeName::new("/esgm", name)
+        .map_err(|e| NodeError::NodeName { name: name.to_owned(), detail: format!("{e:?}") })?;
+    context.new_node(node_name, NodeOptions::new().enable_rosout(false)).map_err(|e| {
+        NodeError::Create { what: "node", topic: name.to_owned(), detail: format!("{e:?}") }
+    })
+}
+
+/// A ROS 2 topic name as `ros2-client` takes it.
+pub fn topic_name(topic: &str) -> Result<Name, NodeError> {
+    let bad = |detail: String| NodeError::TopicName { topic: topic.to_owned(), detail };
+    if !topic.starts_with('/') {
+        return Err(bad("esgm takes absolute names (`/camera/image_raw`)".into()));
+    }
+    Name::parse(topic).map_err(|e| bad(format!("{e:?}")))
+}
+
+/// The node name for esgm system `domain`: `esgm_<domain>`, with what ROS 2 names do
+/// not allow replaced by `_`.
+pub fn default_node_name(domain: &str) -> String {
+    let cleaned: String =
+        domain.chars().map(|c| if c.is_ascii_alphanumeric() { c } else { '_' }).collect();
+    format!("esgm_{cleaned}")
+}

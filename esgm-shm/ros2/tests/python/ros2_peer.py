@@ -1,0 +1,120 @@
+"""A stand-in ROS 2 node for esgm-ros2's tests: the `cyclonedds` package from PyPI,
+with IDL types named as ROS 2 names them (`sensor_msgs::msg::dds_::Image_` on topic
+`rt/camera/image_raw`), talks the wire of a ROS 2 node on rmw_cyclonedds. It shares no
+code with esgm or with ros2-client.
+
+Usage:
+  ros2_peer.py publish-images TOPIC COUNT
+      waits for a reader, publishes COUNT 4x3 rgb8 images (stamp = 1000 s + i ms,
+      frame "camera", pixel k of image i = (k + 7 i) % 251), then waits for the
+      reader to acknowledge them; prints `published COUNT`.
+  ros2_peer.py read-poses TOPIC COUNT TIMEOUT_S
+      reads COUNT geometry_msgs/msg/Pose2D and prints each as a JSON line.
+"""
+
+import json
+import sys
+import time
+from dataclasses import dataclass
+
+from cyclonedds.core import Qos, Policy
+from cyclonedds.domain import DomainParticipant
+from cyclonedds.idl import IdlStruct
+from cyclonedds.idl.types import float64, int32, sequence, uint8, uint32
+from cyclonedds.pub import DataWriter
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+
+@dataclass
+class Time(IdlStruct, typename="builtin_interfaces::msg::dds_::Time_"):
+    sec: int32
+    nanosec: uint32
+
+
+@dataclass
+class Header(IdlStruct, typename="std_msgs::msg::dds_::Header_"):
+    stamp: Time
+    frame_id: str
+
+
+@dataclass
+class Image(IdlStruct, typename="sensor_msgs::msg::dds_::Image_"):
+    header: Header
+    height: uint32
+    width: uint32
+    encoding: str
+    is_bigendian: uint8
+    step: uint32
+    data: sequence[uint8]
+
+
+@dataclass
+class Pose2D(IdlStruct, typename="geometry_msgs::msg::dds_::Pose2D_"):
+    x: float64
+    y: float64
+    theta: float64
+
+
+# ROS 2's default QoS: reliable, keep last 10, volatile.
+QOS = Qos(
+    Policy.Reliability.Reliable(duration(seconds=1)),
+    Policy.History.KeepLast(10),
+    Policy.Durability.Volatile,
+)
+
+
+def dds_topic(ros_topic):
+    return "rt" + ros_topic
+
+
+def wait_for(condition, timeout, what):
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            sys.exit(f"ros2_peer: {what} within {timeout} s")
+        time.sleep(0.02)
+
+
+def publish_images(topic, count):
+    dp = DomainParticipant(0)
+    writer = DataWriter(dp, Topic(dp, dds_topic(topic), Image), qos=QOS)
+    wait_for(lambda: len(writer.get_matched_subscriptions()) > 0, 20, "no reader matched")
+    w, h = 4, 3
+    for i in range(count):
+        data = [(k + 7 * i) % 251 for k in range(w * h * 3)]
+        stamp = Time(sec=1000, nanosec=i * 1_000_000)
+        writer.write(Image(Header(stamp, "camera"), h, w, "rgb8", 0, w * 3, data))
+        time.sleep(0.01)
+    writer.wait_for_acks(duration(seconds=10))
+    print(f"published {count}", flush=True)
+
+
+def read_poses(topic, count, timeout):
+    dp = DomainParticipant(0)
+    reader = DataReader(dp, Topic(dp, dds_topic(topic), Pose2D), qos=QOS)
+    print("reading", flush=True)
+    got = 0
+    deadline = time.monotonic() + timeout
+    while got < count:
+        if time.monotonic() > deadline:
+            sys.exit(f"ros2_peer: {got} of {count} poses within {timeout} s")
+        for pose in reader.take(N=count):
+            print(json.dumps({"x": pose.x, "y": pose.y, "theta": pose.theta}), flush=True)
+            got += 1
+        time.sleep(0.01)
+
+
+def main():
+    mode = sys.argv[1]
+    if mode == "publish-images":
+        publish_images(sys.argv[2], int(sys.argv[3]))
+    elif mode == "read-poses":
+        read_poses(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]))
+    else:
+        sys.exit(f"ros2_peer: unknown mode {mode}")
+
+
+if __name__ == "__main__":
+    main()
