@@ -1,7 +1,8 @@
 //! A ROS 2 node declared in a system's TOML file (`[[ros2]]`): `esgm apply` checks it
 //! with the process's own parser (refused naming the line), has the supervisor run
 //! `esgm-ros2`, and restarts it after `kill -9`; images a stand-in ROS 2 node publishes
-//! (the `cyclonedds` package from PyPI) reach the trajectory.
+//! (the `cyclonedds` package from PyPI) reach the trajectory, and the tutorial's blob
+//! detection runs on them unchanged.
 //!
 //! DDS discovery is multicast: the whole system (`esgm up`, hence its workers) and the
 //! stand-in run in a loopback-only network namespace this test makes.
@@ -53,9 +54,14 @@ fn a_ros2_node_declared_in_toml_imports_a_topic_and_comes_back_after_kill_9() {
     let bad = dir.path().join("bad.toml");
     std::fs::write(&bad, "\n[[ros2]]\nimport = [\"/scan:sensor_msgs/msg/LaserScan\"]\n").unwrap();
     let good = dir.path().join("ros2.toml");
+    // The tutorial's blob detection, unchanged, on the imported camera.
     std::fs::write(
         &good,
-        "[[ros2]]\nimport = [\"/camera/image_raw:sensor_msgs/msg/Image=images\"]\n",
+        "[[ros2]]\nimport = [\"/camera/image_raw:sensor_msgs/msg/Image=images\"]\n\n\
+         [[unit]]\nname = \"BlobDetection\"\n\n\
+         [[trajectory]]\nname = \"images\"\nprimitive = \"Image\"\nwriter = \"ros2\"\n\
+         policy = { cache = 5 }\n\n\
+         [[trajectory]]\nname = \"blobs\"\ncomputed = \"BlobDetection\"\ninputs = [\"images\"]\n",
     )
     .unwrap();
 
@@ -119,6 +125,16 @@ fn a_ros2_node_declared_in_toml_imports_a_topic_and_comes_back_after_kill_9() {
             }
         }
         assert!(Instant::now() < deadline, "the images never arrived: {}", o.stderr);
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    // The blob detection ran on the third image too.
+    let deadline = Instant::now() + WAIT;
+    loop {
+        let o = esgm(&["--domain", &domain, "--json", "latest", "blobs"], WAIT);
+        if o.code == Some(0) && o.stdout.contains("1000002000000") {
+            break;
+        }
+        assert!(Instant::now() < deadline, "no blobs of the third image: {}{}", o.stdout, o.stderr);
         std::thread::sleep(Duration::from_millis(100));
     }
 }

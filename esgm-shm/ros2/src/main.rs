@@ -78,11 +78,18 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         return Ok(());
     }
     let domain = &cli.domain;
+    // Run by the supervisor (`[[ros2]]`), it is the worker it was started as, so a
+    // trajectory the file places there (`writer = "ros2"`) is written here, and taken
+    // back after a restart.
+    let host = std::env::var(esgm_shm::WORKER_ENV)
+        .unwrap_or_else(|_| format!("esgm-ros2-{}", std::process::id()));
     let esgm = ShmEsgm::builder()
         .domain(domain)
-        .host(format!("esgm-ros2-{}", std::process::id()))
+        .host(host)
         .connect()
         .with_context(|| format!("cannot reach the esgm system `{domain}`"))?;
+    // It writes the trajectories it imports.
+    esgm.serve_assignments();
     let name = cli.node_name.clone().unwrap_or_else(|| node::default_node_name(domain));
     let mut ros = node::join(cli.ros_domain_id, &name)?;
     let stop = Arc::new(AtomicBool::new(false));
