@@ -15,9 +15,10 @@ use esgm_core::{
     SubscribeOptions, Subscription,
 };
 use esgm_shm::ShmEsgm;
-use ros2_client::{Node, Publisher};
+use ros2_client::{MessageTypeName, Node, Publisher};
 use serde::Serialize;
 
+use crate::generated;
 use crate::mapping::{self, MappingError, RosType};
 use crate::msgs;
 use crate::node::{NodeError, TopicQos, topic_name};
@@ -89,29 +90,8 @@ impl ExportSpec {
     }
 }
 
-/// A message type that can be exported.
-trait Exportable: Serialize + Send + 'static + Sized {
-    /// The structure as this message.
-    fn message(es: &EntityStructure) -> Result<Self, MappingError>;
-}
-
-impl Exportable for msgs::Image {
-    fn message(es: &EntityStructure) -> Result<Self, MappingError> {
-        mapping::image_out(es)
-    }
-}
-
-impl Exportable for msgs::Pose2D {
-    fn message(es: &EntityStructure) -> Result<Self, MappingError> {
-        mapping::pose_out(es)
-    }
-}
-
-impl Exportable for msgs::Vector3 {
-    fn message(es: &EntityStructure) -> Result<Self, MappingError> {
-        mapping::velocity_out(es)
-    }
-}
+/// How a structure becomes a message of the topic's type.
+type Convert<M> = Box<dyn Fn(&Arc<EntityStructure>) -> Result<M, MappingError> + Send>;
 
 /// Looks the trajectory up, makes its topic and publisher on `node`, and starts the
 /// thread that exports it, until `stop`.
@@ -127,25 +107,43 @@ pub fn spawn(
     let handle = esgm.get_entity_trajectory_structure(&spec.trajectory).map_err(lookup)?;
     let type_name =
         esgm.get_entity_trajectory_structure_type(&spec.trajectory).map_err(lookup)?.name;
-    let ros_type = RosType::for_esgm_type(&type_name)?;
     let counters = stats.topic(&spec.topic, &spec.trajectory, Direction::Export);
+    let Ok(ros_type) = RosType::for_esgm_type(&type_name) else {
+        // No standard message: its generated one (`esgm ros2 msg <Type>`).
+        let schema = Arc::new(generated::Schema::new(&type_name, |t| {
+            esgm.get_entity_structure_type(t).ok()
+        })?);
+        let name = MessageTypeName::new(generated::PACKAGE, &type_name);
+        let convert: Convert<generated::Generated> = Box::new(move |es| {
+            Ok(generated::Generated { structure: Arc::clone(es), schema: Arc::clone(&schema) })
+        });
+        return start(node, spec, name, qos, &handle, convert, counters, stop);
+    };
+    let name = ros_type.message_type_name();
     match ros_type {
-        RosType::Image => start::<msgs::Image>(node, spec, ros_type, qos, &handle, counters, stop),
+        RosType::Image => {
+            let convert: Convert<msgs::Image> = Box::new(|es| mapping::image_out(es));
+            start(node, spec, name, qos, &handle, convert, counters, stop)
+        }
         RosType::Pose2D => {
-            start::<msgs::Pose2D>(node, spec, ros_type, qos, &handle, counters, stop)
+            let convert: Convert<msgs::Pose2D> = Box::new(|es| mapping::pose_out(es));
+            start(node, spec, name, qos, &handle, convert, counters, stop)
         }
         RosType::Vector3 => {
-            start::<msgs::Vector3>(node, spec, ros_type, qos, &handle, counters, stop)
+            let convert: Convert<msgs::Vector3> = Box::new(|es| mapping::velocity_out(es));
+            start(node, spec, name, qos, &handle, convert, counters, stop)
         }
     }
 }
 
-fn start<M: Exportable>(
+#[allow(clippy::too_many_arguments, reason = "one call per message kind, all of the same shape")]
+fn start<M: Serialize + Send + 'static>(
     node: &mut Node,
     spec: &ExportSpec,
-    ros_type: RosType,
+    message_type: MessageTypeName,
     qos: TopicQos,
     handle: &InProcessTrajectory,
+    convert: Convert<M>,
     counters: Arc<TopicCounters>,
     stop: &Arc<AtomicBool>,
 ) -> Result<std::thread::JoinHandle<()>, ExportError> {
@@ -155,7 +153,7 @@ fn start<M: Exportable>(
         detail: format!("{e:?}"),
     };
     let topic = node
-        .create_topic(&topic_name(&spec.topic)?, ros_type.message_type_name(), &qos.profile())
+        .create_topic(&topic_name(&spec.topic)?, message_type, &qos.profile())
         .map_err(|e| create("topic", &e))?;
     let publisher: Publisher<M> =
         node.create_publisher(&topic, None).map_err(|e| create("publisher", &e))?;
@@ -166,16 +164,17 @@ fn start<M: Exportable>(
     let (trajectory, topic) = (spec.trajectory.clone(), spec.topic.clone());
     std::thread::Builder::new()
         .name(format!("ros2-export-{trajectory}"))
-        .spawn(move || run(&subscription, &publisher, &counters, &topic, &stop))
+        .spawn(move || run(&subscription, &publisher, &*convert, &counters, &topic, &stop))
         .map_err(|source| ExportError::Thread { trajectory: spec.trajectory.clone(), source })
 }
 
 /// How long the export thread waits for a sample before it looks at `stop` again.
 const STOP_CHECK: Duration = Duration::from_millis(100);
 
-fn run<M: Exportable>(
+fn run<M: Serialize + 'static>(
     subscription: &Subscription<esgm_core::Sample>,
     publisher: &Publisher<M>,
+    convert: &(dyn Fn(&Arc<EntityStructure>) -> Result<M, MappingError> + Send),
     counters: &TopicCounters,
     topic: &str,
     stop: &AtomicBool,
@@ -196,7 +195,7 @@ fn run<M: Exportable>(
             counters.lost(LossCause::SlowSide, now - overflowed);
             overflowed = now;
         }
-        let sent = M::message(&sample.structure)
+        let sent = convert(&sample.structure)
             .map_err(|e| (LossCause::Unconvertible, e.to_string()))
             .and_then(|m| {
                 publisher.publish(m).map_err(|e| match e {

@@ -5,6 +5,7 @@
 //! messages ([`mapping`]), every message counted ([`stats`]).
 
 pub mod export;
+pub mod generated;
 pub mod import;
 pub mod mapping;
 pub mod msgs;

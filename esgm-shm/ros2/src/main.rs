@@ -50,6 +50,19 @@ struct Cli {
     /// with it).
     #[arg(long)]
     check: bool,
+    #[command(subcommand)]
+    command: Option<Command>,
+}
+
+#[derive(Debug, clap::Subcommand)]
+enum Command {
+    /// Print the ROS 2 message definitions (`.msg`) a type of the system is exported
+    /// as: its own `esgm_msgs/msg/<Type>` and one for each nested frame type, so a ROS
+    /// workspace can build them (a library type with a standard message says which).
+    Msg {
+        /// The entity structure type.
+        type_name: String,
+    },
 }
 
 fn main() -> ExitCode {
@@ -65,6 +78,9 @@ fn main() -> ExitCode {
 }
 
 fn run(cli: &Cli) -> anyhow::Result<()> {
+    if let Some(Command::Msg { type_name }) = &cli.command {
+        return print_msg(&cli.domain, type_name);
+    }
     let imports: Vec<ImportSpec> =
         cli.import.iter().map(|s| ImportSpec::parse(s)).collect::<Result<_, _>>()?;
     let exports: Vec<ExportSpec> =
@@ -141,6 +157,26 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         }
     }
     report(&stats);
+    Ok(())
+}
+
+/// `esgm-ros2 msg TYPE`.
+fn print_msg(domain: &str, type_name: &str) -> anyhow::Result<()> {
+    if let Ok(standard) = esgm_ros2::mapping::RosType::for_esgm_type(type_name) {
+        println!("# {type_name} is exported as the standard message {}", standard.name());
+        return Ok(());
+    }
+    let esgm = ShmEsgm::builder()
+        .domain(domain)
+        .tool()
+        .connect()
+        .with_context(|| format!("cannot reach the esgm system `{domain}`"))?;
+    let schema = esgm_ros2::generated::Schema::new(type_name, |t| {
+        esgm_core::Esgm::get_entity_structure_type(&esgm, t).ok()
+    })?;
+    for (name, text) in schema.msg_files() {
+        println!("# {}/msg/{name}.msg\n{text}", esgm_ros2::generated::PACKAGE);
+    }
     Ok(())
 }
 

@@ -28,7 +28,7 @@ use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
-use esgm_core::library::{Image, RobotState};
+use esgm_core::library::{Blob, BlobSeq, Image, RobotState};
 use esgm_core::{Entity, EntityTrajectoryStructure, Esgm, TypeRegistry};
 use esgm_shm::ShmEsgm;
 use esgm_shm::control::{Coordinator, Registry};
@@ -193,6 +193,68 @@ fn a_ros2_node_on_cyclonedds_feeds_an_image_trajectory_and_reads_an_exported_pos
     assert!(import.contains("\"lost\":[]"), "{import}");
     let export = bridge.line("the export's report", |l| l.contains("\"direction\":\"export\""));
     assert!(export.contains("\"lost\":[]"), "{export}");
+}
+
+/// A type without a standard message (the tutorial's `BlobSeq`) is exported as its
+/// generated `esgm_msgs/msg/BlobSeq`, whose definition `esgm-ros2 msg` prints, and a
+/// reader built from that definition reads every field.
+#[test]
+fn a_type_without_a_standard_message_is_read_as_its_generated_one() {
+    let Some(ns) = capability::needs("root and `ip netns`", Namespace::create("ros2gen")) else {
+        return;
+    };
+    let python = python::venv_python();
+    let domain = esgm_shm::unique_domain("ros2gen");
+    let _coordinator = Coordinator::spawn(&domain, Registry::new(TypeRegistry::with_library()))
+        .expect("start a coordinator");
+    let esgm = ShmEsgm::builder().domain(&domain).host("ros2-gen-test").connect().unwrap();
+    let blobs = esgm.create_primitive_entity_trajectory_structure("blobs", "BlobSeq").unwrap();
+
+    let msg =
+        Command::new(ESGM_ROS2).args(["--domain", &domain, "msg", "BlobSeq"]).output().unwrap();
+    let printed = String::from_utf8_lossy(&msg.stdout);
+    assert!(msg.status.success(), "{}", String::from_utf8_lossy(&msg.stderr));
+    assert!(
+        printed.contains("# esgm_msgs/msg/BlobSeq.msg\n")
+            && printed.contains("std_msgs/Header header\nesgm_msgs/Blob[] items\n")
+            && printed.contains("string name\nint64 x\nint64 y\nint64 size\n"),
+        "{printed}"
+    );
+
+    let mut bridge = ns.command(ESGM_ROS2);
+    bridge.args(["--domain", &domain, "--export", "blobs"]);
+    let mut bridge = Running::start(bridge);
+    bridge.line("the bridge's ready line", |l| l.starts_with("esgm-ros2:"));
+    let mut reader = ns.command(python.to_str().unwrap());
+    reader.arg(peer_script()).args(["read-blob-seqs", "/blobs", "1", "20"]);
+    let mut reader = Running::start(reader);
+    reader.line("the reader's start", |l| l == "reading");
+    let seq = |vt: i64| {
+        let blob = |i: i64| Blob { x: 10 * i, y: -i, size: 100 + i };
+        BlobSeq { items: vec![blob(1), blob(2)] }.to_structure("camera", vt, vt)
+    };
+    let deadline = Instant::now() + WAIT;
+    let line = loop {
+        blobs.add(seq(1_700_000_000_123_456_789)).unwrap();
+        if let Ok(line) = reader.lines.recv_timeout(Duration::from_millis(200)) {
+            break line;
+        }
+        assert!(Instant::now() < deadline, "no BlobSeq reached the cyclonedds reader");
+    };
+    let v: serde_json::Value = serde_json::from_str(&line).unwrap();
+    assert_eq!(v["stamp"].as_i64(), Some(1_700_000_000_123_456_789), "{line}");
+    assert_eq!(v["frame"], "camera", "{line}");
+    // Each frame's name, then its attributes, as the structure holds them.
+    let Some(esgm_core::Value::EntityFrameSeq(frames)) = seq(0).get("items").cloned() else {
+        panic!("a BlobSeq holds frames")
+    };
+    let expected: Vec<serde_json::Value> = frames
+        .iter()
+        .zip(1..)
+        .map(|(f, i)| serde_json::json!([f.name, 10 * i, -i, 100 + i]))
+        .collect();
+    assert_eq!(v["items"], serde_json::Value::Array(expected), "{line}");
+    reader.succeeds("the cyclonedds reader");
 }
 
 #[test]

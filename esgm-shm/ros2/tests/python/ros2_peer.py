@@ -10,6 +10,10 @@ Usage:
       reader to acknowledge them; prints `published COUNT`.
   ros2_peer.py read-poses TOPIC COUNT TIMEOUT_S
       reads COUNT geometry_msgs/msg/Pose2D and prints each as a JSON line.
+  ros2_peer.py read-blob-seqs TOPIC COUNT TIMEOUT_S
+      reads COUNT esgm_msgs/msg/BlobSeq, the message `esgm ros2 msg BlobSeq` defines
+      (declared here from that definition, as rosidl would generate it), and prints
+      each as a JSON line.
 """
 
 import json
@@ -20,7 +24,7 @@ from dataclasses import dataclass
 from cyclonedds.core import Qos, Policy
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.idl import IdlStruct
-from cyclonedds.idl.types import float64, int32, sequence, uint8, uint32
+from cyclonedds.idl.types import float64, int32, int64, sequence, uint8, uint32
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
@@ -57,6 +61,20 @@ class Pose2D(IdlStruct, typename="geometry_msgs::msg::dds_::Pose2D_"):
     theta: float64
 
 
+@dataclass
+class Blob(IdlStruct, typename="esgm_msgs::msg::dds_::Blob_"):
+    name: str
+    x: int64
+    y: int64
+    size: int64
+
+
+@dataclass
+class BlobSeq(IdlStruct, typename="esgm_msgs::msg::dds_::BlobSeq_"):
+    header: Header
+    items: sequence[Blob]
+
+
 # ROS 2's default QoS: reliable, keep last 10, volatile.
 QOS = Qos(
     Policy.Reliability.Reliable(duration(seconds=1)),
@@ -91,19 +109,32 @@ def publish_images(topic, count):
     print(f"published {count}", flush=True)
 
 
-def read_poses(topic, count, timeout):
+def read(topic, kind, count, timeout, show):
     dp = DomainParticipant(0)
-    reader = DataReader(dp, Topic(dp, dds_topic(topic), Pose2D), qos=QOS)
+    reader = DataReader(dp, Topic(dp, dds_topic(topic), kind), qos=QOS)
     print("reading", flush=True)
     got = 0
     deadline = time.monotonic() + timeout
     while got < count:
         if time.monotonic() > deadline:
-            sys.exit(f"ros2_peer: {got} of {count} poses within {timeout} s")
-        for pose in reader.take(N=count):
-            print(json.dumps({"x": pose.x, "y": pose.y, "theta": pose.theta}), flush=True)
+            sys.exit(f"ros2_peer: {got} of {count} messages within {timeout} s")
+        for message in reader.take(N=count):
+            print(json.dumps(show(message)), flush=True)
             got += 1
         time.sleep(0.01)
+
+
+def read_poses(topic, count, timeout):
+    read(topic, Pose2D, count, timeout, lambda p: {"x": p.x, "y": p.y, "theta": p.theta})
+
+
+def read_blob_seqs(topic, count, timeout):
+    def show(m):
+        stamp = m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec
+        items = [[b.name, b.x, b.y, b.size] for b in m.items]
+        return {"stamp": stamp, "frame": m.header.frame_id, "items": items}
+
+    read(topic, BlobSeq, count, timeout, show)
 
 
 def main():
@@ -112,6 +143,8 @@ def main():
         publish_images(sys.argv[2], int(sys.argv[3]))
     elif mode == "read-poses":
         read_poses(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]))
+    elif mode == "read-blob-seqs":
+        read_blob_seqs(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]))
     else:
         sys.exit(f"ros2_peer: unknown mode {mode}")
 
