@@ -42,9 +42,17 @@ static LOG_FILTER: OnceLock<SetFilter> = OnceLock::new();
 /// be replaced while the process runs ([`apply_log_level`]; `esgm log-level`, or
 /// `set_log_level` from any process of the system, reaches it).
 pub fn init_logging() {
+    init_logging_with("warn");
+}
+
+/// [`init_logging`] with `default` as the filter when `RUST_LOG` is unset: a program
+/// quiets a dependency's warnings that are not news for it (e.g. `esgm-ros2` needs no
+/// ROS installation, so `ros2-client`'s "ROS_DISTRO is not set" is not one).
+pub fn init_logging_with(default: &str) {
     use tracing_subscriber::layer::SubscriberExt as _;
     use tracing_subscriber::util::SubscriberInitExt as _;
     let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .or_else(|_| tracing_subscriber::EnvFilter::try_new(default))
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("warn"));
     let (filter, handle) = tracing_subscriber::reload::Layer::new(filter);
     tracing_subscriber::registry()

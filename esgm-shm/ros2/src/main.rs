@@ -66,7 +66,8 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    esgm_shm::process::init_logging();
+    // No ROS installation is needed, so ros2-client's check of ROS_DISTRO is not news.
+    esgm_shm::process::init_logging_with("warn,ros2_client::distributions=error");
     let cli = Cli::parse();
     match run(&cli) {
         Ok(()) => ExitCode::SUCCESS,
@@ -119,10 +120,10 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
     let mut threads = Vec::new();
     for spec in &imports {
         let import_qos = TopicQos { reliable: !cli.best_effort, ..qos };
-        threads.push(import::spawn(&mut ros, &esgm, spec, import_qos, &stats, &stop)?);
+        threads.push(import::spawn(&mut ros.node, &esgm, spec, import_qos, &stats, &stop)?);
     }
     for spec in &exports {
-        threads.push(export::spawn(&mut ros, &esgm, spec, qos, &stats, &stop)?);
+        threads.push(export::spawn(&mut ros.node, &esgm, spec, qos, &stats, &stop)?);
     }
     println!(
         "esgm-ros2: esgm domain `{domain}`, ROS 2 domain {} as /esgm/{name}: importing {:?}, exporting {:?}",

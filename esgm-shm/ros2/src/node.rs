@@ -82,15 +82,40 @@ pub enum NodeError {
     },
 }
 
+/// The node, and the DDS participant under it.
+pub struct RosNode {
+    /// The node (dropped first: see `context`).
+    pub node: Node,
+    /// The participant, kept past the node: the node's own writers (parameter events)
+    /// are dropped after its reference to the participant, and the last reference
+    /// stopping the participant first made each exit log an error.
+    context: Context,
+}
+
+impl RosNode {
+    /// The DDS participant's context.
+    pub fn context(&self) -> &Context {
+        &self.context
+    }
+}
+
+impl std::fmt::Debug for RosNode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RosNode").field("node", &self.node.fully_qualified_name()).finish()
+    }
+}
+
 /// Joins ROS 2 domain `domain_id` as the node `/esgm/<name>`.
-pub fn join(domain_id: u16, name: &str) -> Result<Node, NodeError> {
+pub fn join(domain_id: u16, name: &str) -> Result<RosNode, NodeError> {
     let context = Context::with_options(ContextOptions::new().domain_id(domain_id))
         .map_err(|e| NodeError::Participant { domain_id, detail: e.to_string() })?;
     let node_name = NodeName::new("/esgm", name)
         .map_err(|e| NodeError::NodeName { name: name.to_owned(), detail: format!("{e:?}") })?;
-    context.new_node(node_name, NodeOptions::new().enable_rosout(false)).map_err(|e| {
-        NodeError::Create { what: "node", topic: name.to_owned(), detail: format!("{e:?}") }
-    })
+    let node =
+        context.new_node(node_name, NodeOptions::new().enable_rosout(false)).map_err(|e| {
+            NodeError::Create { what: "node", topic: name.to_owned(), detail: format!("{e:?}") }
+        })?;
+    Ok(RosNode { node, context })
 }
 
 /// A ROS 2 topic name as `ros2-client` takes it.
