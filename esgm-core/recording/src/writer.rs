@@ -68,6 +68,12 @@ pub struct RecordOptions {
     /// channels (they cost a second, JSON copy of each structure). Image trajectories
     /// always have their `foxglove.RawImage` view: it is where their pixels are stored.
     pub views: bool,
+    /// Write every view in the ROS 2 MCAP profile instead (`ros2msg` schemas, `cdr`
+    /// messages, as rosbag2 writes them), so ROS 2 tools read the views as a bag: the
+    /// library types as their standard messages (`sensor_msgs/msg/Image`…), every other
+    /// type as its generated `esgm_msgs` message. An image's pixels are then stored
+    /// twice, in its view and in the lossless channel.
+    pub ros2: bool,
     /// Free-form metadata of the recording (domain, host, command line…).
     pub metadata: BTreeMap<String, String>,
 }
@@ -81,6 +87,7 @@ impl Default for RecordOptions {
             split_bytes: None,
             split_duration: None,
             views: true,
+            ros2: false,
             metadata: BTreeMap::new(),
         }
     }
@@ -117,6 +124,13 @@ impl RecordOptions {
         self.split_duration = d;
         self
     }
+    /// Writes the views in the ROS 2 MCAP profile ([`RecordOptions::ros2`]).
+    #[must_use]
+    pub fn ros2(mut self, on: bool) -> Self {
+        self.ros2 = on;
+        self
+    }
+
     /// Turns the Foxglove views on or off.
     #[must_use]
     pub fn views(mut self, on: bool) -> Self {
@@ -185,12 +199,23 @@ pub struct WriteSummary {
 }
 
 /// How a trajectory is shown in Foxglove.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone)]
 enum ViewKind {
     /// `foxglove.RawImage`; the lossless message leaves the pixels out.
     Image,
     /// JSON with a JSON Schema.
     Json,
+    /// A ROS 2 message in CDR ([`RecordOptions::ros2`]).
+    Ros2(Ros2View),
+}
+
+/// Which ROS 2 message a trajectory's view is.
+#[derive(Debug, Clone)]
+enum Ros2View {
+    /// A standard message of a library type.
+    Standard(esgm_ros2msg::mapping::RosType),
+    /// The type's generated `esgm_msgs` message.
+    Generated(std::sync::Arc<esgm_ros2msg::generated::Schema>),
 }
 
 /// A trajectory's declaration, kept to write it again into each new file.
@@ -277,7 +302,9 @@ impl RecordingWriter {
         if self.trajectories.iter().any(|t| t.meta.info.name == info.name) {
             return Err(RecordError::DuplicateTrajectory(info.name));
         }
-        let view = if self.options.views || view::raw_image::image_view(&types.root).is_some() {
+        let view = if self.options.ros2 {
+            Some(ros2_view_of(&info.type_name, &types))
+        } else if self.options.views || view::raw_image::image_view(&types.root).is_some() {
             Some(view_of(&types))
         } else {
             None
@@ -343,6 +370,17 @@ impl RecordingWriter {
                     Err(e) => {
                         tracing::warn!(
                             "`{name}` at valid time {}: no JSON view: {e}",
+                            es.valid_time
+                        );
+                        false
+                    }
+                },
+                ViewKind::Ros2(v) => match encode_ros2(v, es, &mut self.view_scratch) {
+                    Ok(()) => true,
+                    Err(e) => {
+                        // Kept whole in the lossless channel, not shown.
+                        tracing::warn!(
+                            "`{name}` at valid time {}: no ROS 2 view: {e}",
                             es.valid_time
                         );
                         false
@@ -557,6 +595,58 @@ fn view_of(types: &TypeSchema) -> (ViewKind, ViewSchema) {
             |name: &str| -> Option<EntityStructureType> { types.nested.get(name).cloned() };
         (ViewKind::Json, view::json::json_schema(&types.root, &lookup))
     }
+}
+
+/// The ROS 2 view of a type: its standard message, else its generated one; a type no
+/// message can hold (an `Agg` attribute…) keeps the JSON view, said once.
+fn ros2_view_of(type_name: &str, types: &TypeSchema) -> (ViewKind, ViewSchema) {
+    use esgm_ros2msg::{definitions, generated, mapping::RosType};
+    let view = |kind, name: String, text: String| {
+        let schema = ViewSchema {
+            name,
+            encoding: "ros2msg",
+            message_encoding: "cdr",
+            data: text.into_bytes(),
+        };
+        (ViewKind::Ros2(kind), schema)
+    };
+    if let Ok(t) = RosType::for_esgm_type(type_name) {
+        return view(Ros2View::Standard(t), t.name().to_owned(), definitions::standard_schema(t));
+    }
+    let lookup = |n: &str| {
+        if n == type_name { Some(types.root.clone()) } else { types.nested.get(n).cloned() }
+    };
+    match generated::Schema::new(type_name, lookup) {
+        Ok(schema) => {
+            let text = definitions::generated_schema(&schema);
+            let name = format!("{}/msg/{type_name}", generated::PACKAGE);
+            view(Ros2View::Generated(std::sync::Arc::new(schema)), name, text)
+        }
+        Err(e) => {
+            tracing::warn!("type `{type_name}` has no ROS 2 message ({e}); its view is JSON");
+            view_of(types)
+        }
+    }
+}
+
+/// `es` as its ROS 2 view's CDR bytes, into `out`.
+fn encode_ros2(
+    v: &Ros2View,
+    es: &EntityStructure,
+    out: &mut Vec<u8>,
+) -> Result<(), Box<dyn std::error::Error>> {
+    use esgm_ros2msg::{cdr, generated::GeneratedRef, mapping, mapping::RosType};
+    match v {
+        Ros2View::Standard(RosType::Image) => cdr::encode_into(&mapping::image_out(es)?, out)?,
+        Ros2View::Standard(RosType::Pose2D) => cdr::encode_into(&mapping::pose_out(es)?, out)?,
+        Ros2View::Standard(RosType::Vector3) => {
+            cdr::encode_into(&mapping::velocity_out(es)?, out)?;
+        }
+        Ros2View::Generated(schema) => {
+            cdr::encode_into(&GeneratedRef { structure: es, schema }, out)?;
+        }
+    }
+    Ok(())
 }
 
 /// The `index`-th file of a recording at `path`: the path itself, then `stem_001.mcap`…

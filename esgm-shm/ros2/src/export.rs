@@ -21,7 +21,7 @@ use serde::Serialize;
 use crate::generated;
 use crate::mapping::{self, MappingError, RosType};
 use crate::msgs;
-use crate::node::{NodeError, TopicQos, topic_name};
+use crate::node::{NodeError, TopicQos, message_type_name, topic_name};
 use crate::stats::{Direction, LossCause, Stats, TopicCounters};
 
 /// One `--export`.
@@ -119,7 +119,7 @@ pub fn spawn(
         });
         return start(node, spec, name, qos, &handle, convert, counters, stop);
     };
-    let name = ros_type.message_type_name();
+    let name = message_type_name(ros_type);
     match ros_type {
         RosType::Image => {
             let convert: Convert<msgs::Image> = Box::new(|es| mapping::image_out(es));

@@ -24,7 +24,7 @@ use serde::de::DeserializeOwned;
 
 use crate::mapping::{self, MappingError, RosType};
 use crate::msgs;
-use crate::node::{NodeError, TopicQos, topic_name};
+use crate::node::{NodeError, TopicQos, message_type_name, topic_name};
 use crate::stats::{Direction, LossCause, Stats, TopicCounters};
 
 /// One `--import`.
@@ -233,7 +233,7 @@ fn start<M: Importable>(
         detail: format!("{e:?}"),
     };
     let topic = node
-        .create_topic(&topic_name(&spec.topic)?, spec.ros_type.message_type_name(), &qos.profile())
+        .create_topic(&topic_name(&spec.topic)?, message_type_name(spec.ros_type), &qos.profile())
         .map_err(|e| create("topic", &e))?;
     let subscription: Subscription<M> =
         node.create_subscription(&topic, None).map_err(|e| create("subscription", &e))?;

@@ -2,12 +2,12 @@
 //! a node (over DDS, in pure Rust: no ROS installation to source) and the esgm domain as
 //! a writer: ROS 2 topics come in as primitive trajectories ([`import`]), trajectories
 //! go out as ROS 2 topics ([`export`]), the library types mapped to the standard
-//! messages ([`mapping`]), every message counted ([`stats`]).
+//! messages and every other type to a generated one (crate `esgm_ros2msg`, shared with
+//! recordings in the ROS 2 profile), every message counted ([`stats`]).
+
+pub use esgm_ros2msg::{generated, mapping, msgs};
 
 pub mod export;
-pub mod generated;
 pub mod import;
-pub mod mapping;
-pub mod msgs;
 pub mod node;
 pub mod stats;

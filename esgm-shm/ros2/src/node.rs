@@ -118,6 +118,12 @@ pub fn join(domain_id: u16, name: &str) -> Result<RosNode, NodeError> {
     Ok(RosNode { node, context })
 }
 
+/// A standard message's type name as `ros2-client` takes it.
+pub fn message_type_name(t: esgm_ros2msg::mapping::RosType) -> ros2_client::MessageTypeName {
+    let (package, name) = t.package_and_name();
+    ros2_client::MessageTypeName::new(package, name)
+}
+
 /// A ROS 2 topic name as `ros2-client` takes it.
 pub fn topic_name(topic: &str) -> Result<Name, NodeError> {
     let bad = |detail: String| NodeError::TopicName { topic: topic.to_owned(), detail };

@@ -131,3 +131,26 @@ pub fn independent_reader(path: &Path) -> serde_json::Value {
         )
     })
 }
+
+/// Runs the ROS 2 MCAP decoder (`tests/python/read_ros2.py`, mcap-ros2-support) on the
+/// recording at `path`: `{topic: {schema, count, first}}` for its `cdr` channels.
+/// Panics with the decoder's stderr if it fails.
+pub fn ros2_reader(path: &Path) -> serde_json::Value {
+    let script = crate_dir().join("tests/python/read_ros2.py");
+    let out = Command::new(venv_python())
+        .arg(&script)
+        .arg(path)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run {}: {e}", script.display()));
+    if !out.status.success() {
+        panic!(
+            "the ROS 2 decoder failed on {} ({}):\n{}",
+            path.display(),
+            out.status,
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
+        panic!("the ROS 2 decoder printed no JSON ({e}):\n{}", String::from_utf8_lossy(&out.stdout))
+    })
+}

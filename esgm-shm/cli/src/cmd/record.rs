@@ -52,6 +52,11 @@ pub struct Args {
     /// only images; the file is smaller).
     #[arg(long)]
     pub no_views: bool,
+    /// Write the views in the ROS 2 MCAP profile (`ros2msg` schemas, CDR messages:
+    /// rosbag2 and Foxglove read them as a bag); images as `sensor_msgs/msg/Image`,
+    /// other types as their `esgm_msgs` messages (`esgm ros2 msg TYPE`).
+    #[arg(long)]
+    pub ros2: bool,
     /// Wait for the named trajectories to exist (a replay or a system starting up)
     /// instead of refusing names that do not exist yet.
     #[arg(long)]
@@ -85,6 +90,7 @@ pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
         .split_bytes(a.split_size.map(|m| m.saturating_mul(1 << 20)))
         .split_duration(a.split_duration)
         .views(!a.no_views)
+        .ros2(a.ros2)
         .meta("domain", domain)
         .meta("started_unix_ns", SystemClock.now().to_string());
     let writer = RecordingWriter::create(&a.output, options)

@@ -2,8 +2,16 @@
 //! field order is the message definition's: `ros2-client` encodes them as ROS 2's CDR,
 //! so their bytes are those of `rclcpp`'s messages of the same names.
 
-use ros2_client::builtin_interfaces::Time;
 use serde::{Deserialize, Serialize};
+
+/// `builtin_interfaces/msg/Time`: seconds and nanoseconds since the Unix epoch.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Time {
+    /// Whole seconds.
+    pub sec: i32,
+    /// Nanoseconds past `sec`, below 1e9.
+    pub nanosec: u32,
+}
 
 /// `std_msgs/msg/Header`: when and in which frame the data was taken.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -8,14 +8,12 @@
 //!
 //! A message without a header (`Pose2D`, `Vector3`) is valid when it is received.
 //! Anything that does not map is refused with a [`MappingError`] that names the field
-//! and its value, and is counted ([`crate::stats`]).
+//! and its value (`esgm ros2` counts it).
 
 use esgm_core::library::{DrivingDirection, Image, RobotState};
 use esgm_core::{Entity, EntityStructure, InProcessTrajectory, Time};
-use ros2_client::MessageTypeName;
-use ros2_client::builtin_interfaces::Time as RosTime;
 
-use crate::msgs;
+use crate::msgs::{self, Time as RosTime};
 
 /// A ROS 2 message type esgm maps.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -118,12 +116,12 @@ impl RosType {
             .join(", ")
     }
 
-    /// Its name as `ros2-client` takes it.
-    pub fn message_type_name(self) -> MessageTypeName {
+    /// Its package and message name (`("sensor_msgs", "Image")`).
+    pub fn package_and_name(self) -> (&'static str, &'static str) {
         let mut parts = self.name().split('/');
         let package = parts.next().unwrap_or_default();
         let name = parts.next_back().unwrap_or_default();
-        MessageTypeName::new(package, name)
+        (package, name)
     }
 }
 
@@ -135,12 +133,12 @@ pub fn ros_time(t: Time) -> Result<RosTime, MappingError> {
     let sec = i32::try_from(sec)
         .map_err(|_| unconvertible("header.stamp", t, "outside the seconds a ROS 2 stamp holds"))?;
     // rem_euclid of a positive divisor is within 0..1e9.
-    Ok(RosTime::new(sec, u32::try_from(nanosec).unwrap_or(0)))
+    Ok(RosTime { sec, nanosec: u32::try_from(nanosec).unwrap_or(0) })
 }
 
 /// A ROS 2 stamp as esgm's time.
 pub fn esgm_time(t: RosTime) -> Time {
-    t.to_nanos()
+    i64::from(t.sec) * 1_000_000_000 + i64::from(t.nanosec)
 }
 
 /// An imported `sensor_msgs/msg/Image` as an `Image` structure, its pixels written once
@@ -268,8 +266,7 @@ mod tests {
         assert!(e.to_string().contains("sensor_msgs/msg/Image (Image)"), "{e}");
         assert_eq!(RosType::for_esgm_type("DrivingDirection").unwrap(), RosType::Vector3);
         assert!(matches!(RosType::for_esgm_type("Blob"), Err(MappingError::NoMessage { .. })));
-        let t = RosType::Image.message_type_name();
-        assert_eq!((t.package_name(), t.type_name()), ("sensor_msgs", "Image"));
+        assert_eq!(RosType::Image.package_and_name(), ("sensor_msgs", "Image"));
     }
 
     #[test]
@@ -301,7 +298,10 @@ mod tests {
                 .unwrap();
         // 2 × 2 rgb8 with 2 bytes of padding a row.
         let msg = msgs::Image {
-            header: msgs::Header { stamp: RosTime::new(3, 5), frame_id: "camera".into() },
+            header: msgs::Header {
+                stamp: RosTime { sec: 3, nanosec: 5 },
+                frame_id: "camera".into(),
+            },
             height: 2,
             width: 2,
             encoding: "rgb8".into(),

@@ -181,7 +181,23 @@ pub struct Generated {
 
 impl Serialize for Generated {
     fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        let es = &self.structure;
+        GeneratedRef { structure: &self.structure, schema: &self.schema }.serialize(s)
+    }
+}
+
+/// A borrowed structure as its generated message (a recording encodes one per
+/// structure it writes, without sharing it).
+#[derive(Debug, Clone, Copy)]
+pub struct GeneratedRef<'a> {
+    /// The structure.
+    pub structure: &'a EntityStructure,
+    /// Its type's schema.
+    pub schema: &'a Schema,
+}
+
+impl Serialize for GeneratedRef<'_> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let es = self.structure;
         let Some(t) = self.schema.types.get(&self.schema.root) else {
             return Err(S::Error::custom("the schema lost its root type"));
         };
@@ -190,7 +206,7 @@ impl Serialize for Generated {
         st.serialize_field("header", &(stamp, &es.name))?;
         for a in &t.attributes {
             let value = es.get(&a.name).unwrap_or(&Value::NoValue);
-            st.serialize_field("field", &Field { attr: a, value, schema: &self.schema })?;
+            st.serialize_field("field", &Field { attr: a, value, schema: self.schema })?;
         }
         st.end()
     }
