@@ -1,0 +1,29 @@
+//! `esgm` for Python: the ESGM's operations with the seed's names on both runtimes
+//! ([`runtime`]), samples as read-only mappings ([`sample`]), attributes converted by the
+//! trajectory's type ([`values`]), images as numpy arrays over esgm's own memory in both
+//! directions ([`values::octets_array`], [`images`]), and the IDL's exceptions
+//! ([`errors`]). Built with maturin (`pip install ./esgm-shm/python`).
+
+mod errors;
+mod images;
+mod runtime;
+mod sample;
+mod trajectory;
+mod values;
+
+use pyo3::prelude::*;
+
+/// The `esgm` module.
+#[pymodule]
+fn esgm(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(runtime::connect, m)?)?;
+    m.add_function(wrap_pyfunction!(runtime::in_process, m)?)?;
+    m.add_class::<runtime::Esgm>()?;
+    m.add_class::<trajectory::Trajectory>()?;
+    m.add_class::<trajectory::Subscription>()?;
+    m.add_class::<sample::Sample>()?;
+    m.add_class::<images::ImageBuffer>()?;
+    m.add_class::<values::OctetsOwner>()?;
+    errors::register(m)?;
+    Ok(())
+}

@@ -1,0 +1,178 @@
+//! The ESGM itself, on either runtime: `esgm.connect(domain)` joins a system of
+//! processes in shared memory, `esgm.InProcess()` runs one in this process; both have
+//! the same methods, named as the seed's IDL names them.
+
+use std::sync::Arc;
+
+use esgm_core::{EntityStructureType, Esgm as _, InProcessEsgm, InProcessTrajectory};
+use esgm_shm::ShmEsgm;
+use pyo3::exceptions::PyTypeError;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+use crate::errors::to_py;
+use crate::trajectory::Trajectory;
+
+/// Either runtime.
+#[derive(Debug)]
+pub enum Runtime {
+    /// In this process.
+    Local(InProcessEsgm),
+    /// Across processes.
+    Shm(ShmEsgm),
+}
+
+macro_rules! on {
+    ($rt:expr, $e:ident => $body:expr) => {
+        match $rt {
+            Runtime::Local($e) => $body,
+            Runtime::Shm($e) => $body,
+        }
+    };
+}
+
+impl Runtime {
+    /// The registered type `name`, if any.
+    pub fn entity_type(&self, name: &str) -> Option<EntityStructureType> {
+        on!(self, e => e.get_entity_structure_type(name).ok())
+    }
+}
+
+/// A JSON value as Python (dicts, lists, numbers, strings).
+pub fn json_to_py<'py>(py: Python<'py>, v: &serde_json::Value) -> PyResult<Bound<'py, PyAny>> {
+    Ok(match v {
+        serde_json::Value::Null => py.None().into_bound(py),
+        serde_json::Value::Bool(b) => pyo3::types::PyBool::new(py, *b).to_owned().into_any(),
+        serde_json::Value::Number(n) => match n.as_i64() {
+            Some(i) => i.into_pyobject(py)?.into_any(),
+            None => n.as_f64().unwrap_or(f64::NAN).into_pyobject(py)?.into_any(),
+        },
+        serde_json::Value::String(s) => pyo3::types::PyString::new(py, s).into_any(),
+        serde_json::Value::Array(a) => {
+            let items = a.iter().map(|x| json_to_py(py, x)).collect::<PyResult<Vec<_>>>()?;
+            PyList::new(py, items)?.into_any()
+        }
+        serde_json::Value::Object(m) => {
+            let d = PyDict::new(py);
+            for (k, x) in m {
+                d.set_item(k, json_to_py(py, x)?)?;
+            }
+            d.into_any()
+        }
+    })
+}
+
+/// The ESGM: types and trajectories of one system.
+#[pyclass(frozen, module = "esgm")]
+#[derive(Debug)]
+pub struct Esgm {
+    runtime: Arc<Runtime>,
+}
+
+impl Esgm {
+    fn handle(&self, h: InProcessTrajectory) -> Trajectory {
+        Trajectory { handle: h, runtime: Arc::clone(&self.runtime) }
+    }
+}
+
+#[pymethods]
+impl Esgm {
+    /// The registered types' names.
+    fn entity_structure_type_names(&self) -> PyResult<Vec<String>> {
+        on!(&*self.runtime, e => e.entity_structure_type_names()).map_err(|e| to_py(&e))
+    }
+
+    /// A registered type: `{"name": …, "attributes": [{"name", "sort", "element_type"}]}`.
+    fn get_entity_structure_type<'py>(
+        &self,
+        py: Python<'py>,
+        name: &str,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let t =
+            on!(&*self.runtime, e => e.get_entity_structure_type(name)).map_err(|e| to_py(&e))?;
+        json_to_py(py, &serde_json::to_value(&t).map_err(|e| PyTypeError::new_err(e.to_string()))?)
+    }
+
+    /// The trajectories' names.
+    fn trajectories(&self) -> PyResult<Vec<String>> {
+        let listed = on!(&*self.runtime, e => e.trajectories()).map_err(|e| to_py(&e))?;
+        Ok(listed.into_iter().map(|t| t.name).collect())
+    }
+
+    /// Creates a primitive trajectory `name` of `type_name`, which programs add to.
+    fn create_primitive_entity_trajectory_structure(
+        &self,
+        py: Python<'_>,
+        name: &str,
+        type_name: &str,
+    ) -> PyResult<Trajectory> {
+        let rt = Arc::clone(&self.runtime);
+        let (name, type_name) = (name.to_owned(), type_name.to_owned());
+        let made = py.detach(move || {
+            on!(&*rt, e => e.create_primitive_entity_trajectory_structure(&name, &type_name))
+        });
+        made.map(|h| self.handle(h)).map_err(|e| to_py(&e))
+    }
+
+    /// The trajectory `name`.
+    fn get_entity_trajectory_structure(&self, py: Python<'_>, name: &str) -> PyResult<Trajectory> {
+        let rt = Arc::clone(&self.runtime);
+        let name = name.to_owned();
+        let got = py.detach(move || on!(&*rt, e => e.get_entity_trajectory_structure(&name)));
+        got.map(|h| self.handle(h)).map_err(|e| to_py(&e))
+    }
+
+    /// Destroys the trajectory `name`.
+    fn destroy_entity_trajectory_structure(&self, py: Python<'_>, name: &str) -> PyResult<()> {
+        let rt = Arc::clone(&self.runtime);
+        let name = name.to_owned();
+        py.detach(move || on!(&*rt, e => e.destroy_entity_trajectory_structure(&name)))
+            .map_err(|e| to_py(&e))
+    }
+
+    /// Waits until every worker of the system has processed what it was given, at most
+    /// `timeout` seconds.
+    #[pyo3(signature = (timeout=10.0))]
+    fn flush(&self, py: Python<'_>, timeout: f64) -> PyResult<()> {
+        if !(timeout.is_finite() && timeout >= 0.0) {
+            return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "timeout {timeout} is not a time"
+            )));
+        }
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs_f64(timeout);
+        let rt = Arc::clone(&self.runtime);
+        py.detach(move || on!(&*rt, e => e.flush(deadline))).map_err(|e| to_py(&e))
+    }
+
+    /// True if the system answers.
+    fn ping(&self, py: Python<'_>) -> bool {
+        let rt = Arc::clone(&self.runtime);
+        py.detach(move || on!(&*rt, e => e.ping()))
+    }
+
+    fn __repr__(&self) -> &'static str {
+        match &*self.runtime {
+            Runtime::Local(_) => "Esgm(in process)",
+            Runtime::Shm(_) => "Esgm(connected)",
+        }
+    }
+}
+
+/// Joins the system of `domain` (its coordinator: `esgm up` or `esgm demo`), as the
+/// process `host` (default: a name of its own).
+#[pyfunction]
+#[pyo3(signature = (domain="esgm", host=None))]
+pub fn connect(py: Python<'_>, domain: &str, host: Option<String>) -> PyResult<Esgm> {
+    let domain = domain.to_owned();
+    let host = host.unwrap_or_else(|| format!("python-{}", std::process::id()));
+    let connected = py.detach(move || ShmEsgm::builder().domain(&domain).host(host).connect());
+    let esgm = connected.map_err(|e| crate::errors::Unavailable::new_err(e.to_string()))?;
+    Ok(Esgm { runtime: Arc::new(Runtime::Shm(esgm)) })
+}
+
+/// An ESGM in this process (the embedded runtime), with the library types.
+#[pyfunction]
+#[pyo3(name = "InProcess")]
+pub fn in_process() -> Esgm {
+    Esgm { runtime: Arc::new(Runtime::Local(InProcessEsgm::builder().create())) }
+}

@@ -1,0 +1,256 @@
+//! Attribute values between Python and esgm, guided by the trajectory's type: a Python
+//! `int` is a `Long` where the type says `Long` and a `Time` where it says `Time`; a
+//! nested frame is a `dict`, a frame sequence a `list` of them. A value that does not fit
+//! raises `TypeError` naming the attribute, before anything is added.
+//!
+//! Octets (images) going out are numpy arrays over esgm's own memory (the writer's
+//! shared-memory chunk): no copy, read-only, and they keep that memory alive as long as
+//! they live ([`octets_array`]).
+
+use esgm_core::value::{Pos2, Vec3};
+use esgm_core::{
+    Attr, AttributeValuePair, EntityFrame, EntityStructureType, Octets, Value, ValueSort,
+};
+use numpy::ndarray::ArrayView1;
+use numpy::{PyArray1, PyArrayMethods, PyUntypedArrayMethods};
+use pyo3::exceptions::{PyKeyError, PyTypeError};
+use pyo3::prelude::*;
+use pyo3::types::{
+    PyBool, PyByteArray, PyBytes, PyDict, PyFloat, PyInt, PyList, PyString, PyTuple,
+};
+
+/// How nested frame types are found.
+pub type Types<'a> = &'a dyn Fn(&str) -> Option<EntityStructureType>;
+
+fn wrong(attr: &str, expected: &str, got: &Bound<'_, PyAny>) -> PyErr {
+    let got = got.get_type().name().map_or_else(|_| "?".to_owned(), |n| n.to_string());
+    PyTypeError::new_err(format!("attribute `{attr}` takes {expected}, not {got}"))
+}
+
+fn float(attr: &str, v: &Bound<'_, PyAny>) -> PyResult<f64> {
+    if v.is_instance_of::<PyBool>()
+        || !(v.is_instance_of::<PyFloat>() || v.is_instance_of::<PyInt>())
+    {
+        return Err(wrong(attr, "a float", v));
+    }
+    v.extract::<f64>()
+}
+
+fn int(attr: &str, v: &Bound<'_, PyAny>) -> PyResult<i64> {
+    if v.is_instance_of::<PyBool>() || !v.is_instance_of::<PyInt>() {
+        return Err(wrong(attr, "an int", v));
+    }
+    v.extract::<i64>().map_err(|_| {
+        PyTypeError::new_err(format!("attribute `{attr}`: the int does not fit 64 bits"))
+    })
+}
+
+fn string(attr: &str, v: &Bound<'_, PyAny>) -> PyResult<String> {
+    if !v.is_instance_of::<PyString>() {
+        return Err(wrong(attr, "a str", v));
+    }
+    v.extract::<String>()
+}
+
+fn list<'py>(attr: &str, v: &Bound<'py, PyAny>) -> PyResult<Vec<Bound<'py, PyAny>>> {
+    if !(v.is_instance_of::<PyList>() || v.is_instance_of::<PyTuple>()) {
+        return Err(wrong(attr, "a list", v));
+    }
+    v.try_iter()?.collect()
+}
+
+/// An image buffer's pixels as they are ([`crate::images`]); bytes, a bytearray or a
+/// C-contiguous uint8 numpy array, copied.
+fn octets(attr: &str, v: &Bound<'_, PyAny>) -> PyResult<Octets> {
+    if let Ok(buffer) = v.cast::<crate::images::ImageBuffer>() {
+        return crate::images::ImageBuffer::take(buffer);
+    }
+    if let Ok(b) = v.cast::<PyBytes>() {
+        return Ok(Octets::new(b.as_bytes().to_vec()));
+    }
+    if let Ok(b) = v.cast::<PyByteArray>() {
+        return Ok(Octets::new(b.to_vec()));
+    }
+    if let Ok(a) = v.cast::<numpy::PyUntypedArray>() {
+        let contiguous = a.is_c_contiguous();
+        let Ok(typed) = v.cast::<numpy::PyArrayDyn<u8>>() else {
+            return Err(PyTypeError::new_err(format!(
+                "attribute `{attr}` takes a uint8 array, not one of dtype {}",
+                a.dtype()
+            )));
+        };
+        if !contiguous {
+            return Err(PyTypeError::new_err(format!(
+                "attribute `{attr}`: the array is not contiguous (use numpy.ascontiguousarray)"
+            )));
+        }
+        let read = typed.try_readonly()?;
+        return Ok(Octets::new(read.as_slice()?.to_vec()));
+    }
+    Err(wrong(attr, "bytes, a bytearray or a uint8 numpy array", v))
+}
+
+fn xyz(attr: &str, v: &Bound<'_, PyAny>, n: usize) -> PyResult<Vec<f64>> {
+    let items = list(attr, v)?;
+    if items.len() != n {
+        return Err(PyTypeError::new_err(format!(
+            "attribute `{attr}` takes {n} floats, not {}",
+            items.len()
+        )));
+    }
+    items.iter().map(|x| float(attr, x)).collect()
+}
+
+/// The frame a `dict` describes, of type `ty` (its name under the key `name`).
+pub fn frame(
+    d: &Bound<'_, PyAny>,
+    attr: &str,
+    ty: &EntityStructureType,
+    types: Types<'_>,
+) -> PyResult<EntityFrame> {
+    let d = d.cast::<PyDict>().map_err(|_| wrong(attr, "a dict", d))?;
+    let name = match d.get_item("name")? {
+        Some(n) => string("name", &n)?,
+        None => String::new(),
+    };
+    let mut f = EntityFrame::new(name);
+    f.attributes = attributes(d, ty, types, &["name"])?;
+    Ok(f)
+}
+
+/// The attributes of `d` for type `ty`; `skip` lists keys that are not attributes.
+pub fn attributes(
+    d: &Bound<'_, PyDict>,
+    ty: &EntityStructureType,
+    types: Types<'_>,
+    skip: &[&str],
+) -> PyResult<Vec<AttributeValuePair>> {
+    let mut out = Vec::with_capacity(d.len());
+    for (k, v) in d.iter() {
+        let key: String = k.extract()?;
+        if skip.contains(&key.as_str()) {
+            continue;
+        }
+        let Some(attr) = ty.attribute(&key) else {
+            let known: Vec<&str> = ty.attributes.iter().map(|a| a.name.as_str()).collect();
+            return Err(PyKeyError::new_err(format!(
+                "type `{}` has no attribute `{key}`; it has {}",
+                ty.name,
+                known.join(", ")
+            )));
+        };
+        out.push(AttributeValuePair { name: key, value: to_value(&v, attr, types)? });
+    }
+    Ok(out)
+}
+
+/// A Python value as the value `attr` holds.
+pub fn to_value(v: &Bound<'_, PyAny>, attr: &Attr, types: Types<'_>) -> PyResult<Value> {
+    let name = attr.name.as_str();
+    let element = || -> PyResult<EntityStructureType> {
+        let e = attr.element_type.as_deref().unwrap_or_default();
+        types(e).ok_or_else(|| PyTypeError::new_err(format!("attribute `{name}`: no type `{e}`")))
+    };
+    Ok(match attr.sort {
+        ValueSort::Long => Value::Long(int(name, v)?),
+        ValueSort::Time => Value::Time(int(name, v)?),
+        ValueSort::Double => Value::Double(float(name, v)?),
+        ValueSort::Altitude => Value::Altitude(float(name, v)?),
+        ValueSort::Bool => {
+            if !v.is_instance_of::<PyBool>() {
+                return Err(wrong(name, "a bool", v));
+            }
+            Value::Bool(v.extract()?)
+        }
+        ValueSort::String => Value::String(string(name, v)?),
+        ValueSort::Symbol => Value::Symbol(string(name, v)?),
+        ValueSort::OctetSeq => Value::OctetSeq(octets(name, v)?),
+        ValueSort::LongSeq => {
+            Value::LongSeq(list(name, v)?.iter().map(|x| int(name, x)).collect::<PyResult<_>>()?)
+        }
+        ValueSort::DoubleSeq => Value::DoubleSeq(
+            list(name, v)?.iter().map(|x| float(name, x)).collect::<PyResult<_>>()?,
+        ),
+        ValueSort::SymbolSeq => Value::SymbolSeq(
+            list(name, v)?.iter().map(|x| string(name, x)).collect::<PyResult<_>>()?,
+        ),
+        ValueSort::Vec => {
+            let p = xyz(name, v, 3)?;
+            Value::Vec(Vec3 { x: p[0], y: p[1], z: p[2] })
+        }
+        ValueSort::Pos2 => {
+            let p = xyz(name, v, 2)?;
+            Value::Pos2(Pos2 { x: p[0], y: p[1] })
+        }
+        ValueSort::EntityFrame => Value::EntityFrame(Box::new(frame(v, name, &element()?, types)?)),
+        ValueSort::EntityFrameSeq => {
+            let ty = element()?;
+            Value::EntityFrameSeq(
+                list(name, v)?
+                    .iter()
+                    .map(|f| frame(f, name, &ty, types))
+                    .collect::<PyResult<_>>()?,
+            )
+        }
+        other => {
+            return Err(PyTypeError::new_err(format!(
+                "attribute `{name}` is of sort {other:?}, which the Python API does not write yet"
+            )));
+        }
+    })
+}
+
+/// Keeps esgm's memory of octets alive for the numpy arrays that view it.
+#[pyclass(frozen, module = "esgm")]
+#[derive(Debug)]
+pub struct OctetsOwner {
+    octets: Octets,
+}
+
+/// A read-only numpy array over `octets`, without a copy: its base keeps them alive.
+pub fn octets_array<'py>(py: Python<'py>, octets: &Octets) -> PyResult<Bound<'py, PyAny>> {
+    let owner = Bound::new(py, OctetsOwner { octets: octets.clone() })?;
+    let bytes: &[u8] = owner.get().octets.as_ref();
+    let view = ArrayView1::from(bytes);
+    // SAFETY: the array views the bytes of `owner.octets`, which `owner` (the array's
+    // base) keeps alive and never changes: octets are immutable once made, and the
+    // array is made read-only below before any Python code can see it.
+    let array = unsafe { PyArray1::<u8>::borrow_from_array(&view, owner.clone().into_any()) };
+    let flags = PyDict::new(py);
+    flags.set_item("write", false)?;
+    array.call_method("setflags", (), Some(&flags))?;
+    Ok(array.into_any())
+}
+
+/// A value as Python: numbers, strings, lists, dicts for frames, and octets as
+/// zero-copy read-only numpy arrays.
+pub fn from_value<'py>(py: Python<'py>, v: &Value) -> PyResult<Bound<'py, PyAny>> {
+    Ok(match v {
+        Value::NoValue => py.None().into_bound(py),
+        Value::Long(x) | Value::Time(x) => x.into_pyobject(py)?.into_any(),
+        Value::Double(x) | Value::Altitude(x) => x.into_pyobject(py)?.into_any(),
+        Value::Bool(x) => PyBool::new(py, *x).to_owned().into_any(),
+        Value::String(s) | Value::Symbol(s) => PyString::new(py, s).into_any(),
+        Value::OctetSeq(o) => octets_array(py, o)?,
+        Value::LongSeq(x) => PyList::new(py, x)?.into_any(),
+        Value::DoubleSeq(x) => PyList::new(py, x)?.into_any(),
+        Value::SymbolSeq(x) => PyList::new(py, x)?.into_any(),
+        Value::Vec(p) => PyTuple::new(py, [p.x, p.y, p.z])?.into_any(),
+        Value::Pos2(p) => PyTuple::new(py, [p.x, p.y])?.into_any(),
+        Value::EntityFrame(f) => frame_dict(py, f)?.into_any(),
+        Value::EntityFrameSeq(fs) => {
+            let items = fs.iter().map(|f| frame_dict(py, f)).collect::<PyResult<Vec<_>>>()?;
+            PyList::new(py, items)?.into_any()
+        }
+        other => PyString::new(py, &format!("{other:?}")).into_any(),
+    })
+}
+
+fn frame_dict<'py>(py: Python<'py>, f: &EntityFrame) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("name", &f.name)?;
+    for p in &f.attributes {
+        d.set_item(&p.name, from_value(py, &p.value)?)?;
+    }
+    Ok(d)
+}
