@@ -9,6 +9,7 @@ mod images;
 mod runtime;
 mod sample;
 mod trajectory;
+mod units;
 mod values;
 
 use pyo3::prelude::*;

@@ -130,6 +130,82 @@ impl Esgm {
             .map_err(|e| to_py(&e))
     }
 
+    /// Registers `unit` (an object with `compute(inputs, qtime)`, returning
+    /// `(name, valid_time, attributes)` or `None`) as the computational unit `name`
+    /// producing `type_name` from inputs of `input_types` (type names).
+    fn add_comp_unit(
+        &self,
+        py: Python<'_>,
+        name: &str,
+        type_name: &str,
+        input_types: Vec<String>,
+        unit: Py<PyAny>,
+    ) -> PyResult<()> {
+        let cu = Arc::new(crate::units::PyUnit::new(unit, name, type_name, &self.runtime));
+        let inputs = input_types.into_iter().map(esgm_core::esgm::InputType::Type).collect();
+        let rt = Arc::clone(&self.runtime);
+        let (name, type_name) = (name.to_owned(), type_name.to_owned());
+        py.detach(move || on!(&*rt, e => e.add_comp_unit(&name, &type_name, inputs, cu)))
+            .map_err(|e| to_py(&e))
+    }
+
+    /// Registers `sensor` (an object with `get_current_value(qtime)`, returning
+    /// `(name, valid_time, attributes)` or `None`) as the sensor `name` of `type_name`.
+    fn add_sensor_interface(
+        &self,
+        py: Python<'_>,
+        name: &str,
+        type_name: &str,
+        sensor: Py<PyAny>,
+    ) -> PyResult<()> {
+        let s = Arc::new(crate::units::PySensor::new(sensor, name, type_name, &self.runtime));
+        let rt = Arc::clone(&self.runtime);
+        let (name, type_name) = (name.to_owned(), type_name.to_owned());
+        py.detach(move || on!(&*rt, e => e.add_sensor_interface(&name, &type_name, s)))
+            .map_err(|e| to_py(&e))
+    }
+
+    /// A computed trajectory `name`: `unit` runs on every update of `inputs`.
+    fn create_computed_entity_trajectory_structure(
+        &self,
+        py: Python<'_>,
+        name: &str,
+        unit: &str,
+        inputs: Vec<String>,
+    ) -> PyResult<Trajectory> {
+        let rt = Arc::clone(&self.runtime);
+        let (name, unit) = (name.to_owned(), unit.to_owned());
+        let made = py.detach(move || {
+            let inputs: Vec<&str> = inputs.iter().map(String::as_str).collect();
+            on!(&*rt, e => e.create_computed_entity_trajectory_structure(&name, &unit, &inputs))
+        });
+        made.map(|h| self.handle(h)).map_err(|e| to_py(&e))
+    }
+
+    /// A sampled trajectory `name` (the seed's signature): `sensor` read every
+    /// `sample_period` ns from `start` to `end` (0: no bound), keeping `cache_size`
+    /// samples (0: all).
+    #[pyo3(signature = (name, sensor, sample_period, start=0, end=0, delay=0, cache_size=0))]
+    #[allow(clippy::too_many_arguments, reason = "the seed's operation, argument for argument")]
+    fn create_entity_trajectory_structure(
+        &self,
+        py: Python<'_>,
+        name: &str,
+        sensor: &str,
+        sample_period: i64,
+        start: i64,
+        end: i64,
+        delay: i64,
+        cache_size: i64,
+    ) -> PyResult<Trajectory> {
+        let rt = Arc::clone(&self.runtime);
+        let (name, sensor) = (name.to_owned(), sensor.to_owned());
+        let made = py.detach(move || {
+            on!(&*rt, e => e.create_entity_trajectory_structure(&name, &sensor, start, end, sample_period, delay, cache_size))
+        });
+        made.map(|h| self.handle(h)).map_err(|e| to_py(&e))
+    }
+
     /// Waits until every worker of the system has processed what it was given, at most
     /// `timeout` seconds.
     #[pyo3(signature = (timeout=10.0))]
