@@ -28,6 +28,10 @@ def InProcess() -> Esgm:
     """An ESGM in this process, with the library types."""
 
 class Esgm:
+    def create_entity_structure_type(self, type_name: str, attributes: Mapping[str, str]) -> None:
+        """Attribute name to sort: "Long", "Double", "String", "OctetSeq", "EntityFrameSeq<Blob>", …"""
+    def create_type(self, cls: type) -> str:
+        """Registers a dataclass (nested dataclasses and lists of them become frames)."""
     def entity_structure_type_names(self) -> List[str]: ...
     def get_entity_structure_type(self, name: str) -> Dict[str, Any]: ...
     def trajectories(self) -> List[str]: ...

@@ -73,6 +73,86 @@ impl Esgm {
     fn handle(&self, h: InProcessTrajectory) -> Trajectory {
         Trajectory { handle: h, runtime: Arc::clone(&self.runtime) }
     }
+
+    fn register(&self, py: Python<'_>, t: EntityStructureType) -> PyResult<()> {
+        let rt = Arc::clone(&self.runtime);
+        py.detach(move || on!(&*rt, e => e.create_type(t))).map_err(|e| to_py(&e))
+    }
+
+    /// The sort of a dataclass field's type hint (and its element type, registered).
+    fn sort_of(
+        &self,
+        py: Python<'_>,
+        class: &str,
+        field: &str,
+        hint: &Bound<'_, PyAny>,
+    ) -> PyResult<(esgm_core::ValueSort, Option<String>)> {
+        use esgm_core::ValueSort as S;
+        let builtins = py.import("builtins")?;
+        let is = |name: &str| -> PyResult<bool> { Ok(hint.is(&builtins.getattr(name)?)) };
+        // `bool` first: it is an `int` to Python.
+        for (name, sort) in [
+            ("bool", S::Bool),
+            ("int", S::Long),
+            ("float", S::Double),
+            ("str", S::String),
+            ("bytes", S::OctetSeq),
+            ("bytearray", S::OctetSeq),
+        ] {
+            if is(name)? {
+                return Ok((sort, None));
+            }
+        }
+        if let Ok(numpy) = py.import("numpy") {
+            if hint.is(&numpy.getattr("ndarray")?) {
+                return Ok((S::OctetSeq, None));
+            }
+        }
+        let typing = py.import("typing")?;
+        let dataclasses = py.import("dataclasses")?;
+        if dataclasses.call_method1("is_dataclass", (hint,))?.is_truthy()? {
+            return Ok((S::EntityFrame, Some(self.create_type(py, hint)?)));
+        }
+        if typing.call_method1("get_origin", (hint,))?.is(&builtins.getattr("list")?) {
+            let args = typing.call_method1("get_args", (hint,))?;
+            let item = args.get_item(0)?;
+            for (name, sort) in
+                [("int", S::LongSeq), ("float", S::DoubleSeq), ("str", S::SymbolSeq)]
+            {
+                if item.is(&builtins.getattr(name)?) {
+                    return Ok((sort, None));
+                }
+            }
+            if dataclasses.call_method1("is_dataclass", (&item,))?.is_truthy()? {
+                return Ok((S::EntityFrameSeq, Some(self.create_type(py, &item)?)));
+            }
+        }
+        Err(PyTypeError::new_err(format!(
+            "{class}.{field}: no esgm sort for the type {}; use int, float, bool, str, bytes, numpy.ndarray, list[int|float|str], a dataclass or a list of them",
+            hint.repr()?
+        )))
+    }
+}
+
+/// `t` with the attribute `name` of sort `spec` (`"Long"`, `"EntityFrameSeq<Blob>"`).
+fn with_attribute(t: EntityStructureType, name: &str, spec: &str) -> PyResult<EntityStructureType> {
+    let bad = || PyTypeError::new_err(format!("attribute `{name}`: `{spec}` is not a sort"));
+    let (sort, element) = match spec.split_once('<') {
+        Some((sort, rest)) => (sort.trim(), Some(rest.strip_suffix('>').ok_or_else(bad)?.trim())),
+        None => (spec.trim(), None),
+    };
+    let sort = esgm_core::ValueSort::parse(sort).ok_or_else(bad)?;
+    Ok(match (sort, element) {
+        (esgm_core::ValueSort::EntityFrame, Some(e)) => t.frame(name, e),
+        (esgm_core::ValueSort::EntityFrameSeq, Some(e)) => t.frame_seq(name, e),
+        (esgm_core::ValueSort::EntityFrame | esgm_core::ValueSort::EntityFrameSeq, None) => {
+            return Err(PyTypeError::new_err(format!(
+                "attribute `{name}`: a frame sort names its element type, e.g. `{spec}<Blob>`"
+            )));
+        }
+        (sort, None) => t.attr(name, sort),
+        (_, Some(_)) => return Err(bad()),
+    })
 }
 
 #[pymethods]
@@ -128,6 +208,54 @@ impl Esgm {
         let name = name.to_owned();
         py.detach(move || on!(&*rt, e => e.destroy_entity_trajectory_structure(&name)))
             .map_err(|e| to_py(&e))
+    }
+
+    /// Registers the type `type_name` (E1) with `attributes`, a dict of attribute name
+    /// to sort: `"Long"`, `"Double"`, `"String"`, `"OctetSeq"`, … (or `"int"`,
+    /// `"float"`, `"str"`, `"bytes"`), a frame as `"EntityFrame<Blob>"`, frames as
+    /// `"EntityFrameSeq<Blob>"`.
+    fn create_entity_structure_type(
+        &self,
+        py: Python<'_>,
+        type_name: &str,
+        attributes: &Bound<'_, PyDict>,
+    ) -> PyResult<()> {
+        let mut t = EntityStructureType::new(type_name);
+        for (k, v) in attributes.iter() {
+            let (name, spec): (String, String) = (k.extract()?, v.extract()?);
+            t = with_attribute(t, &name, &spec)?;
+        }
+        self.register(py, t)
+    }
+
+    /// Registers a dataclass as a type of the same name (E1): `int` is `Long`,
+    /// `float` `Double`, `bool` `Bool`, `str` `String`, `bytes` or a numpy array
+    /// `OctetSeq`, `list[int|float|str]` a sequence, a nested dataclass a frame and a
+    /// list of them a frame sequence (nested dataclasses are registered first, unless
+    /// a type of their name exists). Returns the type's name.
+    fn create_type(&self, py: Python<'_>, cls: &Bound<'_, PyAny>) -> PyResult<String> {
+        let dataclasses = py.import("dataclasses")?;
+        if !dataclasses.call_method1("is_dataclass", (cls,))?.is_truthy()? {
+            return Err(PyTypeError::new_err("create_type takes a dataclass"));
+        }
+        let name: String = cls.getattr("__name__")?.extract()?;
+        if self.runtime.entity_type(&name).is_some() {
+            return Ok(name);
+        }
+        let hints = py.import("typing")?.call_method1("get_type_hints", (cls,))?;
+        let mut t = EntityStructureType::new(&name);
+        for f in dataclasses.call_method1("fields", (cls,))?.try_iter()? {
+            let field: String = f?.getattr("name")?.extract()?;
+            let hint = hints.get_item(&field)?;
+            let (sort, element) = self.sort_of(py, &name, &field, &hint)?;
+            t = match (sort, element) {
+                (esgm_core::ValueSort::EntityFrame, Some(e)) => t.frame(&field, e),
+                (esgm_core::ValueSort::EntityFrameSeq, Some(e)) => t.frame_seq(&field, e),
+                (sort, _) => t.attr(&field, sort),
+            };
+        }
+        self.register(py, t)?;
+        Ok(name)
     }
 
     /// Registers `unit` (an object with `compute(inputs, qtime)`, returning
