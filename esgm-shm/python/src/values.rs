@@ -7,7 +7,9 @@
 //! shared-memory chunk): no copy, read-only, and they keep that memory alive as long as
 //! they live ([`octets_array`]).
 
-use esgm_core::value::{Pos2, Vec3};
+use esgm_core::value::{
+    Pos2, Position, PositionAltitude, PositionAltitudeRotation, Rotation, Vec3,
+};
 use esgm_core::{
     Attr, AttributeValuePair, EntityFrame, EntityStructureType, Octets, Value, ValueSort,
 };
@@ -182,6 +184,39 @@ pub fn to_value(v: &Bound<'_, PyAny>, attr: &Attr, types: Types<'_>) -> PyResult
             let p = xyz(name, v, 2)?;
             Value::Pos2(Pos2 { x: p[0], y: p[1] })
         }
+        ValueSort::VecSeq => Value::VecSeq(
+            list(name, v)?
+                .iter()
+                .map(|p| xyz(name, p, 3).map(|p| Vec3 { x: p[0], y: p[1], z: p[2] }))
+                .collect::<PyResult<_>>()?,
+        ),
+        ValueSort::Pos2Seq => Value::Pos2Seq(
+            list(name, v)?
+                .iter()
+                .map(|p| xyz(name, p, 2).map(|p| Pos2 { x: p[0], y: p[1] }))
+                .collect::<PyResult<_>>()?,
+        ),
+        ValueSort::Position => {
+            let p = xyz(name, v, 2)?;
+            Value::Position(Position { north: p[0], east: p[1] })
+        }
+        ValueSort::Rotation => {
+            let r = xyz(name, v, 3)?;
+            Value::Rotation(Rotation { roll: r[0], pitch: r[1], yaw: r[2] })
+        }
+        ValueSort::PositionAltitude => {
+            let p = xyz(name, v, 3)?;
+            let position = Position { north: p[0], east: p[1] };
+            Value::PositionAltitude(PositionAltitude { position, altitude: p[2] })
+        }
+        ValueSort::PositionAltitudeRotation => {
+            let p = xyz(name, v, 6)?;
+            Value::PositionAltitudeRotation(PositionAltitudeRotation {
+                position: Position { north: p[0], east: p[1] },
+                altitude: p[2],
+                rotation: Rotation { roll: p[3], pitch: p[4], yaw: p[5] },
+            })
+        }
         ValueSort::EntityFrame => Value::EntityFrame(Box::new(frame(v, name, &element()?, types)?)),
         ValueSort::EntityFrameSeq => {
             let ty = element()?;
@@ -192,9 +227,10 @@ pub fn to_value(v: &Bound<'_, PyAny>, attr: &Attr, types: Types<'_>) -> PyResult
                     .collect::<PyResult<_>>()?,
             )
         }
+        // Values of any sort, whose sort a Python value does not say.
         other => {
             return Err(PyTypeError::new_err(format!(
-                "attribute `{name}` is of sort {other:?}, which the Python API does not write yet"
+                "attribute `{name}` is of sort {other:?}, whose values have no one Python form; give the type a definite sort"
             )));
         }
     })
@@ -237,12 +273,44 @@ pub fn from_value<'py>(py: Python<'py>, v: &Value) -> PyResult<Bound<'py, PyAny>
         Value::SymbolSeq(x) => PyList::new(py, x)?.into_any(),
         Value::Vec(p) => PyTuple::new(py, [p.x, p.y, p.z])?.into_any(),
         Value::Pos2(p) => PyTuple::new(py, [p.x, p.y])?.into_any(),
+        Value::VecSeq(x) => {
+            let items = x
+                .iter()
+                .map(|p| PyTuple::new(py, [p.x, p.y, p.z]))
+                .collect::<PyResult<Vec<_>>>()?;
+            PyList::new(py, items)?.into_any()
+        }
+        Value::Pos2Seq(x) => {
+            let items =
+                x.iter().map(|p| PyTuple::new(py, [p.x, p.y])).collect::<PyResult<Vec<_>>>()?;
+            PyList::new(py, items)?.into_any()
+        }
+        Value::Position(p) => PyTuple::new(py, [p.north, p.east])?.into_any(),
+        Value::Rotation(r) => PyTuple::new(py, [r.roll, r.pitch, r.yaw])?.into_any(),
+        Value::PositionAltitude(p) => {
+            PyTuple::new(py, [p.position.north, p.position.east, p.altitude])?.into_any()
+        }
+        Value::PositionAltitudeRotation(p) => PyTuple::new(
+            py,
+            [
+                p.position.north,
+                p.position.east,
+                p.altitude,
+                p.rotation.roll,
+                p.rotation.pitch,
+                p.rotation.yaw,
+            ],
+        )?
+        .into_any(),
+        Value::Agg(items) | Value::Collection(items) => {
+            let items = items.iter().map(|x| from_value(py, x)).collect::<PyResult<Vec<_>>>()?;
+            PyList::new(py, items)?.into_any()
+        }
         Value::EntityFrame(f) => frame_dict(py, f)?.into_any(),
         Value::EntityFrameSeq(fs) => {
             let items = fs.iter().map(|f| frame_dict(py, f)).collect::<PyResult<Vec<_>>>()?;
             PyList::new(py, items)?.into_any()
         }
-        other => PyString::new(py, &format!("{other:?}")).into_any(),
     })
 }
 

@@ -43,3 +43,16 @@ def test_a_type_from_sorts_and_refusals_that_name_the_field(system, unique):
         system.create_type(Odd)
     with pytest.raises(TypeError, match="dataclass"):
         system.create_type(int)
+
+
+def test_geometric_sorts_are_tuples(system, unique):
+    system.create_entity_structure_type(
+        unique, {"pose": "PositionAltitudeRotation", "points": "Pos2Seq", "v": "Vec", "at": "Position"})
+    t = system.create_primitive_entity_trajectory_structure(unique, unique)
+    attributes = {"pose": (1.0, 2.0, 3.0, 0.1, 0.2, 0.3), "points": [(1.0, 2.0), (3.0, 4.0)],
+                  "v": (0.5, 0.0, -0.5), "at": (58.4, 15.6)}
+    t.add("drone", 3, attributes)
+    system.flush(10)
+    assert t.get_latest().to_dict() == attributes
+    with pytest.raises(TypeError, match="`v` takes 3 floats"):
+        t.add("drone", 4, {**attributes, "v": (1.0, 2.0)})
