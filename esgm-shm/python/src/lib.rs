@@ -6,6 +6,7 @@
 
 mod errors;
 mod images;
+mod policy;
 mod runtime;
 mod sample;
 mod trajectory;
@@ -22,6 +23,7 @@ fn esgm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<runtime::Esgm>()?;
     m.add_class::<trajectory::Trajectory>()?;
     m.add_class::<trajectory::Subscription>()?;
+    m.add_class::<trajectory::Violations>()?;
     m.add_class::<sample::Sample>()?;
     m.add_class::<images::ImageBuffer>()?;
     m.add_class::<values::OctetsOwner>()?;

@@ -179,18 +179,25 @@ impl Esgm {
         Ok(listed.into_iter().map(|t| t.name).collect())
     }
 
-    /// Creates a primitive trajectory `name` of `type_name`, which programs add to.
+    /// Creates a primitive trajectory `name` of `type_name`, which programs add to,
+    /// with an optional `policy` (C1–C6): a dict of `cache` (a count, or `"all"`),
+    /// `order` (`"any"`, `"monotone"`, `"strict"`), `delay` (ns, the largest add
+    /// delay), `reorder` (bool) and `filter` (an expression, e.g. `"x > 0.0"`).
+    #[pyo3(signature = (name, type_name, policy=None))]
     fn create_primitive_entity_trajectory_structure(
         &self,
         py: Python<'_>,
         name: &str,
         type_name: &str,
+        policy: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Trajectory> {
+        let policy = match policy {
+            Some(d) => crate::policy::from_dict(d)?,
+            None => esgm_core::FluentStreamPolicy::default(),
+        };
+        let spec = esgm_core::esgm::TrajectorySpec::primitive(name, type_name).policy(policy);
         let rt = Arc::clone(&self.runtime);
-        let (name, type_name) = (name.to_owned(), type_name.to_owned());
-        let made = py.detach(move || {
-            on!(&*rt, e => e.create_primitive_entity_trajectory_structure(&name, &type_name))
-        });
+        let made = py.detach(move || on!(&*rt, e => e.create_trajectory(spec)));
         made.map(|h| self.handle(h)).map_err(|e| to_py(&e))
     }
 
@@ -346,6 +353,17 @@ impl Esgm {
         let deadline = std::time::Instant::now() + std::time::Duration::from_secs_f64(timeout);
         let rt = Arc::clone(&self.runtime);
         py.detach(move || on!(&*rt, e => e.flush(deadline))).map_err(|e| to_py(&e))
+    }
+
+    /// The system's statistics (E7): every trajectory's listing, store statistics and
+    /// worker counters (a Python unit's failed calls among them).
+    fn stats<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let rt = Arc::clone(&self.runtime);
+        let stats = py.detach(move || on!(&*rt, e => e.stats())).map_err(|e| to_py(&e))?;
+        json_to_py(
+            py,
+            &serde_json::to_value(stats).map_err(|e| PyTypeError::new_err(e.to_string()))?,
+        )
     }
 
     /// True if the system answers.

@@ -173,6 +173,14 @@ impl Trajectory {
         Ok(Subscription { sub })
     }
 
+    /// The structures its policy refuses from now on (T4), each a `dict`
+    /// (`constraint`, `valid_time`, `detail`, …): iterate it, or `recv(timeout)`.
+    #[pyo3(signature = (queue=64))]
+    fn subscribe_violations(&self, queue: usize) -> PyResult<Violations> {
+        let sub = self.handle.subscribe_violations(queue).map_err(|e| to_py(&e))?;
+        Ok(Violations { sub })
+    }
+
     /// A buffer of this trajectory's memory for one image's pixels (format 0: rgb8, 1:
     /// mono8): write its `array`, then add it as the `image_data` attribute.
     #[pyo3(signature = (width, height, format=0))]
@@ -256,6 +264,62 @@ impl Subscription {
     fn __next__(&self, py: Python<'_>) -> PyResult<Option<Sample>> {
         match self.recv(py, None) {
             Ok(s) => Ok(Some(s)),
+            Err(e) if e.is_instance_of::<crate::errors::EsgmError>(py) => Ok(None),
+            Err(e) => Err(e),
+        }
+    }
+}
+
+/// A subscription to a trajectory's policy violations.
+#[pyclass(module = "esgm")]
+#[derive(Debug)]
+pub struct Violations {
+    sub: esgm_core::Subscription<esgm_core::PolicyViolation>,
+}
+
+#[pymethods]
+impl Violations {
+    /// The next violation as a `dict`, waiting at most `timeout` seconds (`None`: for
+    /// ever); raises `TimeoutError` when none came.
+    #[pyo3(signature = (timeout=None))]
+    fn recv<'py>(&self, py: Python<'py>, timeout: Option<f64>) -> PyResult<Bound<'py, PyAny>> {
+        let deadline = match timeout {
+            Some(t) if !(t.is_finite() && t >= 0.0) => {
+                return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                    "timeout {t} is not a time"
+                )));
+            }
+            Some(t) => Some(std::time::Instant::now() + Duration::from_secs_f64(t)),
+            None => None,
+        };
+        loop {
+            let slice = deadline.map_or(SIGNAL_CHECK, |d| {
+                d.saturating_duration_since(std::time::Instant::now()).min(SIGNAL_CHECK)
+            });
+            match py.detach(|| self.sub.recv_timeout(slice)) {
+                Ok(v) => {
+                    let json = serde_json::to_value(&v)
+                        .map_err(|e| PyTypeError::new_err(e.to_string()))?;
+                    return crate::runtime::json_to_py(py, &json);
+                }
+                Err(RecvError::Timeout) => {
+                    py.check_signals()?;
+                    if deadline.is_some_and(|d| std::time::Instant::now() >= d) {
+                        return Err(PyTimeoutError::new_err("no violation within the timeout"));
+                    }
+                }
+                Err(e) => return Err(crate::errors::EsgmError::new_err(e.to_string())),
+            }
+        }
+    }
+
+    fn __iter__(slf: PyRef<'_, Self>) -> PyRef<'_, Self> {
+        slf
+    }
+
+    fn __next__<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyAny>>> {
+        match self.recv(py, None) {
+            Ok(v) => Ok(Some(v)),
             Err(e) if e.is_instance_of::<crate::errors::EsgmError>(py) => Ok(None),
             Err(e) => Err(e),
         }

@@ -113,3 +113,24 @@ def test_images_come_back_as_shaped_read_only_arrays(system, unique):
     assert pixels[2, 3, 2] == 35
     with pytest.raises(RuntimeError, match="already added"):
         images.add("camera", 10, {"width": 4, "height": 3, "format": 0, "image_data": buffer})
+
+
+def test_a_policy_refuses_and_violations_are_delivered(system, unique):
+    t = system.create_primitive_entity_trajectory_structure(
+        unique, "RobotState", policy={"order": "monotone", "cache": 2, "reorder": False})
+    violations = t.subscribe_violations()
+    t.add_blocking("robot", 10, robot(10, 1))
+    with pytest.raises(esgm.PolicyViolation):
+        t.add_blocking("robot", 5, robot(5, 2))
+    v = violations.recv(10)
+    assert v["valid_time"] == 5, v
+    for i in range(3):
+        t.add("robot", 20 + i, robot(20 + i, i))
+    system.flush(10)
+    assert len(t.get_between(0, 100)) == 2  # cache = 2
+    with pytest.raises(KeyError, match="no policy setting `speed`"):
+        system.create_primitive_entity_trajectory_structure(unique + "b", "RobotState", policy={"speed": 1})
+    with pytest.raises(ValueError, match="policy `order`"):
+        system.create_primitive_entity_trajectory_structure(unique + "c", "RobotState", policy={"order": "sideways"})
+    stats = system.stats()
+    assert stats["trajectories"][unique]["stats"]["violations"] == 1, stats["trajectories"][unique]
