@@ -28,5 +28,8 @@ fn esgm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<images::ImageBuffer>()?;
     m.add_class::<values::OctetsOwner>()?;
     errors::register(m)?;
+    // Before the interpreter finalizes, esgm's workers stop calling Python.
+    let shutdown = wrap_pyfunction!(units::shutdown, m)?;
+    m.py().import("atexit")?.call_method1("register", (shutdown,))?;
     Ok(())
 }

@@ -10,7 +10,9 @@
 //! counted as a failed call (the worker's `failures`), and the next input is computed
 //! as usual.
 
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Weak};
+use std::time::{Duration, Instant};
 
 use esgm_core::esgm::{CompUnit, ComputeError, SensorError, SensorInterface};
 use esgm_core::{EntityStructure, EntityStructureType, Time};
@@ -20,6 +22,51 @@ use pyo3::types::PyDict;
 use crate::runtime::Runtime;
 use crate::sample::Sample;
 use crate::values::attributes;
+
+/// Set when the interpreter is about to shut down ([`shutdown`]): from then on esgm's
+/// workers call no Python unit or sensor (a call into a finalizing interpreter crashes
+/// the process); their calls fail instead, counted.
+static SHUTTING_DOWN: AtomicBool = AtomicBool::new(false);
+/// Calls into Python units and sensors under way, which [`shutdown`] waits for.
+static IN_FLIGHT: AtomicUsize = AtomicUsize::new(0);
+
+/// One call under way, while it lives.
+struct InFlight;
+
+impl InFlight {
+    /// A call may start, unless the interpreter is shutting down.
+    fn enter() -> Option<Self> {
+        IN_FLIGHT.fetch_add(1, Ordering::SeqCst);
+        if SHUTTING_DOWN.load(Ordering::SeqCst) {
+            IN_FLIGHT.fetch_sub(1, Ordering::SeqCst);
+            return None;
+        }
+        Some(InFlight)
+    }
+}
+
+impl Drop for InFlight {
+    fn drop(&mut self) {
+        IN_FLIGHT.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
+/// How long [`shutdown`] waits for calls under way (a unit that never returns is not
+/// waited for past this).
+const SHUTDOWN_WAIT: Duration = Duration::from_secs(2);
+
+/// Registered with `atexit`: stops esgm's workers from calling Python, and waits (the
+/// GIL released) for the calls under way to return, before the interpreter finalizes.
+#[pyfunction]
+pub fn shutdown(py: Python<'_>) {
+    SHUTTING_DOWN.store(true, Ordering::SeqCst);
+    py.detach(|| {
+        let deadline = Instant::now() + SHUTDOWN_WAIT;
+        while IN_FLIGHT.load(Ordering::SeqCst) > 0 && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    });
+}
 
 /// What a Python unit or sensor needs to turn its answers into structures.
 #[derive(Debug)]
@@ -46,7 +93,9 @@ impl Output {
         method: &str,
         args: impl for<'py> FnOnce(Python<'py>) -> PyResult<Bound<'py, pyo3::types::PyTuple>>,
     ) -> Result<EntityStructure, Missed> {
-        Python::attach(|py| {
+        let shutting_down = || Missed::Failed("the Python interpreter is shutting down".into());
+        let Some(_call) = InFlight::enter() else { return Err(shutting_down()) };
+        let called = Python::try_attach(|py| {
             let answer = args(py).and_then(|a| self.object.bind(py).call_method1(method, a));
             let answer = match answer {
                 Ok(a) => a,
@@ -56,7 +105,8 @@ impl Output {
                 return Err(Missed::NoValue);
             }
             self.structure(&answer).map_err(|e| Missed::Failed(self.traceback(py, &e)))
-        })
+        });
+        called.unwrap_or_else(|| Err(shutting_down()))
     }
 
     /// `(name, valid_time, attributes)` as a structure of this unit's type.
@@ -157,8 +207,10 @@ impl CompUnit for PyUnit {
         inputs: &[esgm_core::Sample],
         t: Time,
     ) -> Result<EntityStructure, ComputeError> {
-        let has =
-            Python::attach(|py| self.0.object.bind(py).hasattr("compute_at").unwrap_or(false));
+        let has = InFlight::enter().is_some_and(|_call| {
+            Python::try_attach(|py| self.0.object.bind(py).hasattr("compute_at").unwrap_or(false))
+                .unwrap_or(false)
+        });
         if !has {
             return Err(ComputeError::OperationNotSupported);
         }
