@@ -215,6 +215,44 @@ pub struct Subscription {
     sub: esgm_core::Subscription<esgm_core::Sample>,
 }
 
+/// The next item of `sub`, waiting at most `timeout` seconds (`None`: for ever) with
+/// the GIL released, looking at Python's signals (Ctrl-C) between slices; raises
+/// `TimeoutError` naming `what` when none came. Shared by samples and violations.
+fn recv_within<T>(
+    py: Python<'_>,
+    sub: &esgm_core::Subscription<T>,
+    timeout: Option<f64>,
+    what: &str,
+) -> PyResult<T>
+where
+    T: Send,
+{
+    let deadline = match timeout {
+        Some(t) if !(t.is_finite() && t >= 0.0) => {
+            return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "timeout {t} is not a time"
+            )));
+        }
+        Some(t) => Some(std::time::Instant::now() + Duration::from_secs_f64(t)),
+        None => None,
+    };
+    loop {
+        let slice = deadline.map_or(SIGNAL_CHECK, |d| {
+            d.saturating_duration_since(std::time::Instant::now()).min(SIGNAL_CHECK)
+        });
+        match py.detach(|| sub.recv_timeout(slice)) {
+            Ok(item) => return Ok(item),
+            Err(RecvError::Timeout) => {
+                py.check_signals()?;
+                if deadline.is_some_and(|d| std::time::Instant::now() >= d) {
+                    return Err(PyTimeoutError::new_err(format!("no {what} within the timeout")));
+                }
+            }
+            Err(e) => return Err(crate::errors::EsgmError::new_err(e.to_string())),
+        }
+    }
+}
+
 /// How long one wait lasts before Python's signals (Ctrl-C) are looked at.
 const SIGNAL_CHECK: Duration = Duration::from_millis(100);
 
@@ -224,31 +262,7 @@ impl Subscription {
     /// `TimeoutError` when none came.
     #[pyo3(signature = (timeout=None))]
     fn recv(&self, py: Python<'_>, timeout: Option<f64>) -> PyResult<Sample> {
-        let deadline = match timeout {
-            Some(t) if !(t.is_finite() && t >= 0.0) => {
-                return Err(pyo3::exceptions::PyValueError::new_err(format!(
-                    "timeout {t} is not a time"
-                )));
-            }
-            Some(t) => Some(std::time::Instant::now() + Duration::from_secs_f64(t)),
-            None => None,
-        };
-        loop {
-            let slice = deadline.map_or(SIGNAL_CHECK, |d| {
-                d.saturating_duration_since(std::time::Instant::now()).min(SIGNAL_CHECK)
-            });
-            let got = py.detach(|| self.sub.recv_timeout(slice));
-            match got {
-                Ok(s) => return Ok(Sample::new(s)),
-                Err(RecvError::Timeout) => {
-                    py.check_signals()?;
-                    if deadline.is_some_and(|d| std::time::Instant::now() >= d) {
-                        return Err(PyTimeoutError::new_err("no sample within the timeout"));
-                    }
-                }
-                Err(e) => return Err(crate::errors::EsgmError::new_err(e.to_string())),
-            }
-        }
+        recv_within(py, &self.sub, timeout, "sample").map(Sample::new)
     }
 
     /// Samples dropped because this subscription's queue was full.
@@ -283,34 +297,9 @@ impl Violations {
     /// ever); raises `TimeoutError` when none came.
     #[pyo3(signature = (timeout=None))]
     fn recv<'py>(&self, py: Python<'py>, timeout: Option<f64>) -> PyResult<Bound<'py, PyAny>> {
-        let deadline = match timeout {
-            Some(t) if !(t.is_finite() && t >= 0.0) => {
-                return Err(pyo3::exceptions::PyValueError::new_err(format!(
-                    "timeout {t} is not a time"
-                )));
-            }
-            Some(t) => Some(std::time::Instant::now() + Duration::from_secs_f64(t)),
-            None => None,
-        };
-        loop {
-            let slice = deadline.map_or(SIGNAL_CHECK, |d| {
-                d.saturating_duration_since(std::time::Instant::now()).min(SIGNAL_CHECK)
-            });
-            match py.detach(|| self.sub.recv_timeout(slice)) {
-                Ok(v) => {
-                    let json = serde_json::to_value(&v)
-                        .map_err(|e| PyTypeError::new_err(e.to_string()))?;
-                    return crate::runtime::json_to_py(py, &json);
-                }
-                Err(RecvError::Timeout) => {
-                    py.check_signals()?;
-                    if deadline.is_some_and(|d| std::time::Instant::now() >= d) {
-                        return Err(PyTimeoutError::new_err("no violation within the timeout"));
-                    }
-                }
-                Err(e) => return Err(crate::errors::EsgmError::new_err(e.to_string())),
-            }
-        }
+        let v = recv_within(py, &self.sub, timeout, "violation")?;
+        let json = serde_json::to_value(&v).map_err(|e| PyTypeError::new_err(e.to_string()))?;
+        crate::runtime::json_to_py(py, &json)
     }
 
     fn __iter__(slf: PyRef<'_, Self>) -> PyRef<'_, Self> {
