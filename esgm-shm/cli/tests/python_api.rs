@@ -1,8 +1,9 @@
 //! The `esgm` Python package (esgm-shm/python): built into the test venv with maturin
 //! (`maturin develop`, so the tests run the code of this checkout), then its pytest
 //! suite runs against a coordinator this test starts in a domain of its own: every
-//! semantic test on both runtimes, and the zero-copy and lifetime test of images
-//! across processes.
+//! semantic test on both runtimes, the zero-copy and lifetime test of images across
+//! processes, and Python units supervised in a system of their own (through the
+//! `esgm` command, `ESGM_BIN`).
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // a failure is a failed test
 
@@ -42,6 +43,7 @@ fn the_python_package_passes_its_tests_on_both_runtimes() {
         .args(["-m", "pytest", "-q", "-p", "no:cacheprovider"])
         .arg(package.join("tests"))
         .env("ESGM_TEST_DOMAIN", &domain)
+        .env("ESGM_BIN", env!("CARGO_BIN_EXE_esgm"))
         .output()
         .unwrap();
     let said = format!(

@@ -20,17 +20,18 @@ import time
 import numpy as np
 
 import esgm
+from blobs import BlobDetection, BlobSelection, detect
 
 WIDTH, HEIGHT = 160, 120
 FOV_DEG = 60.0          # the camera's horizontal field of view
 MAX_SPEED = 1.0         # m/s, for a blob far away
 STOP_SIZE = 900.0       # pixels: a blob this large is close enough to stop
-THRESHOLD = 127         # luminance of a blob's pixel (above)
-MIN_SIZE = 10           # pixels of the smallest blob
 
 
 class Camera:
     """A synthetic scene: bright squares drifting over a dark floor (the sensor)."""
+
+    output_type = "Image"
 
     def get_current_value(self, qtime):
         t = qtime / 1e9
@@ -40,50 +41,6 @@ class Camera:
             cy = int((0.5 + 0.3 * math.cos(speed * t + i)) * HEIGHT)
             frame[max(cy - size, 0):cy + size, max(cx - size, 0):cx + size] = 250
         return ("camera", qtime, {"width": WIDTH, "height": HEIGHT, "format": 0, "image_data": frame})
-
-
-def detect(image):
-    """Blobs of an (h, w, 3) image as (x, y, size), largest first, as the Rust unit finds
-    them (cu-workers): pixels whose BT.601 luminance is above 127, 8-connected, at
-    least 10 of them; labelled by propagating the smallest label, all in numpy."""
-    rgb = image.astype(np.uint32)
-    luminance = (77 * rgb[..., 0] + 150 * rgb[..., 1] + 29 * rgb[..., 2] + 128) >> 8
-    mask = luminance > THRESHOLD
-    big = np.iinfo(np.int64).max
-    labels = np.where(mask, np.arange(mask.size).reshape(mask.shape), big)
-    while True:
-        p = np.pad(labels, 1, constant_values=big)
-        neighbours = [p[dy:dy + mask.shape[0], dx:dx + mask.shape[1]] for dy in range(3) for dx in range(3)]
-        smallest = np.where(mask, np.minimum.reduce(neighbours), big)
-        if np.array_equal(smallest, labels):
-            break
-        labels = smallest
-    blobs = []
-    for label in np.unique(labels[mask]):
-        ys, xs = np.nonzero(labels == label)
-        if xs.size >= MIN_SIZE:
-            blobs.append((int(xs.mean()), int(ys.mean()), int(xs.size)))
-    return sorted(blobs, key=lambda b: -b[2])
-
-
-class BlobDetection:
-    """Image -> BlobSeq (the seed's BlobDetection unit)."""
-
-    def compute(self, inputs, qtime):
-        image = inputs[0]
-        items = [{"name": f"blob{i}", "x": x, "y": y, "size": s} for i, (x, y, s) in enumerate(detect(image["image_data"]))]
-        return ("blobs", image.valid_time, {"items": items})
-
-
-class BlobSelection:
-    """BlobSeq -> Blob: the largest (the seed's BlobSelection unit)."""
-
-    def compute(self, inputs, qtime):
-        seq = inputs[0]
-        if not seq["items"]:
-            return None
-        b = seq["items"][0]
-        return ("current_blob", seq.valid_time, {"x": b["x"], "y": b["y"], "size": b["size"]})
 
 
 class Steering:

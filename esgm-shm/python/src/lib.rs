@@ -17,6 +17,7 @@ use pyo3::prelude::*;
 
 /// The `esgm` module.
 #[pymodule]
+#[pyo3(name = "_esgm")]
 fn esgm(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(runtime::connect, m)?)?;
     m.add_function(wrap_pyfunction!(runtime::in_process, m)?)?;

@@ -372,6 +372,40 @@ impl Esgm {
         py.detach(move || on!(&*rt, e => e.ping()))
     }
 
+    /// Serves this process's units and sensors, GIL released, until the system ends
+    /// (its coordinator gone for `patience` seconds; returns True) or a signal's
+    /// handler raises (Ctrl-C: `KeyboardInterrupt`). A worker's main loop. In process,
+    /// the system ends only with this process: it serves until interrupted.
+    #[pyo3(signature = (patience=0.5))]
+    fn serve(&self, py: Python<'_>, patience: f64) -> PyResult<bool> {
+        if !(patience.is_finite() && patience >= 0.0) {
+            return Err(pyo3::exceptions::PyValueError::new_err(format!(
+                "patience {patience} is not a time"
+            )));
+        }
+        let patience = std::time::Duration::from_secs_f64(patience);
+        let rt = Arc::clone(&self.runtime);
+        let mut interrupted = None;
+        let go_on = || match Python::attach(|py| py.check_signals()) {
+            Ok(()) => true,
+            Err(e) => {
+                interrupted = Some(e);
+                false
+            }
+        };
+        let gone = py.detach(|| match &*rt {
+            Runtime::Shm(e) => e.serve_while(patience, go_on),
+            Runtime::Local(_) => {
+                let mut go_on = go_on;
+                while go_on() {
+                    std::thread::sleep(std::time::Duration::from_millis(250));
+                }
+                false
+            }
+        });
+        interrupted.map_or(Ok(gone), Err)
+    }
+
     fn __repr__(&self) -> &'static str {
         match &*self.runtime {
             Runtime::Local(_) => "Esgm(in process)",
@@ -381,13 +415,19 @@ impl Esgm {
 }
 
 /// Joins the system of `domain` (its coordinator: `esgm up` or `esgm demo`), as the
-/// process `host` (default: a name of its own).
+/// process `host`. Unset, both are what a supervisor gives the workers it starts
+/// (`ESGM_DOMAIN`, `ESGM_WORKER`), else the domain `esgm` and a name of its own.
 #[pyfunction]
-#[pyo3(signature = (domain="esgm", host=None))]
-pub fn connect(py: Python<'_>, domain: &str, host: Option<String>) -> PyResult<Esgm> {
-    let domain = domain.to_owned();
-    let host = host.unwrap_or_else(|| format!("python-{}", std::process::id()));
-    let connected = py.detach(move || ShmEsgm::builder().domain(&domain).host(host).connect());
+#[pyo3(signature = (domain=None, host=None))]
+pub fn connect(py: Python<'_>, domain: Option<String>, host: Option<String>) -> PyResult<Esgm> {
+    let mut builder = ShmEsgm::builder().host(format!("python-{}", std::process::id())).from_env();
+    if let Some(domain) = domain {
+        builder = builder.domain(domain);
+    }
+    if let Some(host) = host {
+        builder = builder.host(host);
+    }
+    let connected = py.detach(move || builder.connect());
     let esgm = connected.map_err(|e| crate::errors::Unavailable::new_err(e.to_string()))?;
     Ok(Esgm { runtime: Arc::new(Runtime::Shm(esgm)) })
 }

@@ -434,14 +434,25 @@ impl ShmEsgm {
     /// Blocks while the coordinator answers; returns once it has been gone for
     /// `patience` (a worker's main loop: it leaves with its system).
     pub fn serve_until_coordinator_gone(&self, patience: Duration) {
+        self.serve_while(patience, || true);
+    }
+
+    /// [`ShmEsgm::serve_until_coordinator_gone`], also leaving as soon as `go_on`
+    /// (asked every quarter second) says false: a worker hosted by another runtime,
+    /// such as Python's, looks at its signals there. Returns true if the coordinator
+    /// went, false if `go_on` stopped it.
+    pub fn serve_while(&self, patience: Duration, mut go_on: impl FnMut() -> bool) -> bool {
         const PING_EVERY: Duration = Duration::from_millis(250);
         let mut gone_since = None;
         loop {
             std::thread::sleep(PING_EVERY);
+            if !go_on() {
+                return false;
+            }
             if self.ping() {
                 gone_since = None;
             } else if gone_since.get_or_insert_with(std::time::Instant::now).elapsed() >= patience {
-                return;
+                return true;
             }
         }
     }

@@ -2,13 +2,15 @@
 //! the writer's valid → add time, carried in every sample), then the system's processes
 //! with their restarts.
 
+use esgm_core::esgm::TrajectoryKind;
 use esgm_core::{EntityTrajectoryStructure, Esgm};
 use serde_json::json;
 
 use crate::session::{connect_tool as connect, trajectory};
 use crate::show::ms;
 
-/// Prints one line (or JSON object) per trajectory, then every drop by cause.
+/// Prints one line (or JSON object) per trajectory, then every drop by cause and
+/// every unit or sensor whose calls failed.
 ///
 /// The figures are the domain's (E7 through `connect`): each trajectory's writer's,
 /// plus what its readers in every process lost on the way or rejected as malformed.
@@ -39,14 +41,14 @@ pub fn run(domain: &str, json: bool) -> anyhow::Result<()> {
     }
     let mut drops = Vec::new();
     for info in list {
-        let s = match domain_stats.as_ref().and_then(|d| d.get(&info.name)) {
-            Some(report) => report.stats.clone(),
-            None => trajectory(&esgm, &info.name)?.stats()?,
+        let (s, worker) = match domain_stats.as_ref().and_then(|d| d.get(&info.name)) {
+            Some(report) => (report.stats.clone(), Some(report.worker)),
+            None => (trajectory(&esgm, &info.name)?.stats()?, None),
         };
         if json {
             println!(
                 "{}",
-                json!({ "trajectory": info.name, "kind": info.kind.name(), "stats": s })
+                json!({ "trajectory": info.name, "kind": info.kind.name(), "stats": s, "worker": worker })
             );
         } else {
             println!(
@@ -62,6 +64,20 @@ pub fn run(domain: &str, json: bool) -> anyhow::Result<()> {
             );
             for (cause, n) in &s.dropped {
                 drops.push(format!("{}: {n} dropped: {cause}", info.name));
+            }
+            if let Some(w) = worker.filter(|w| w.failures + w.panics + w.invalid_outputs > 0) {
+                // A unit's or sensor's own failures lose no stored sample, but the
+                // structures it did not make: say so, and where its tracebacks are.
+                drops.push(format!(
+                    "{}: {} of {} calls of {} `{}` failed ({} panicked, {} invalid outputs): esgm logs shows why",
+                    info.name,
+                    w.failures + w.panics,
+                    w.calls,
+                    if matches!(info.kind, TrajectoryKind::Sampled) { "sensor" } else { "unit" },
+                    info.source.as_deref().unwrap_or("?"),
+                    w.panics,
+                    w.invalid_outputs
+                ));
             }
         }
     }

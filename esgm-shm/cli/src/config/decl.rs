@@ -60,7 +60,7 @@ fn attr(spec: &str) -> anyhow::Result<Attr> {
 }
 
 /// `[[sensor]]`: a pull sensor served by a process the system keeps running — a
-/// built-in camera, or your own executable.
+/// built-in camera, your own executable, or a class written in Python.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SensorDecl {
@@ -70,6 +70,12 @@ pub struct SensorDecl {
     pub camera: Option<String>,
     /// Your own executable serving the sensor (it registers it under `name`).
     pub exec: Option<String>,
+    /// A class written in Python serving the sensor, `"FILE.py:CLASS"` (relative to
+    /// this file): run as a worker by `python -m esgm.worker`.
+    pub python: Option<String>,
+    /// The interpreter of `python` (default: `ESGM_PYTHON`, else `python3`); the
+    /// `esgm` package must be installed in it.
+    pub interpreter: Option<String>,
     /// Its arguments.
     #[serde(default)]
     pub args: Vec<String>,
@@ -89,8 +95,8 @@ pub struct SensorDecl {
 }
 
 /// `[[unit]]`: a computational unit served by a process the system keeps running —
-/// built in (BlobDetection, BlobSelection, DrivingDirection, MovingAverage), or your
-/// own executable.
+/// built in (BlobDetection, BlobSelection, DrivingDirection, MovingAverage), your
+/// own executable, or a class written in Python.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct UnitDecl {
@@ -100,6 +106,12 @@ pub struct UnitDecl {
     pub builtin: Option<String>,
     /// Your own executable serving the unit (it registers it under `name`).
     pub exec: Option<String>,
+    /// A class written in Python serving the unit, `"FILE.py:CLASS"` (relative to
+    /// this file): run as a worker by `python -m esgm.worker`.
+    pub python: Option<String>,
+    /// The interpreter of `python` (default: `ESGM_PYTHON`, else `python3`); the
+    /// `esgm` package must be installed in it.
+    pub interpreter: Option<String>,
     /// Its arguments.
     #[serde(default)]
     pub args: Vec<String>,

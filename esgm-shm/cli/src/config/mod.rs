@@ -14,7 +14,8 @@
 //! name = "camera"
 //! camera = "synthetic"           # or a directory of PNG/JPEG frames, or exec = "path"
 //!
-//! [[unit]]                       # a computational unit, built in or exec = "path"
+//! [[unit]]                       # a computational unit: built in, exec = "path",
+//!                                #   or python = "blobs.py:BlobDetection"
 //! name = "BlobDetection"
 //!
 //! [[robot]]                      # the tutorial's robot (pushes robot_state)
@@ -40,6 +41,7 @@ pub mod apply;
 pub mod bridge;
 pub mod decl;
 pub mod generate;
+pub mod python;
 pub mod ros2;
 
 use std::path::{Path, PathBuf};
@@ -336,29 +338,50 @@ fn user_program(
 fn sensor_worker(s: &SensorDecl, esgm: &Path, base: &Path) -> anyhow::Result<Worker> {
     let process = sensor_process(&s.name);
     let serves = Serves::Sensor(s.name.clone());
-    let spec = match (&s.camera, &s.exec) {
-        (Some(_), Some(_)) => {
-            anyhow::bail!("sensor `{}`: give either camera or exec, not both", s.name)
-        }
-        (None, None) => anyhow::bail!(
-            "sensor `{}` needs camera = \"synthetic\" (or a frame directory) or exec = \"path\"",
-            s.name
-        ),
-        (None, Some(exec)) => {
-            for (set, what) in [
-                (s.seed.is_some(), "seed"),
-                (s.blobs.is_some(), "blobs"),
-                (s.width.is_some(), "width"),
-                (s.height.is_some(), "height"),
-                (s.frame_period.is_some(), "frame_period"),
-            ] {
-                if set {
-                    anyhow::bail!("sensor `{}`: `{what}` is only for built-in cameras", s.name);
-                }
+    let sources = [s.camera.is_some(), s.exec.is_some(), s.python.is_some()];
+    if sources.iter().filter(|set| **set).count() > 1 {
+        anyhow::bail!("sensor `{}`: give one of camera, exec and python", s.name);
+    }
+    if s.interpreter.is_some() && s.python.is_none() {
+        anyhow::bail!("sensor `{}`: interpreter is for python sensors", s.name);
+    }
+    let only_for_cameras = |kind: &str| -> anyhow::Result<()> {
+        for (set, what) in [
+            (s.seed.is_some(), "seed"),
+            (s.blobs.is_some(), "blobs"),
+            (s.width.is_some(), "width"),
+            (s.height.is_some(), "height"),
+            (s.frame_period.is_some(), "frame_period"),
+        ] {
+            if set {
+                anyhow::bail!(
+                    "sensor `{}`: `{what}` is only for built-in cameras, not {kind} sensors",
+                    s.name
+                );
             }
+        }
+        Ok(())
+    };
+    let spec = match (&s.camera, &s.exec, &s.python) {
+        (_, _, Some(target)) => {
+            only_for_cameras("python")?;
+            let decl = python::PythonDecl {
+                target,
+                interpreter: s.interpreter.as_deref(),
+                args: &s.args,
+                env: &s.env,
+            };
+            python::python_worker(python::PythonRole::Sensor, process, &s.name, decl, base)?
+        }
+        (None, Some(exec), None) => {
+            only_for_cameras("exec")?;
             user_program(process, &s.name, exec, &s.args, &s.env, base)
         }
-        (Some(camera), None) => {
+        (None, None, None) => anyhow::bail!(
+            "sensor `{}` needs camera = \"synthetic\" (or a frame directory), exec = \"path\" or python = \"FILE.py:CLASS\"",
+            s.name
+        ),
+        (Some(camera), _, None) => {
             let mut args = vec!["worker".into(), "camera".into(), "--name".into(), s.name.clone()];
             let mut push = |flag: &str, v: Option<String>| {
                 if let Some(v) = v {
@@ -388,7 +411,7 @@ fn sensor_worker(s: &SensorDecl, esgm: &Path, base: &Path) -> anyhow::Result<Wor
                 }
             }
             if !s.args.is_empty() || !s.env.is_empty() {
-                anyhow::bail!("sensor `{}`: args and env are for exec sensors", s.name);
+                anyhow::bail!("sensor `{}`: args and env are for exec and python sensors", s.name);
             }
             spec(process, esgm, args)
         }
@@ -399,10 +422,32 @@ fn sensor_worker(s: &SensorDecl, esgm: &Path, base: &Path) -> anyhow::Result<Wor
 fn unit_worker(u: &UnitDecl, esgm: &Path, base: &Path) -> anyhow::Result<Worker> {
     let process = unit_process(&u.name);
     let serves = Serves::Unit(u.name.clone());
+    if u.exec.is_some() && u.python.is_some() {
+        anyhow::bail!("unit `{}`: give either exec or python, not both", u.name);
+    }
+    if u.interpreter.is_some() && u.python.is_none() {
+        anyhow::bail!("unit `{}`: interpreter is for python units", u.name);
+    }
+    let own = if u.python.is_some() { "python" } else { "exec" };
+    if (u.exec.is_some() || u.python.is_some())
+        && (u.builtin.is_some() || u.type_name.is_some() || u.window.is_some())
+    {
+        anyhow::bail!(
+            "unit `{}`: builtin, type and window are for built-in units, not {own} units",
+            u.name
+        );
+    }
+    if let Some(target) = &u.python {
+        let decl = python::PythonDecl {
+            target,
+            interpreter: u.interpreter.as_deref(),
+            args: &u.args,
+            env: &u.env,
+        };
+        let spec = python::python_worker(python::PythonRole::Unit, process, &u.name, decl, base)?;
+        return Ok(Worker { spec, serves });
+    }
     if let Some(exec) = &u.exec {
-        if u.builtin.is_some() || u.type_name.is_some() || u.window.is_some() {
-            anyhow::bail!("unit `{}`: builtin, type and window are for built-in units", u.name);
-        }
         return Ok(Worker {
             spec: user_program(process, &u.name, exec, &u.args, &u.env, base),
             serves,
@@ -411,7 +456,7 @@ fn unit_worker(u: &UnitDecl, esgm: &Path, base: &Path) -> anyhow::Result<Worker>
     let builtin = u.builtin.clone().unwrap_or_else(|| u.name.clone());
     if !BUILTIN_UNITS.contains(&builtin.as_str()) {
         anyhow::bail!(
-            "unknown built-in unit `{builtin}`; built in: {}; or give exec = \"path\"",
+            "unknown built-in unit `{builtin}`; built in: {}; or give exec = \"path\" or python = \"FILE.py:CLASS\"",
             BUILTIN_UNITS.join(", ")
         );
     }
@@ -430,7 +475,7 @@ fn unit_worker(u: &UnitDecl, esgm: &Path, base: &Path) -> anyhow::Result<Worker>
         anyhow::bail!("unit `{}`: type and window are for MovingAverage", u.name);
     }
     if !u.args.is_empty() || !u.env.is_empty() {
-        anyhow::bail!("unit `{}`: args and env are for exec units", u.name);
+        anyhow::bail!("unit `{}`: args and env are for exec and python units", u.name);
     }
     Ok(Worker { spec: spec(process, esgm, args), serves })
 }
