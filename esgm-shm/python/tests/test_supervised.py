@@ -1,7 +1,8 @@
 """A unit written in Python, named in a system file (`[[unit]] python =
 "blobs.py:BlobDetection"`), runs as a worker the supervisor keeps running: it computes
 what the built-in Rust unit computes, comes back after `kill -9`, and a unit that
-raises has its tracebacks in `esgm logs` and its failures counted in `esgm stats`.
+raises has its tracebacks in `esgm logs` and its failures counted in `esgm stats`; a
+sensor written in Python is sampled the same way.
 
 Everything is done through the `esgm` command (`ESGM_BIN`), in a domain of the test's
 own; this process never connects, so `esgm down` at the end stops only the system."""
@@ -41,6 +42,11 @@ blobs = 3
 width = 160
 height = 120
 
+[[sensor]]
+name = "pycam"
+python = "{examples}/tutorial.py:Camera"
+interpreter = "{python}"
+
 [[unit]]
 name = "PyBlobs"
 python = "{examples}/blobs.py:BlobDetection"
@@ -71,6 +77,11 @@ name = "rust_blobs"
 computed = "BlobDetection"
 inputs = ["images"]
 policy = {{ cache = 50 }}
+
+[[trajectory]]
+name = "pyimages"
+sampled = "pycam"
+period = "200ms"
 
 [[trajectory]]
 name = "flaky"
@@ -142,6 +153,10 @@ def test_a_python_unit_in_a_system_file_is_supervised(cli, tmp_path):
     ours = until("a blob sequence from the Python unit", lambda: latest(cli, "blobs"))
     theirs = until("the Rust unit's blobs at the same time", lambda: at(cli, "rust_blobs", ours["valid_time"]))
     assert len(sizes(ours)) > 0 and sizes(ours) == sizes(theirs), (ours, theirs)
+
+    # A sensor written in Python is sampled as well.
+    frame = until("a frame of the Python camera", lambda: latest(cli, "pyimages"))
+    assert (frame["attributes"]["width"], frame["attributes"]["height"]) == (160, 120), frame
 
     # kill -9: the supervisor starts it again, and it computes again.
     before = worker(cli, "unit-PyBlobs")
