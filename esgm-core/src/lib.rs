@@ -38,6 +38,7 @@ pub mod esgm;
 pub mod filter;
 pub mod frame;
 pub mod generator;
+pub mod generator_entry;
 pub mod library;
 pub mod octets;
 pub mod operators;

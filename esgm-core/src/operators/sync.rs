@@ -173,7 +173,53 @@ impl Default for SyncPolicy {
     }
 }
 
+/// A sync policy written as words that do not make one.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[non_exhaustive]
+pub enum SyncWordsError {
+    /// Not `exact`, `approximate` or `epsilon`.
+    #[error("unknown sync policy `{0}` (exact, approximate or epsilon)")]
+    Unknown(String),
+    /// `approximate` or `epsilon` without a tolerance.
+    #[error("sync policy `{0}` needs a tolerance")]
+    NeedsTolerance(&'static str),
+    /// `exact` with a tolerance, which it would ignore.
+    #[error("an exact sync has no tolerance (approximate or epsilon use one)")]
+    ToleranceForExact,
+}
+
 impl SyncPolicy {
+    /// The policy named by `word` (`exact`, `approximate` or `epsilon`; unset: exact
+    /// without a tolerance, approximate with one), matching within `tolerance` and
+    /// keeping `queue_size` items per input: how a system file, the command line and
+    /// Python name it.
+    ///
+    /// # Errors
+    /// [`SyncWordsError`]: an unknown word, or a tolerance missing or given in vain.
+    pub fn from_words(
+        word: Option<&str>,
+        tolerance: Option<Time>,
+        queue_size: usize,
+    ) -> Result<Self, SyncWordsError> {
+        Ok(match (word.map(str::trim), tolerance) {
+            (None | Some("exact"), None) => {
+                SyncPolicy::Exact(ExactConfig::default().queue_size(queue_size))
+            }
+            (Some("exact"), Some(_)) => return Err(SyncWordsError::ToleranceForExact),
+            (None | Some("approximate"), Some(t)) => SyncPolicy::Approximate(
+                ApproximateConfig::default().queue_size(queue_size).tolerance(t),
+            ),
+            (Some("epsilon"), Some(t)) => {
+                SyncPolicy::Epsilon(EpsilonConfig::default().queue_size(queue_size).tolerance(t))
+            }
+            (Some("approximate"), None) => {
+                return Err(SyncWordsError::NeedsTolerance("approximate"));
+            }
+            (Some("epsilon"), None) => return Err(SyncWordsError::NeedsTolerance("epsilon")),
+            (Some(other), _) => return Err(SyncWordsError::Unknown(other.to_owned())),
+        })
+    }
+
     /// Creates a synchronizer of this policy over `inputs` inputs.
     ///
     /// # Errors
@@ -262,5 +308,22 @@ mod tests {
             approx(ApproximateConfig::default().age_penalty(f64::NAN)),
             Some(SyncError::InvalidAgePenalty(_))
         ));
+    }
+
+    #[test]
+    fn policies_by_their_words() {
+        let words = |w, t| SyncPolicy::from_words(w, t, 7);
+        assert_eq!(words(None, None), Ok(SyncPolicy::Exact(ExactConfig::default().queue_size(7))));
+        assert_eq!(
+            words(None, Some(5)),
+            Ok(SyncPolicy::Approximate(ApproximateConfig::default().queue_size(7).tolerance(5)))
+        );
+        assert_eq!(
+            words(Some("epsilon"), Some(5)),
+            Ok(SyncPolicy::Epsilon(EpsilonConfig::default().queue_size(7).tolerance(5)))
+        );
+        assert_eq!(words(Some("epsilon"), None), Err(SyncWordsError::NeedsTolerance("epsilon")));
+        assert_eq!(words(Some("exact"), Some(5)), Err(SyncWordsError::ToleranceForExact));
+        assert_eq!(words(Some("nearest"), None), Err(SyncWordsError::Unknown("nearest".into())));
     }
 }

@@ -13,6 +13,11 @@ create_exception!(esgm, EsgmError, PyException, "Every esgm error.");
 create_exception!(esgm, NoSuchEntityStructure, EsgmError, "No trajectory of this name.");
 create_exception!(esgm, NoSuchEntityStructureType, EsgmError, "No type of this name.");
 create_exception!(esgm, EntityStructureAlreadyExists, EsgmError, "The name is taken.");
+create_exception!(esgm, EntityStructureTypeAlreadyExists, EsgmError, "The type name is taken.");
+create_exception!(esgm, NoSuchSensor, EsgmError, "No sensor of this name.");
+create_exception!(esgm, NoSuchCompUnit, EsgmError, "No computational unit of this name.");
+create_exception!(esgm, SensorAlreadyExists, EsgmError, "The sensor name is taken.");
+create_exception!(esgm, CompUnitAlreadyExists, EsgmError, "The unit name is taken.");
 create_exception!(esgm, ValueNotAvailable, EsgmError, "No sample answers the query.");
 create_exception!(esgm, PolicyViolation, EsgmError, "The trajectory's policy refused it.");
 create_exception!(esgm, InvalidType, EsgmError, "The structure does not fit the type.");
@@ -29,6 +34,11 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("NoSuchEntityStructure", py.get_type::<NoSuchEntityStructure>())?;
     m.add("NoSuchEntityStructureType", py.get_type::<NoSuchEntityStructureType>())?;
     m.add("EntityStructureAlreadyExists", py.get_type::<EntityStructureAlreadyExists>())?;
+    m.add("EntityStructureTypeAlreadyExists", py.get_type::<EntityStructureTypeAlreadyExists>())?;
+    m.add("NoSuchSensor", py.get_type::<NoSuchSensor>())?;
+    m.add("NoSuchCompUnit", py.get_type::<NoSuchCompUnit>())?;
+    m.add("SensorAlreadyExists", py.get_type::<SensorAlreadyExists>())?;
+    m.add("CompUnitAlreadyExists", py.get_type::<CompUnitAlreadyExists>())?;
     m.add("ValueNotAvailable", py.get_type::<ValueNotAvailable>())?;
     m.add("PolicyViolation", py.get_type::<PolicyViolation>())?;
     m.add("InvalidType", py.get_type::<InvalidType>())?;
@@ -56,9 +66,24 @@ pub fn to_py<E: serde::Serialize + std::fmt::Display>(e: &E) -> PyErr {
         Some("NoSuchEntityStructure") => NoSuchEntityStructure::new_err(message),
         Some("NoSuchEntityStructureType") => NoSuchEntityStructureType::new_err(message),
         Some("EntityStructureAlreadyExists") => EntityStructureAlreadyExists::new_err(message),
+        Some("EntityStructureTypeAlreadyExists") => {
+            EntityStructureTypeAlreadyExists::new_err(message)
+        }
+        Some("NoSuchSensor") => NoSuchSensor::new_err(message),
+        Some("NoSuchCompUnit") => NoSuchCompUnit::new_err(message),
+        Some("SensorAlreadyExists") => SensorAlreadyExists::new_err(message),
+        Some("CompUnitAlreadyExists") => CompUnitAlreadyExists::new_err(message),
         Some("ValueNotAvailable") => ValueNotAvailable::new_err(message),
         Some("PolicyViolation") => PolicyViolation::new_err(message),
-        Some("InvalidType") => InvalidType::new_err(message),
+        // A structure, an input or a definition that does not fit its type.
+        Some(
+            "InvalidType"
+            | "InvalidInput"
+            | "WrongInputCount"
+            | "InvalidTypeDefinition"
+            | "InvalidDefinition"
+            | "TypeChange",
+        ) => InvalidType::new_err(message),
         Some("OperationNotSupported") => OperationNotSupported::new_err(message),
         Some("IllegalPolicy") => IllegalPolicy::new_err(message),
         Some("LimitReached") => LimitReached::new_err(message),

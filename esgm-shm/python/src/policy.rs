@@ -5,11 +5,12 @@ use pyo3::exceptions::{PyKeyError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-/// `{"cache": 10 | "all", "order": "monotone", "delay": ns, "reorder": bool,
-/// "filter": "x > 0.0"}` as a policy; an unknown key or value is named. (The
+/// `base` with the settings of `{"cache": 10 | "all", "order": "monotone", "delay": ns,
+/// "reorder": bool, "filter": "x > 0.0"}` (a kind's own defaults, such as a sampled
+/// stream's period, stay unless set); an unknown key or value is named. (The
 /// combination is checked when the trajectory is made: `IllegalPolicy`.)
-pub fn from_dict(d: &Bound<'_, PyDict>) -> PyResult<FluentStreamPolicy> {
-    let mut p = FluentStreamPolicy::default();
+pub fn with_dict(base: FluentStreamPolicy, d: &Bound<'_, PyDict>) -> PyResult<FluentStreamPolicy> {
+    let mut p = base;
     for (k, v) in d.iter() {
         let key: String = k.extract()?;
         let bad =

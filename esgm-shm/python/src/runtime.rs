@@ -4,9 +4,12 @@
 
 use std::sync::Arc;
 
+use esgm_core::esgm::TrajectorySpec;
+use esgm_core::generator_entry::parse_generator;
+use esgm_core::operators::sync::SyncPolicy;
 use esgm_core::{EntityStructureType, Esgm as _, InProcessEsgm, InProcessTrajectory};
 use esgm_shm::ShmEsgm;
-use pyo3::exceptions::PyTypeError;
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
@@ -70,6 +73,25 @@ pub struct Esgm {
 }
 
 impl Esgm {
+    /// Makes the trajectory of `spec`, its policy's settings changed by `policy`.
+    fn create(
+        &self,
+        py: Python<'_>,
+        spec: TrajectorySpec,
+        policy: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Trajectory> {
+        let spec = match policy {
+            Some(d) => {
+                let policy = crate::policy::with_dict(spec.policy.clone(), d)?;
+                spec.policy(policy)
+            }
+            None => spec,
+        };
+        let rt = Arc::clone(&self.runtime);
+        let made = py.detach(move || on!(&*rt, e => e.create_trajectory(spec)));
+        made.map(|h| self.handle(h)).map_err(|e| to_py(&e))
+    }
+
     fn handle(&self, h: InProcessTrajectory) -> Trajectory {
         Trajectory { handle: h, runtime: Arc::clone(&self.runtime) }
     }
@@ -191,14 +213,80 @@ impl Esgm {
         type_name: &str,
         policy: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Trajectory> {
-        let policy = match policy {
-            Some(d) => crate::policy::from_dict(d)?,
-            None => esgm_core::FluentStreamPolicy::default(),
+        self.create(py, TrajectorySpec::primitive(name, type_name), policy)
+    }
+
+    /// A synchronized trajectory `name` (G2): states holding one sample of each of
+    /// `inputs` valid at the same time — exactly, or within `tolerance` ns as ROS
+    /// message_filters match them (`sync_policy`: `"approximate"`, the default with a
+    /// tolerance, or `"epsilon"`), keeping `queue_size` items per input.
+    #[pyo3(signature = (name, inputs, tolerance=None, sync_policy=None, queue_size=10, policy=None))]
+    #[allow(clippy::too_many_arguments, reason = "the trajectory's settings, each with its default")]
+    fn create_sync_entity_trajectory_structure(
+        &self,
+        py: Python<'_>,
+        name: &str,
+        inputs: Vec<String>,
+        tolerance: Option<i64>,
+        sync_policy: Option<&str>,
+        queue_size: usize,
+        policy: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Trajectory> {
+        let sync = SyncPolicy::from_words(sync_policy, tolerance, queue_size)
+            .map_err(|e| PyValueError::new_err(format!("trajectory `{name}`: {e}")))?;
+        self.create(py, TrajectorySpec::sync(name, inputs, sync), policy)
+    }
+
+    /// A merged trajectory `name` (G3): every sample of `inputs` (one type), as they
+    /// come.
+    #[pyo3(signature = (name, inputs, policy=None))]
+    fn create_merge_entity_trajectory_structure(
+        &self,
+        py: Python<'_>,
+        name: &str,
+        inputs: Vec<String>,
+        policy: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Trajectory> {
+        self.create(py, TrajectorySpec::merge(name, inputs), policy)
+    }
+
+    /// A trajectory `name` sampled every `sample_period` ns from fluent generators
+    /// (G4): `generators` are `"TRAJ[:APPROXIMATION[:MERGE]]"` (`"robot_state:linear"`);
+    /// one gives its values, several their state, and `unit` its temporal function of
+    /// them (`compute_at(values, t)`). Read `lag` ns behind each sample time, from
+    /// `start` to `end` (0: now, forever).
+    #[pyo3(signature = (name, generators, sample_period, unit=None, start=0, end=0, lag=0, policy=None))]
+    #[allow(
+        clippy::too_many_arguments,
+        reason = "the trajectory's settings, each with its default"
+    )]
+    fn create_generated_entity_trajectory_structure(
+        &self,
+        py: Python<'_>,
+        name: &str,
+        generators: Vec<String>,
+        sample_period: i64,
+        unit: Option<&str>,
+        start: i64,
+        end: i64,
+        lag: i64,
+        policy: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Trajectory> {
+        if generators.is_empty() {
+            return Err(PyValueError::new_err(format!(
+                "trajectory `{name}`: generators needs at least one trajectory"
+            )));
+        }
+        let generators = generators
+            .iter()
+            .map(|g| parse_generator(g))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|e| PyValueError::new_err(format!("trajectory `{name}`: {e}")))?;
+        let spec = match unit {
+            Some(unit) => TrajectorySpec::sampled_function(name, unit, generators, sample_period),
+            None => TrajectorySpec::sampled_generators(name, generators, sample_period),
         };
-        let spec = esgm_core::esgm::TrajectorySpec::primitive(name, type_name).policy(policy);
-        let rt = Arc::clone(&self.runtime);
-        let made = py.detach(move || on!(&*rt, e => e.create_trajectory(spec)));
-        made.map(|h| self.handle(h)).map_err(|e| to_py(&e))
+        self.create(py, spec.between(start, end).lag(lag), policy)
     }
 
     /// The trajectory `name`.
@@ -300,27 +388,25 @@ impl Esgm {
             .map_err(|e| to_py(&e))
     }
 
-    /// A computed trajectory `name`: `unit` runs on every update of `inputs`.
+    /// A computed trajectory `name`: `unit` runs on every update of `inputs`; `policy`
+    /// as a primitive trajectory's.
+    #[pyo3(signature = (name, unit, inputs, policy=None))]
     fn create_computed_entity_trajectory_structure(
         &self,
         py: Python<'_>,
         name: &str,
         unit: &str,
         inputs: Vec<String>,
+        policy: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Trajectory> {
-        let rt = Arc::clone(&self.runtime);
-        let (name, unit) = (name.to_owned(), unit.to_owned());
-        let made = py.detach(move || {
-            let inputs: Vec<&str> = inputs.iter().map(String::as_str).collect();
-            on!(&*rt, e => e.create_computed_entity_trajectory_structure(&name, &unit, &inputs))
-        });
-        made.map(|h| self.handle(h)).map_err(|e| to_py(&e))
+        self.create(py, TrajectorySpec::computed(name, unit, inputs), policy)
     }
 
     /// A sampled trajectory `name` (the seed's signature): `sensor` read every
-    /// `sample_period` ns from `start` to `end` (0: no bound), keeping `cache_size`
-    /// samples (0: all).
-    #[pyo3(signature = (name, sensor, sample_period, start=0, end=0, delay=0, cache_size=0))]
+    /// `sample_period` ns from `start` to `end` (0: no bound), with the largest add
+    /// `delay` (0: any), keeping `cache_size` samples (0: all); `policy` changes any
+    /// other setting, as a primitive trajectory's.
+    #[pyo3(signature = (name, sensor, sample_period, start=0, end=0, delay=0, cache_size=0, policy=None))]
     #[allow(clippy::too_many_arguments, reason = "the seed's operation, argument for argument")]
     fn create_entity_trajectory_structure(
         &self,
@@ -332,13 +418,16 @@ impl Esgm {
         end: i64,
         delay: i64,
         cache_size: i64,
+        policy: Option<&Bound<'_, PyDict>>,
     ) -> PyResult<Trajectory> {
-        let rt = Arc::clone(&self.runtime);
-        let (name, sensor) = (name.to_owned(), sensor.to_owned());
-        let made = py.detach(move || {
-            on!(&*rt, e => e.create_entity_trajectory_structure(&name, &sensor, start, end, sample_period, delay, cache_size))
-        });
-        made.map(|h| self.handle(h)).map_err(|e| to_py(&e))
+        let illegal = |e: esgm_core::PolicyError| to_py(&esgm_core::esgm::CreateError::from(e));
+        let mut spec = TrajectorySpec::sampled(name, sensor, sample_period)
+            .map_err(illegal)?
+            .between(start, end);
+        spec.policy =
+            esgm_core::FluentStreamPolicy::sampled(start, end, sample_period, delay, cache_size)
+                .map_err(illegal)?;
+        self.create(py, spec, policy)
     }
 
     /// Waits until every worker of the system has processed what it was given, at most

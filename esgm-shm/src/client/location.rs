@@ -99,6 +99,9 @@ pub(crate) struct Looked {
     /// (`None`: not subscribed; the coordinator is asked instead), and the last one.
     pub versions: Option<iceoryx2::port::subscriber::Subscriber<crate::ShmService, u64, ()>>,
     announced: Option<u64>,
+    /// True while [`Location::poll_assignments`] builds: an assignment's input that is
+    /// itself assigned here is built by the same poll, never by a nested one.
+    building_assignments: bool,
 }
 
 impl Looked {
@@ -702,7 +705,15 @@ impl Location {
 
     /// Builds the trajectories the coordinator placed here that are not built yet
     /// (sampled on this process's sensors, computed by its units, created by others).
+    ///
+    /// One assignment may read another (a computed trajectory of a sampled one, both
+    /// here): building it asks for its inputs, which does not poll again (that nested
+    /// poll would build the same list again, without end); the input's own turn in
+    /// this list builds it, and what waited for it is built in the next pass.
     fn poll_assignments(&mut self) {
+        if self.looked.building_assignments {
+            return;
+        }
         let version = self.registry_version();
         if version.is_some() && version == self.looked.assignments && self.failed.is_empty() {
             return;
@@ -716,25 +727,42 @@ impl Location {
                 return;
             }
         };
-        for Assignment { spec, record } in list {
-            if self.exports(&spec.name) || self.failed.contains(&spec.name) {
-                continue;
+        self.looked.building_assignments = true;
+        let mut pending: Vec<Assignment> = list
+            .into_iter()
+            .filter(|a| !self.exports(&a.spec.name) && !self.failed.contains(&a.spec.name))
+            .collect();
+        while !pending.is_empty() {
+            let before = pending.len();
+            let mut waiting = Vec::new();
+            for assignment in pending {
+                match self.build(&assignment.spec, &assignment.record, false) {
+                    Ok(_) => {
+                        tracing::info!(trajectory = %assignment.spec.name, "writing trajectory")
+                    }
+                    // A transient failure (the coordinator slow to answer under load,
+                    // an input of this list not built yet) is retried; anything else
+                    // would fail again.
+                    Err(CreateError::Unavailable { .. }) => waiting.push(assignment),
+                    Err(e) => {
+                        tracing::warn!(trajectory = %assignment.spec.name, error = %e,
+                            "cannot build an assigned trajectory");
+                        self.failed.insert(assignment.spec.name.clone());
+                    }
+                }
             }
-            match self.build(&spec, &record, false) {
-                Ok(_) => tracing::info!(trajectory = %spec.name, "writing trajectory"),
-                // A transient failure (the coordinator slow to answer under load) is
-                // retried at the next poll; anything else would fail again.
-                Err(e @ CreateError::Unavailable { .. }) => {
-                    tracing::info!(trajectory = %spec.name, error = %e,
+            if waiting.len() == before {
+                for assignment in &waiting {
+                    tracing::info!(trajectory = %assignment.spec.name,
                         "cannot build an assigned trajectory yet; retrying");
                 }
-                Err(e) => {
-                    tracing::warn!(trajectory = %spec.name, error = %e,
-                        "cannot build an assigned trajectory");
-                    self.failed.insert(spec.name.clone());
-                }
+                // Asked again at the next poll, whatever the registry's version.
+                self.looked.assignments = None;
+                break;
             }
+            pending = waiting;
         }
+        self.looked.building_assignments = false;
     }
 }
 

@@ -7,14 +7,14 @@ use std::collections::BTreeMap;
 
 use anyhow::{Context, bail};
 use esgm_core::esgm::TrajectorySpec;
-use esgm_core::operators::sync::{ApproximateConfig, EpsilonConfig, ExactConfig, SyncPolicy};
+use esgm_core::operators::sync::SyncPolicy;
 use esgm_core::value::ValueSort;
 use esgm_core::{Attr, EntityStructureType, Time};
 use serde::Deserialize;
 
-use super::generate::parse_generator;
 use crate::policy_args::{PolicyArgs, duration};
 use crate::time_arg::TimeArg;
+use esgm_core::generator_entry::parse_generator;
 
 /// `[[type]]` / `esgm type add`: an entity structure type.
 #[derive(Debug, Clone, clap::Args, Deserialize)]
@@ -308,7 +308,7 @@ impl TrajectoryDecl {
             let generators = entries
                 .iter()
                 .map(|e| parse_generator(e))
-                .collect::<anyhow::Result<Vec<_>>>()
+                .collect::<Result<Vec<_>, _>>()
                 .with_context(|| format!("trajectory `{}`", self.name))?;
             let spec = match &self.function {
                 Some(unit) => {
@@ -326,28 +326,10 @@ impl TrajectoryDecl {
             TrajectorySpec::computed(&self.name, unit, inputs)
         } else if let Some(inputs) = &self.sync {
             let queue = self.queue.unwrap_or(10);
-            let policy = match (&self.tolerance, self.sync_policy.as_deref()) {
-                (Some(t), None | Some("approximate")) => SyncPolicy::Approximate(
-                    ApproximateConfig::default()
-                        .queue_size(queue)
-                        .tolerance(duration(t).context("tolerance")?),
-                ),
-                (Some(t), Some("epsilon")) => SyncPolicy::Epsilon(
-                    EpsilonConfig::default()
-                        .queue_size(queue)
-                        .tolerance(duration(t).context("tolerance")?),
-                ),
-                (None, None | Some("exact")) => {
-                    SyncPolicy::Exact(ExactConfig::default().queue_size(queue))
-                }
-                (None, Some(p @ ("approximate" | "epsilon"))) => {
-                    bail!("trajectory `{}`: sync_policy `{p}` needs a tolerance", self.name)
-                }
-                (_, Some(other)) => bail!(
-                    "trajectory `{}`: unknown sync_policy `{other}` (exact, approximate or epsilon)",
-                    self.name
-                ),
-            };
+            let tolerance =
+                self.tolerance.as_deref().map(duration).transpose().context("tolerance")?;
+            let policy = SyncPolicy::from_words(self.sync_policy.as_deref(), tolerance, queue)
+                .with_context(|| format!("trajectory `{}`", self.name))?;
             TrajectorySpec::sync(&self.name, inputs.clone(), policy)
         } else {
             TrajectorySpec::merge(&self.name, self.merge.clone().unwrap_or_default())

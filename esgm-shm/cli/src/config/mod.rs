@@ -40,7 +40,6 @@
 pub mod apply;
 pub mod bridge;
 pub mod decl;
-pub mod generate;
 pub mod python;
 pub mod ros2;
 
