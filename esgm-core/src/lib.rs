@@ -73,9 +73,9 @@ pub use policy::{
 pub use runtime::{InProcessEsgm, InProcessTrajectory};
 pub use sample::Sample;
 pub use store::{
-    AddError, AddForwarder, AddOutcome, CallbackError, CallbackHandle, DropCause, FeedWaiter,
-    PolicyViolation, QueryError, RecvError, Rejection, ReplicaFeed, ResetForwarder, StoreEvent,
-    StoreTap, SubscribeOptions, Subscription, SubscriptionId, TapId, TrajectoryStats,
+    AddError, AddForwarder, AddOutcome, BridgeLoss, CallbackError, CallbackHandle, DropCause,
+    FeedWaiter, PolicyViolation, QueryError, RecvError, Rejection, ReplicaFeed, ResetForwarder,
+    StoreEvent, StoreTap, SubscribeOptions, Subscription, SubscriptionId, TapId, TrajectoryStats,
     TrajectoryStore,
 };
 pub use time::{TIMEUNITS_PER_MILLI_SECOND, TIMEUNITS_PER_SECOND, Time, micros, millis, secs};

@@ -92,6 +92,14 @@ impl InProcessTrajectory {
             .or_else(|| PixelBuffer::heap_image(width, height, format))
     }
 
+    /// Counts `n` messages a bridge to another middleware lost on their way into or
+    /// out of this trajectory, so that `esgm stats` shows them with their cause
+    /// (an importing bridge counts on the trajectory it writes, an exporting one on
+    /// the replica it reads).
+    pub fn count_bridge_loss(&self, loss: crate::BridgeLoss, n: u64) -> Result<(), QueryError> {
+        self.with_store(|s| s.count_bridge_loss(loss, n))
+    }
+
     /// Adds an already shared structure without copying it (zero-copy push).
     pub fn add_shared(&self, es: Arc<EntityStructure>) -> Result<AddOutcome, AddError> {
         self.add_with("add", |s| s.add_shared(es, false))

@@ -55,7 +55,9 @@ pub use subscription::{
     CallbackError, CallbackHandle, FanIn, FeedWaiter, RecvError, ReplicaFeed, SubscribeOptions,
     Subscription, SubscriptionId,
 };
-pub use violation::{AddError, AddForwarder, AddOutcome, DropCause, PolicyViolation, Rejection};
+pub use violation::{
+    AddError, AddForwarder, AddOutcome, BridgeLoss, DropCause, PolicyViolation, Rejection,
+};
 
 /// A sample waiting in the reorder buffer, ordered by (valid time, add sequence).
 #[derive(Debug)]
@@ -748,6 +750,12 @@ impl TrajectoryStore {
     /// time is kept, so queries, subscribers and stats agree with the writer's.
     pub fn replicate(&mut self, es: Arc<EntityStructure>, add_time: Time) {
         self.admit(es, add_time);
+    }
+
+    /// Counts `n` messages a bridge to another middleware lost on their way into or
+    /// out of this trajectory ([`DropCause::Bridge`]).
+    pub fn count_bridge_loss(&mut self, loss: BridgeLoss, n: u64) {
+        self.stats.record_dropped_n(DropCause::Bridge(loss), n);
     }
 
     /// Counts `n` structures the writer of this replica admitted that never reached

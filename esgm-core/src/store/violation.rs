@@ -65,6 +65,39 @@ pub enum DropCause {
     /// Its sequence number was used anyway, so each reader also counts it as
     /// [`DropCause::Lost`].
     Unpublished,
+    /// A message on its way between this trajectory and another middleware (a ROS 2
+    /// topic through `esgm ros2`) that the bridge lost: counted by the importing
+    /// bridge on the trajectory it writes, by an exporting bridge on its replica.
+    Bridge(BridgeLoss),
+}
+
+/// Why a bridge to another middleware lost a message ([`DropCause::Bridge`]): each is
+/// the bridge's own count, so that `esgm stats` shows what never became a sample,
+/// or never left as a message, beside what the trajectory itself dropped.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
+pub enum BridgeLoss {
+    /// The foreign message did not decode as its declared type.
+    Undecodable,
+    /// A field has no counterpart on the other side (an image encoding esgm has no
+    /// format for, a sequence too long for its attribute).
+    Unconvertible,
+    /// The bridge fell behind: its queue on one side overflowed.
+    Behind,
+    /// The other middleware refused to send it.
+    NotSent,
+}
+
+impl fmt::Display for BridgeLoss {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            BridgeLoss::Undecodable => "bridge_undecodable",
+            BridgeLoss::Unconvertible => "bridge_unconvertible",
+            BridgeLoss::Behind => "bridge_behind",
+            BridgeLoss::NotSent => "bridge_not_sent",
+        })
+    }
 }
 
 /// Why a replica dropped bytes that arrived on its trajectory's service: hostile or
@@ -113,6 +146,7 @@ impl fmt::Display for DropCause {
             DropCause::Lost => f.write_str("lost"),
             DropCause::Rejected(r) => r.fmt(f),
             DropCause::Unpublished => f.write_str("unpublished"),
+            DropCause::Bridge(loss) => loss.fmt(f),
         }
     }
 }

@@ -107,7 +107,7 @@ pub fn spawn(
     let handle = esgm.get_entity_trajectory_structure(&spec.trajectory).map_err(lookup)?;
     let type_name =
         esgm.get_entity_trajectory_structure_type(&spec.trajectory).map_err(lookup)?.name;
-    let counters = stats.topic(&spec.topic, &spec.trajectory, Direction::Export);
+    let counters = stats.topic(&spec.topic, &handle, Direction::Export);
     let Ok(ros_type) = RosType::for_esgm_type(&type_name) else {
         // No standard message: its generated one (`esgm ros2 msg <Type>`).
         let schema = Arc::new(generated::Schema::new(&type_name, |t| {

@@ -211,7 +211,7 @@ pub fn spawn(
     stop: &Arc<AtomicBool>,
 ) -> Result<std::thread::JoinHandle<()>, ImportError> {
     let handle = trajectory(esgm, spec, qos)?;
-    let counters = stats.topic(&spec.topic, &spec.trajectory, Direction::Import);
+    let counters = stats.topic(&spec.topic, &handle, Direction::Import);
     match spec.ros_type {
         RosType::Image => start::<msgs::Image>(node, spec, qos, handle, counters, stop),
         RosType::Pose2D => start::<msgs::Pose2D>(node, spec, qos, handle, counters, stop),

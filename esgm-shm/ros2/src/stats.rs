@@ -5,6 +5,7 @@
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use esgm_core::{BridgeLoss, EntityTrajectoryStructure as _, InProcessTrajectory};
 use serde::Serialize;
 use std::sync::Mutex;
 
@@ -34,6 +35,20 @@ pub enum LossCause {
     PublishFailed,
 }
 
+impl LossCause {
+    /// The cause as the trajectory's statistics count it (`esgm stats`); `None` for a
+    /// refusal, which the trajectory's gate counted itself (as its violation or type).
+    pub fn bridge_loss(self) -> Option<BridgeLoss> {
+        match self {
+            LossCause::Malformed => Some(BridgeLoss::Undecodable),
+            LossCause::Unconvertible => Some(BridgeLoss::Unconvertible),
+            LossCause::Refused => None,
+            LossCause::SlowSide => Some(BridgeLoss::Behind),
+            LossCause::PublishFailed => Some(BridgeLoss::NotSent),
+        }
+    }
+}
+
 const CAUSES: [LossCause; 5] = [
     LossCause::Malformed,
     LossCause::Unconvertible,
@@ -42,11 +57,13 @@ const CAUSES: [LossCause; 5] = [
     LossCause::PublishFailed,
 ];
 
-/// One topic's counters.
+/// One topic's counters, kept here for the bridge's report and counted on the
+/// trajectory too (its writer's store for an import, this process's replica for an
+/// export), where `esgm stats` shows them.
 #[derive(Debug)]
 pub struct TopicCounters {
     topic: String,
-    trajectory: String,
+    trajectory: InProcessTrajectory,
     direction: Direction,
     passed: AtomicU64,
     lost: [AtomicU64; CAUSES.len()],
@@ -58,10 +75,16 @@ impl TopicCounters {
         self.passed.fetch_add(1, Ordering::Relaxed);
     }
 
-    /// `n` lost for `cause`.
+    /// `n` lost for `cause`: in the report, and in the trajectory's statistics.
     pub fn lost(&self, cause: LossCause, n: u64) {
         if let Some(i) = CAUSES.iter().position(|c| *c == cause) {
             self.lost[i].fetch_add(n, Ordering::Relaxed);
+        }
+        if let Some(loss) = cause.bridge_loss() {
+            if let Err(e) = self.trajectory.count_bridge_loss(loss, n) {
+                // Destroyed meanwhile: the report still counts it.
+                tracing::debug!(topic = %self.topic, error = %e, "loss not counted on the trajectory");
+            }
         }
     }
 
@@ -93,11 +116,16 @@ pub struct Stats {
 }
 
 impl Stats {
-    /// The counters of a new topic.
-    pub fn topic(&self, topic: &str, trajectory: &str, direction: Direction) -> Arc<TopicCounters> {
+    /// The counters of a new topic, bridged to `trajectory`.
+    pub fn topic(
+        &self,
+        topic: &str,
+        trajectory: &InProcessTrajectory,
+        direction: Direction,
+    ) -> Arc<TopicCounters> {
         let counters = Arc::new(TopicCounters {
             topic: topic.to_owned(),
-            trajectory: trajectory.to_owned(),
+            trajectory: trajectory.clone(),
             direction,
             passed: AtomicU64::new(0),
             lost: Default::default(),
@@ -116,7 +144,7 @@ impl Stats {
             .iter()
             .map(|t| TopicReport {
                 topic: t.topic.clone(),
-                trajectory: t.trajectory.clone(),
+                trajectory: t.trajectory.name().to_owned(),
                 direction: t.direction,
                 passed: t.passed.load(Ordering::Relaxed),
                 lost: CAUSES.iter().map(|c| (*c, t.lost_for(*c))).filter(|(_, n)| *n > 0).collect(),

@@ -252,7 +252,12 @@ pub(crate) fn combine_stats(answers: Answers) -> EsgmStats {
                 stats.trajectories.insert(name, report);
             } else {
                 for (cause, n) in &report.stats.dropped {
-                    if matches!(cause, DropCause::Lost | DropCause::Rejected(_)) {
+                    // What only a reader sees: its losses, its rejections, and an
+                    // exporting bridge's losses on the way out.
+                    if matches!(
+                        cause,
+                        DropCause::Lost | DropCause::Rejected(_) | DropCause::Bridge(_)
+                    ) {
                         at_readers.push((name.clone(), *cause, *n));
                     }
                 }

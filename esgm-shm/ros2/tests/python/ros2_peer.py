@@ -95,7 +95,9 @@ def wait_for(condition, timeout, what):
         time.sleep(0.02)
 
 
-def publish_images(topic, count):
+def publish_images(topic, count, unconvertible=0):
+    """`count` 4x3 rgb8 images, then `unconvertible` in an encoding esgm has no format
+    for (which the bridge must count, not store)."""
     dp = DomainParticipant(0)
     writer = DataWriter(dp, Topic(dp, dds_topic(topic), Image), qos=QOS)
     wait_for(lambda: len(writer.get_matched_subscriptions()) > 0, 20, "no reader matched")
@@ -105,6 +107,9 @@ def publish_images(topic, count):
         stamp = Time(sec=1000, nanosec=i * 1_000_000)
         writer.write(Image(Header(stamp, "camera"), h, w, "rgb8", 0, w * 3, data))
         time.sleep(0.01)
+    for i in range(unconvertible):
+        stamp = Time(sec=2000, nanosec=i)
+        writer.write(Image(Header(stamp, "camera"), h, w, "bayer_weird16", 0, w * 2, [0] * (w * h * 2)))
     writer.wait_for_acks(duration(seconds=10))
     print(f"published {count}", flush=True)
 
@@ -140,7 +145,7 @@ def read_blob_seqs(topic, count, timeout):
 def main():
     mode = sys.argv[1]
     if mode == "publish-images":
-        publish_images(sys.argv[2], int(sys.argv[3]))
+        publish_images(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]) if len(sys.argv) > 4 else 0)
     elif mode == "read-poses":
         read_poses(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]))
     elif mode == "read-blob-seqs":

@@ -18,7 +18,8 @@
 //! - **Unexplained**: everything else, which in this system is a bug:
 //!   [`DropCause::Rejected`] (no process of the soak writes anything but valid samples
 //!   from the registered writer), [`DropCause::InvalidType`] (the built-in units and
-//!   sensors write their declared types), [`DropCause::Reset`] (the soak resets
+//!   sensors write their declared types), [`DropCause::Bridge`] (the soak runs no
+//!   bridge to another middleware), [`DropCause::Reset`] (the soak resets
 //!   nothing), a worker's `failures` and `panics`, and any cause this version does not
 //!   know.
 
@@ -119,7 +120,8 @@ pub fn explained(cause: DropCause) -> bool {
         DropCause::InvalidType
         | DropCause::Reset
         | DropCause::Rejected(_)
-        | DropCause::Unpublished => false,
+        | DropCause::Unpublished
+        | DropCause::Bridge(_) => false,
     }
 }
 
