@@ -23,6 +23,7 @@ use crate::mapping::{self, MappingError, RosType};
 use crate::msgs;
 use crate::node::{NodeError, TopicQos, message_type_name, topic_name};
 use crate::stats::{Direction, LossCause, Stats, TopicCounters};
+use crate::watch::{Spawned, Watched};
 
 /// One `--export`.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -102,7 +103,7 @@ pub fn spawn(
     qos: TopicQos,
     stats: &Stats,
     stop: &Arc<AtomicBool>,
-) -> Result<std::thread::JoinHandle<()>, ExportError> {
+) -> Result<Spawned, ExportError> {
     let lookup = |source| ExportError::Lookup { trajectory: spec.trajectory.clone(), source };
     let handle = esgm.get_entity_trajectory_structure(&spec.trajectory).map_err(lookup)?;
     let type_name =
@@ -146,12 +147,19 @@ fn start<M: Serialize + Send + 'static>(
     convert: Convert<M>,
     counters: Arc<TopicCounters>,
     stop: &Arc<AtomicBool>,
-) -> Result<std::thread::JoinHandle<()>, ExportError> {
+) -> Result<Spawned, ExportError> {
     let create = |what, e: &dyn std::fmt::Debug| NodeError::Create {
         what,
         topic: spec.topic.clone(),
         detail: format!("{e:?}"),
     };
+    let watched = Watched::new(
+        &spec.topic,
+        &message_type,
+        Direction::Export,
+        &qos.profile(),
+        Arc::clone(&counters),
+    );
     let topic = node
         .create_topic(&topic_name(&spec.topic)?, message_type, &qos.profile())
         .map_err(|e| create("topic", &e))?;
@@ -162,10 +170,11 @@ fn start<M: Serialize + Send + 'static>(
         .map_err(|source| ExportError::Subscribe { trajectory: spec.trajectory.clone(), source })?;
     let stop = Arc::clone(stop);
     let (trajectory, topic) = (spec.trajectory.clone(), spec.topic.clone());
-    std::thread::Builder::new()
+    let thread = std::thread::Builder::new()
         .name(format!("ros2-export-{trajectory}"))
         .spawn(move || run(&subscription, &publisher, &*convert, &counters, &topic, &stop))
-        .map_err(|source| ExportError::Thread { trajectory: spec.trajectory.clone(), source })
+        .map_err(|source| ExportError::Thread { trajectory: spec.trajectory.clone(), source })?;
+    Ok(Spawned { thread, watched })
 }
 
 /// How long the export thread waits for a sample before it looks at `stop` again.

@@ -26,6 +26,7 @@ use crate::mapping::{self, MappingError, RosType};
 use crate::msgs;
 use crate::node::{NodeError, TopicQos, message_type_name, topic_name};
 use crate::stats::{Direction, LossCause, Stats, TopicCounters};
+use crate::watch::{Spawned, Watched};
 
 /// One `--import`.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -209,7 +210,7 @@ pub fn spawn(
     qos: TopicQos,
     stats: &Stats,
     stop: &Arc<AtomicBool>,
-) -> Result<std::thread::JoinHandle<()>, ImportError> {
+) -> Result<Spawned, ImportError> {
     let handle = trajectory(esgm, spec, qos)?;
     let counters = stats.topic(&spec.topic, &handle, Direction::Import);
     match spec.ros_type {
@@ -226,23 +227,32 @@ fn start<M: Importable>(
     handle: InProcessTrajectory,
     counters: Arc<TopicCounters>,
     stop: &Arc<AtomicBool>,
-) -> Result<std::thread::JoinHandle<()>, ImportError> {
+) -> Result<Spawned, ImportError> {
     let create = |what, e: &dyn std::fmt::Debug| NodeError::Create {
         what,
         topic: spec.topic.clone(),
         detail: format!("{e:?}"),
     };
+    let message_type = message_type_name(spec.ros_type);
+    let watched = Watched::new(
+        &spec.topic,
+        &message_type,
+        Direction::Import,
+        &qos.profile(),
+        Arc::clone(&counters),
+    );
     let topic = node
-        .create_topic(&topic_name(&spec.topic)?, message_type_name(spec.ros_type), &qos.profile())
+        .create_topic(&topic_name(&spec.topic)?, message_type, &qos.profile())
         .map_err(|e| create("topic", &e))?;
     let subscription: Subscription<M> =
         node.create_subscription(&topic, None).map_err(|e| create("subscription", &e))?;
     let stop = Arc::clone(stop);
     let topic = spec.topic.clone();
-    std::thread::Builder::new()
+    let thread = std::thread::Builder::new()
         .name(format!("ros2-import-{}", spec.trajectory))
         .spawn(move || run(subscription, &handle, &counters, &topic, &stop))
-        .map_err(|source| ImportError::Thread { topic: spec.topic.clone(), source })
+        .map_err(|source| ImportError::Thread { topic: spec.topic.clone(), source })?;
+    Ok(Spawned { thread, watched })
 }
 
 /// How long the import thread sleeps before it looks at `stop` again.

@@ -11,3 +11,4 @@ pub mod export;
 pub mod import;
 pub mod node;
 pub mod stats;
+pub mod watch;

@@ -13,6 +13,7 @@ use esgm_ros2::export::{self, ExportSpec};
 use esgm_ros2::import::{self, ImportSpec};
 use esgm_ros2::node::{self, TopicQos};
 use esgm_ros2::stats::Stats;
+use esgm_ros2::watch::Watch;
 use esgm_shm::ShmEsgm;
 
 /// esgm-ros2 — ROS 2 topics in as trajectories, trajectories out as ROS 2 topics.
@@ -118,13 +119,20 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
     let stats = Stats::default();
     let qos = TopicQos { reliable: true, depth: cli.depth };
     let mut threads = Vec::new();
+    let mut watch = Watch::default();
     for spec in &imports {
         let import_qos = TopicQos { reliable: !cli.best_effort, ..qos };
-        threads.push(import::spawn(&mut ros.node, &esgm, spec, import_qos, &stats, &stop)?);
+        let spawned = import::spawn(&mut ros.node, &esgm, spec, import_qos, &stats, &stop)?;
+        threads.push(spawned.thread);
+        watch.add(spawned.watched);
     }
     for spec in &exports {
-        threads.push(export::spawn(&mut ros.node, &esgm, spec, qos, &stats, &stop)?);
+        let spawned = export::spawn(&mut ros.node, &esgm, spec, qos, &stats, &stop)?;
+        threads.push(spawned.thread);
+        watch.add(spawned.watched);
     }
+    let participant = ros.context().domain_participant();
+    let mut watched = Instant::now();
     println!(
         "esgm-ros2: esgm domain `{domain}`, ROS 2 domain {} as /esgm/{name}: importing {:?}, exporting {:?}",
         cli.ros_domain_id,
@@ -146,6 +154,11 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
                 stop.store(true, Ordering::Relaxed);
                 eprintln!("esgm-ros2: the coordinator of `{domain}` is gone; stopping");
             }
+        }
+        // A peer discovery finds that cannot match is named at once, not at the report.
+        if watched.elapsed() >= Duration::from_millis(250) {
+            watched = Instant::now();
+            watch.check(&participant);
         }
         if cli.report_every.is_some_and(|every| reported.elapsed() >= every) {
             reported = Instant::now();

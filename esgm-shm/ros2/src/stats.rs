@@ -67,6 +67,9 @@ pub struct TopicCounters {
     direction: Direction,
     passed: AtomicU64,
     lost: [AtomicU64; CAUSES.len()],
+    /// Peers that cannot match esgm's side (QoS or type), and why the last one.
+    incompatible: AtomicU64,
+    incompatibility: Mutex<Option<String>>,
 }
 
 impl TopicCounters {
@@ -88,6 +91,13 @@ impl TopicCounters {
         }
     }
 
+    /// One more peer that cannot match esgm's side of the topic ([`crate::watch`]).
+    pub fn incompatible(&self, why: &str) {
+        self.incompatible.fetch_add(1, Ordering::Relaxed);
+        *self.incompatibility.lock().unwrap_or_else(std::sync::PoisonError::into_inner) =
+            Some(why.to_owned());
+    }
+
     /// Lost so far for `cause`.
     pub fn lost_for(&self, cause: LossCause) -> u64 {
         CAUSES.iter().position(|c| *c == cause).map_or(0, |i| self.lost[i].load(Ordering::Relaxed))
@@ -107,6 +117,12 @@ pub struct TopicReport {
     pub passed: u64,
     /// Losses by cause (causes with none are left out).
     pub lost: Vec<(LossCause, u64)>,
+    /// Peers on the topic that cannot match esgm's side (QoS or type): DDS delivers
+    /// nothing between them.
+    pub incompatible: u64,
+    /// Why the last of them cannot.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub incompatibility: Option<String>,
 }
 
 /// The counters of every topic of one `esgm ros2`.
@@ -129,6 +145,8 @@ impl Stats {
             direction,
             passed: AtomicU64::new(0),
             lost: Default::default(),
+            incompatible: AtomicU64::new(0),
+            incompatibility: Mutex::new(None),
         });
         self.topics
             .lock()
@@ -148,6 +166,12 @@ impl Stats {
                 direction: t.direction,
                 passed: t.passed.load(Ordering::Relaxed),
                 lost: CAUSES.iter().map(|c| (*c, t.lost_for(*c))).filter(|(_, n)| *n > 0).collect(),
+                incompatible: t.incompatible.load(Ordering::Relaxed),
+                incompatibility: t
+                    .incompatibility
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner)
+                    .clone(),
             })
             .collect()
     }

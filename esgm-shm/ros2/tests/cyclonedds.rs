@@ -193,15 +193,10 @@ fn a_ros2_node_on_cyclonedds_feeds_an_image_trajectory_and_reads_an_exported_pos
         l.contains("\"direction\":\"import\"") && l.contains("\"passed\":5")
     });
     assert!(import.contains("\"lost\":[[\"unconvertible\",1]]"), "{import}");
-    let counted = || {
-        esgm.domain_stats().ok().and_then(|s| s.get("camera").map(|r| r.stats.dropped.clone()))
-    };
+    let counted =
+        || esgm.domain_stats().ok().and_then(|s| s.get("camera").map(|r| r.stats.dropped.clone()));
     let unconvertible = (DropCause::Bridge(BridgeLoss::Unconvertible), 1);
-    assert!(
-        wait_for(|| counted().is_some_and(|d| d.contains(&unconvertible))),
-        "{:?}",
-        counted()
-    );
+    assert!(wait_for(|| counted().is_some_and(|d| d.contains(&unconvertible))), "{:?}", counted());
     assert_eq!(camera.stats().unwrap().stored, 5);
     let export = bridge.line("the export's report", |l| l.contains("\"direction\":\"export\""));
     assert!(export.contains("\"lost\":[]"), "{export}");
@@ -267,6 +262,37 @@ fn a_type_without_a_standard_message_is_read_as_its_generated_one() {
         .collect();
     assert_eq!(v["items"], serde_json::Value::Array(expected), "{line}");
     reader.succeeds("the cyclonedds reader");
+}
+
+/// A publisher whose QoS cannot match esgm's reader (best effort, where esgm requests
+/// reliable) gets nothing across, as DDS wants; the bridge says so, naming the policy
+/// and both settings, instead of receiving nothing silently.
+#[test]
+fn a_publisher_with_incompatible_qos_is_named_not_silent() {
+    let Some(ns) = capability::needs("root and `ip netns`", Namespace::create("ros2qos")) else {
+        return;
+    };
+    let python = python::venv_python();
+    let domain = esgm_shm::unique_domain("ros2qos");
+    let _coordinator = Coordinator::spawn(&domain, Registry::new(TypeRegistry::with_library()))
+        .expect("start a coordinator");
+    let mut bridge = ns.command(ESGM_ROS2);
+    bridge.args(["--domain", &domain, "--report-every", "200ms"]);
+    bridge.args(["--import", "/camera/image_raw:sensor_msgs/msg/Image=camera"]);
+    let mut bridge = Running::start(bridge);
+    bridge.line("the bridge's ready line", |l| l.starts_with("esgm-ros2:"));
+    let mut publisher = ns.command(python.to_str().unwrap());
+    publisher.arg(peer_script()).args(["publish-best-effort", "/camera/image_raw", "20"]);
+    let mut publisher = Running::start(publisher);
+    publisher.line("the publisher's start", |l| l == "publishing");
+    let report = bridge.line("a report naming the incompatible publisher", |l| {
+        l.contains("\"direction\":\"import\"") && l.contains("\"incompatible\":1")
+    });
+    assert!(
+        report.contains("Reliability") && report.contains("BestEffort"),
+        "the report names the policy and the writer's setting: {report}"
+    );
+    assert!(report.contains("\"passed\":0"), "{report}");
 }
 
 #[test]

@@ -4,10 +4,14 @@ with IDL types named as ROS 2 names them (`sensor_msgs::msg::dds_::Image_` on to
 code with esgm or with ros2-client.
 
 Usage:
-  ros2_peer.py publish-images TOPIC COUNT
+  ros2_peer.py publish-images TOPIC COUNT [UNCONVERTIBLE]
       waits for a reader, publishes COUNT 4x3 rgb8 images (stamp = 1000 s + i ms,
       frame "camera", pixel k of image i = (k + 7 i) % 251), then waits for the
-      reader to acknowledge them; prints `published COUNT`.
+      reader to acknowledge them (after UNCONVERTIBLE more in an encoding esgm has
+      no format for); prints `published COUNT`.
+  ros2_peer.py publish-best-effort TOPIC SECONDS
+      publishes 1x1 images best effort for SECONDS (prints `publishing` first): a
+      reliable reader cannot match it.
   ros2_peer.py read-poses TOPIC COUNT TIMEOUT_S
       reads COUNT geometry_msgs/msg/Pose2D and prints each as a JSON line.
   ros2_peer.py read-blob-seqs TOPIC COUNT TIMEOUT_S
@@ -114,6 +118,19 @@ def publish_images(topic, count, unconvertible=0):
     print(f"published {count}", flush=True)
 
 
+def publish_best_effort(topic, seconds):
+    """Publishes images best effort for `seconds`: a reliable reader cannot match it
+    (DDS delivers nothing, which the bridge must say). Prints `publishing` first."""
+    dp = DomainParticipant(0)
+    qos = Qos(Policy.Reliability.BestEffort, Policy.History.KeepLast(10), Policy.Durability.Volatile)
+    writer = DataWriter(dp, Topic(dp, dds_topic(topic), Image), qos=qos)
+    print("publishing", flush=True)
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        writer.write(Image(Header(Time(sec=1, nanosec=0), "camera"), 1, 1, "rgb8", 0, 3, [1, 2, 3]))
+        time.sleep(0.05)
+
+
 def read(topic, kind, count, timeout, show):
     dp = DomainParticipant(0)
     reader = DataReader(dp, Topic(dp, dds_topic(topic), kind), qos=QOS)
@@ -146,6 +163,8 @@ def main():
     mode = sys.argv[1]
     if mode == "publish-images":
         publish_images(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]) if len(sys.argv) > 4 else 0)
+    elif mode == "publish-best-effort":
+        publish_best_effort(sys.argv[2], float(sys.argv[3]))
     elif mode == "read-poses":
         read_poses(sys.argv[2], int(sys.argv[3]), float(sys.argv[4]))
     elif mode == "read-blob-seqs":
