@@ -60,6 +60,7 @@ pub mod peer_process;
 pub mod peer_role;
 pub mod pin;
 pub mod plots;
+pub mod python_env;
 pub mod report;
 pub mod runner;
 pub mod scenario;

@@ -50,6 +50,11 @@
 //! - [`ros1_fanout`]: `ros1-fanout-<k>`, the same through roscpp with k reader
 //!   processes, against `fanout-<k>` (when the ROS 1 peer is built).
 //!
+//! The Python issue (26) adds, after `connect-*`, [`python_peer`]: `python-small` and
+//! `python-image` (esgm's Python package, process to process) beside the same hop
+//! through iceoryx2's (`python-iceoryx2-*`) and Zenoh's (`python-zenoh-*`) Python
+//! packages, run by a venv the bench makes ([`crate::python_env`]).
+//!
 //! The silent-failures issue (24) adds [`control_churn`]: `control-ping` and
 //! `control-ping-churn`, a client's call to the coordinator while others churn.
 //!
@@ -94,6 +99,7 @@ pub mod ipc_uds_echo;
 pub mod ipc_uds_frames;
 pub mod ipc_uds_image;
 pub mod ipc_uds_small;
+pub mod python_peer;
 pub mod record_image;
 pub mod record_small;
 pub mod replay_max;
@@ -128,6 +134,12 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(ros1_peer::Ros1::IMAGE),
         Box::new(ipc_connect::Connect::SMALL),
         Box::new(ipc_connect::Connect::IMAGE),
+        Box::new(python_peer::Python::ICEORYX2_SMALL),
+        Box::new(python_peer::Python::ICEORYX2_IMAGE),
+        Box::new(python_peer::Python::SMALL),
+        Box::new(python_peer::Python::IMAGE),
+        Box::new(python_peer::Python::ZENOH_SMALL),
+        Box::new(python_peer::Python::ZENOH_IMAGE),
         Box::new(bridge::Bridge::SMALL),
         Box::new(bridge::Bridge::IMAGE),
         Box::new(ipc_throughput::Throughput::ONE),

@@ -175,7 +175,7 @@ impl Drop for Master {
     }
 }
 
-pub(super) fn which(program: &str) -> Option<PathBuf> {
+pub(crate) fn which(program: &str) -> Option<PathBuf> {
     std::env::var_os("PATH")?
         .to_str()?
         .split(':')
@@ -184,7 +184,7 @@ pub(super) fn which(program: &str) -> Option<PathBuf> {
 }
 
 /// A child that is killed if dropped before it exits.
-pub(super) struct Guard(Option<Child>);
+pub(crate) struct Guard(Option<Child>);
 
 impl Guard {
     /// No child.
@@ -222,7 +222,7 @@ impl Guard {
 
 /// Reads all of `from` on a thread of its own (a child's pipe, which would block the
 /// child if nobody read it), to join for the text.
-pub(super) fn read_all(mut from: impl Read + Send + 'static) -> std::thread::JoinHandle<String> {
+pub(crate) fn read_all(mut from: impl Read + Send + 'static) -> std::thread::JoinHandle<String> {
     std::thread::spawn(move || {
         let mut s = String::new();
         // What was read before an error is all there is.
@@ -273,7 +273,7 @@ impl Drop for Guard {
 /// `program`, pinned to `core` with `taskset` when pinning. Children inherit the
 /// affinity of the (pinned) measuring thread, so without this under `--pin` every ROS
 /// process would share the measuring core.
-pub(super) fn command(program: &std::path::Path, core: Option<String>) -> Command {
+pub(crate) fn command(program: &std::path::Path, core: Option<String>) -> Command {
     match core {
         Some(core) => {
             let mut c = Command::new("taskset");
