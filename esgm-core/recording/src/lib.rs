@@ -33,6 +33,7 @@ pub mod reader;
 pub mod recorder;
 pub mod replay;
 pub mod rerun;
+pub mod ros2_bag;
 pub mod type_diff;
 pub mod value_diff;
 pub mod view;

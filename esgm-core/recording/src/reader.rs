@@ -25,6 +25,7 @@ use crate::layout::{
     ARCHIVE_ENCODING, EVENTS_TOPIC, EventKind, PIXELS_ATTRIBUTE, RECORDING_METADATA, RecordHeader,
     RecordedEvent, TYPES_ENCODING, TrajectoryMeta, TypeSchema,
 };
+use crate::ros2_bag;
 use crate::view::raw_image;
 
 /// The 8 bytes every MCAP file starts and ends with.
@@ -366,6 +367,9 @@ struct Decoder {
     lossless: HashMap<u16, usize>,
     /// View channel id → the last view message (sequence, data).
     views: HashMap<u16, Option<(u32, Vec<u8>)>>,
+    /// A ROS 2 bag's channel of a standard message → its trajectory's index, what it
+    /// holds, and the sequence its next message gets ([`crate::ros2_bag`]).
+    bags: HashMap<u16, (usize, ros2_bag::BagChannel, u64)>,
     events_channel: Option<u16>,
 }
 
@@ -424,6 +428,25 @@ impl Decoder {
                     self.events_channel = Some(c.id);
                 } else if c.metadata.contains_key(crate::layout::keys::TRAJECTORY) {
                     self.views.insert(c.id, None);
+                } else if self.bags.contains_key(&c.id) {
+                    // The summary repeats the channels: this one is read already.
+                } else if let Some(bag) =
+                    self.bag_channel(&c.topic, &c.message_encoding, c.schema_id)
+                    && !rec.trajectories.iter().any(|t| t.info.name == bag.info.name)
+                {
+                    rec.trajectories.push(RecordedTrajectory {
+                        info: bag.info.clone(),
+                        types: bag.types.clone(),
+                        view_topic: None,
+                        count: 0,
+                        bytes: 0,
+                        valid_range: None,
+                        add_range: None,
+                        losses: BTreeMap::new(),
+                        violations: 0,
+                        channel: c.id,
+                    });
+                    self.bags.insert(c.id, (rec.trajectories.len() - 1, bag, 0));
                 } else if !rec.foreign_topics.contains(&c.topic) {
                     rec.foreign_topics.push(c.topic);
                 }
@@ -445,6 +468,33 @@ impl Decoder {
                         })?;
                     rec.events.push(event);
                     return Ok(None);
+                }
+                if let Some((index, bag, next)) = self.bags.get_mut(&header.channel_id) {
+                    let t = &mut rec.trajectories[*index];
+                    let log_time = Time::try_from(header.log_time).unwrap_or(Time::MAX);
+                    return Ok(match ros2_bag::bag_structure(bag, &data, log_time) {
+                        Ok(structure) => {
+                            t.bytes = t.bytes.saturating_add(data.len() as u64);
+                            let sequence = *next;
+                            *next = next.saturating_add(1);
+                            let header = RecordHeader {
+                                add_time: log_time,
+                                recorded_time: log_time,
+                                sequence,
+                                pixels_in_view: false,
+                                view_channel: 0,
+                            };
+                            Some(RecordedSample { trajectory: *index, structure, header })
+                        }
+                        Err(e) => {
+                            // A bag is another tool's file: a message esgm cannot read
+                            // is counted with its cause, and the rest still reads.
+                            ros2_bag::count_loss(&mut t.losses, ros2_bag::loss_cause(&e));
+                            tracing::debug!(trajectory = %t.info.name, error = %e,
+                                "a ROS 2 bag message not read");
+                            None
+                        }
+                    });
                 }
                 let Some(&index) = self.lossless.get(&header.channel_id) else { return Ok(None) };
                 let t = &mut rec.trajectories[index];
@@ -480,6 +530,19 @@ impl Decoder {
             _ => {}
         }
         Ok(None)
+    }
+}
+
+impl Decoder {
+    /// The trajectory a ROS 2 bag's channel holds, if it is one esgm reads.
+    fn bag_channel(
+        &self,
+        topic: &str,
+        message_encoding: &str,
+        schema_id: u16,
+    ) -> Option<ros2_bag::BagChannel> {
+        let (name, encoding, _) = self.schemas.get(&schema_id)?;
+        ros2_bag::bag_channel(topic, message_encoding, name, encoding)
     }
 }
 

@@ -98,3 +98,47 @@ fn ros2_tools_decode_images_poses_and_generated_messages() {
     let pixels: &[u8] = image.image_data.as_ref();
     assert_eq!((pixels[0], pixels[35]), (10, 99));
 }
+
+/// A bag written by another tool in the ROS 2 MCAP profile (mcap-ros2-support's
+/// writer, as rosbag2 writes them) reads as a recording: each standard message's topic
+/// is a primitive trajectory named as `esgm ros2 --import` names it, images keep their
+/// stamps and pixels, poses their log times; what does not map is a counted loss, and a
+/// topic of another type stays foreign.
+#[test]
+fn a_ros2_bag_from_another_tool_reads_as_trajectories() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("rosbag.mcap");
+    python::ros2_bag_writer(&path);
+    let rec = Recording::open(&path).unwrap();
+    assert!(rec.complete && rec.damage.is_none(), "{:?}", rec.damage);
+    let images = rec.trajectory("camera_image_raw").expect("the image topic's trajectory");
+    assert_eq!(
+        (images.info.type_name.as_str(), images.info.kind),
+        ("Image", TrajectoryKind::Primitive)
+    );
+    assert_eq!(images.count, 3);
+    assert_eq!(images.losses.get("ros2_unconvertible"), Some(&1), "{:?}", images.losses);
+    let poses = rec.trajectory("odom2d").expect("the pose topic's trajectory");
+    assert_eq!((poses.info.type_name.as_str(), poses.count), ("RobotState", 2));
+    assert_eq!(rec.foreign_topics, vec!["/chatter".to_owned()]);
+
+    let samples: Vec<_> = rec.samples().unwrap().map(Result::unwrap).collect();
+    let of = |name: &str| {
+        let index = rec.trajectories.iter().position(|t| t.info.name == name).unwrap();
+        samples.iter().filter(move |s| s.trajectory == index)
+    };
+    for (i, s) in of("camera_image_raw").enumerate() {
+        let image = Image::from_structure(&s.structure).unwrap();
+        assert_eq!(s.structure.valid_time, 1_000_000_000_000 + i as i64 * 1_000_000);
+        assert_eq!((image.width, image.height, image.format), (4, 3, Image::FORMAT_RGB8));
+        let expected: Vec<u8> = (0..36).map(|k| ((k + 7 * i) % 251) as u8).collect();
+        assert_eq!(image.image_data.as_ref(), expected.as_slice(), "image {i}");
+        assert_eq!(s.header.add_time, 1_500_000_000_000 + i as i64);
+    }
+    for (i, s) in of("odom2d").enumerate() {
+        let pose = RobotState::from_structure(&s.structure).unwrap();
+        assert_eq!(s.structure.valid_time, 2_000_000_000_000 + i as i64 * 1_000_000);
+        assert_eq!((pose.x, pose.y), (i as f64, -(i as f64)));
+        assert!((pose.dir - 90.0).abs() < 1e-9, "{}", pose.dir);
+    }
+}

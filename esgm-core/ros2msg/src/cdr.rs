@@ -2,14 +2,39 @@
 //! the 4-byte encapsulation header of little-endian plain CDR, then the message.
 
 use serde::Serialize;
+use serde::de::DeserializeOwned;
 
 /// The encapsulation header of little-endian plain CDR (`CDR_LE`).
 pub const CDR_LE: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
 
-/// A message could not be encoded.
+/// The encapsulation header of big-endian plain CDR (`CDR_BE`).
+pub const CDR_BE: [u8; 4] = [0x00, 0x00, 0x00, 0x00];
+
+/// A message could not be encoded or decoded.
 #[derive(Debug, thiserror::Error)]
-#[error("cannot encode the message as CDR: {0}")]
-pub struct CdrError(#[from] cdr_encoding::Error);
+#[non_exhaustive]
+pub enum CdrError {
+    /// The bytes are not the message (too short, a wrong length, a bad string).
+    #[error("CDR: {0}")]
+    Encoding(#[from] cdr_encoding::Error),
+    /// The encapsulation header is not plain CDR's.
+    #[error("CDR: encapsulation header {0:02x?} is not plain CDR (little or big endian)")]
+    Encapsulation(Vec<u8>),
+}
+
+/// The message in `bytes` (encapsulation header, then the message), little- or
+/// big-endian as its header says. Bytes past the message are allowed (padding).
+pub fn decode<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, CdrError> {
+    let (header, body) =
+        bytes.split_at_checked(4).ok_or_else(|| CdrError::Encapsulation(bytes.to_vec()))?;
+    // The options bytes (2..4) only say how much padding ends the message.
+    let decoded = match [header[0], header[1]] {
+        [0x00, 0x01] => cdr_encoding::from_bytes::<T, byteorder::LittleEndian>(body),
+        [0x00, 0x00] => cdr_encoding::from_bytes::<T, byteorder::BigEndian>(body),
+        _ => return Err(CdrError::Encapsulation(header.to_vec())),
+    };
+    Ok(decoded?.0)
+}
 
 /// Appends `message`, with the encapsulation header, to `out`.
 pub fn encode_into<T: Serialize>(message: &T, out: &mut Vec<u8>) -> Result<(), CdrError> {
@@ -19,4 +44,23 @@ pub fn encode_into<T: Serialize>(message: &T, out: &mut Vec<u8>) -> Result<(), C
     cdr_encoding::to_writer::<_, byteorder::LittleEndian, _>(&mut body, message)?;
     out.extend_from_slice(&body);
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::*;
+    use crate::msgs;
+
+    #[test]
+    fn a_message_comes_back_as_it_was_encoded() {
+        let pose = msgs::Pose2D { x: 1.5, y: -2.0, theta: 0.25 };
+        let mut bytes = Vec::new();
+        encode_into(&pose, &mut bytes).unwrap();
+        assert_eq!(decode::<msgs::Pose2D>(&bytes).unwrap(), pose);
+        assert!(matches!(decode::<msgs::Pose2D>(&bytes[..10]), Err(CdrError::Encoding(_))));
+        assert!(matches!(decode::<msgs::Pose2D>(&[7, 7, 0, 0]), Err(CdrError::Encapsulation(_))));
+        assert!(matches!(decode::<msgs::Pose2D>(&[0]), Err(CdrError::Encapsulation(_))));
+    }
 }

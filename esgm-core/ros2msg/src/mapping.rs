@@ -11,6 +11,7 @@
 //! and its value (`esgm ros2` counts it).
 
 use esgm_core::library::{DrivingDirection, Image, RobotState};
+use esgm_core::pixel_buffer::PixelBuffer;
 use esgm_core::{Entity, EntityStructure, InProcessTrajectory, Time};
 
 use crate::msgs::{self, Time as RosTime};
@@ -149,6 +150,16 @@ pub fn image_in(
     trajectory: &InProcessTrajectory,
     add_time: Time,
 ) -> Result<EntityStructure, MappingError> {
+    image_in_with(msg, add_time, |w, h, f| trajectory.image_buffer(w, h, f))
+}
+
+/// [`image_in`], the pixels written into the buffer `buffer(width, height, format)`
+/// gives (a heap buffer where no trajectory is at hand, as in a recording).
+pub fn image_in_with(
+    msg: &msgs::Image,
+    add_time: Time,
+    buffer: impl FnOnce(i64, i64, i64) -> Option<PixelBuffer>,
+) -> Result<EntityStructure, MappingError> {
     let format = match msg.encoding.as_str() {
         "rgb8" => Image::FORMAT_RGB8,
         "mono8" | "8UC1" => Image::FORMAT_MONO8,
@@ -170,7 +181,7 @@ pub fn image_in(
             "fewer than step × height",
         ));
     }
-    let Some(mut buffer) = trajectory.image_buffer(width, height, format) else {
+    let Some(mut buffer) = buffer(width, height, format) else {
         return Err(unconvertible(
             "width × height",
             format!("{width} × {height}"),
@@ -251,6 +262,44 @@ pub fn velocity_out(es: &EntityStructure) -> Result<msgs::Vector3, MappingError>
         .map_err(|e| unconvertible("attributes", e, "not a DrivingDirection"))?;
     let (sin, cos) = d.dir.to_radians().sin_cos();
     Ok(msgs::Vector3 { x: d.speed * cos, y: d.speed * sin, z: 0.0 })
+}
+
+/// A ROS 2 message stored as CDR (in a ROS 2 bag: rosbag2's, or `esgm record
+/// --ros2`'s) could not be read as a structure.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum DecodeError {
+    /// The bytes are not a message of the type.
+    #[error("{0}")]
+    Cdr(#[from] crate::cdr::CdrError),
+    /// The message does not map to its esgm type.
+    #[error("{0}")]
+    Mapping(#[from] MappingError),
+}
+
+/// A message of `t` from its CDR bytes, as the structure `esgm ros2`'s import makes of
+/// it (named `name` where the message has no frame id, valid at `received` where it
+/// has no header); an image's pixels go into the buffer `image_buffer` gives.
+pub fn structure_from_cdr(
+    t: RosType,
+    cdr: &[u8],
+    name: &str,
+    received: Time,
+    image_buffer: impl FnOnce(i64, i64, i64) -> Option<PixelBuffer>,
+) -> Result<EntityStructure, DecodeError> {
+    Ok(match t {
+        RosType::Image => {
+            image_in_with(&crate::cdr::decode::<msgs::Image>(cdr)?, received, image_buffer)?
+        }
+        RosType::Pose2D => pose_in(&crate::cdr::decode(cdr)?, name, received),
+        RosType::Vector3 => velocity_in(&crate::cdr::decode(cdr)?, name, received),
+    })
+}
+
+/// The trajectory a topic goes into by default: its name without the leading `/`,
+/// with `/` as `_` (`/camera/image_raw` → `camera_image_raw`).
+pub fn trajectory_for(topic: &str) -> String {
+    topic.trim_start_matches('/').replace('/', "_")
 }
 
 #[cfg(test)]

@@ -113,11 +113,7 @@ impl ImportSpec {
     }
 }
 
-/// The trajectory a topic goes into by default: its name without the leading `/`,
-/// with `/` as `_` (`/camera/image_raw` → `camera_image_raw`).
-pub fn trajectory_for(topic: &str) -> String {
-    topic.trim_start_matches('/').replace('/', "_")
-}
+pub use esgm_ros2msg::mapping::trajectory_for;
 
 /// A message type that can be imported.
 trait Importable: DeserializeOwned + Send + 'static {

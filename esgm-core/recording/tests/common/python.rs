@@ -106,51 +106,43 @@ pub fn venv_python() -> &'static Path {
     })
 }
 
-/// Runs the independent reader on the recording at `path` and returns what it printed.
-/// Panics with the reader's stderr if it fails: a recording it cannot read is a failed
-/// test.
-pub fn independent_reader(path: &Path) -> serde_json::Value {
-    let script = crate_dir().join("tests/python/read_recording.py");
+/// Runs `tests/python/<script>` (called `what` in failures) with `args`, and returns
+/// the JSON it printed. Panics with the script's stderr if it fails: a recording it
+/// cannot read (or write) is a failed test.
+fn run_script(what: &str, script: &str, args: &[&Path]) -> serde_json::Value {
+    let script = crate_dir().join("tests/python").join(script);
     let out = Command::new(venv_python())
         .arg(&script)
-        .arg(path)
+        .args(args)
         .output()
         .unwrap_or_else(|e| panic!("cannot run {}: {e}", script.display()));
     if !out.status.success() {
         panic!(
-            "the independent reader failed on {} ({}):\n{}",
-            path.display(),
+            "{what} failed on {:?} ({}):\n{}",
+            args,
             out.status,
             String::from_utf8_lossy(&out.stderr)
         );
     }
     serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
-        panic!(
-            "the independent reader printed no JSON ({e}):\n{}",
-            String::from_utf8_lossy(&out.stdout)
-        )
+        panic!("{what} printed no JSON ({e}):\n{}", String::from_utf8_lossy(&out.stdout))
     })
 }
 
-/// Runs the ROS 2 MCAP decoder (`tests/python/read_ros2.py`, mcap-ros2-support) on the
-/// recording at `path`: `{topic: {schema, count, first}}` for its `cdr` channels.
-/// Panics with the decoder's stderr if it fails.
+/// Runs the independent reader (`read_recording.py`, the `mcap` package) on the
+/// recording at `path` and returns what it printed.
+pub fn independent_reader(path: &Path) -> serde_json::Value {
+    run_script("the independent reader", "read_recording.py", &[path])
+}
+
+/// Runs the ROS 2 MCAP decoder (`read_ros2.py`, mcap-ros2-support) on the recording at
+/// `path`: `{topic: {schema, count, first}}` for its `cdr` channels.
 pub fn ros2_reader(path: &Path) -> serde_json::Value {
-    let script = crate_dir().join("tests/python/read_ros2.py");
-    let out = Command::new(venv_python())
-        .arg(&script)
-        .arg(path)
-        .output()
-        .unwrap_or_else(|e| panic!("cannot run {}: {e}", script.display()));
-    if !out.status.success() {
-        panic!(
-            "the ROS 2 decoder failed on {} ({}):\n{}",
-            path.display(),
-            out.status,
-            String::from_utf8_lossy(&out.stderr)
-        );
-    }
-    serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
-        panic!("the ROS 2 decoder printed no JSON ({e}):\n{}", String::from_utf8_lossy(&out.stdout))
-    })
+    run_script("the ROS 2 decoder", "read_ros2.py", &[path])
+}
+
+/// Writes a ROS 2 bag at `path` with mcap-ros2-support's writer (`write_ros2_bag.py`,
+/// the ROS 2 MCAP profile rosbag2 writes) and returns what it wrote (see the script).
+pub fn ros2_bag_writer(path: &Path) -> serde_json::Value {
+    run_script("the ROS 2 bag writer", "write_ros2_bag.py", &[path])
 }
