@@ -221,7 +221,10 @@ impl Esgm {
     /// message_filters match them (`sync_policy`: `"approximate"`, the default with a
     /// tolerance, or `"epsilon"`), keeping `queue_size` items per input.
     #[pyo3(signature = (name, inputs, tolerance=None, sync_policy=None, queue_size=10, policy=None))]
-    #[allow(clippy::too_many_arguments, reason = "the trajectory's settings, each with its default")]
+    #[allow(
+        clippy::too_many_arguments,
+        reason = "the trajectory's settings, each with its default"
+    )]
     fn create_sync_entity_trajectory_structure(
         &self,
         py: Python<'_>,
