@@ -370,6 +370,9 @@ struct Decoder {
     /// A ROS 2 bag's channel of a standard message → its trajectory's index, what it
     /// holds, and the sequence its next message gets ([`crate::ros2_bag`]).
     bags: HashMap<u16, (usize, ros2_bag::BagChannel, u64)>,
+    /// View channels in the ROS 2 profile (`esgm record --ros2`): an image's pixels
+    /// there are a `sensor_msgs/msg/Image`'s data, not a raw image view's.
+    cdr_views: std::collections::HashSet<u16>,
     events_channel: Option<u16>,
 }
 
@@ -428,6 +431,9 @@ impl Decoder {
                     self.events_channel = Some(c.id);
                 } else if c.metadata.contains_key(crate::layout::keys::TRAJECTORY) {
                     self.views.insert(c.id, None);
+                    if c.message_encoding == ros2_bag::CDR {
+                        self.cdr_views.insert(c.id);
+                    }
                 } else if self.bags.contains_key(&c.id) {
                     // The summary repeats the channels: this one is read already.
                 } else if let Some(bag) =
@@ -520,9 +526,16 @@ impl Decoder {
                             malformed(h.sequence, "its image view message is missing".into())
                         })?;
                     view_len = view.1.len() as u64;
-                    let image = raw_image::decode_raw_image(&view.1)
-                        .map_err(|e| malformed(h.sequence, format!("image view: {e}")))?;
-                    structure.set(PIXELS_ATTRIBUTE, Octets::new(image.data.to_vec()));
+                    let pixels = if self.cdr_views.contains(&h.view_channel) {
+                        ros2_bag::image_pixels(&view.1)
+                            .map_err(|e| malformed(h.sequence, format!("ROS 2 image view: {e}")))?
+                    } else {
+                        raw_image::decode_raw_image(&view.1)
+                            .map_err(|e| malformed(h.sequence, format!("image view: {e}")))?
+                            .data
+                            .to_vec()
+                    };
+                    structure.set(PIXELS_ATTRIBUTE, Octets::new(pixels));
                 }
                 t.bytes = t.bytes.saturating_add(data.len() as u64).saturating_add(view_len);
                 return Ok(Some(RecordedSample { trajectory: index, structure, header: h }));

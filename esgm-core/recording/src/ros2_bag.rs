@@ -88,3 +88,20 @@ pub fn count_loss(losses: &mut BTreeMap<String, u64>, cause: &str) {
     let n = losses.entry(cause.to_owned()).or_default();
     *n = n.saturating_add(1);
 }
+
+/// The pixels of an `esgm record --ros2` image view (a `sensor_msgs/msg/Image` in
+/// CDR, rows unpadded as esgm writes them), which the lossless message leaves out.
+pub fn image_pixels(cdr: &[u8]) -> Result<Vec<u8>, String> {
+    let msg: esgm_ros2msg::msgs::Image =
+        esgm_ros2msg::cdr::decode(cdr).map_err(|e| e.to_string())?;
+    let rows = msg.step as usize * msg.height as usize;
+    if msg.data.len() != rows {
+        return Err(format!(
+            "{} bytes of data for {} rows of {} bytes",
+            msg.data.len(),
+            msg.height,
+            msg.step
+        ));
+    }
+    Ok(msg.data)
+}

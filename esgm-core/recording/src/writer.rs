@@ -376,7 +376,12 @@ impl RecordingWriter {
                     }
                 },
                 ViewKind::Ros2(v) => match encode_ros2(v, es, &mut self.view_scratch) {
-                    Ok(()) => true,
+                    Ok(()) => {
+                        // An image's pixels are the message's `data`: stored once.
+                        pixels_in_view =
+                            matches!(v, Ros2View::Standard(esgm_ros2msg::mapping::RosType::Image));
+                        true
+                    }
                     Err(e) => {
                         // Kept whole in the lossless channel, not shown.
                         tracing::warn!(

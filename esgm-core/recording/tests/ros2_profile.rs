@@ -97,6 +97,14 @@ fn ros2_tools_decode_images_poses_and_generated_messages() {
     let image = Image::from_structure(&first_image.structure).unwrap();
     let pixels: &[u8] = image.image_data.as_ref();
     assert_eq!((pixels[0], pixels[35]), (10, 99));
+    // The pixels are stored once: in the ROS 2 message, which the lossless one points to.
+    let images: Vec<_> = samples.iter().filter(|s| s.structure.get("width").is_some()).collect();
+    assert_eq!(images.len(), 5);
+    for (i, s) in images.iter().enumerate() {
+        assert!(s.header.pixels_in_view, "image {i} holds its pixels twice");
+        let image = Image::from_structure(&s.structure).unwrap();
+        assert_eq!(image.image_data.as_ref()[0], 10 + i as u8);
+    }
 }
 
 /// A bag written by another tool in the ROS 2 MCAP profile (mcap-ros2-support's
