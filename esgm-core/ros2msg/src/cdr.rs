@@ -1,8 +1,9 @@
 //! CDR bytes of a message as a ROS 2 MCAP file stores them (message encoding `cdr`):
 //! the 4-byte encapsulation header of little-endian plain CDR, then the message.
 
+use cdr_encoding::CdrDeserializer;
 use serde::Serialize;
-use serde::de::DeserializeOwned;
+use serde::de::{DeserializeOwned, DeserializeSeed};
 
 /// The encapsulation header of little-endian plain CDR (`CDR_LE`).
 pub const CDR_LE: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
@@ -25,15 +26,28 @@ pub enum CdrError {
 /// The message in `bytes` (encapsulation header, then the message), little- or
 /// big-endian as its header says. Bytes past the message are allowed (padding).
 pub fn decode<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, CdrError> {
-    let (header, body) =
-        bytes.split_at_checked(4).ok_or_else(|| CdrError::Encapsulation(bytes.to_vec()))?;
-    // The options bytes (2..4) only say how much padding ends the message.
-    let decoded = match [header[0], header[1]] {
-        [0x00, 0x01] => cdr_encoding::from_bytes::<T, byteorder::LittleEndian>(body),
-        [0x00, 0x00] => cdr_encoding::from_bytes::<T, byteorder::BigEndian>(body),
-        _ => return Err(CdrError::Encapsulation(header.to_vec())),
+    decode_seed(bytes, std::marker::PhantomData::<T>)
+}
+
+/// [`decode`] through `seed`: a message whose layout is known only at run time (a
+/// generated message, [`crate::generated_in`]).
+pub fn decode_seed<'de, S: DeserializeSeed<'de>>(
+    bytes: &'de [u8],
+    seed: S,
+) -> Result<S::Value, CdrError> {
+    let Some((header, body)) = bytes.split_at_checked(4) else {
+        return Err(CdrError::Encapsulation(bytes.to_vec()));
     };
-    Ok(decoded?.0)
+    // The options bytes (2..4) only say how much padding ends the message.
+    Ok(match [header[0], header[1]] {
+        [0x00, 0x01] => {
+            seed.deserialize(&mut CdrDeserializer::<byteorder::LittleEndian>::new(body))?
+        }
+        [0x00, 0x00] => {
+            seed.deserialize(&mut CdrDeserializer::<byteorder::BigEndian>::new(body))?
+        }
+        _ => return Err(CdrError::Encapsulation(header.to_vec())),
+    })
 }
 
 /// Appends `message`, with the encapsulation header, to `out`.

@@ -105,6 +105,11 @@ impl Schema {
         &self.root
     }
 
+    /// The definition of `name`: the root or a type it nests.
+    pub fn get(&self, name: &str) -> Option<&EntityStructureType> {
+        self.types.get(name)
+    }
+
     /// Each message definition, `(Type, .msg text)`, the root's first.
     pub fn msg_files(&self) -> Vec<(String, String)> {
         let text = |t: &EntityStructureType, top: bool| {

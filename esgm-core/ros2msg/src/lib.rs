@@ -7,5 +7,6 @@
 pub mod cdr;
 pub mod definitions;
 pub mod generated;
+pub mod generated_in;
 pub mod mapping;
 pub mod msgs;

@@ -3,7 +3,9 @@
 //! `--import /camera/image_raw:sensor_msgs/msg/Image[=camera]` subscribes to the topic
 //! and adds each message, converted ([`crate::mapping`]), to the trajectory (by default
 //! named after the topic: `camera_image_raw`), made with the library type if it does
-//! not exist. An image's pixels are written once, into the trajectory's shared memory.
+//! not exist. `--import /blobs:esgm_msgs/msg/BlobSeq` reads the generated message of a
+//! type of the system (`esgm ros2 msg BlobSeq` prints its definition) by that type's
+//! layout ([`esgm_ros2msg::generated_in`]). An image's pixels are written once, into the trajectory's shared memory.
 //! A message that does not decode, does not map or is refused by the trajectory's gate
 //! is counted with its cause and logged (the first of each cause per topic at warn,
 //! the rest at debug).
@@ -17,11 +19,13 @@ use esgm_core::{
     CacheConstraint, Clock as _, CreateError, EntityStructure, EntityTrajectoryStructure, Esgm,
     FluentStreamPolicy, InProcessTrajectory, LookupError, SystemClock,
 };
+use esgm_ros2msg::generated_in::GeneratedSeed;
 use esgm_shm::ShmEsgm;
 use ros2_client::dds::rustdds::mio1::{Events, Interest, Poll, Token};
-use ros2_client::{Node, Subscription};
+use ros2_client::{MessageTypeName, Node, Subscription};
 use serde::de::DeserializeOwned;
 
+use crate::generated;
 use crate::mapping::{self, MappingError, RosType};
 use crate::msgs;
 use crate::node::{NodeError, TopicQos, message_type_name, topic_name};
@@ -34,9 +38,30 @@ pub struct ImportSpec {
     /// The ROS 2 topic (absolute).
     pub topic: String,
     /// Its message type.
-    pub ros_type: RosType,
+    pub message: Imported,
     /// The trajectory it goes into.
     pub trajectory: String,
+}
+
+/// The message type of an imported topic.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Imported {
+    /// A standard message esgm maps to a library type.
+    Standard(RosType),
+    /// `esgm_msgs/msg/<Type>`: the message `esgm ros2 msg <Type>` defines for the esgm
+    /// type `<Type>` of the system (as a ROS 2 node built with that definition
+    /// publishes it).
+    Generated(String),
+}
+
+impl Imported {
+    /// The esgm type its structures have.
+    pub fn esgm_type(&self) -> &str {
+        match self {
+            Imported::Standard(t) => t.esgm_type(),
+            Imported::Generated(t) => t,
+        }
+    }
 }
 
 /// An `--import` that cannot be carried out.
@@ -107,9 +132,13 @@ impl ImportSpec {
         if topic.is_empty() || ros_type.is_empty() || trajectory.as_deref() == Some("") {
             return Err(syntax());
         }
-        let ros_type = RosType::parse(ros_type)?;
+        let generated = format!("{}/msg/", generated::PACKAGE);
+        let message = match ros_type.strip_prefix(&generated) {
+            Some(name) if !name.is_empty() => Imported::Generated(name.to_owned()),
+            _ => Imported::Standard(RosType::parse(ros_type)?),
+        };
         let trajectory = trajectory.unwrap_or_else(|| trajectory_for(topic));
-        Ok(Self { topic: topic.to_owned(), ros_type, trajectory })
+        Ok(Self { topic: topic.to_owned(), message, trajectory })
     }
 }
 
@@ -163,7 +192,7 @@ fn trajectory(
     spec: &ImportSpec,
     qos: TopicQos,
 ) -> Result<InProcessTrajectory, ImportError> {
-    let wants = spec.ros_type.esgm_type();
+    let wants = spec.message.esgm_type();
     let lookup = |source| ImportError::Lookup { trajectory: spec.trajectory.clone(), source };
     match esgm.get_entity_trajectory_structure_type(&spec.trajectory) {
         Ok(t) if t.name == wants => {}
@@ -207,55 +236,109 @@ pub fn spawn(
     stats: &Stats,
     stop: &Arc<AtomicBool>,
 ) -> Result<Spawned, ImportError> {
+    // A generated message's layout is its esgm type's: known, and checked, before
+    // anything is made.
+    let schema = match &spec.message {
+        Imported::Generated(t) => Some(Arc::new(generated::Schema::new(t, |name| {
+            esgm.get_entity_structure_type(name).ok()
+        })?)),
+        Imported::Standard(_) => None,
+    };
     let handle = trajectory(esgm, spec, qos)?;
     let counters = stats.topic(&spec.topic, &handle, Direction::Import);
-    match spec.ros_type {
-        RosType::Image => start::<msgs::Image>(node, spec, qos, handle, counters, stop),
-        RosType::Pose2D => start::<msgs::Pose2D>(node, spec, qos, handle, counters, stop),
-        RosType::Vector3 => start::<msgs::Vector3>(node, spec, qos, handle, counters, stop),
+    let started = Started { node, spec, qos, handle, counters, stop };
+    match (&spec.message, schema) {
+        (Imported::Standard(t @ RosType::Image), _) => started.standard::<msgs::Image>(*t),
+        (Imported::Standard(t @ RosType::Pose2D), _) => started.standard::<msgs::Pose2D>(*t),
+        (Imported::Standard(t @ RosType::Vector3), _) => started.standard::<msgs::Vector3>(*t),
+        (Imported::Generated(t), Some(schema)) => started.generated(t, schema),
+        (Imported::Generated(t), None) => Err(ImportError::Mapping(MappingError::UnknownMessage {
+            name: t.clone(),
+            known: "a registered esgm type".into(),
+        })),
     }
 }
 
-fn start<M: Importable>(
-    node: &mut Node,
-    spec: &ImportSpec,
+/// What an import needs to subscribe and start its thread.
+struct Started<'a> {
+    node: &'a mut Node,
+    spec: &'a ImportSpec,
     qos: TopicQos,
     handle: InProcessTrajectory,
     counters: Arc<TopicCounters>,
-    stop: &Arc<AtomicBool>,
-) -> Result<Spawned, ImportError> {
-    let create = |what, e: &dyn std::fmt::Debug| NodeError::Create {
-        what,
-        topic: spec.topic.clone(),
-        detail: format!("{e:?}"),
-    };
-    let message_type = message_type_name(spec.ros_type);
-    let watched = Watched::new(
-        &spec.topic,
-        &message_type,
-        Direction::Import,
-        &qos.profile(),
-        Arc::clone(&counters),
-    );
-    let topic = node
-        .create_topic(&topic_name(&spec.topic)?, message_type, &qos.profile())
-        .map_err(|e| create("topic", &e))?;
-    let subscription: Subscription<M> =
-        node.create_subscription(&topic, None).map_err(|e| create("subscription", &e))?;
-    let stop = Arc::clone(stop);
-    let topic = spec.topic.clone();
-    let thread = std::thread::Builder::new()
-        .name(format!("ros2-import-{}", spec.trajectory))
-        .spawn(move || run(subscription, &handle, &counters, &topic, &stop))
-        .map_err(|source| ImportError::Thread { topic: spec.topic.clone(), source })?;
-    Ok(Spawned { thread, watched })
+    stop: &'a Arc<AtomicBool>,
+}
+
+/// What the import thread reads next: `None` when nothing waits, else the structure
+/// the message maps to (or why it does not).
+type Read<M> = dyn FnMut(
+        &Subscription<M>,
+        &InProcessTrajectory,
+        i64,
+    ) -> ros2_client::ReadResult<Option<Result<EntityStructure, MappingError>>>
+    + Send;
+
+impl Started<'_> {
+    /// A standard message of `t`, decoded as `M`.
+    fn standard<M: Importable>(self, t: RosType) -> Result<Spawned, ImportError> {
+        let read: Box<Read<M>> = Box::new(|subscription, handle, now| {
+            Ok(subscription.take()?.map(|(message, _)| message.structure(handle, now)))
+        });
+        self.subscribe(message_type_name(t), read)
+    }
+
+    /// A generated message of `esgm_type`, read by its schema.
+    fn generated(
+        self,
+        esgm_type: &str,
+        schema: Arc<generated::Schema>,
+    ) -> Result<Spawned, ImportError> {
+        let read: Box<Read<EntityStructure>> = Box::new(move |subscription, _, now| {
+            let seed = GeneratedSeed { schema: &schema, received: now };
+            Ok(subscription.take_seed(seed)?.map(|(es, _)| Ok(es)))
+        });
+        self.subscribe(MessageTypeName::new(generated::PACKAGE, esgm_type), read)
+    }
+
+    fn subscribe<M: DeserializeOwned + Send + 'static>(
+        self,
+        message_type: MessageTypeName,
+        read: Box<Read<M>>,
+    ) -> Result<Spawned, ImportError> {
+        let Started { node, spec, qos, handle, counters, stop } = self;
+        let create = |what, e: &dyn std::fmt::Debug| NodeError::Create {
+            what,
+            topic: spec.topic.clone(),
+            detail: format!("{e:?}"),
+        };
+        let watched = Watched::new(
+            &spec.topic,
+            &message_type,
+            Direction::Import,
+            &qos.profile(),
+            Arc::clone(&counters),
+        );
+        let topic = node
+            .create_topic(&topic_name(&spec.topic)?, message_type, &qos.profile())
+            .map_err(|e| create("topic", &e))?;
+        let subscription: Subscription<M> =
+            node.create_subscription(&topic, None).map_err(|e| create("subscription", &e))?;
+        let stop = Arc::clone(stop);
+        let topic = spec.topic.clone();
+        let thread = std::thread::Builder::new()
+            .name(format!("ros2-import-{}", spec.trajectory))
+            .spawn(move || run(subscription, read, &handle, &counters, &topic, &stop))
+            .map_err(|source| ImportError::Thread { topic: spec.topic.clone(), source })?;
+        Ok(Spawned { thread, watched })
+    }
 }
 
 /// How long the import thread sleeps before it looks at `stop` again.
 const STOP_CHECK: Duration = Duration::from_millis(100);
 
-fn run<M: Importable>(
+fn run<M: DeserializeOwned + Send + 'static>(
     mut subscription: Subscription<M>,
+    mut read: Box<Read<M>>,
     handle: &InProcessTrajectory,
     counters: &TopicCounters,
     topic: &str,
@@ -295,23 +378,20 @@ fn run<M: Importable>(
         }
         // Edge-triggered: take everything that has arrived.
         loop {
-            match subscription.take() {
-                Ok(Some((message, _info))) => {
-                    let now = SystemClock.now();
-                    match message.structure(handle, now) {
-                        Ok(es) => match handle.add(es) {
-                            Ok(_) => counters.passed(),
-                            Err(e) => {
-                                counters.lost(LossCause::Refused, 1);
-                                warn(LossCause::Refused, &e);
-                            }
-                        },
+            match read(&subscription, handle, SystemClock.now()) {
+                Ok(Some(structure)) => match structure {
+                    Ok(es) => match handle.add(es) {
+                        Ok(_) => counters.passed(),
                         Err(e) => {
-                            counters.lost(LossCause::Unconvertible, 1);
-                            warn(LossCause::Unconvertible, &e);
+                            counters.lost(LossCause::Refused, 1);
+                            warn(LossCause::Refused, &e);
                         }
+                    },
+                    Err(e) => {
+                        counters.lost(LossCause::Unconvertible, 1);
+                        warn(LossCause::Unconvertible, &e);
                     }
-                }
+                },
                 Ok(None) => break,
                 Err(e) => {
                     counters.lost(LossCause::Malformed, 1);
@@ -330,9 +410,20 @@ mod tests {
     #[test]
     fn specs_parse_and_name_their_trajectory() {
         let s = ImportSpec::parse("/camera/image_raw:sensor_msgs/msg/Image").unwrap();
-        assert_eq!((s.ros_type, s.trajectory.as_str()), (RosType::Image, "camera_image_raw"));
+        assert_eq!(
+            (s.message, s.trajectory.as_str()),
+            (Imported::Standard(RosType::Image), "camera_image_raw")
+        );
         let s = ImportSpec::parse("/odom2d:geometry_msgs/msg/Pose2D=robot_state").unwrap();
-        assert_eq!((s.ros_type, s.trajectory.as_str()), (RosType::Pose2D, "robot_state"));
+        assert_eq!(
+            (s.message, s.trajectory.as_str()),
+            (Imported::Standard(RosType::Pose2D), "robot_state")
+        );
+        let s = ImportSpec::parse("/blobs:esgm_msgs/msg/BlobSeq").unwrap();
+        assert_eq!(
+            (s.message, s.trajectory.as_str()),
+            (Imported::Generated("BlobSeq".into()), "blobs")
+        );
         for bad in ["/camera", ":sensor_msgs/msg/Image", "/c:sensor_msgs/msg/Image="] {
             assert!(matches!(ImportSpec::parse(bad), Err(ImportError::Syntax { .. })), "{bad}");
         }

@@ -204,7 +204,8 @@ fn a_ros2_node_on_cyclonedds_feeds_an_image_trajectory_and_reads_an_exported_pos
 
 /// A type without a standard message (the tutorial's `BlobSeq`) is exported as its
 /// generated `esgm_msgs/msg/BlobSeq`, whose definition `esgm-ros2 msg` prints, and a
-/// reader built from that definition reads every field.
+/// reader built from that definition reads every field; a writer built from it is
+/// imported, every field back in its structure.
 #[test]
 fn a_type_without_a_standard_message_is_read_as_its_generated_one() {
     let Some(ns) = capability::needs("root and `ip netns`", Namespace::create("ros2gen")) else {
@@ -230,6 +231,7 @@ fn a_type_without_a_standard_message_is_read_as_its_generated_one() {
 
     let mut bridge = ns.command(ESGM_ROS2);
     bridge.args(["--domain", &domain, "--export", "blobs"]);
+    bridge.args(["--import", "/detections:esgm_msgs/msg/BlobSeq"]);
     let mut bridge = Running::start(bridge);
     bridge.line("the bridge's ready line", |l| l.starts_with("esgm-ros2:"));
     let mut reader = ns.command(python.to_str().unwrap());
@@ -262,6 +264,33 @@ fn a_type_without_a_standard_message_is_read_as_its_generated_one() {
         .collect();
     assert_eq!(v["items"], serde_json::Value::Array(expected), "{line}");
     reader.succeeds("the cyclonedds reader");
+
+    // ROS 2 → esgm: a generated message, read by the esgm type's own layout.
+    let mut publisher = ns.command(python.to_str().unwrap());
+    publisher.arg(peer_script()).args(["publish-blob-seqs", "/detections", "2"]);
+    let mut publisher = Running::start(publisher);
+    publisher.line("`published 2`", |l| l == "published 2");
+    publisher.succeeds("the cyclonedds publisher");
+    let detections = esgm.get_entity_trajectory_structure("detections").unwrap();
+    assert!(
+        wait_for(|| detections.stats().is_ok_and(|s| s.stored == 2)),
+        "{:?}",
+        detections.stats()
+    );
+    for (i, s) in detections.get_between(0, i64::MAX).unwrap().iter().enumerate() {
+        let i = i as i64;
+        assert_eq!(
+            (s.structure.name.as_str(), s.structure.valid_time),
+            ("camera", 2_000_000_000_000 + i * 1_000_000)
+        );
+        let seq = BlobSeq::from_structure(&s.structure).unwrap();
+        let expected: Vec<Blob> = (1..=2).map(|k| Blob { x: k, y: -k, size: 10 * i + k }).collect();
+        assert_eq!(seq.items, expected, "message {i}");
+        let Some(esgm_core::Value::EntityFrameSeq(frames)) = s.structure.get("items") else {
+            panic!("a BlobSeq holds frames")
+        };
+        assert_eq!(frames.iter().map(|f| f.name.as_str()).collect::<Vec<_>>(), ["b1", "b2"]);
+    }
 }
 
 /// A publisher whose QoS cannot match esgm's reader (best effort, where esgm requests

@@ -9,6 +9,10 @@ Usage:
       frame "camera", pixel k of image i = (k + 7 i) % 251), then waits for the
       reader to acknowledge them (after UNCONVERTIBLE more in an encoding esgm has
       no format for); prints `published COUNT`.
+  ros2_peer.py publish-blob-seqs TOPIC COUNT
+      waits for a reader, publishes COUNT esgm_msgs/msg/BlobSeq (stamp 2000 s + i ms,
+      blobs ("b<k>", k, -k, 10 i + k), k = 1, 2), waits for acknowledgements; prints
+      `published COUNT`.
   ros2_peer.py publish-best-effort TOPIC SECONDS
       publishes 1x1 images best effort for SECONDS (prints `publishing` first): a
       reliable reader cannot match it.
@@ -118,6 +122,21 @@ def publish_images(topic, count, unconvertible=0):
     print(f"published {count}", flush=True)
 
 
+def publish_blob_seqs(topic, count):
+    """Waits for a reader, publishes COUNT esgm_msgs/msg/BlobSeq (stamp 2000 s + i ms,
+    frame "camera", blobs ("b<k>", k, -k, 10 i + k) for k in 1..=2), and waits for them
+    to be acknowledged; prints `published COUNT`."""
+    dp = DomainParticipant(0)
+    writer = DataWriter(dp, Topic(dp, dds_topic(topic), BlobSeq), qos=QOS)
+    wait_for(lambda: len(writer.get_matched_subscriptions()) > 0, 20, "no reader matched")
+    for i in range(count):
+        items = [Blob(f"b{k}", k, -k, 10 * i + k) for k in (1, 2)]
+        writer.write(BlobSeq(Header(Time(sec=2000, nanosec=i * 1_000_000), "camera"), items))
+        time.sleep(0.01)
+    writer.wait_for_acks(duration(seconds=10))
+    print(f"published {count}", flush=True)
+
+
 def publish_best_effort(topic, seconds):
     """Publishes images best effort for `seconds`: a reliable reader cannot match it
     (DDS delivers nothing, which the bridge must say). Prints `publishing` first."""
@@ -163,6 +182,8 @@ def main():
     mode = sys.argv[1]
     if mode == "publish-images":
         publish_images(sys.argv[2], int(sys.argv[3]), int(sys.argv[4]) if len(sys.argv) > 4 else 0)
+    elif mode == "publish-blob-seqs":
+        publish_blob_seqs(sys.argv[2], int(sys.argv[3]))
     elif mode == "publish-best-effort":
         publish_best_effort(sys.argv[2], float(sys.argv[3]))
     elif mode == "read-poses":
