@@ -118,6 +118,27 @@ pub fn one_line<'a>(
     })
 }
 
+/// Prints `lines` to stdout as JSON lines, one object each, and flushes: a bridge's
+/// per-topic report (`esgm-bridge`, `esgm-ros2`), read by people and by tests as it
+/// comes. A closed stdout ends the report quietly.
+pub fn print_json_lines<T: serde::Serialize>(lines: impl IntoIterator<Item = T>) {
+    use std::io::Write as _;
+    let mut out = std::io::stdout().lock();
+    for item in lines {
+        match serde_json::to_string(&item) {
+            Ok(line) => {
+                if writeln!(out, "{line}").is_err() {
+                    return;
+                }
+            }
+            Err(e) => tracing::warn!(error = %e, "a report line cannot be printed"),
+        }
+    }
+    if out.flush().is_err() {
+        tracing::debug!("stdout closed");
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -250,19 +250,5 @@ fn run(domain: &str, a: &RunArgs) -> anyhow::Result<()> {
 }
 
 fn report(stats: &Stats) {
-    use std::io::Write as _;
-    let mut out = std::io::stdout().lock();
-    for c in stats.snapshot() {
-        match serde_json::to_string(&c) {
-            Ok(line) => {
-                if writeln!(out, "{line}").is_err() {
-                    return;
-                }
-            }
-            Err(e) => tracing::warn!(error = %e, "counters not printable"),
-        }
-    }
-    if out.flush().is_err() {
-        tracing::debug!("stdout closed");
-    }
+    esgm_shm::process::print_json_lines(stats.snapshot());
 }

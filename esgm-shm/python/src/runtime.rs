@@ -15,6 +15,7 @@ use pyo3::types::{PyDict, PyList};
 
 use crate::errors::to_py;
 use crate::trajectory::Trajectory;
+use crate::units::Output;
 
 /// Either runtime.
 #[derive(Debug)]
@@ -367,7 +368,7 @@ impl Esgm {
         input_types: Vec<String>,
         unit: Py<PyAny>,
     ) -> PyResult<()> {
-        let cu = Arc::new(crate::units::PyUnit::new(unit, name, type_name, &self.runtime));
+        let cu = Arc::new(crate::units::PyUnit(Output::new(unit, name, type_name, &self.runtime)));
         let inputs = input_types.into_iter().map(esgm_core::esgm::InputType::Type).collect();
         let rt = Arc::clone(&self.runtime);
         let (name, type_name) = (name.to_owned(), type_name.to_owned());
@@ -384,7 +385,8 @@ impl Esgm {
         type_name: &str,
         sensor: Py<PyAny>,
     ) -> PyResult<()> {
-        let s = Arc::new(crate::units::PySensor::new(sensor, name, type_name, &self.runtime));
+        let s =
+            Arc::new(crate::units::PySensor(Output::new(sensor, name, type_name, &self.runtime)));
         let rt = Arc::clone(&self.runtime);
         let (name, type_name) = (name.to_owned(), type_name.to_owned());
         py.detach(move || on!(&*rt, e => e.add_sensor_interface(&name, &type_name, s)))

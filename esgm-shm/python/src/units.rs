@@ -70,7 +70,7 @@ pub fn shutdown(py: Python<'_>) {
 
 /// What a Python unit or sensor needs to turn its answers into structures.
 #[derive(Debug)]
-struct Output {
+pub struct Output {
     /// Its Python object.
     object: Py<PyAny>,
     /// The name it was registered under (for its log lines).
@@ -79,6 +79,18 @@ struct Output {
     type_name: String,
     /// The runtime, for nested frame types (weak: the runtime holds this unit).
     runtime: Weak<Runtime>,
+}
+
+impl Output {
+    /// `object`, registered as `name`, producing `type_name` in `runtime`.
+    pub fn new(object: Py<PyAny>, name: &str, type_name: &str, runtime: &Arc<Runtime>) -> Self {
+        Self {
+            object,
+            name: name.to_owned(),
+            type_name: type_name.to_owned(),
+            runtime: Arc::downgrade(runtime),
+        }
+    }
 }
 
 /// Why a call produced nothing.
@@ -163,21 +175,9 @@ fn samples<'py>(
     pyo3::types::PyList::new(py, items)
 }
 
-/// A unit written in Python.
+/// A unit written in Python (its object calls `compute`).
 #[derive(Debug)]
-pub struct PyUnit(Output);
-
-impl PyUnit {
-    /// `object` as the unit `name` producing `type_name`.
-    pub fn new(object: Py<PyAny>, name: &str, type_name: &str, runtime: &Arc<Runtime>) -> Self {
-        Self(Output {
-            object,
-            name: name.to_owned(),
-            type_name: type_name.to_owned(),
-            runtime: Arc::downgrade(runtime),
-        })
-    }
-}
+pub struct PyUnit(pub Output);
 
 fn compute_error(m: Missed) -> ComputeError {
     match m {
@@ -225,21 +225,9 @@ impl CompUnit for PyUnit {
     }
 }
 
-/// A sensor written in Python.
+/// A sensor written in Python (its object calls `get_current_value`).
 #[derive(Debug)]
-pub struct PySensor(Output);
-
-impl PySensor {
-    /// `object` as the sensor `name` producing `type_name`.
-    pub fn new(object: Py<PyAny>, name: &str, type_name: &str, runtime: &Arc<Runtime>) -> Self {
-        Self(Output {
-            object,
-            name: name.to_owned(),
-            type_name: type_name.to_owned(),
-            runtime: Arc::downgrade(runtime),
-        })
-    }
-}
+pub struct PySensor(pub Output);
 
 impl SensorInterface for PySensor {
     fn get_current_value(&self, qtime: Time) -> Result<EntityStructure, SensorError> {

@@ -196,19 +196,5 @@ fn print_msg(domain: &str, type_name: &str) -> anyhow::Result<()> {
 
 /// Prints every topic's counters, a JSON line each.
 fn report(stats: &Stats) {
-    use std::io::Write as _;
-    let mut out = std::io::stdout().lock();
-    for topic in stats.snapshot() {
-        match serde_json::to_string(&topic) {
-            Ok(line) => {
-                if writeln!(out, "{line}").is_err() {
-                    return;
-                }
-            }
-            Err(e) => tracing::error!(error = %e, "cannot write a report line"),
-        }
-    }
-    if let Err(e) = out.flush() {
-        tracing::debug!(error = %e, "cannot flush the report");
-    }
+    esgm_shm::process::print_json_lines(stats.snapshot());
 }
