@@ -20,6 +20,9 @@ mod common;
 /// Skipped outside CI, failed in CI, without root, `ip` or `unshare` (the cli tests' helper).
 #[path = "../../cli/tests/common/capability.rs"]
 mod capability;
+#[path = "../../cli/tests/common/netns.rs"]
+mod loopback_netns;
+use loopback_netns::ip;
 
 use std::io::{BufRead, BufReader, Write};
 use std::process::{Child, ChildStdin, Command, Stdio};
@@ -57,15 +60,6 @@ fn image(i: i64) -> EntityStructure {
         .with("height", 24i64)
         .with("format", 1i64)
         .with("image_data", Value::OctetSeq(Octets::from(pixels)))
-}
-
-fn ip(args: &[&str]) -> Result<(), String> {
-    let out = Command::new("ip").args(args).output().map_err(|e| format!("ip: {e}"))?;
-    if out.status.success() {
-        Ok(())
-    } else {
-        Err(format!("ip {}: {}", args.join(" "), String::from_utf8_lossy(&out.stderr).trim()))
-    }
 }
 
 /// Two namespaces and the veth pair between them, removed when dropped.

@@ -2,14 +2,15 @@
 //! where a test may run DDS discovery (multicast), since no packet can leave it.
 //! Removed when dropped, also when the test fails.
 //!
-//! Shared by the esgm-cli tests (`common::netns`) and the esgm-ros2 tests (included
-//! by `#[path]`).
+//! Shared by the esgm-cli tests (`common::netns`) and the esgm-ros2 and esgm-bridge
+//! tests (included by `#[path]`).
 
 #![allow(dead_code)] // each test binary uses what it needs
 
 use std::process::Command;
 
-fn ip(args: &[&str]) -> Result<(), String> {
+/// Runs `ip ARGS`; the error names the command and what `ip` said.
+pub fn ip(args: &[&str]) -> Result<(), String> {
     let out = Command::new("ip").args(args).output().map_err(|e| format!("ip: {e}"))?;
     if out.status.success() {
         Ok(())
