@@ -39,7 +39,7 @@ pub(crate) fn run(
         }
     };
     if let Some(mut waiter) = fan_in.take_waiter() {
-        // One replica input: wait on its writer's wake-up, feed, take (see
+        // Replica inputs only: wait on their writers' wake-ups, feed, take (see
         // `ReplicaFeed`). Stop is noticed within a wait slice.
         loop {
             if stop.load(Ordering::Relaxed)

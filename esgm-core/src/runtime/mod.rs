@@ -384,9 +384,15 @@ impl InProcessEsgm {
     /// in the same step (under its lock), so no update falls between the two.
     fn subscribe_inputs(&self, inputs: &[Input]) -> (FanIn<Sample>, Vec<workers::InputState>) {
         let mut fan_in = FanIn::new(self.inner.subscriber_capacity);
-        // One input fed from another process: the worker waits for its writer itself.
-        if let [(_, cell)] = inputs {
-            if let Some(waiter) = cell.store.lock().feed_waiter() {
+        // Every input fed from another process: the worker waits for their writers
+        // itself (one input's waiter, or all inputs' joined into one).
+        let waiters: Option<Vec<_>> =
+            inputs.iter().map(|(_, cell)| cell.store.lock().feed_waiter()).collect();
+        let mut waiters = waiters.unwrap_or_default().into_iter();
+        if let Some(first) = waiters.next() {
+            let rest: Vec<_> = waiters.collect();
+            let waiter = if rest.is_empty() { Some(first) } else { first.join(rest) };
+            if let Some(waiter) = waiter {
                 fan_in.set_waiter(waiter);
             }
         }

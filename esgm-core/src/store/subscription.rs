@@ -75,6 +75,18 @@ pub trait FeedWaiter: Send + 'static {
     /// `timeout`, then feeds. Returns false if it could not wait (the caller then
     /// waits on its channel).
     fn wait_and_feed(&mut self, timeout: Duration) -> bool;
+
+    /// This waiter and `others` (the other inputs' waiters of one worker) as one waiter
+    /// that sleeps until any of their writers publishes: a unit with several inputs
+    /// from other processes waits on all of them itself and is woken once, with no
+    /// thread between the writers' wake-ups and its `compute`. `None` where the
+    /// transport cannot join them: the worker then waits on its channel, fed by the
+    /// runtime.
+    fn join(self: Box<Self>, others: Vec<Box<dyn FeedWaiter>>) -> Option<Box<dyn FeedWaiter>>;
+
+    /// This waiter as `Any`, for a transport's [`FeedWaiter::join`] to find its own
+    /// among the others.
+    fn into_any(self: Box<Self>) -> Box<dyn std::any::Any + Send>;
 }
 
 /// The receiving end of a subscription; dropping it unsubscribes.

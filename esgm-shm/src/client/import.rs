@@ -543,7 +543,82 @@ impl ImportWaiter {
     }
 }
 
+impl ImportWaiter {
+    /// The listener it waits on, once [`ImportWaiter::listen`] made it.
+    fn listener(&self) -> Option<&Listener<ShmService>> {
+        self.listening.as_ref().map(|(_, l)| l)
+    }
+}
+
+/// Several inputs' waiters as one ([`FeedWaiter::join`]): a worker with several inputs
+/// from other processes sleeps on all their writers' wake-ups at once (`poll(2)` on
+/// the listeners' descriptors, one system call whatever the number of inputs), and is
+/// woken once by whichever writer publishes.
+struct JoinedWaiter {
+    waiters: Vec<ImportWaiter>,
+}
+
+impl FeedWaiter for JoinedWaiter {
+    fn feed(&mut self) {
+        for w in &mut self.waiters {
+            w.feed();
+        }
+    }
+
+    fn wait_and_feed(&mut self, timeout: std::time::Duration) -> bool {
+        if !self.waiters.iter_mut().all(ImportWaiter::listen) {
+            return false;
+        }
+        let listeners: Vec<&Listener<ShmService>> =
+            self.waiters.iter().filter_map(ImportWaiter::listener).collect();
+        match crate::wait::wait_any(&listeners, timeout.min(WAIT_SLICE)) {
+            Ok(()) => {
+                self.feed();
+                true
+            }
+            Err(e) => {
+                tracing::warn!(error = %e,
+                    "cannot wait on the inputs' writers; waiting on the channel");
+                false
+            }
+        }
+    }
+
+    fn join(
+        mut self: Box<Self>,
+        others: Vec<Box<dyn FeedWaiter>>,
+    ) -> Option<Box<dyn FeedWaiter>> {
+        for other in others {
+            self.waiters.extend(ImportWaiter::own(other)?);
+        }
+        Some(self)
+    }
+
+    fn into_any(self: Box<Self>) -> Box<dyn std::any::Any + Send> {
+        self
+    }
+}
+
+impl ImportWaiter {
+    /// The import waiters `waiter` is made of, if it is this transport's.
+    fn own(waiter: Box<dyn FeedWaiter>) -> Option<Vec<ImportWaiter>> {
+        let any = waiter.into_any();
+        match any.downcast::<ImportWaiter>() {
+            Ok(w) => Some(vec![*w]),
+            Err(any) => any.downcast::<JoinedWaiter>().ok().map(|j| j.waiters),
+        }
+    }
+}
+
 impl FeedWaiter for ImportWaiter {
+    fn join(self: Box<Self>, others: Vec<Box<dyn FeedWaiter>>) -> Option<Box<dyn FeedWaiter>> {
+        Box::new(JoinedWaiter { waiters: vec![*self] }).join(others)
+    }
+
+    fn into_any(self: Box<Self>) -> Box<dyn std::any::Any + Send> {
+        self
+    }
+
     fn feed(&mut self) {
         let import = match self.import.upgrade() {
             Some(import) => Some(import),

@@ -186,6 +186,57 @@ pub(crate) fn timed_wait(
     }
 }
 
+/// A wait on several listeners failed.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum WaitAnyError {
+    /// `poll(2)` failed.
+    #[error("cannot wait on the listeners: {0}")]
+    Poll(std::io::Error),
+    /// A listener's notifications could not be taken.
+    #[error("cannot take a listener's notifications: {0:?}")]
+    Take(ListenerWaitError),
+}
+
+/// Waits up to `timeout` until any of `listeners` is notified (one `poll(2)` on their
+/// descriptors), then consumes the notifications of those that were, so that each
+/// next notify wakes again. An interrupted wait returns as a wake-up: the caller looks
+/// at what arrived either way.
+pub(crate) fn wait_any(
+    listeners: &[&Listener<ShmService>],
+    timeout: Duration,
+) -> Result<(), WaitAnyError> {
+    use iceoryx2::prelude::FileDescriptorBased as _;
+    let mut fds: Vec<libc::pollfd> = listeners
+        .iter()
+        .map(|l| libc::pollfd {
+            // SAFETY: the descriptor belongs to the listener, which outlives this call.
+            fd: unsafe { l.file_descriptor().native_handle() },
+            events: libc::POLLIN,
+            revents: 0,
+        })
+        .collect();
+    // Rounded up: a timeout below a millisecond still sleeps rather than spins.
+    let ms = i32::try_from(timeout.as_micros().div_ceil(1000)).unwrap_or(i32::MAX);
+    let nfds = libc::nfds_t::try_from(fds.len()).unwrap_or(libc::nfds_t::MAX);
+    // SAFETY: `fds` is a valid array of `nfds` pollfd entries for the whole call.
+    let ready = unsafe { libc::poll(fds.as_mut_ptr(), nfds, ms) };
+    if ready < 0 {
+        let e = std::io::Error::last_os_error();
+        return if e.kind() == std::io::ErrorKind::Interrupted {
+            Ok(())
+        } else {
+            Err(WaitAnyError::Poll(e))
+        };
+    }
+    for (listener, fd) in listeners.iter().zip(&fds) {
+        if fd.revents != 0 {
+            listener.try_wait(|_| {}).map_err(WaitAnyError::Take)?;
+        }
+    }
+    Ok(())
+}
+
 /// `now + timeout`, saturating at a far but finite deadline.
 pub(crate) fn deadline_after(timeout: Duration) -> Instant {
     let now = Instant::now();
