@@ -108,8 +108,9 @@ pub fn read_value(kind: Kind, es: &EntityStructure) -> anyhow::Result<(u64, bool
 }
 
 /// Reads one pixel at each end of a frame and checks them against the frame sent
-/// ([`pattern`]); returns their sum (for `black_box`).
-fn check_frame(pixels: &[u8]) -> anyhow::Result<u64> {
+/// ([`pattern`]); returns their sum (for `black_box`). Public for readers of pixels
+/// that come in another form (a ROS 2 message's `data`).
+pub fn check_frame(pixels: &[u8]) -> anyhow::Result<u64> {
     let (Some(&first), Some(&last)) = (pixels.first(), pixels.last()) else {
         bail!("the image has no pixels")
     };

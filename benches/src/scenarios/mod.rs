@@ -55,6 +55,11 @@
 //! through iceoryx2's (`python-iceoryx2-*`) and Zenoh's (`python-zenoh-*`) Python
 //! packages, run by a venv the bench makes ([`crate::python_env`]).
 //!
+//! The ROS 2 issue (25) adds, after `bridge-*`, [`ros2_peer`]: `ros2-raw-small` and
+//! `ros2-raw-image` (a raw DDS hop between two processes on ros2-client), then
+//! `ros2-export-*` and `ros2-import-*` through the `esgm-ros2` bridge, against them
+//! (cargo feature `ros2`; DDS only inside a loopback-only network namespace).
+//!
 //! The silent-failures issue (24) adds [`control_churn`]: `control-ping` and
 //! `control-ping-churn`, a client's call to the coordinator while others churn.
 //!
@@ -105,6 +110,13 @@ pub mod record_small;
 pub mod replay_max;
 pub mod ros1_fanout;
 pub mod ros1_peer;
+#[cfg(feature = "ros2")]
+pub mod ros2_dds;
+#[cfg(feature = "ros2")]
+pub mod ros2_hop;
+pub mod ros2_peer;
+#[cfg(feature = "ros2")]
+pub mod ros2_process;
 #[cfg(feature = "zenoh")]
 pub mod zenoh_echo;
 pub mod zenoh_peer;
@@ -142,6 +154,12 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(python_peer::Python::ZENOH_IMAGE),
         Box::new(bridge::Bridge::SMALL),
         Box::new(bridge::Bridge::IMAGE),
+        Box::new(ros2_peer::Ros2::RAW_SMALL),
+        Box::new(ros2_peer::Ros2::RAW_IMAGE),
+        Box::new(ros2_peer::Ros2::EXPORT_SMALL),
+        Box::new(ros2_peer::Ros2::EXPORT_IMAGE),
+        Box::new(ros2_peer::Ros2::IMPORT_SMALL),
+        Box::new(ros2_peer::Ros2::IMPORT_IMAGE),
         Box::new(ipc_throughput::Throughput::ONE),
         Box::new(ipc_throughput::Throughput::FOUR),
         Box::new(ipc_query::Query::THOUSAND),
