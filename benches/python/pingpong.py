@@ -27,6 +27,10 @@ is there; iceoryx2: `receive()`; Zenoh: `try_recv()`), `event` blocks (esgm:
 Before an `event` hop the ping busy-waits 50 us so that the blocked pong is asleep, as
 esgm-bench's EVENT_GAP does for the Rust rows.
 
+The ping also reads the clock when its send call returns (one read inside the hop) and
+notes the median time that call took: where a row's time goes, the sender's call or the
+way to the other process and back.
+
 Output of the ping, on stdout: one line per measured hop, `<one-way ns> <write ns>`,
 then `note <text>` lines; of the pong, `note <text>` lines. Failures go to stderr with
 a non-zero exit. Every wait has a timeout, and the whole process has one
@@ -119,6 +123,7 @@ def ping(ends, args):
             ready_after = max(ready_after, signal)
 
     out = []
+    send_calls = []
     in_place = None
     total = args.warmup + args.samples
     for seq in range(1, total + 1):
@@ -133,6 +138,7 @@ def ping(ends, args):
             busy_wait_ns(EVENT_GAP_NS)
         start = time.perf_counter_ns()
         ends.send(message, seq)
+        sent = time.perf_counter_ns() - start
         while True:
             got = next_message(ends.poll, ends.wait, args.wait, f"answer to ping {seq}")
             if got == seq:
@@ -140,10 +146,15 @@ def ping(ends, args):
         round_trip = time.perf_counter_ns() - start
         if seq > args.warmup:
             out.append(f"{round_trip // 2} {made}")
+            send_calls.append(sent)
         if seq == total:
             in_place = ends.last_read_in_shared_memory()
     ends.send(ends.prepare(), STOP)
     out.append(f"note {ends.describe()}")
+    send_calls.sort()
+    out.append(f"note the ping's send call ({ends.send_call()}) returned after p50 "
+               f"{send_calls[len(send_calls) // 2] / 1000:.1f} us, p99 "
+               f"{send_calls[len(send_calls) * 99 // 100] / 1000:.1f} us (inside the round trip)")
     if in_place is not None:
         where = "in place in a /dev/shm mapping" if in_place else "from a copy on the heap"
         out.append(f"note the ping read the last answer's {ends.what_is_read()} {where}")

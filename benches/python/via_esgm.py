@@ -117,6 +117,9 @@ class Ends:
     def what_is_read(self):
         return "pixels"
 
+    def send_call(self):
+        return "Trajectory.add"
+
     def describe(self):
         return ("esgm.connect on both sides; Trajectory.add -> Subscription.recv; primitive "
                 f"trajectories with a cache of {CACHE}; spin polls recv(0) (TimeoutError when "

@@ -170,6 +170,9 @@ class Ends:
     def what_is_read(self):
         return "pixels"
 
+    def send_call(self):
+        return "assume_init().send() and notify"
+
     def describe(self):
         return (f"iceoryx2 {version()} Python, ipc publish-subscribe; the payload written into a "
                 "loan before the hop, read in place; spin polls receive(), event blocks in "

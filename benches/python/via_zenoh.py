@@ -118,6 +118,9 @@ class Ends:
     def what_is_read(self):
         return "pixels"
 
+    def send_call(self):
+        return "Publisher.put"
+
     def describe(self):
         from importlib.metadata import version
         shared = "in" if self.arrived_in_shared_memory() else "NOT in"

@@ -66,7 +66,7 @@ fn make() -> anyhow::Result<PythonEnv> {
     let marker = venv.join(".esgm-requirements");
     let current = std::fs::read_to_string(&marker).ok();
     if !python.is_file() || current.as_deref() != Some(wanted.as_str()) {
-        eprintln!("esgm-bench: making the Python venv {} (once)", venv.display());
+        eprintln!("\nesgm-bench: making the Python venv {} (once)", venv.display());
         if venv.exists() {
             std::fs::remove_dir_all(&venv)
                 .with_context(|| format!("removing the stale venv {}", venv.display()))?;
