@@ -193,7 +193,11 @@ impl LinkedProcess {
         // The end of its stderr says why; a chatty process's whole log would not.
         let tail: Vec<&str> = stderr.lines().rev().take(12).collect();
         let tail: Vec<&str> = tail.into_iter().rev().collect();
-        anyhow!("the {} {what}: {}", self.name, tail.join("\n"))
+        if tail.is_empty() {
+            anyhow!("the {} {what}, saying nothing on stderr", self.name)
+        } else {
+            anyhow!("the {} {what}: {}", self.name, tail.join("\n"))
+        }
     }
 }
 
