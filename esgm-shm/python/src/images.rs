@@ -19,7 +19,7 @@ use numpy::PyArray1;
 use numpy::ndarray::ArrayViewMut1;
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyDict, PyWeakrefReference};
 
 /// Where the pixels live.
 #[derive(Debug)]
@@ -36,12 +36,17 @@ enum Pixels {
 }
 
 /// A buffer of a trajectory's memory for one image's pixels.
+///
+/// Its array's base is the buffer (so the memory outlives every view of it); the
+/// buffer holds that array only weakly, else the two would form a cycle that Python's
+/// collector cannot see through a native class, and every frame would leak (found by
+/// the `python-image` benchmark: one frame of resident memory per add).
 #[pyclass(frozen, module = "esgm")]
 #[derive(Debug)]
 pub struct ImageBuffer {
     pixels: Mutex<Pixels>,
     shape: Vec<usize>,
-    array: Mutex<Option<Py<PyAny>>>,
+    array: Mutex<Option<Py<PyWeakrefReference>>>,
 }
 
 impl ImageBuffer {
@@ -84,14 +89,19 @@ impl ImageBuffer {
         *pixels = Pixels::Added(octets.clone());
         drop(pixels);
         // The pixels are the sample's now: whoever holds the array may read them only.
-        if let Some(array) =
-            me.array.lock().map_err(|_| PyRuntimeError::new_err("a poisoned buffer"))?.as_ref()
-        {
+        if let Some(array) = Self::live_array(slf)? {
             let flags = PyDict::new(slf.py());
             flags.set_item("write", false)?;
-            array.bind(slf.py()).call_method("setflags", (), Some(&flags))?;
+            array.call_method("setflags", (), Some(&flags))?;
         }
         Ok(octets)
+    }
+
+    /// The array last made over the pixels, if someone still holds it.
+    fn live_array<'py>(slf: &Bound<'py, Self>) -> PyResult<Option<Bound<'py, PyAny>>> {
+        let array =
+            slf.get().array.lock().map_err(|_| PyRuntimeError::new_err("a poisoned buffer"))?;
+        Ok(array.as_ref().and_then(|weak| weak.bind(slf.py()).upgrade()))
     }
 }
 
@@ -100,12 +110,9 @@ impl ImageBuffer {
     /// The pixels, a writable numpy array `(height, width[, 3])` over the buffer.
     #[getter]
     fn array<'py>(slf: &Bound<'py, Self>) -> PyResult<Bound<'py, PyAny>> {
-        let py = slf.py();
         let me = slf.get();
-        if let Some(a) =
-            me.array.lock().map_err(|_| PyRuntimeError::new_err("a poisoned buffer"))?.as_ref()
-        {
-            return Ok(a.bind(py).clone());
+        if let Some(a) = Self::live_array(slf)? {
+            return Ok(a);
         }
         let mut pixels =
             me.pixels.lock().map_err(|_| PyRuntimeError::new_err("a poisoned buffer"))?;
@@ -125,7 +132,7 @@ impl ImageBuffer {
         drop(pixels);
         let shaped = flat.call_method1("reshape", (me.shape.clone(),))?;
         *me.array.lock().map_err(|_| PyRuntimeError::new_err("a poisoned buffer"))? =
-            Some(shaped.clone().unbind());
+            Some(PyWeakrefReference::new(&shaped)?.unbind());
         Ok(shaped)
     }
 

@@ -82,3 +82,26 @@ def test_frames_cross_processes_without_copies_and_outlive_their_trajectory(doma
     finally:
         if reader.poll() is None:
             reader.kill()
+
+
+def resident_mb():
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * 4096 / (1 << 20)
+
+
+def test_frames_written_into_loans_are_freed(system, unique):
+    """A buffer's array views the buffer, which must not hold the array in a cycle the
+    collector cannot see: 200 frames of 900 KiB written and added in a loop leave the
+    process about where it started."""
+    images = system.create_primitive_entity_trajectory_structure(unique, "Image", policy={"cache": 2})
+    before = resident_mb()
+    for i in range(200):
+        buffer = images.image_buffer(640, 480)
+        with buffer as frame:
+            frame[0, 0, 0] = i % 256
+        images.add("camera", i + 1, {"width": 640, "height": 480, "format": 0, "image_data": buffer})
+    system.flush(10)
+    grown = resident_mb() - before
+    # A leak keeps every frame: 200 x 0.88 MiB = 176 MiB. The cache holds 2.
+    assert grown < 60, f"resident memory grew by {grown:.0f} MiB over 200 frames"
+    assert images.get_latest()["image_data"][0, 0, 0] == 199 % 256
