@@ -181,6 +181,22 @@ fn quick_connect_image_reads_the_pixels_in_shared_memory() {
     assert!(stdout.contains("20 of 20 replies' pixels read in place"), "{stdout}");
 }
 
+/// Without the `ros2` feature (CI's build) the ROS 2 rows are reported as not run,
+/// with the command that runs them, and their targets say so: nothing pretends to have
+/// measured DDS.
+#[cfg(not(feature = "ros2"))]
+#[test]
+fn ros2_rows_without_the_feature_are_reported_as_not_run() {
+    let (stdout, report) = run_quick("ros2-");
+    assert!(rows(&report).is_empty(), "{report}");
+    let skipped = report["skipped"].as_array().expect("a `skipped` array");
+    assert_eq!(skipped.len(), 6, "{report}");
+    for row in skipped {
+        assert!(row["reason"].as_str().is_some_and(|r| r.contains("--features ros2")), "{row}");
+    }
+    assert!(stdout.contains("(ros2-export-small not run) (ros2-raw-small not run)"), "{stdout}");
+}
+
 #[test]
 fn an_unknown_scenario_is_one_clear_error() {
     let output = Command::new(env!("CARGO_BIN_EXE_esgm-bench"))

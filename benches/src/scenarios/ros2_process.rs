@@ -71,11 +71,6 @@ impl LinkedProcess {
         Ok(process)
     }
 
-    /// The process id.
-    pub fn id(&self) -> u32 {
-        self.child.id()
-    }
-
     /// Writes `line` to its stdin.
     pub fn send(&mut self, line: &str) -> anyhow::Result<()> {
         let stdin = self.stdin.as_mut().with_context(|| format!("{}: stdin closed", self.name))?;
