@@ -584,10 +584,7 @@ impl FeedWaiter for JoinedWaiter {
         }
     }
 
-    fn join(
-        mut self: Box<Self>,
-        others: Vec<Box<dyn FeedWaiter>>,
-    ) -> Option<Box<dyn FeedWaiter>> {
+    fn join(mut self: Box<Self>, others: Vec<Box<dyn FeedWaiter>>) -> Option<Box<dyn FeedWaiter>> {
         for other in others {
             self.waiters.extend(ImportWaiter::own(other)?);
         }
