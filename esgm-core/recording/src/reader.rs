@@ -132,6 +132,27 @@ pub struct RecordedTrajectory {
 }
 
 impl RecordedTrajectory {
+    /// A trajectory found in the file, nothing of it read yet.
+    fn new(
+        info: TrajectoryInfo,
+        types: TypeSchema,
+        view_topic: Option<String>,
+        channel: u16,
+    ) -> Self {
+        Self {
+            info,
+            types,
+            view_topic,
+            count: 0,
+            bytes: 0,
+            valid_range: None,
+            add_range: None,
+            losses: BTreeMap::new(),
+            violations: 0,
+            channel,
+        }
+    }
+
     /// All losses, whatever the cause.
     pub fn lost(&self) -> u64 {
         // Counts come from the file, which may be crafted: they saturate, never wrap.
@@ -410,18 +431,12 @@ impl Decoder {
                         match rec.trajectories.iter().position(|t| t.info.name == meta.info.name) {
                             Some(i) => i,
                             None => {
-                                rec.trajectories.push(RecordedTrajectory {
-                                    info: meta.info,
+                                rec.trajectories.push(RecordedTrajectory::new(
+                                    meta.info,
                                     types,
-                                    view_topic: meta.view_topic,
-                                    count: 0,
-                                    bytes: 0,
-                                    valid_range: None,
-                                    add_range: None,
-                                    losses: BTreeMap::new(),
-                                    violations: 0,
-                                    channel: c.id,
-                                });
+                                    meta.view_topic,
+                                    c.id,
+                                ));
                                 rec.trajectories.len() - 1
                             }
                         };
@@ -440,18 +455,12 @@ impl Decoder {
                     self.bag_channel(&c.topic, &c.message_encoding, c.schema_id)
                     && !rec.trajectories.iter().any(|t| t.info.name == bag.info.name)
                 {
-                    rec.trajectories.push(RecordedTrajectory {
-                        info: bag.info.clone(),
-                        types: bag.types.clone(),
-                        view_topic: None,
-                        count: 0,
-                        bytes: 0,
-                        valid_range: None,
-                        add_range: None,
-                        losses: BTreeMap::new(),
-                        violations: 0,
-                        channel: c.id,
-                    });
+                    rec.trajectories.push(RecordedTrajectory::new(
+                        bag.info.clone(),
+                        bag.types.clone(),
+                        None,
+                        c.id,
+                    ));
                     self.bags.insert(c.id, (rec.trajectories.len() - 1, bag, 0));
                 } else if !rec.foreign_topics.contains(&c.topic) {
                     rec.foreign_topics.push(c.topic);

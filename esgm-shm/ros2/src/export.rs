@@ -21,9 +21,9 @@ use serde::Serialize;
 use crate::generated;
 use crate::mapping::{self, MappingError, RosType};
 use crate::msgs;
-use crate::node::{NodeError, TopicQos, message_type_name, topic_name};
+use crate::node::{NodeError, TopicQos, bridged_topic, create_error, message_type_name};
 use crate::stats::{Direction, LossCause, Stats, TopicCounters};
-use crate::watch::{Spawned, Watched};
+use crate::watch::Spawned;
 
 /// One `--export`.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -148,23 +148,11 @@ fn start<M: Serialize + Send + 'static>(
     counters: Arc<TopicCounters>,
     stop: &Arc<AtomicBool>,
 ) -> Result<Spawned, ExportError> {
-    let create = |what, e: &dyn std::fmt::Debug| NodeError::Create {
-        what,
-        topic: spec.topic.clone(),
-        detail: format!("{e:?}"),
-    };
-    let watched = Watched::new(
-        &spec.topic,
-        &message_type,
-        Direction::Export,
-        &qos.profile(),
-        Arc::clone(&counters),
-    );
-    let topic = node
-        .create_topic(&topic_name(&spec.topic)?, message_type, &qos.profile())
-        .map_err(|e| create("topic", &e))?;
-    let publisher: Publisher<M> =
-        node.create_publisher(&topic, None).map_err(|e| create("publisher", &e))?;
+    let (topic, watched) =
+        bridged_topic(node, &spec.topic, message_type, Direction::Export, qos, &counters)?;
+    let publisher: Publisher<M> = node
+        .create_publisher(&topic, None)
+        .map_err(|e| create_error("publisher", &spec.topic, &e))?;
     let subscription = handle
         .subscribe(SubscribeOptions::default())
         .map_err(|source| ExportError::Subscribe { trajectory: spec.trajectory.clone(), source })?;

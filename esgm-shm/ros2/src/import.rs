@@ -28,9 +28,9 @@ use serde::de::DeserializeOwned;
 use crate::generated;
 use crate::mapping::{self, MappingError, RosType};
 use crate::msgs;
-use crate::node::{NodeError, TopicQos, message_type_name, topic_name};
+use crate::node::{NodeError, TopicQos, bridged_topic, create_error, message_type_name};
 use crate::stats::{Direction, LossCause, Stats, TopicCounters};
-use crate::watch::{Spawned, Watched};
+use crate::watch::Spawned;
 
 /// One `--import`.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -306,23 +306,11 @@ impl Started<'_> {
         read: Box<Read<M>>,
     ) -> Result<Spawned, ImportError> {
         let Started { node, spec, qos, handle, counters, stop } = self;
-        let create = |what, e: &dyn std::fmt::Debug| NodeError::Create {
-            what,
-            topic: spec.topic.clone(),
-            detail: format!("{e:?}"),
-        };
-        let watched = Watched::new(
-            &spec.topic,
-            &message_type,
-            Direction::Import,
-            &qos.profile(),
-            Arc::clone(&counters),
-        );
-        let topic = node
-            .create_topic(&topic_name(&spec.topic)?, message_type, &qos.profile())
-            .map_err(|e| create("topic", &e))?;
-        let subscription: Subscription<M> =
-            node.create_subscription(&topic, None).map_err(|e| create("subscription", &e))?;
+        let (topic, watched) =
+            bridged_topic(node, &spec.topic, message_type, Direction::Import, qos, &counters)?;
+        let subscription: Subscription<M> = node
+            .create_subscription(&topic, None)
+            .map_err(|e| create_error("subscription", &spec.topic, &e))?;
         let stop = Arc::clone(stop);
         let topic = spec.topic.clone();
         let thread = std::thread::Builder::new()

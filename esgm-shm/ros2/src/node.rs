@@ -124,6 +124,34 @@ pub fn message_type_name(t: esgm_ros2msg::mapping::RosType) -> ros2_client::Mess
     ros2_client::MessageTypeName::new(package, name)
 }
 
+/// The topic of a bridged ROS 2 `topic` (absolute) of `message_type` on `node`, with
+/// esgm's side of it for the [`crate::watch`] (`direction`, `qos`, where an
+/// incompatible peer is counted): what an import and an export both make first.
+pub fn bridged_topic(
+    node: &mut ros2_client::Node,
+    topic: &str,
+    message_type: ros2_client::MessageTypeName,
+    direction: crate::stats::Direction,
+    qos: TopicQos,
+    counters: &std::sync::Arc<crate::stats::TopicCounters>,
+) -> Result<(ros2_client::dds::rustdds::Topic, crate::watch::Watched), NodeError> {
+    let watched = crate::watch::Watched::new(
+        topic,
+        &message_type,
+        direction,
+        &qos.profile(),
+        std::sync::Arc::clone(counters),
+    );
+    let made = node.create_topic(&topic_name(topic)?, message_type, &qos.profile());
+    let made = made.map_err(|e| create_error("topic", topic, &e))?;
+    Ok((made, watched))
+}
+
+/// Making `what` (a topic, a publisher, a subscription) for `topic` failed.
+pub fn create_error(what: &'static str, topic: &str, e: &dyn std::fmt::Debug) -> NodeError {
+    NodeError::Create { what, topic: topic.to_owned(), detail: format!("{e:?}") }
+}
+
 /// A ROS 2 topic name as `ros2-client` takes it.
 pub fn topic_name(topic: &str) -> Result<Name, NodeError> {
     let bad = |detail: String| NodeError::TopicName { topic: topic.to_owned(), detail };
