@@ -277,6 +277,41 @@ mod tests {
     }
 
     #[test]
+    #[allow(clippy::unwrap_used, reason = "a failure is a failed test")]
+    fn wait_any_wakes_on_whichever_listener_is_notified_and_consumes_it() {
+        use iceoryx2::prelude::{NodeBuilder, ServiceName};
+        let node = NodeBuilder::new().create::<ShmService>().unwrap();
+        let domain = crate::service_name::unique_domain("wait-any");
+        let events: Vec<_> = ["a", "b"]
+            .iter()
+            .map(|n| {
+                let name = ServiceName::new(&format!("{domain}/{n}")).unwrap();
+                node.service_builder(&name).event().open_or_create().unwrap()
+            })
+            .collect();
+        let listeners: Vec<_> =
+            events.iter().map(|e| e.listener_builder().create().unwrap()).collect();
+        let second = events[1].notifier_builder().create().unwrap();
+        let all: Vec<&Listener<ShmService>> = listeners.iter().collect();
+
+        // Nothing notified: the wait lasts its timeout.
+        let start = Instant::now();
+        wait_any(&all, Duration::from_millis(30)).unwrap();
+        assert!(start.elapsed() >= Duration::from_millis(30));
+
+        // The second listener notified: the wait returns long before its timeout, and
+        // the notification is consumed (the next wait sleeps again).
+        second.notify().unwrap();
+        let start = Instant::now();
+        wait_any(&all, Duration::from_secs(20)).unwrap();
+        assert!(start.elapsed() < Duration::from_secs(20));
+        assert_eq!(listeners[1].try_wait(|_| {}).unwrap(), 0, "consumed");
+        let start = Instant::now();
+        wait_any(&all, Duration::from_millis(30)).unwrap();
+        assert!(start.elapsed() >= Duration::from_millis(30));
+    }
+
+    #[test]
     fn huge_timeouts_still_end() {
         let d = deadline_after(Duration::MAX);
         assert!(d > Instant::now());
