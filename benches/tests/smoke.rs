@@ -155,10 +155,21 @@ fn quick_esgm_small_reports_three_waits_idle_cpu_and_the_encode() {
 
 #[test]
 fn quick_connect_small_measures_the_api_both_ways() {
+    // Back to back, and paced as the image's hops (`connect-small-paced`).
     let (stdout, report) = run_quick("connect-small");
-    assert_eq!(rows(&report), [key("connect-small", "event"), key("connect-small", "spin")]);
+    assert_eq!(
+        rows(&report),
+        [
+            key("connect-small", "event"),
+            key("connect-small", "spin"),
+            key("connect-small-paced", "event"),
+            key("connect-small-paced", "spin"),
+        ]
+    );
     for row in report["scenarios"].as_array().unwrap() {
-        assert_eq!(row["baseline"], "esgm-small", "{row}");
+        let baseline =
+            if row["name"] == "connect-small-paced" { "connect-small" } else { "esgm-small" };
+        assert_eq!(row["baseline"], baseline, "{row}");
         assert!(row["p50_ns"].as_u64().is_some_and(|ns| ns > 0), "{row}");
     }
     assert!(stdout.contains("Subscription::recv_timeout"), "{stdout}");
@@ -177,6 +188,8 @@ fn quick_connect_image_reads_the_pixels_in_shared_memory() {
     );
     for row in report["scenarios"].as_array().unwrap() {
         assert!(row["payload_bytes"].as_u64().is_some_and(|b| b > 921_600), "{row}");
+        // Compared with a small structure paced as the frames are.
+        assert_eq!(row["baseline"], "connect-small-paced", "{row}");
     }
     assert!(stdout.contains("20 of 20 replies' pixels read in place"), "{stdout}");
 }

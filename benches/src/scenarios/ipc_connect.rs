@@ -14,9 +14,11 @@
 //! Two rows each ([`super::ipc_connect_echo`] has the ping-pong): `spin`, both
 //! subscribers polling `try_recv`, and `event`, both blocking in `recv_timeout`. `event`
 //! is what a user gets: `connect` has no wait strategy to choose, so there is no
-//! `-default` row. Targets, as ratios of rows of the same run: `connect-small` within
-//! 2× `esgm-small` at the same wait (what the API adds to the data plane),
-//! `connect-image` within 1.2× `connect-small` (pixels are not copied on the way), and
+//! `-default` row. `connect-small-paced` is `connect-small` with each hop after the
+//! `ready`/`done` exchange the image's hops wait for (a camera's pace rather than back
+//! to back). Targets, as ratios of rows of the same run: `connect-small` within 2×
+//! `esgm-small` at the same wait (what the API adds to the data plane),
+//! `connect-image` within 1.2× `connect-small-paced` (pixels are not copied on the way), and
 //! `connect-small` (`event`) faster than ROS 1 and Zenoh (`event`), which are reported
 //! as not run when their peers are not built.
 //!
@@ -38,25 +40,34 @@ use crate::wait_mode::WaitMode;
 pub const SMALL_NAME: &str = "connect-small";
 /// The name of the image's scenario.
 pub const IMAGE_NAME: &str = "connect-image";
+/// The name of the small structure's scenario paced as the image's.
+pub const SMALL_PACED_NAME: &str = "connect-small-paced";
 
 /// One payload through `connect` (see the module docs).
 #[derive(Debug, Clone, Copy)]
 pub struct Connect {
     name: &'static str,
     kind: Kind,
+    /// Each hop after the `ready`/`done` exchange, as a camera's frames
+    /// ([`super::ipc_connect_echo`]).
+    paced: bool,
 }
 
 impl Connect {
-    /// The small structure.
-    pub const SMALL: Connect = Connect { name: SMALL_NAME, kind: Kind::Small };
+    /// The small structure, back to back.
+    pub const SMALL: Connect = Connect { name: SMALL_NAME, kind: Kind::Small, paced: false };
+    /// The small structure, paced as the image.
+    pub const SMALL_PACED: Connect =
+        Connect { name: SMALL_PACED_NAME, kind: Kind::Small, paced: true };
     /// The image.
-    pub const IMAGE: Connect = Connect { name: IMAGE_NAME, kind: Kind::Image };
+    pub const IMAGE: Connect = Connect { name: IMAGE_NAME, kind: Kind::Image, paced: true };
 
     /// The scenario each row is compared with (same wait).
     fn baseline(&self) -> &'static str {
-        match self.kind {
-            Kind::Small => ipc_esgm_small::NAME,
-            Kind::Image => SMALL_NAME,
+        match (self.kind, self.paced) {
+            (Kind::Small, false) => ipc_esgm_small::NAME,
+            (Kind::Small, true) => SMALL_NAME,
+            (Kind::Image, _) => SMALL_PACED_NAME,
         }
     }
 
@@ -108,12 +119,16 @@ impl Scenario for Connect {
     }
 
     fn summary(&self) -> &'static str {
-        match self.kind {
-            Kind::Small => {
+        match (self.kind, self.paced) {
+            (Kind::Small, false) => {
                 "~120-byte RobotState, add in one connected process -> subscriber in another \
                  (esgm_shm connect on both sides); busy and blocking waits"
             }
-            Kind::Image => {
+            (Kind::Small, true) => {
+                "connect-small paced as connect-image: each hop after the same ready/done \
+                 exchange a camera's frame waits for; busy and blocking waits"
+            }
+            (Kind::Image, _) => {
                 "921,600-byte 640x480 RGB Image, add in one connected process -> subscriber in \
                  another reads a pixel at each end (connect on both sides); busy and blocking"
             }
@@ -124,15 +139,17 @@ impl Scenario for Connect {
         let payload_bytes = esgm_core::codec::encoded_len(&self.kind.make(0))? as u64;
         let mut rows = Vec::new();
         for mode in WaitMode::SPIN_AND_BLOCK {
-            let run = ping_pong(ctx, self.name, self.kind, mode)?;
+            let run = ping_pong(ctx, self.name, self.kind, self.paced, mode)?;
             rows.push(self.row(mode, &run, payload_bytes));
         }
         Ok(rows)
     }
 
     fn targets(&self) -> Vec<Target> {
-        match self.kind {
-            Kind::Small => {
+        match (self.kind, self.paced) {
+            // Shown beside its back-to-back row; the image's row is held to it.
+            (Kind::Small, true) => Vec::new(),
+            (Kind::Small, false) => {
                 let mut targets: Vec<Target> = Wait::BOTH
                     .iter()
                     .map(|&w| Target::at_most(SMALL_NAME, ipc_esgm_small::NAME, w, 2.0))
@@ -142,14 +159,14 @@ impl Scenario for Connect {
                 }
                 targets
             }
-            Kind::Image => Wait::BOTH
+            (Kind::Image, _) => Wait::BOTH
                 .iter()
-                .map(|&w| Target::at_most(IMAGE_NAME, SMALL_NAME, w, 1.2))
+                .map(|&w| Target::at_most(IMAGE_NAME, SMALL_PACED_NAME, w, 1.2))
                 .collect(),
         }
     }
 
     fn run_peer(&self, role: &PeerRole) -> anyhow::Result<Vec<String>> {
-        echo(role, self.kind)
+        echo(role, self.kind, self.paced)
     }
 }

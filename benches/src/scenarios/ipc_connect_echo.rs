@@ -25,7 +25,9 @@
 //! more trajectories keep the peer's 921,600-byte writes out of the hops: the peer says
 //! on `ready` that its reply frame is made and it is waiting, and the measuring process
 //! says on `done` that it has read the reply and stopped its timer, before the peer
-//! makes its next frame.
+//! makes its next frame. A *paced* small row (`connect-small-paced`) runs the same
+//! exchange with a `RobotState`, so that the image's hop is compared with a small hop
+//! that comes after the same steps, as a camera's do, rather than back to back.
 //!
 //! The sequence number travels as the structure's valid time (the trajectories are
 //! unconstrained but for a cache of [`CACHE`] samples, so any valid time is admitted); a
@@ -90,11 +92,14 @@ pub struct ConnectRun {
     pub peer_notes: Vec<String>,
 }
 
-/// Runs the measuring side of scenario `scenario` with `mode` in both processes.
+/// Runs the measuring side of scenario `scenario` with `mode` in both processes;
+/// `paced`: each hop waits for the `ready`/`done` exchange of the module docs, as a
+/// camera's frames do (every image row is paced).
 pub fn ping_pong(
     ctx: &Context,
     scenario: &str,
     kind: Kind,
+    paced: bool,
     mode: WaitMode,
 ) -> anyhow::Result<ConnectRun> {
     let (full, quick) = kind.samples();
@@ -110,19 +115,14 @@ pub fn ping_pong(
     let esgm = connect(coordinator.domain(), "bench-measuring")?;
     let ping = create(&esgm, PING, kind)?;
     // Images only (see the module docs).
-    let done = match kind {
-        Kind::Small => None,
-        Kind::Image => Some(create(&esgm, DONE, Kind::Small)?),
-    };
+    let done = if paced { Some(create(&esgm, DONE, Kind::Small)?) } else { None };
     let mut peer = ctx.spawn_peer_process(scenario, mode, &domain)?;
     let mut patience = Patience::for_peer(&mut peer);
     // The peer subscribes to ours before it creates its own: once its trajectories
     // exist, its subscriptions do too.
     let pong = subscribe_when_created(&esgm, PONG, &mut patience)?;
-    let ready = match kind {
-        Kind::Small => None,
-        Kind::Image => Some(subscribe_when_created(&esgm, READY, &mut patience)?),
-    };
+    let ready =
+        if paced { Some(subscribe_when_created(&esgm, READY, &mut patience)?) } else { None };
 
     // Made once: start-up pings share its pixels.
     let hello = kind.make(0);
@@ -194,21 +194,15 @@ pub fn ping_pong(
     Ok(run)
 }
 
-/// The peer side: echoes every ping until the stop.
-pub fn echo(role: &PeerRole, kind: Kind) -> anyhow::Result<Vec<String>> {
+/// The peer side: echoes every ping until the stop (`paced` as the measuring side's).
+pub fn echo(role: &PeerRole, kind: Kind, paced: bool) -> anyhow::Result<Vec<String>> {
     iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
     let esgm = connect(&role.domain, "bench-peer")?;
     // Subscribed before ours are created: see `ping_pong`.
     let ping = subscribe(&esgm, PING)?;
-    let done = match kind {
-        Kind::Small => None,
-        Kind::Image => Some(subscribe(&esgm, DONE)?),
-    };
+    let done = if paced { Some(subscribe(&esgm, DONE)?) } else { None };
     let pong = create(&esgm, PONG, kind)?;
-    let ready = match kind {
-        Kind::Small => None,
-        Kind::Image => Some(create(&esgm, READY, Kind::Small)?),
-    };
+    let ready = if paced { Some(create(&esgm, READY, Kind::Small)?) } else { None };
 
     let mut patience = Patience::alone();
     let (mut pings, mut early, mut held, mut last) = (0u64, 0u64, 0u64, HELLO);

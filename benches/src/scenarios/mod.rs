@@ -145,6 +145,7 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(ros1_peer::Ros1::SMALL),
         Box::new(ros1_peer::Ros1::IMAGE),
         Box::new(ipc_connect::Connect::SMALL),
+        Box::new(ipc_connect::Connect::SMALL_PACED),
         Box::new(ipc_connect::Connect::IMAGE),
         Box::new(python_peer::Python::ICEORYX2_SMALL),
         Box::new(python_peer::Python::ICEORYX2_IMAGE),
