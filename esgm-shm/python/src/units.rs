@@ -192,14 +192,7 @@ impl CompUnit for PyUnit {
         inputs: &[esgm_core::Sample],
         qtime: Time,
     ) -> Result<EntityStructure, ComputeError> {
-        self.0
-            .call("compute", |py| {
-                pyo3::types::PyTuple::new(
-                    py,
-                    [samples(py, inputs)?.into_any(), qtime.into_pyobject(py)?.into_any()],
-                )
-            })
-            .map_err(compute_error)
+        self.call_with("compute", inputs, qtime)
     }
 
     fn compute_at(
@@ -214,11 +207,24 @@ impl CompUnit for PyUnit {
         if !has {
             return Err(ComputeError::OperationNotSupported);
         }
+        self.call_with("compute_at", inputs, t)
+    }
+}
+
+impl PyUnit {
+    /// Calls the unit's `method(inputs, time)`: `compute` and `compute_at` take the
+    /// same arguments.
+    fn call_with(
+        &self,
+        method: &str,
+        inputs: &[esgm_core::Sample],
+        time: Time,
+    ) -> Result<EntityStructure, ComputeError> {
         self.0
-            .call("compute_at", |py| {
+            .call(method, |py| {
                 pyo3::types::PyTuple::new(
                     py,
-                    [samples(py, inputs)?.into_any(), t.into_pyobject(py)?.into_any()],
+                    [samples(py, inputs)?.into_any(), time.into_pyobject(py)?.into_any()],
                 )
             })
             .map_err(compute_error)
