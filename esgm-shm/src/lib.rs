@@ -125,7 +125,8 @@ pub mod process;
 pub(crate) use data_plane::sequence_gaps;
 pub use data_plane::{
     capacity, image_layout, image_loan, payload, publisher, qos, received, sample_check, service,
-    service_name, size_hint, structure_loan, subscriber, type_id, violations, wait, writer_check,
+    service_name, size_hint, structure_loan, subscriber, type_id, violations, wait, wake_word,
+    writer_check,
 };
 // What connected processes hold in shared memory, with its old path.
 pub use client::holdings;

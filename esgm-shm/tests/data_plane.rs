@@ -509,11 +509,56 @@ fn every_wait_strategy_delivers_and_times_out() {
             // Keep the publisher alive until the subscriber has had time to read.
             thread::sleep(Duration::from_millis(100));
         });
+        let waiting = Instant::now();
         let sample = s.wait_for_sample(TIMEOUT).unwrap().expect("woken by the sample");
+        // Woken by the writer, not found when the wait's timeout ended.
+        assert!(waiting.elapsed() < TIMEOUT / 2, "{strategy:?} was not woken");
         assert_eq!(sample.to_owned().unwrap(), robot(7), "{strategy:?}");
         drop(sample);
         producer.join().unwrap();
     }
+}
+
+#[test]
+fn blocked_readers_sleep_on_the_trajectorys_word_and_are_all_woken() {
+    let domain = unique_domain("word");
+    let word =
+        esgm_shm::wake_word::path_for(&esgm_shm::service_name::wake_service_name(&domain, "robot"));
+    let readers: Vec<_> = (0..3)
+        .map(|_| {
+            let n = node();
+            let s = subscriber(&domain, "robot", "RobotState")
+                .wait_strategy(WaitStrategy::Block)
+                .create(&n)
+                .unwrap();
+            (n, s)
+        })
+        .collect();
+    assert!(word.exists(), "the readers mapped the trajectory's word");
+    thread::scope(|scope| {
+        let waits: Vec<_> = readers
+            .iter()
+            .map(|(_, s)| {
+                scope.spawn(move || {
+                    let start = Instant::now();
+                    let got = s.wait_for_sample(TIMEOUT).unwrap().map(|r| r.to_owned().unwrap());
+                    (got, start.elapsed())
+                })
+            })
+            .collect();
+        let n = node();
+        let p = publisher(&domain, "robot", "RobotState").create(&n).unwrap();
+        // Every reader asleep (their wait began at least 50 ms before), then one send.
+        thread::sleep(Duration::from_millis(50));
+        p.publish(&robot(3)).unwrap();
+        for w in waits {
+            let (got, waited) = w.join().unwrap();
+            assert_eq!(got, Some(robot(3)));
+            assert!(waited < TIMEOUT / 2, "a reader was not woken");
+        }
+    });
+    drop(readers);
+    assert!(!word.exists(), "the last user removed the word");
 }
 
 #[test]

@@ -50,7 +50,8 @@ use crate::service::{EventSpec, OpenError, ShmService, open_event_service};
 use crate::service_name::{NameError, TrajectoryServiceNames};
 use crate::subscriber::{ReceiveError, TrajectorySubscriber};
 use crate::violations::{ViolationSubscriber, violation_service_name};
-use crate::wait::{WaitStrategy, timed_wait};
+use crate::wait::{Sleeper, WaitStrategy, timed_wait};
+use crate::wake_word::WakeWord;
 use crate::writer_check::{Decided, WriterCheck};
 
 /// Where an import is made: the connection's node, domain, holdings and mirrors.
@@ -120,6 +121,10 @@ impl Drop for Import {
             return;
         }
         let Some(wake) = self.sample_wake() else { return };
+        // Both ways a subscription may sleep: on the word, and on the event.
+        if let Ok(word) = WakeWord::open(wake.name.as_str()) {
+            word.ring();
+        }
         let rung = self
             .node
             .with(|node| wake.open(node)?.notifier_builder().create().map_err(OpenError::Notifier));
@@ -439,6 +444,7 @@ impl ReplicaFeed for ImportFeed {
     fn waiter(&self) -> Option<Box<dyn FeedWaiter>> {
         Some(Box::new(ImportWaiter {
             listening: None,
+            seen: None,
             trajectory: self.trajectory.clone(),
             node: self.node.clone(),
             mirrors: Weak::clone(&self.mirrors),
@@ -450,6 +456,7 @@ impl ReplicaFeed for ImportFeed {
     fn worker_waiter(&self) -> Option<Box<dyn FeedWaiter>> {
         Some(Box::new(ImportWaiter {
             listening: None,
+            seen: None,
             trajectory: self.trajectory.clone(),
             node: self.node.clone(),
             mirrors: Weak::clone(&self.mirrors),
@@ -466,10 +473,16 @@ impl ReplicaFeed for ImportFeed {
 /// 2 s it was 2 % of a core for 60 processes, twice an idle domain's budget).
 const WAIT_SLICE: std::time::Duration = std::time::Duration::from_secs(30);
 
-/// One subscription's listener on the writer's wake-up service.
+/// One subscription's sleep on its writer's wake-ups: the trajectory's futex word
+/// ([`crate::wake_word`]), or a listener on the writer's wake-up service where the
+/// word cannot be mapped.
 struct ImportWaiter {
-    /// The generation listened to, and the listener.
-    listening: Option<(u64, Listener<ShmService>)>,
+    /// The generation listened to, and what it sleeps on.
+    listening: Option<(u64, Sleeper)>,
+    /// The word's sequence loaded before the last feed: the wait sleeps only while the
+    /// word still holds it (a sample sent since changed it). `None` until the first
+    /// feed after listening.
+    seen: Option<u32>,
     trajectory: String,
     node: SharedNode,
     mirrors: Weak<SharedMirrors>,
@@ -508,12 +521,15 @@ impl ImportWaiter {
         }
         // Another generation: count in the import now served.
         self.stand_down();
-        let listener = self
-            .node
-            .with(|node| wake.open(node)?.listener_builder().create().map_err(OpenError::Listener));
-        match listener {
-            Ok(l) => {
-                self.listening = Some((generation, l));
+        let sleeper = self.node.with(|node| {
+            Sleeper::open(wake.name.as_str(), || {
+                wake.open(node)?.listener_builder().create().map_err(OpenError::Listener)
+            })
+        });
+        match sleeper {
+            Ok(sleeper) => {
+                self.listening = Some((generation, sleeper));
+                self.seen = None;
                 if let Some(counted) = &mut self.worker {
                     workers.fetch_add(1, std::sync::atomic::Ordering::AcqRel);
                     *counted = Some(workers);
@@ -544,9 +560,33 @@ impl ImportWaiter {
 }
 
 impl ImportWaiter {
-    /// The listener it waits on, once [`ImportWaiter::listen`] made it.
+    /// The listener it waits on, if [`ImportWaiter::listen`] made one.
     fn listener(&self) -> Option<&Listener<ShmService>> {
-        self.listening.as_ref().map(|(_, l)| l)
+        match &self.listening {
+            Some((_, Sleeper::Listener(l))) => Some(l),
+            _ => None,
+        }
+    }
+
+    /// The word it sleeps on, if [`ImportWaiter::listen`] mapped it, with the
+    /// sequence seen at the last feed.
+    fn word(&self) -> Option<(&WakeWord, Option<u32>)> {
+        match &self.listening {
+            Some((_, Sleeper::Word(w))) => Some((w, self.seen)),
+            _ => None,
+        }
+    }
+
+    /// After a sleep on the word that saw no change: a word whose file was made anew
+    /// (the domain restarted with this process in it) is mapped again at the next
+    /// wait, to meet the new writer.
+    fn check_word(&mut self) {
+        if let Some((word, Some(seen))) = self.word()
+            && word.sequence() == seen
+            && word.stale()
+        {
+            self.listening = None;
+        }
     }
 }
 
@@ -569,9 +609,31 @@ impl FeedWaiter for JoinedWaiter {
         if !self.waiters.iter_mut().all(ImportWaiter::listen) {
             return false;
         }
-        let listeners: Vec<&Listener<ShmService>> =
-            self.waiters.iter().filter_map(ImportWaiter::listener).collect();
-        match crate::wait::wait_any(&listeners, timeout.min(WAIT_SLICE)) {
+        let timeout = timeout.min(WAIT_SLICE);
+        let words: Option<Vec<_>> = self.waiters.iter().map(ImportWaiter::word).collect();
+        if let Some(words) = words {
+            // Sleep only if no word changed since the last feed (nor was never seen).
+            let seen: Option<Vec<(&WakeWord, u32)>> = words
+                .iter()
+                .map(|&(w, seen)| seen.filter(|&s| s == w.sequence()).map(|s| (w, s)))
+                .collect();
+            if let Some(seen) = seen
+                && let Err(e) = crate::wake_word::sleep_any(&seen, timeout)
+            {
+                tracing::warn!(error = %e,
+                    "cannot sleep on the inputs' words; waiting on the channel");
+                return false;
+            }
+            self.waiters.iter_mut().for_each(ImportWaiter::check_word);
+            self.feed();
+            return true;
+        }
+        // Every input on a listener, or some on words and some not: a mix cannot be
+        // waited on at once, so the worker waits on its channel.
+        let listeners: Option<Vec<&Listener<ShmService>>> =
+            self.waiters.iter().map(ImportWaiter::listener).collect();
+        let Some(listeners) = listeners else { return false };
+        match crate::wait::wait_any(&listeners, timeout) {
             Ok(()) => {
                 self.feed();
                 true
@@ -617,6 +679,10 @@ impl FeedWaiter for ImportWaiter {
     }
 
     fn feed(&mut self) {
+        // Loaded before the pump: what is sent after it changes the word.
+        if let Some((word, _)) = self.word() {
+            self.seen = Some(word.sequence());
+        }
         let import = match self.import.upgrade() {
             Some(import) => Some(import),
             None => self.mirrors.upgrade().and_then(|m| m.import(&self.trajectory)),
@@ -630,7 +696,15 @@ impl FeedWaiter for ImportWaiter {
         if !self.listen() {
             return false;
         }
-        let Some((_, listener)) = &self.listening else { return false };
+        if let Some((word, seen)) = self.word() {
+            if let Some(seen) = seen.filter(|&s| s == word.sequence()) {
+                word.sleep(seen, timeout.min(WAIT_SLICE));
+            }
+            self.check_word();
+            self.feed();
+            return true;
+        }
+        let Some(listener) = self.listener() else { return false };
         match crate::wait::timed_wait(listener, timeout.min(WAIT_SLICE)) {
             Ok(_) => {
                 self.feed();

@@ -702,6 +702,15 @@ impl Coordinator {
                 next_cleanup = Instant::now() + cleanup_every;
             }
         }
+        if self.shutdown_requested {
+            // The domain is going down: the words its crashed processes kept mapped
+            // (counted as users for ever) go with it.
+            let snapshot = self.registry.snapshot();
+            crate::wake_word::remove_words(
+                &self.domain,
+                snapshot.trajectories.iter().map(|t| t.info.name.as_str()),
+            );
+        }
         Ok(())
     }
 }

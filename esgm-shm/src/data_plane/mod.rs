@@ -2,8 +2,8 @@
 //! history — its iceoryx2 services and their names ([`service`], [`service_name`]),
 //! the sample layout ([`payload`]), the writing end ([`publisher`], with structures
 //! encoded ahead of sending in [`structure_loan`] and images written in place in
-//! [`image_loan`]) and the reading end ([`subscriber`], [`received`], [`wait`], and
-//! every sample's checks in [`sample_check`]), and the violations service.
+//! [`image_loan`]) and the reading end ([`subscriber`], [`received`], [`wait`], woken through
+//! [`wake_word`], and every sample's checks in [`sample_check`]), and the violations service.
 //! Trajectories with policy and history are built on it by the client
 //! ([`crate::client`]).
 
@@ -24,4 +24,5 @@ pub mod subscriber;
 pub mod type_id;
 pub mod violations;
 pub mod wait;
+pub mod wake_word;
 pub mod writer_check;

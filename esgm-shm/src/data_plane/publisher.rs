@@ -56,6 +56,7 @@ use crate::service_name::{DEFAULT_DOMAIN, TrajectoryServiceNames};
 use crate::size_hint::archived_size_hint;
 use crate::structure_loan::StructureLoan;
 use crate::type_id::type_id;
+use crate::wake_word::WakeWord;
 
 /// Default initial size of a publisher's samples: small structures fit without growth.
 pub const DEFAULT_INITIAL_MAX_LEN: usize = 4096;
@@ -234,6 +235,15 @@ impl TrajectoryPublisherBuilder {
         let port = port.create().map_err(OpenError::Publisher)?;
         let wake = open_wake_service(node, &names, &self.qos)?;
         let notifier = wake.notifier_builder().create().map_err(OpenError::Notifier)?;
+        // Without its word, readers that sleep on it wake only at their timeouts:
+        // worth a warning, not a refusal (readers that cannot map it use the event).
+        let word = WakeWord::open(names.wake().as_str())
+            .inspect_err(|e| {
+                tracing::warn!(trajectory = %self.trajectory, error = %e,
+                    "cannot map the trajectory's wake-up word; readers sleeping on it \
+                     wake only at their timeouts")
+            })
+            .ok();
         Ok(TrajectoryPublisher {
             type_id: type_id(&self.type_name),
             trajectory: self.trajectory.clone(),
@@ -241,6 +251,7 @@ impl TrajectoryPublisherBuilder {
             service,
             port,
             notifier,
+            word,
             clock: self.clock.clone().unwrap_or_else(SystemClock::shared),
             lossless_timeout: self.lossless_timeout,
             sequence: Cell::new(0),
@@ -259,6 +270,8 @@ pub struct TrajectoryPublisher {
     service: DataService,
     port: Publisher<ShmService, [Block16], SampleHeader>,
     notifier: Notifier<ShmService>,
+    /// Rung before the notifier: readers sleeping on the futex word ([`WakeWord`]).
+    word: Option<WakeWord>,
     clock: SharedClock,
     lossless_timeout: Duration,
     sequence: Cell<u64>,
@@ -512,6 +525,9 @@ impl TrajectoryPublisher {
     }
 
     fn wake(&self) {
+        if let Some(word) = &self.word {
+            word.ring();
+        }
         // A failed wake-up is not a failed publish: the sample is delivered, and a
         // reader's timed wait bounds the delay. Log the first, count all.
         if let Err(e) = self.notifier.notify() {

@@ -30,7 +30,7 @@ use crate::service::{
 };
 use crate::service_name::{DEFAULT_DOMAIN, TrajectoryServiceNames};
 use crate::type_id::type_id;
-use crate::wait::{WaitStrategy, Waiter, deadline_after};
+use crate::wait::{Sleeper, WaitStrategy, Waiter, deadline_after};
 
 /// When a subscriber validates archives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -216,9 +216,11 @@ impl TrajectorySubscriberBuilder {
             port = port.history_request(n);
         }
         let port = port.create().map_err(OpenError::Subscriber)?;
-        let listener = if self.wait.blocks() {
-            let wake = open_wake_service(node, &names, &self.qos)?;
-            Some(wake.listener_builder().create().map_err(OpenError::Listener)?)
+        let sleeper = if self.wait.blocks() {
+            Some(Sleeper::open(names.wake().as_str(), || {
+                let wake = open_wake_service(node, &names, &self.qos)?;
+                wake.listener_builder().create().map_err(OpenError::Listener)
+            })?)
         } else {
             None
         };
@@ -228,7 +230,7 @@ impl TrajectorySubscriberBuilder {
             type_name: self.type_name.clone(),
             service,
             port: Arc::new(port),
-            waiter: Waiter::new(self.wait, listener),
+            waiter: Waiter::new(self.wait, sleeper),
             validation: self.validation,
             counters: Arc::default(),
         })

@@ -39,7 +39,7 @@ use crate::sequence_gaps::SequenceGaps;
 use crate::service::{OpenError, ShmNode, with_room};
 use crate::service_name::{DEFAULT_DOMAIN, NameError, SERVICE_PREFIX, TrajectoryServiceNames};
 use crate::subscriber::ReceiveError;
-use crate::wait::{WaitStrategy, Waiter, deadline_after};
+use crate::wait::{Sleeper, WaitStrategy, Waiter, deadline_after};
 
 /// Unread violations a subscriber can queue before the oldest are overwritten.
 pub const VIOLATION_BUFFER: usize = 64;
@@ -250,7 +250,7 @@ impl ViolationSubscriberBuilder {
         Ok(ViolationSubscriber {
             trajectory: self.trajectory.clone(),
             port,
-            waiter: Waiter::new(self.wait, listener),
+            waiter: Waiter::new(self.wait, listener.map(|l| Sleeper::Listener(Box::new(l)))),
             stats: Cell::new(ViolationSubscriberStats::default()),
             gaps: RefCell::new(SequenceGaps::default()),
         })

@@ -9,7 +9,7 @@
 //!
 //! # The default: spin briefly, then block
 //! [`WaitStrategy::SpinThenBlock`] polls for [`DEFAULT_SPIN`] (25 µs) and only then
-//! sleeps on the trajectory's wake-up event. Anything that arrives within the spin
+//! sleeps on the trajectory's wake-up word. Anything that arrives within the spin
 //! window — the reply in a request/reply exchange, the next stage of a pipeline that is
 //! already running, any sample a blocking socket would have delivered in its 5–9 µs —
 //! is seen at spinning latency, so the default beats a blocking socket on small
@@ -37,21 +37,29 @@
 //! 1.9 % for pure blocking — the spin adds at most 25 µs per sample, so a 30 Hz camera
 //! costs under 0.1 % more.
 //!
-//! # Wake-ups stay cheap for the publisher
-//! The publisher notifies after every send, but iceoryx2 only sends a datagram when the
-//! listener has consumed the previous one (its notification state goes idle → notified
-//! once, and later notifies see "already notified" and stop at an atomic). So while
-//! readers spin, or have no listener at all ([`WaitStrategy::BusySpin`]), a publish costs
-//! no system call for wake-ups; a datagram goes out only when a reader may be asleep.
-//! A reader about to sleep first drains stale wake-ups, then polls once more, then
-//! sleeps: a sample sent after that poll finds the state idle and sends a datagram, so
-//! no sample is missed between the last poll and the sleep.
+//! # Sleeping on a futex word
+//! A blocking reader sleeps on its trajectory's futex word ([`crate::wake_word`]): the
+//! writer adds one to it after every send and calls `FUTEX_WAKE` only when somebody
+//! sleeps, so while readers spin, or nobody reads, a publish costs one atomic add and
+//! no system call. A reader about to sleep loads the word, polls once more, and sleeps
+//! only if the word still holds what it loaded: a sample sent after that poll changed
+//! it, and the kernel refuses the sleep. A futex wake-up between two processes costs
+//! about half of iceoryx2's event here (6 µs against 13 µs, `floor-futex`).
+//!
+//! Where the word cannot be mapped, and for services that have none (a trajectory's
+//! violations), the reader sleeps on iceoryx2's event instead. iceoryx2 only sends a
+//! datagram when the listener has consumed the previous one (its notification state
+//! goes idle → notified once, and later notifies see "already notified" and stop at an
+//! atomic). A reader about to sleep on it first drains stale wake-ups, then polls once
+//! more, then sleeps: a sample sent after that poll finds the state idle and sends a
+//! datagram, so no sample is missed between the last poll and the sleep.
 //!
 //! # Never forever
 //! Every wait takes a timeout: a publisher that dies is not signalled to a waiting
 //! reader, so without a deadline a reader could wait forever.
 
 use crate::service::ShmService;
+use crate::wake_word::WakeWord;
 use std::time::{Duration, Instant};
 
 use iceoryx2::port::listener::{Listener, ListenerWaitError};
@@ -93,23 +101,49 @@ impl WaitStrategy {
     }
 }
 
+/// What a blocking reader sleeps on: the trajectory's futex word, or (where the word
+/// cannot be mapped, or for a service that has none) an iceoryx2 listener.
+#[derive(Debug)]
+pub(crate) enum Sleeper {
+    Word(WakeWord),
+    Listener(Box<Listener<ShmService>>),
+}
+
+impl Sleeper {
+    /// The word of the wake-up service `service` (unless [`crate::wake_word::WAKE_ENV`]
+    /// says `event`), else the listener `listener` makes.
+    pub(crate) fn open<E>(
+        service: &str,
+        listener: impl FnOnce() -> Result<Listener<ShmService>, E>,
+    ) -> Result<Sleeper, E> {
+        if crate::wake_word::futex_enabled() {
+            match WakeWord::open(service) {
+                Ok(word) => return Ok(Sleeper::Word(word)),
+                Err(e) => tracing::debug!(service, error = %e,
+                    "cannot map the wake-up word; sleeping on the iceoryx2 event"),
+            }
+        }
+        listener().map(|l| Sleeper::Listener(Box::new(l)))
+    }
+}
+
 /// A wait strategy with what it needs to block.
 #[derive(Debug)]
 pub(crate) enum Waiter {
     Spin,
-    SpinThenBlock { spin: Duration, listener: Listener<ShmService> },
-    Block { listener: Listener<ShmService> },
+    SpinThenBlock { spin: Duration, sleeper: Sleeper },
+    Block { sleeper: Sleeper },
 }
 
 impl Waiter {
-    /// The waiter for `strategy`; `listener` is used only if the strategy blocks.
-    pub(crate) fn new(strategy: WaitStrategy, listener: Option<Listener<ShmService>>) -> Self {
-        match (strategy, listener) {
-            (WaitStrategy::SpinThenBlock { spin }, Some(listener)) => {
-                Waiter::SpinThenBlock { spin, listener }
+    /// The waiter for `strategy`; `sleeper` is used only if the strategy blocks.
+    pub(crate) fn new(strategy: WaitStrategy, sleeper: Option<Sleeper>) -> Self {
+        match (strategy, sleeper) {
+            (WaitStrategy::SpinThenBlock { spin }, Some(sleeper)) => {
+                Waiter::SpinThenBlock { spin, sleeper }
             }
-            (WaitStrategy::Block, Some(listener)) => Waiter::Block { listener },
-            // Without a listener nothing can wake a sleeper: polling is the only option.
+            (WaitStrategy::Block, Some(sleeper)) => Waiter::Block { sleeper },
+            // Without a sleeper nothing can wake a reader: polling is the only option.
             _ => Waiter::Spin,
         }
     }
@@ -124,13 +158,13 @@ impl Waiter {
         if let Some(v) = poll()? {
             return Ok(Some(v));
         }
-        let (spin_until, listener) = match self {
+        let (spin_until, sleeper) = match self {
             Waiter::Spin => (deadline, None),
-            Waiter::SpinThenBlock { spin, listener } => {
+            Waiter::SpinThenBlock { spin, sleeper } => {
                 let until = Instant::now().checked_add(*spin).unwrap_or(deadline);
-                (until.min(deadline), Some(listener))
+                (until.min(deadline), Some(sleeper))
             }
-            Waiter::Block { listener } => (Instant::now(), Some(listener)),
+            Waiter::Block { sleeper } => (Instant::now(), Some(sleeper)),
         };
 
         // A blocking strategy's spin yields after a short pure spin (see the module docs).
@@ -152,20 +186,37 @@ impl Waiter {
                 return Ok(Some(v));
             }
         }
-        let Some(listener) = listener else { return Ok(None) };
-
-        // Consume wake-ups for samples already taken, so that the next notify sends a
-        // datagram instead of seeing "already notified" (see the module docs).
-        listener.try_wait(|_| {})?;
-        loop {
-            if let Some(v) = poll()? {
-                return Ok(Some(v));
+        match sleeper {
+            None => Ok(None),
+            Some(Sleeper::Word(word)) => loop {
+                // Loaded before the look: a sample sent after it changes the word, and
+                // the sleep is refused (see `wake_word`).
+                let seen = word.sequence();
+                if let Some(v) = poll()? {
+                    return Ok(Some(v));
+                }
+                let now = Instant::now();
+                if now >= deadline {
+                    return Ok(None);
+                }
+                word.sleep(seen, deadline - now);
+            },
+            Some(Sleeper::Listener(listener)) => {
+                // Consume wake-ups for samples already taken, so that the next notify
+                // sends a datagram instead of seeing "already notified" (see the
+                // module docs).
+                listener.try_wait(|_| {})?;
+                loop {
+                    if let Some(v) = poll()? {
+                        return Ok(Some(v));
+                    }
+                    let now = Instant::now();
+                    if now >= deadline {
+                        return Ok(None);
+                    }
+                    timed_wait(listener, deadline - now)?;
+                }
             }
-            let now = Instant::now();
-            if now >= deadline {
-                return Ok(None);
-            }
-            timed_wait(listener, deadline - now)?;
         }
     }
 }

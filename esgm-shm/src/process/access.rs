@@ -108,6 +108,13 @@ impl ShmAccess {
         }
     }
 
+    /// The mode of a file esgm makes itself in the domain's shared memory (a
+    /// trajectory's [`crate::wake_word`]): read and write for the owner and for the
+    /// classes this access admits.
+    pub(crate) fn file_mode(self) -> u32 {
+        0o600 | self.widen(0o600)
+    }
+
     /// The mode bits to add to a file whose owner bits are `owner` (`0o600`, `0o400`,
     /// …): the owner's read and write bits, mirrored to the classes this access
     /// admits. Execute bits are never added to files.

@@ -1,0 +1,454 @@
+//! A trajectory's futex word: the cheapest way to wake a reader in another process.
+//!
+//! # Why not only iceoryx2's event
+//! iceoryx2 0.10 wakes a listener with a datagram on a Unix socket. On this kind of
+//! machine that costs 13 µs one-way, where two processes ping-ponging through a futex
+//! word in shared memory take 6 µs (`floor-futex` in BENCHMARKS.md). A futex is also
+//! one system call for every sleeper of the word, where a datagram goes to each
+//! listener in turn.
+//!
+//! # The word
+//! Every trajectory has one page of POSIX shared memory, named after its wake-up
+//! service (`/dev/shm/esgm_wake_<hash>`). It holds three 32-bit counters, each on its
+//! own cache line:
+//! - `sequence`, the futex word: the writer adds one after every sample it sends;
+//! - `sleepers`: readers asleep on `sequence` right now, so that a writer calls
+//!   `FUTEX_WAKE` only when somebody sleeps (a publish nobody waits for costs one
+//!   atomic add and one load, no system call);
+//! - `users`: processes that map the page, counted under an advisory lock; the last to
+//!   leave removes the file.
+//!
+//! A reader loads `sequence`, looks for a sample, and sleeps with `FUTEX_WAIT` only if
+//! `sequence` still holds what it loaded: a sample sent after the look changed the
+//! word, and the kernel refuses the sleep. The writer's add and the reader's count of
+//! itself among the sleepers are both sequentially consistent, so either the writer
+//! sees the sleeper and wakes it, or the reader's sleep sees the new sequence.
+//!
+//! # Where iceoryx2's event stays
+//! The writer still notifies the trajectory's iceoryx2 event after ringing the word.
+//! Waits over many trajectories at once (a process's receiver thread) and one-off
+//! waits (a new reader's history) sleep on listeners, which have descriptors for
+//! `poll(2)`; a notify with no listener asleep costs an atomic. A reader whose word
+//! cannot be opened (no room in `/dev/shm`, another user's file) falls back to the
+//! event, as does every reader when [`WAKE_ENV`] is `event`.
+//!
+//! A process killed while it slept leaves `sleepers` one too high: its writer then
+//! calls `FUTEX_WAKE` after each sample (about a microsecond, nobody woken) until the
+//! page is made anew. A process killed while mapping it leaves `users` too high and the
+//! file (one page) in `/dev/shm` until the domain's coordinator removes it at its end.
+
+use std::fs::{File, OpenOptions};
+use std::os::fd::AsRawFd as _;
+use std::os::unix::fs::{MetadataExt as _, OpenOptionsExt as _};
+use std::path::{Path, PathBuf};
+use std::ptr::NonNull;
+use std::sync::OnceLock;
+use std::sync::atomic::{AtomicU32, Ordering};
+use std::time::{Duration, Instant};
+
+use crate::process::access::ShmAccess;
+
+/// The environment variable that chooses how readers sleep: `futex` (the default) or
+/// `event` (iceoryx2's event only), to measure one against the other or to rule the
+/// word out when looking for a fault. Read once per process.
+pub const WAKE_ENV: &str = "ESGM_WAKE";
+
+/// Where the words live: POSIX shared memory, as iceoryx2's segments.
+const SHM_DIR: &str = "/dev/shm";
+/// The words' file names begin with this.
+pub const FILE_PREFIX: &str = "esgm_wake_";
+/// The page's size.
+const LEN: usize = 4096;
+/// Where each counter is: a cache line apiece, so that sleepers counting themselves do
+/// not slow the writer's add.
+const SEQUENCE: usize = 0;
+const SLEEPERS: usize = 64;
+const USERS: usize = 128;
+/// How often an open retries a file its last user removed meanwhile.
+const OPEN_ATTEMPTS: usize = 8;
+/// The most words [`sleep_any`] waits on (the kernel's limit for `futex_waitv`).
+pub const MAX_WAIT_ANY: usize = 128;
+
+/// True unless [`WAKE_ENV`] asks readers to sleep on iceoryx2's event.
+pub fn futex_enabled() -> bool {
+    static ENABLED: OnceLock<bool> = OnceLock::new();
+    *ENABLED.get_or_init(|| std::env::var(WAKE_ENV).map_or(true, |v| v != "event"))
+}
+
+/// The path of the word of the wake-up service `service`.
+pub fn path_for(service: &str) -> PathBuf {
+    // FNV-1a: a file name of fixed length for names of any length and character.
+    let hash = service
+        .bytes()
+        .fold(0xcbf2_9ce4_8422_2325_u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3));
+    Path::new(SHM_DIR).join(format!("{FILE_PREFIX}{hash:016x}"))
+}
+
+/// Removes the words of `trajectories` of `domain`, at the domain's end: a process
+/// killed while it mapped a word leaves it counted as a user, and its file in
+/// `/dev/shm`. A process still in the domain keeps its mapping; one that joins later
+/// makes the word anew.
+pub fn remove_words<'a>(domain: &str, trajectories: impl IntoIterator<Item = &'a str>) {
+    for t in trajectories {
+        let path = path_for(&crate::service_name::wake_service_name(domain, t));
+        match std::fs::remove_file(&path) {
+            Ok(()) => tracing::debug!(path = %path.display(), "removed a wake-up word left behind"),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+            Err(e) => {
+                tracing::debug!(path = %path.display(), error = %e, "cannot remove a wake-up word")
+            }
+        }
+    }
+}
+
+/// One trajectory's futex word, mapped (see the module docs). Unmapped, and its file
+/// removed by the last process that used it, when dropped.
+#[derive(Debug)]
+pub struct WakeWord {
+    base: NonNull<u8>,
+    /// Held open so that the last user can lock the file to remove it.
+    file: File,
+    path: PathBuf,
+}
+
+// SAFETY: the mapping is only used through atomics, and it lives as long as the value.
+unsafe impl Send for WakeWord {}
+// SAFETY: as above; every access is an atomic operation.
+unsafe impl Sync for WakeWord {}
+
+impl WakeWord {
+    /// Maps the word of the wake-up service named `service`, making it if it is the
+    /// first. Files are made with the mode the domain's access asks for
+    /// ([`ShmAccess::from_env`]).
+    pub fn open(service: &str) -> std::io::Result<WakeWord> {
+        Self::open_at(path_for(service))
+    }
+
+    fn open_at(path: PathBuf) -> std::io::Result<WakeWord> {
+        let mode = ShmAccess::from_env().unwrap_or_default().file_mode();
+        for _ in 0..OPEN_ATTEMPTS {
+            let file =
+                OpenOptions::new().read(true).write(true).create(true).mode(mode).open(&path)?;
+            if let Some(base) = Self::map_locked(&file, &path, mode)? {
+                return Ok(WakeWord { base, file, path });
+            }
+        }
+        Err(std::io::Error::new(
+            std::io::ErrorKind::WouldBlock,
+            format!("{} was removed and made again {OPEN_ATTEMPTS} times", path.display()),
+        ))
+    }
+
+    /// Under the file's lock: maps it and counts this process among its users, or
+    /// `None` if its last user removed it meanwhile (open the new one, or every
+    /// process would not meet on the same word).
+    fn map_locked(file: &File, path: &Path, mode: u32) -> std::io::Result<Option<NonNull<u8>>> {
+        let _lock = Flock::exclusive(file)?;
+        let meta = file.metadata()?;
+        let same =
+            std::fs::metadata(path).is_ok_and(|m| m.ino() == meta.ino() && m.dev() == meta.dev());
+        if meta.nlink() == 0 || !same {
+            return Ok(None);
+        }
+        if meta.len() < LEN as u64 {
+            // Made now: the umask may have narrowed the mode.
+            std::fs::set_permissions(path, std::os::unix::fs::PermissionsExt::from_mode(mode))?;
+            file.set_len(LEN as u64)?;
+        }
+        // SAFETY: a shared mapping of a file at least LEN long.
+        let base = unsafe {
+            libc::mmap(
+                std::ptr::null_mut(),
+                LEN,
+                libc::PROT_READ | libc::PROT_WRITE,
+                libc::MAP_SHARED,
+                file.as_raw_fd(),
+                0,
+            )
+        };
+        if base == libc::MAP_FAILED {
+            return Err(std::io::Error::last_os_error());
+        }
+        let base = NonNull::new(base.cast::<u8>()).ok_or(std::io::ErrorKind::Other)?;
+        // SAFETY: just mapped, LEN long.
+        unsafe { counter_at(base, USERS) }.fetch_add(1, Ordering::SeqCst);
+        Ok(Some(base))
+    }
+
+    fn counter(&self, offset: usize) -> &AtomicU32 {
+        // SAFETY: the page lives as long as `self`.
+        unsafe { counter_at(self.base, offset) }
+    }
+
+    /// The word's current sequence: load it before looking for a sample, and sleep
+    /// with [`WakeWord::sleep`] on what it was.
+    pub fn sequence(&self) -> u32 {
+        self.counter(SEQUENCE).load(Ordering::SeqCst)
+    }
+
+    /// Tells every reader of the trajectory that a sample was sent (after the send):
+    /// an atomic add, and a `FUTEX_WAKE` only if somebody sleeps.
+    pub fn ring(&self) {
+        self.counter(SEQUENCE).fetch_add(1, Ordering::SeqCst);
+        if self.counter(SLEEPERS).load(Ordering::SeqCst) != 0 {
+            futex_wake(self.counter(SEQUENCE));
+        }
+    }
+
+    /// Sleeps until the sequence is no longer `seen`, at most `timeout`; returns at
+    /// once if it already changed. A wake-up is not a promise of a sample (a signal,
+    /// a ring for another reason): look, then sleep again.
+    pub fn sleep(&self, seen: u32, timeout: Duration) {
+        let sleepers = self.counter(SLEEPERS);
+        sleepers.fetch_add(1, Ordering::SeqCst);
+        futex_wait(self.counter(SEQUENCE), seen, timeout);
+        sleepers.fetch_sub(1, Ordering::SeqCst);
+    }
+
+    /// True if this word's file is no longer the one its path names (removed while
+    /// the domain was stopped with this process still in it): open it again to meet
+    /// the trajectory's new writer.
+    pub fn stale(&self) -> bool {
+        let Ok(meta) = self.file.metadata() else { return true };
+        !std::fs::metadata(&self.path).is_ok_and(|m| m.ino() == meta.ino() && m.dev() == meta.dev())
+    }
+}
+
+impl Drop for WakeWord {
+    fn drop(&mut self) {
+        // Counted out under the lock, so an open cannot count itself in between the
+        // last user's count and its removal of the file.
+        if let Ok(_lock) = Flock::exclusive(&self.file) {
+            let last = self.counter(USERS).fetch_sub(1, Ordering::SeqCst) == 1;
+            if last && !self.stale() {
+                let _ = std::fs::remove_file(&self.path);
+            }
+        }
+        // SAFETY: mapped in `open_at` with this length; nothing borrows it any more.
+        unsafe { libc::munmap(self.base.as_ptr().cast(), LEN) };
+    }
+}
+
+/// The counter at `offset` of the page at `base`.
+///
+/// # Safety
+/// `base` is a live mapping of [`LEN`] bytes for as long as the result is used.
+unsafe fn counter_at<'a>(base: NonNull<u8>, offset: usize) -> &'a AtomicU32 {
+    debug_assert!(offset + 4 <= LEN && offset % 4 == 0);
+    // SAFETY: within the page, 4-aligned (the page is page-aligned); other processes
+    // use it atomically too.
+    unsafe { AtomicU32::from_ptr(base.as_ptr().add(offset).cast::<u32>()) }
+}
+
+/// Sleeps until any of `words` is no longer at its `seen` sequence, at most
+/// `timeout`: one `futex_waitv(2)` (Linux 5.16) whatever their number. `Err` if the
+/// kernel cannot (too old, or more than [`MAX_WAIT_ANY`] words): wait another way.
+pub fn sleep_any(words: &[(&WakeWord, u32)], timeout: Duration) -> std::io::Result<()> {
+    if words.len() > MAX_WAIT_ANY {
+        return Err(std::io::Error::from_raw_os_error(libc::E2BIG));
+    }
+    /// The kernel's `struct futex_waitv`.
+    #[repr(C)]
+    struct FutexWaitv {
+        val: u64,
+        uaddr: u64,
+        flags: u32,
+        reserved: u32,
+    }
+    /// `FUTEX2_SIZE_U32`, without `FUTEX2_PRIVATE`: the words are shared.
+    const FUTEX2_SIZE_U32: u32 = 0x02;
+    let waiters: Vec<FutexWaitv> = words
+        .iter()
+        .map(|(w, seen)| FutexWaitv {
+            val: u64::from(*seen),
+            uaddr: w.counter(SEQUENCE).as_ptr() as u64,
+            flags: FUTEX2_SIZE_U32,
+            reserved: 0,
+        })
+        .collect();
+    let until = monotonic_after(timeout);
+    for (w, _) in words {
+        w.counter(SLEEPERS).fetch_add(1, Ordering::SeqCst);
+    }
+    // SAFETY: `waiters` and `until` outlive the call; every address is a mapped word.
+    let r = unsafe {
+        libc::syscall(
+            libc::SYS_futex_waitv,
+            waiters.as_ptr(),
+            waiters.len() as libc::c_uint,
+            0 as libc::c_uint,
+            &until as *const libc::timespec,
+            libc::CLOCK_MONOTONIC,
+        )
+    };
+    let error = (r < 0).then(std::io::Error::last_os_error);
+    for (w, _) in words {
+        w.counter(SLEEPERS).fetch_sub(1, Ordering::SeqCst);
+    }
+    match error.and_then(|e| e.raw_os_error()) {
+        // Woken, a word changed before the sleep, the deadline, or a signal: the
+        // caller looks at what arrived either way.
+        None | Some(libc::EAGAIN | libc::ETIMEDOUT | libc::EINTR) => Ok(()),
+        Some(code) => Err(std::io::Error::from_raw_os_error(code)),
+    }
+}
+
+/// `CLOCK_MONOTONIC` now plus `timeout`, for `futex_waitv`'s absolute deadline.
+fn monotonic_after(timeout: Duration) -> libc::timespec {
+    let mut now = libc::timespec { tv_sec: 0, tv_nsec: 0 };
+    // SAFETY: `now` is a valid timespec to write.
+    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut now) };
+    let timeout = timeout.min(Duration::from_secs(365 * 24 * 3600));
+    let nanos = now.tv_nsec + i64::from(timeout.subsec_nanos());
+    libc::timespec {
+        tv_sec: now.tv_sec + timeout.as_secs() as libc::time_t + (nanos / 1_000_000_000),
+        tv_nsec: (nanos % 1_000_000_000) as libc::c_long,
+    }
+}
+
+/// `FUTEX_WAIT` on a shared word for at most `timeout`. Every ending (woken, the word
+/// changed, the timeout, a signal) returns: the caller looks, then sleeps again. An
+/// unexpected failure sleeps out a millisecond, so that a reader never spins on it.
+fn futex_wait(word: &AtomicU32, seen: u32, timeout: Duration) {
+    let timeout = timeout.min(Duration::from_secs(365 * 24 * 3600));
+    let ts = libc::timespec {
+        tv_sec: timeout.as_secs() as libc::time_t,
+        tv_nsec: timeout.subsec_nanos() as libc::c_long,
+    };
+    let started = Instant::now();
+    // SAFETY: the word is mapped for the call's duration; `ts` outlives it.
+    let r = unsafe {
+        libc::syscall(
+            libc::SYS_futex,
+            word.as_ptr(),
+            libc::FUTEX_WAIT,
+            seen,
+            &ts as *const libc::timespec,
+            std::ptr::null::<u32>(),
+            0u32,
+        )
+    };
+    if r < 0 {
+        let e = std::io::Error::last_os_error();
+        if !matches!(e.raw_os_error(), Some(libc::EAGAIN | libc::ETIMEDOUT | libc::EINTR)) {
+            tracing::debug!(error = %e, "FUTEX_WAIT failed; sleeping a millisecond instead");
+            std::thread::sleep(
+                Duration::from_millis(1).min(timeout.saturating_sub(started.elapsed())),
+            );
+        }
+    }
+}
+
+/// `FUTEX_WAKE` of every sleeper of a shared word.
+fn futex_wake(word: &AtomicU32) {
+    // SAFETY: the word is mapped for the call's duration.
+    unsafe {
+        libc::syscall(
+            libc::SYS_futex,
+            word.as_ptr(),
+            libc::FUTEX_WAKE,
+            i32::MAX,
+            0usize,
+            0usize,
+            0u32,
+        )
+    };
+}
+
+/// An exclusive `flock(2)` on a file, released when dropped.
+struct Flock<'a>(&'a File);
+
+impl<'a> Flock<'a> {
+    fn exclusive(file: &'a File) -> std::io::Result<Self> {
+        loop {
+            // SAFETY: a valid open descriptor.
+            if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX) } == 0 {
+                return Ok(Flock(file));
+            }
+            let e = std::io::Error::last_os_error();
+            if e.kind() != std::io::ErrorKind::Interrupted {
+                return Err(e);
+            }
+        }
+    }
+}
+
+impl Drop for Flock<'_> {
+    fn drop(&mut self) {
+        // SAFETY: a valid open descriptor, locked by this value.
+        unsafe { libc::flock(self.0.as_raw_fd(), libc::LOCK_UN) };
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, reason = "a failure is a failed test")]
+mod tests {
+    use super::*;
+
+    fn unique() -> String {
+        crate::service_name::unique_domain("wake-word")
+    }
+
+    #[test]
+    fn two_maps_meet_on_one_word_and_the_last_removes_it() {
+        let name = unique();
+        let a = WakeWord::open(&name).unwrap();
+        let b = WakeWord::open(&name).unwrap();
+        let before = b.sequence();
+        a.ring();
+        assert_eq!(b.sequence(), before.wrapping_add(1));
+        let path = path_for(&name);
+        drop(a);
+        assert!(path.exists(), "b still maps it");
+        drop(b);
+        assert!(!path.exists(), "the last user removed it");
+    }
+
+    #[test]
+    fn a_sleeper_is_woken_by_a_ring_and_sleeps_out_its_timeout_otherwise() {
+        let name = unique();
+        let word = std::sync::Arc::new(WakeWord::open(&name).unwrap());
+
+        let start = Instant::now();
+        word.sleep(word.sequence(), Duration::from_millis(30));
+        assert!(start.elapsed() >= Duration::from_millis(30));
+
+        // A changed sequence refuses the sleep at once.
+        let seen = word.sequence();
+        word.ring();
+        let start = Instant::now();
+        word.sleep(seen, Duration::from_secs(20));
+        assert!(start.elapsed() < Duration::from_secs(20));
+
+        let seen = word.sequence();
+        let ringer = std::sync::Arc::clone(&word);
+        let t = std::thread::spawn(move || {
+            std::thread::sleep(Duration::from_millis(50));
+            ringer.ring();
+        });
+        let start = Instant::now();
+        word.sleep(seen, Duration::from_secs(20));
+        assert!(start.elapsed() < Duration::from_secs(20));
+        t.join().unwrap();
+    }
+
+    #[test]
+    fn sleep_any_wakes_on_whichever_word_rings() {
+        let (a, b) = (WakeWord::open(&unique()).unwrap(), WakeWord::open(&unique()).unwrap());
+        let start = Instant::now();
+        sleep_any(&[(&a, a.sequence()), (&b, b.sequence())], Duration::from_millis(30)).unwrap();
+        assert!(start.elapsed() >= Duration::from_millis(30));
+
+        let seen = [(a.sequence()), (b.sequence())];
+        std::thread::scope(|s| {
+            s.spawn(|| {
+                std::thread::sleep(Duration::from_millis(50));
+                b.ring();
+            });
+            let start = Instant::now();
+            sleep_any(&[(&a, seen[0]), (&b, seen[1])], Duration::from_secs(20)).unwrap();
+            assert!(start.elapsed() < Duration::from_secs(20));
+        });
+        assert_ne!(b.sequence(), seen[1]);
+    }
+}
