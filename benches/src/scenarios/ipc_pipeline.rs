@@ -50,6 +50,7 @@ use esgm_shm::control::{ControlClient, Coordinator, Registry, Request};
 use esgm_shm::unique_domain;
 use robot_publisher::RobotPublisher;
 
+use super::pipeline_woken::{Woken, note_for};
 use crate::latency::Latency;
 use crate::peer_process::PeerProcess;
 use crate::peer_role::PeerRole;
@@ -90,8 +91,8 @@ impl Scenario for Pipeline {
 
     fn run(&self, ctx: &Context) -> anyhow::Result<Vec<Measurement>> {
         let seconds = if ctx.is_quick() { 3 } else { 30 };
-        let collected = run_system(ctx, Duration::from_secs(seconds))?;
-        let mut rows = stage_rows(&collected)?;
+        let (collected, lines) = run_system(ctx, Duration::from_secs(seconds))?;
+        let mut rows = stage_rows(&collected, &lines)?;
         rows.extend(compute_rows(ctx)?);
         Ok(rows)
     }
@@ -161,6 +162,7 @@ fn serve(domain: &str, worker: &str) -> anyhow::Result<Vec<String>> {
         .timeout(Duration::from_secs(2))
         .connect()
         .with_context(|| format!("{worker}: cannot reach the coordinator"))?;
+    let mut woken = None;
     if worker == "camera" {
         let scene = SyntheticScene::builder().create()?;
         esgm.add_sensor_interface(
@@ -187,7 +189,9 @@ fn serve(domain: &str, worker: &str) -> anyhow::Result<Vec<String>> {
             ),
             other => bail!("unknown pipeline worker {other}"),
         };
-        esgm.add_comp_unit(worker, output, inputs, unit)?;
+        let timed = Arc::new(Woken::new(unit)?);
+        esgm.add_comp_unit(worker, output, inputs, Arc::clone(&timed) as Arc<dyn CompUnit>)?;
+        woken = Some(timed);
     }
     let started = Instant::now();
     let mut misses = 0;
@@ -198,13 +202,14 @@ fn serve(domain: &str, worker: &str) -> anyhow::Result<Vec<String>> {
             bail!("{worker}: still running after 10 minutes");
         }
     }
-    Ok(Vec::new())
+    Ok(woken.map(|w| w.report(worker)).into_iter().collect())
 }
 
 /// What the measuring process saw of each trajectory.
 type Collected = HashMap<&'static str, Vec<Sample>>;
 
-fn run_system(ctx: &Context, run_for: Duration) -> anyhow::Result<Collected> {
+/// What the measuring process saw, and the lines the workers printed when they left.
+fn run_system(ctx: &Context, run_for: Duration) -> anyhow::Result<(Collected, Vec<String>)> {
     // iceoryx2's warnings (no config file, buffer sizes adjusted) are not news here.
     iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
     let domain = unique_domain("esgm-bench-pipe");
@@ -223,16 +228,18 @@ fn run_system(ctx: &Context, run_for: Duration) -> anyhow::Result<Collected> {
     // Stop: the coordinator leaves, the workers notice within two pings.
     shutdown(&domain);
     let mut failures = Vec::new();
+    let mut lines = Vec::new();
     for peer in workers.into_iter().chain(std::iter::once(coordinator)) {
-        if let Err(e) = peer.finish(Duration::from_secs(15)) {
-            failures.push(format!("{e:#}"));
+        match peer.finish(Duration::from_secs(15)) {
+            Ok(printed) => lines.extend(printed),
+            Err(e) => failures.push(format!("{e:#}")),
         }
     }
     let collected = result?;
     if !failures.is_empty() {
         bail!("pipeline processes failed: {}", failures.join("; "));
     }
-    Ok(collected)
+    Ok((collected, lines))
 }
 
 fn drive(
@@ -331,7 +338,7 @@ fn drive(
 }
 
 /// The latency rows, from the samples' times.
-fn stage_rows(c: &Collected) -> anyhow::Result<Vec<Measurement>> {
+fn stage_rows(c: &Collected, lines: &[String]) -> anyhow::Result<Vec<Measurement>> {
     let empty = Vec::new();
     let of = |name: &str| c.get(name).unwrap_or(&empty);
     let mut rows = Vec::new();
@@ -375,10 +382,18 @@ fn stage_rows(c: &Collected) -> anyhow::Result<Vec<Measurement>> {
         if stage == "images" {
             row = row.note(format!("{} images at one per {IMAGE_PERIOD_MS} ms", outputs.len()));
         }
+        if let Some(note) = unit_of(stage).and_then(|unit| note_for(unit, lines)) {
+            row = row.note(note);
+        }
         rows.push(row);
     }
     rows.push(end_to_end(c)?);
     Ok(rows)
+}
+
+/// The unit that computes `stage`.
+fn unit_of(stage: &str) -> Option<&'static str> {
+    STAGES.iter().skip(1).zip(UNITS).find(|((s, _), _)| *s == stage).map(|(_, unit)| unit)
 }
 
 /// `pipeline-end-to-end`: for each blob, its image's valid time → the first driving
