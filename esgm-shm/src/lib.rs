@@ -54,9 +54,11 @@
 //!   validated before it is handed out ([`Validation::InPlace`]); a trusted setup may
 //!   defer or skip it, explicitly and unsafely. Bad samples are typed errors and
 //!   counters ([`SubscriberStats`]), never panics.
-//! - **Spin briefly, then block.** iceoryx2's event wake-up costs more than a blocking
-//!   Unix-socket read here, so the default [`WaitStrategy`] spins 25 µs before sleeping;
-//!   every wait has a deadline because a dead publisher is not signalled. See [`wait`].
+//! - **Spin briefly, then sleep on a futex.** A blocking reader sleeps on its
+//!   trajectory's futex word in shared memory ([`wake_word`]), half the cost of
+//!   iceoryx2's event (a Unix datagram), which stays for waits over many trajectories.
+//!   The default [`WaitStrategy`] still spins 25 µs before sleeping; every wait has a
+//!   deadline because a dead publisher is not signalled. See [`wait`].
 //! - **One namespace per system, and per test.** Service names carry a domain
 //!   ([`service_name`]), so parallel tests and independent systems never meet.
 //!

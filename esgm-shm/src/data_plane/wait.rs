@@ -2,8 +2,10 @@
 //!
 //! # The trade-off measured on this kind of machine
 //! A sample reaches a *spinning* reader about 1.3 µs after it is sent. A reader that
-//! *blocks* on an iceoryx2 event is woken through a Unix datagram, and that wake-up
-//! alone costs 10–14 µs — more than a blocking Unix-socket read (5–9 µs). Spinning
+//! *blocks* must be woken by the kernel: through iceoryx2's event (a Unix datagram)
+//! that wake-up alone costs 10–14 µs, more than a blocking Unix-socket read (5–9 µs);
+//! through a futex word in shared memory, which esgm's readers sleep on (see below),
+//! about 6 µs. Spinning
 //! forever wins latency but burns a core while nothing arrives, which a robot program
 //! with a dozen subscribers cannot afford.
 //!
@@ -22,7 +24,8 @@
 //! 210 µs with 200 µs). A yield with nothing else runnable costs well under a
 //! microsecond, so it keeps the latency of a pure spin when cores are free.
 //!
-//! Measured with `examples/wait_strategies.rs` (release, 2 cores shared with other
+//! Measured with `examples/wait_strategies.rs`, before readers slept on the futex word
+//! (release, 2 cores shared with other
 //! work, unpinned; one-way = round trip / 2, small structure, p50 / p99):
 //!
 //! | wait                            | p50          | p99        |
@@ -78,12 +81,13 @@ pub enum WaitStrategy {
     /// busy for the whole wait. For a dedicated, pinned reader.
     BusySpin,
     /// Poll for `spin` (bounded by the timeout, yielding the CPU between polls after
-    /// [`PURE_SPIN`]), then sleep on the wake-up event.
+    /// [`PURE_SPIN`]), then sleep on the trajectory's wake-up word.
     SpinThenBlock {
         /// How long to poll before sleeping.
         spin: Duration,
     },
-    /// Sleep on the wake-up event at once: no CPU while waiting, 10–14 µs per wake-up.
+    /// Sleep on the trajectory's wake-up word at once: no CPU while waiting, about
+    /// 6–8 µs per wake-up (`esgm-small` event in BENCHMARKS.md).
     Block,
 }
 
@@ -95,7 +99,7 @@ impl Default for WaitStrategy {
 }
 
 impl WaitStrategy {
-    /// True if the strategy sleeps on the wake-up event and so needs a listener.
+    /// True if the strategy sleeps, and so needs the wake-up word (or a listener).
     pub fn blocks(&self) -> bool {
         !matches!(self, WaitStrategy::BusySpin)
     }
