@@ -705,11 +705,7 @@ impl Coordinator {
         if self.shutdown_requested {
             // The domain is going down: the words its crashed processes kept mapped
             // (counted as users for ever) go with it.
-            let snapshot = self.registry.snapshot();
-            crate::wake_word::remove_words(
-                &self.domain,
-                snapshot.trajectories.iter().map(|t| t.info.name.as_str()),
-            );
+            crate::wake_word::remove_domain(&self.domain);
         }
         Ok(())
     }

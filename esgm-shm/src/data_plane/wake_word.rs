@@ -8,8 +8,8 @@
 //! listener in turn.
 //!
 //! # The word
-//! Every trajectory has one page of POSIX shared memory, named after its wake-up
-//! service (`/dev/shm/esgm_wake_<hash>`). It holds three 32-bit counters, each on its
+//! Every trajectory has one page of POSIX shared memory, named after its domain and
+//! wake-up service (`/dev/shm/esgm_wake@<domain>@<hash>`). It holds three 32-bit counters, each on its
 //! own cache line:
 //! - `sequence`, the futex word: the writer adds one after every sample it sends;
 //! - `sleepers`: readers asleep on `sequence` right now, so that a writer calls
@@ -35,7 +35,9 @@
 //! A process killed while it slept leaves `sleepers` one too high: its writer then
 //! calls `FUTEX_WAKE` after each sample (about a microsecond, nobody woken) until the
 //! page is made anew. A process killed while mapping it leaves `users` too high and the
-//! file (one page) in `/dev/shm` until the domain's coordinator removes it at its end.
+//! file (one page) in `/dev/shm` until the domain's end removes every word of the
+//! domain ([`remove_domain`]: `esgm down`, the end of `esgm up` and of `esgm demo`,
+//! and a coordinator asked to shut down).
 
 use std::fs::{File, OpenOptions};
 use std::os::fd::AsRawFd as _;
@@ -55,8 +57,11 @@ pub const WAKE_ENV: &str = "ESGM_WAKE";
 
 /// Where the words live: POSIX shared memory, as iceoryx2's segments.
 const SHM_DIR: &str = "/dev/shm";
-/// The words' file names begin with this.
-pub const FILE_PREFIX: &str = "esgm_wake_";
+/// The words' file names begin with this, then the domain and [`SEPARATOR`]:
+/// `esgm_wake@<domain>@<hash>`, so that a domain's words can be found by name.
+pub const FILE_PREFIX: &str = "esgm_wake@";
+/// What ends the domain in a word's file name: a character no domain name has.
+const SEPARATOR: char = '@';
 /// The page's size.
 const LEN: usize = 4096;
 /// Where each counter is: a cache line apiece, so that sleepers counting themselves do
@@ -75,30 +80,52 @@ pub fn futex_enabled() -> bool {
     *ENABLED.get_or_init(|| std::env::var(WAKE_ENV).map_or(true, |v| v != "event"))
 }
 
-/// The path of the word of the wake-up service `service`.
+/// The path of the word of the wake-up service `service` (`esgm/<domain>/wake/<name>`).
 pub fn path_for(service: &str) -> PathBuf {
-    // FNV-1a: a file name of fixed length for names of any length and character.
+    // The trajectory's name may hold any character: it is hashed (FNV-1a). The domain's
+    // characters are all allowed in a file name.
     let hash = service
         .bytes()
         .fold(0xcbf2_9ce4_8422_2325_u64, |h, b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3));
-    Path::new(SHM_DIR).join(format!("{FILE_PREFIX}{hash:016x}"))
+    let domain = service.split('/').nth(1).unwrap_or_default();
+    Path::new(SHM_DIR).join(format!("{}{hash:016x}", domain_prefix(domain)))
 }
 
-/// Removes the words of `trajectories` of `domain`, at the domain's end: a process
-/// killed while it mapped a word leaves it counted as a user, and its file in
-/// `/dev/shm`. A process still in the domain keeps its mapping; one that joins later
-/// makes the word anew.
-pub fn remove_words<'a>(domain: &str, trajectories: impl IntoIterator<Item = &'a str>) {
-    for t in trajectories {
-        let path = path_for(&crate::service_name::wake_service_name(domain, t));
-        match std::fs::remove_file(&path) {
-            Ok(()) => tracing::debug!(path = %path.display(), "removed a wake-up word left behind"),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-            Err(e) => {
-                tracing::debug!(path = %path.display(), error = %e, "cannot remove a wake-up word")
-            }
+/// The beginning of the file names of `domain`'s words.
+fn domain_prefix(domain: &str) -> String {
+    format!("{FILE_PREFIX}{domain}{SEPARATOR}")
+}
+
+/// Removes every word of `domain` and of its derived namespaces (a re-pointed
+/// trajectory's generation, `<domain>.g<N>`), at the domain's end: a process killed
+/// while it mapped a word leaves it counted as a user, and its file in `/dev/shm`. A
+/// process still in the domain keeps its mapping; one that joins later makes the word
+/// anew. Returns how many were removed.
+pub fn remove_domain(domain: &str) -> usize {
+    let Ok(entries) = std::fs::read_dir(SHM_DIR) else { return 0 };
+    let mut removed = 0;
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(namespace) = name
+            .to_str()
+            .and_then(|n| n.strip_prefix(FILE_PREFIX))
+            .and_then(|n| n.split_once(SEPARATOR))
+            .map(|(namespace, _)| namespace)
+        else {
+            continue;
+        };
+        // The domain's rule for services, applied to the word's namespace.
+        let service = format!("{}/{namespace}/wake", crate::service_name::SERVICE_PREFIX);
+        if !crate::process::access::belongs_to(domain, &service) {
+            continue;
+        }
+        match std::fs::remove_file(entry.path()) {
+            Ok(()) => removed += 1,
+            Err(e) => tracing::debug!(path = %entry.path().display(), error = %e,
+                "cannot remove a wake-up word"),
         }
     }
+    removed
 }
 
 /// One trajectory's futex word, mapped (see the module docs). Unmapped, and its file
@@ -386,7 +413,32 @@ mod tests {
     use super::*;
 
     fn unique() -> String {
-        crate::service_name::unique_domain("wake-word")
+        let domain = crate::service_name::unique_domain("wake-word");
+        crate::service_name::wake_service_name(&domain, "t")
+    }
+
+    #[test]
+    fn a_domains_words_are_found_by_name_and_removed_at_its_end() {
+        let domain = crate::service_name::unique_domain("wake-end");
+        let generation = format!("{domain}.g3");
+        let other = format!("{domain}.b");
+        let words: Vec<_> = [&domain, &generation, &other]
+            .iter()
+            .enumerate()
+            .map(|(i, d)| {
+                let service = crate::service_name::wake_service_name(d, &format!("t/{i}"));
+                assert!(path_for(&service).to_string_lossy().contains(d.as_str()));
+                WakeWord::open(&service).unwrap()
+            })
+            .collect();
+        assert_eq!(
+            remove_domain(&domain),
+            2,
+            "its own and its generation's; the other domain's stays"
+        );
+        assert!(words[0].stale() && words[1].stale() && !words[2].stale());
+        drop(words);
+        assert_eq!(remove_domain(&other), 0, "its last user removed it");
     }
 
     #[test]

@@ -479,7 +479,7 @@ impl DomainIds {
 /// True if the service or node `name` is one of `domain`'s: `esgm/<domain>/…`, or one
 /// of the domain's derived namespaces, `esgm/<domain>.g<generation>/…` (a mirrored
 /// trajectory's generation) and `esgm/<domain>:<kind>/…` (inboxes, joins).
-fn belongs_to(domain: &str, name: &str) -> bool {
+pub(crate) fn belongs_to(domain: &str, name: &str) -> bool {
     let Some(rest) = name.strip_prefix(SERVICE_PREFIX).and_then(|r| r.strip_prefix('/')) else {
         return false;
     };

@@ -78,6 +78,7 @@ fn finish(domain: &str) -> anyhow::Result<()> {
         .context("cannot list nodes to clean up after dead processes")?
         .log(esgm_shm::CleanupReporter::Owner);
     stop_attached(domain)?;
+    esgm_shm::wake_word::remove_domain(domain);
     println!("stopped `{domain}`");
     Ok(())
 }
@@ -133,6 +134,11 @@ fn stop_attached(domain: &str) -> anyhow::Result<()> {
 fn stop_without_coordinator(domain: &str, unreachable: ControlClientError) -> anyhow::Result<()> {
     let state = StateDir::from_env(domain).context("cannot choose a state directory")?;
     let Some(snapshot) = state.load().context("cannot read the saved registry")? else {
+        // Nothing runs: what its killed processes left of the domain's futex words
+        // goes all the same, unless a process is still attached to it.
+        if esgm_shm::processes_of(domain).is_ok_and(|p| p.is_empty()) {
+            esgm_shm::wake_word::remove_domain(domain);
+        }
         return Err(anyhow::Error::new(unreachable).context(format!("cannot stop `{domain}`")));
     };
     let workers: Vec<(String, u32)> = snapshot

@@ -317,6 +317,8 @@ fn serve(
     drop(supervisor);
     drop(coordinator);
     log_cleanup(cleanup_dead_nodes(), esgm_shm::CleanupReporter::Owner);
+    // Every worker is gone: the futex words its killed processes kept go too.
+    esgm_shm::wake_word::remove_domain(domain);
     tracing::info!("coordinator stopped");
     match applying.map(std::thread::JoinHandle::join) {
         Some(Ok(false)) => bail!("the configuration could not be applied; stopped"),
