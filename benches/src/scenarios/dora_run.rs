@@ -54,6 +54,9 @@ pub fn run(pair: &Pair) -> anyhow::Result<Latency> {
         .arg(&dataflow)
         .args(["--log-level", "warn"])
         .current_dir(dir.path())
+        // A failure's message, not dora's backtrace of it.
+        .env("RUST_BACKTRACE", "0")
+        .env("RUST_LIB_BACKTRACE", "0")
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped());
@@ -124,10 +127,19 @@ fn descriptor(pair: &Pair, out: &Path) -> String {
     )
 }
 
-/// The last lines of what dora printed, for an error message.
+/// What dora printed that explains a failure, for an error message: the nodes' own
+/// error lines (dora quotes a failed node's stderr), else dora's errors, else its last
+/// lines.
 fn tail(said: &str) -> String {
-    let lines: Vec<&str> = said.trim().lines().collect();
-    lines[lines.len().saturating_sub(8)..].join(" | ")
+    let lines: Vec<&str> = said.lines().map(str::trim).filter(|l| !l.is_empty()).collect();
+    let node: Vec<&str> =
+        lines.iter().copied().filter(|l| l.starts_with("esgm-dora-pingpong:")).collect();
+    if !node.is_empty() {
+        return node.join(" | ");
+    }
+    let errors: Vec<&str> = lines.iter().copied().filter(|l| l.contains("ERROR")).collect();
+    let chosen = if errors.is_empty() { &lines } else { &errors };
+    chosen[chosen.len().saturating_sub(8)..].join(" | ")
 }
 
 /// `dora run`, stopped when dropped before it exited: Ctrl-C first (dora stops its
@@ -174,6 +186,16 @@ impl Drop for Running {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_failure_is_explained_by_the_node_s_own_line() {
+        let said = "ping: DEBUG building node\nNode `ping` failed: exited with code 2\n\
+                    ----\nesgm-dora-pingpong: answer to 7: nothing received within 20s\n\
+                    ----\n  29: __libc_start_main_impl\n  30: _start\n";
+        assert_eq!(tail(said), "esgm-dora-pingpong: answer to 7: nothing received within 20s");
+        assert_eq!(tail("a\nb ERROR c\nd\n"), "b ERROR c");
+        assert_eq!(tail("a\nb\n"), "a | b");
+    }
 
     #[test]
     fn the_descriptor_names_both_roles_and_pins_each_node() {
