@@ -210,6 +210,36 @@ fn ros2_rows_without_the_feature_are_reported_as_not_run() {
     assert!(stdout.contains("(ros2-export-small not run) (ros2-raw-small not run)"), "{stdout}");
 }
 
+/// dora is optional, as ROS 1 is: built (benches/dora/build.sh), both rows are measured
+/// at both waits; not built (CI), both are reported as not run, saying how to build it.
+#[test]
+fn dora_rows_are_measured_when_built_and_say_how_when_not() {
+    use esgm_benches::scenarios::dora_peer;
+    let (stdout, report) = run_quick("dora-");
+    // The report leaves `skipped` out when nothing was.
+    let skipped = report["skipped"].as_array().cloned().unwrap_or_default();
+    if dora_peer::cli().is_some() && dora_peer::node().is_some() {
+        assert!(skipped.is_empty(), "{report}");
+        assert_eq!(
+            rows(&report),
+            [
+                key("dora-image", "event"),
+                key("dora-image", "spin"),
+                key("dora-small", "event"),
+                key("dora-small", "spin"),
+            ]
+        );
+    } else {
+        assert!(rows(&report).is_empty(), "{report}");
+        assert_eq!(skipped.len(), 2, "{report}");
+        for row in skipped {
+            let reason = row["reason"].as_str().unwrap_or_default();
+            assert!(reason.contains("benches/dora/build.sh"), "{row}");
+        }
+        assert!(stdout.contains("benches/dora/build.sh"), "{stdout}");
+    }
+}
+
 #[test]
 fn an_unknown_scenario_is_one_clear_error() {
     let output = Command::new(env!("CARGO_BIN_EXE_esgm-bench"))

@@ -50,6 +50,11 @@
 //! - [`ros1_fanout`]: `ros1-fanout-<k>`, the same through roscpp with k reader
 //!   processes, against `fanout-<k>` (when the ROS 1 peer is built).
 //!
+//! Issue 27 adds, after the ROS 1 peer, [`dora_peer`]: `dora-small` and `dora-image`,
+//! the same ping-pong between two Rust nodes on `dora-node-api` through dora's daemon
+//! (`dora run`, [`dora_run`]; built by `benches/dora/build.sh`, skipped with that
+//! instruction when not built), against `esgm-small` and `esgm-image`.
+//!
 //! The Python issue (26) adds, after `connect-*`, [`python_peer`]: `python-small` and
 //! `python-image` (esgm's Python package, process to process) beside the same hop
 //! through iceoryx2's (`python-iceoryx2-*`) and Zenoh's (`python-zenoh-*`) Python
@@ -78,6 +83,8 @@
 
 pub mod bridge;
 pub mod control_churn;
+pub mod dora_peer;
+pub mod dora_run;
 pub mod file_write_image;
 pub mod inproc_chain3;
 pub mod inproc_echo;
@@ -145,6 +152,8 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(zenoh_peer::Zenoh::TCP_IMAGE),
         Box::new(ros1_peer::Ros1::SMALL),
         Box::new(ros1_peer::Ros1::IMAGE),
+        Box::new(dora_peer::Dora::SMALL),
+        Box::new(dora_peer::Dora::IMAGE),
         Box::new(ipc_connect::Connect::SMALL),
         Box::new(ipc_connect::Connect::SMALL_PACED),
         Box::new(ipc_connect::Connect::IMAGE),
