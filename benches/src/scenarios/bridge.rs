@@ -337,15 +337,23 @@ impl Bridge {
         let secs = last_at.duration_since(started).as_secs_f64().max(1e-9);
         let rate = arrived as f64 / secs;
         let lost = importer.import_counters().map(|c| c["lost"].clone());
-        let overflow = reader.stats().map(|s| s.subscriber_overflow).unwrap_or_default();
+        let in_b = match reader.stats() {
+            Ok(s) => format!(
+                "B's subscription overflowed {} times in all, and B's shared-memory queue was \
+                 overwritten before this process read {} (both: this process reading slower \
+                 than they came)",
+                s.subscriber_overflow,
+                s.dropped_for(esgm_core::DropCause::Lost)
+            ),
+            Err(e) => format!("B's counters could not be read: {e}"),
+        };
         let unit = match self.kind {
             Kind::Small => "structures/s",
             Kind::Image => "frames/s",
         };
         Ok(row.throughput(rate, n - arrived).note(format!(
             "burst: {n} added back to back in A, {arrived} held by B's subscriber at {rate:.0} \
-             {unit}; the importer's loss counters: {}; B's subscription overflowed {overflow} \
-             times in all (this process reading slower than they came)",
+             {unit}; the importer's loss counters: {}; {in_b}",
             lost.map_or_else(|| "not reported".to_owned(), |l| l.to_string())
         )))
     }
