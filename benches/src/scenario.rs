@@ -1,5 +1,6 @@
 //! A benchmark scenario and what it is handed to run.
 
+use std::process::{Child, Command};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -178,6 +179,26 @@ impl Context {
             domain: domain.to_owned(),
             core: self.pin.map(|p| p.peer_core()),
             arg: arg.map(str::to_owned),
+        })
+    }
+
+    /// Starts `command`, a peer that is not `esgm-bench` (a bridge, a server), pinned to
+    /// the peer core under `--pin`, every thread of it. A child inherits the affinity of
+    /// the thread that starts it, and the measuring thread is pinned to the measuring
+    /// core: started from there, the peer would share that core with the measuring
+    /// thread (which busy-polls in `spin` rows) and leave the peer core idle. So it is
+    /// started from a thread pinned to the peer core.
+    pub fn spawn_peer_command(&self, command: &mut Command) -> anyhow::Result<Child> {
+        let Some(pin) = self.pin else {
+            return Ok(command.spawn()?);
+        };
+        std::thread::scope(|s| {
+            s.spawn(|| {
+                pin.pin_peer_thread()?;
+                Ok(command.spawn()?)
+            })
+            .join()
+            .map_err(|_| anyhow::anyhow!("the thread starting a peer process panicked"))?
         })
     }
 

@@ -15,6 +15,12 @@
 //! returned the sample with that valid time. `spin` polls the subscription, `event`
 //! blocks on it; the next add waits until the last one arrived.
 //!
+//! Under `--pin` the measuring process (writer, subscriber, both coordinators) is on
+//! the measuring core and both bridges on the peer core, as raw Zenoh's peer process
+//! is. (Started from the pinned measuring thread, they used to inherit its core and
+//! share it with the busy-polling subscriber: `spin` was then about 1 ms, the time
+//! each of their wake-ups waited for the poller's time slice to end.)
+//!
 //! Throughput: after the latency rows, a burst of structures is added back to back
 //! and the row notes how many arrived per second in B and how many were lost, as the
 //! importer's counters say (a full queue, a gap in the exporter's sequence).
@@ -102,15 +108,19 @@ struct BridgeProcess {
 }
 
 impl BridgeProcess {
-    fn start(binary: &PathBuf, domain: &str, args: &[&str]) -> anyhow::Result<Self> {
-        let mut child = Command::new(binary)
+    /// Starts a bridge, on the peer core under `--pin` (as the raw Zenoh row's peer
+    /// process).
+    fn start(ctx: &Context, binary: &PathBuf, domain: &str, args: &[&str]) -> anyhow::Result<Self> {
+        let mut command = Command::new(binary);
+        command
             .args(["--domain", domain, "--report-every", "200ms"])
             .args(args)
             .env("RUST_LOG", "warn")
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
+            .stderr(Stdio::null());
+        let mut child = ctx
+            .spawn_peer_command(&mut command)
             .with_context(|| format!("cannot run {}", binary.display()))?;
         let stdout = child.stdout.take().context("no stdout")?;
         let (tx, lines) = mpsc::channel();
@@ -204,9 +214,13 @@ impl Scenario for Bridge {
         let endpoint = format!("tcp/127.0.0.1:{port}");
         let import = format!("{a}/{TRAJECTORY}");
         let mut importer =
-            BridgeProcess::start(&binary, &b, &["--listen", &endpoint, "--import", &import])?;
-        let _exporter =
-            BridgeProcess::start(&binary, &a, &["--connect", &endpoint, "--export", TRAJECTORY])?;
+            BridgeProcess::start(ctx, &binary, &b, &["--listen", &endpoint, "--import", &import])?;
+        let _exporter = BridgeProcess::start(
+            ctx,
+            &binary,
+            &a,
+            &["--connect", &endpoint, "--export", TRAJECTORY],
+        )?;
 
         // B sees the trajectory once the first structure crossed.
         let started = Instant::now();
@@ -323,15 +337,23 @@ impl Bridge {
         let secs = last_at.duration_since(started).as_secs_f64().max(1e-9);
         let rate = arrived as f64 / secs;
         let lost = importer.import_counters().map(|c| c["lost"].clone());
-        let overflow = reader.stats().map(|s| s.subscriber_overflow).unwrap_or_default();
+        let in_b = match reader.stats() {
+            Ok(s) => format!(
+                "B's subscription overflowed {} times in all, and B's shared-memory queue was \
+                 overwritten before this process read {} (both: this process reading slower \
+                 than they came)",
+                s.subscriber_overflow,
+                s.dropped_for(esgm_core::DropCause::Lost)
+            ),
+            Err(e) => format!("B's counters could not be read: {e}"),
+        };
         let unit = match self.kind {
             Kind::Small => "structures/s",
             Kind::Image => "frames/s",
         };
         Ok(row.throughput(rate, n - arrived).note(format!(
             "burst: {n} added back to back in A, {arrived} held by B's subscriber at {rate:.0} \
-             {unit}; the importer's loss counters: {}; B's subscription overflowed {overflow} \
-             times in all (this process reading slower than they came)",
+             {unit}; the importer's loss counters: {}; {in_b}",
             lost.map_or_else(|| "not reported".to_owned(), |l| l.to_string())
         )))
     }

@@ -10,6 +10,17 @@
 //! stream. Each message is validated (header, then `codec::access` through
 //! `decode_bytes`); a malformed one is counted and dropped.
 //!
+//! **One wake-up per message.** A message of a trajectory already imported is added
+//! on Zenoh's receive thread, in the subscriber's callback: handing it to the import
+//! thread through a channel cost a second wake-up per message, about a fifth of the
+//! bridge's latency on two cores (issue 27). Only what needs a Zenoh query first (a
+//! trajectory not known yet, a new exporter session, a changed type) goes to the
+//! import thread, which may wait for the reply; the callback never does, since the
+//! reply comes through the very thread it runs on. The callback never waits for the
+//! import thread either: while that thread holds the importer (a query, a history),
+//! messages queue for it, and once one message waits there every later one does, so a
+//! trajectory's messages are added in the order they came.
+//!
 //! **Times.** The structure keeps its valid and create times; the add time is the
 //! local gate's, so the local trajectory's add delay (`esgm hz`, `esgm stats`) is the
 //! delay from the valid time to arrival here, across hosts.
@@ -23,7 +34,8 @@
 
 use std::collections::HashMap;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use esgm_core::esgm::TrajectorySpec;
@@ -32,6 +44,7 @@ use esgm_core::{
     InProcessTrajectory,
 };
 use esgm_shm::ShmEsgm;
+use parking_lot::Mutex;
 use zenoh::Wait as _;
 
 use crate::ask::ask;
@@ -73,33 +86,94 @@ struct Imported {
     last: Option<(u64, u64, u64, u64)>,
 }
 
+/// Whether handling a message may wait for a Zenoh query (meta, history).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Queries {
+    /// On the import thread.
+    Allowed,
+    /// On Zenoh's receive thread, which would have to deliver the reply itself.
+    Forbidden,
+}
+
+/// What became of a message.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Handled {
+    /// Added, counted or dropped.
+    Done,
+    /// Untouched: it needs a query first (only with [`Queries::Forbidden`]).
+    NeedsQuery,
+}
+
+/// The messages the receive thread left to the import thread, and how many of them
+/// are not handled yet (while any is, the callback leaves every message to the thread).
+struct Backlog {
+    sender: mpsc::Sender<(String, Vec<u8>)>,
+    waiting: AtomicUsize,
+}
+
+impl Backlog {
+    fn push(&self, key: &str, payload: Vec<u8>) {
+        self.waiting.fetch_add(1, Ordering::AcqRel);
+        if self.sender.send((key.to_owned(), payload)).is_err() {
+            // The import thread ended: the bridge is stopping.
+            self.waiting.fetch_sub(1, Ordering::AcqRel);
+        }
+    }
+}
+
 /// Starts importing what `key_expr` matches, on its own thread, until `site.stop`.
 pub fn spawn(site: ImportSite, key_expr: String) -> anyhow::Result<std::thread::JoinHandle<()>> {
-    let subscriber = site
-        .session
-        .declare_subscriber(key_expr.clone())
-        .wait()
-        .map_err(|e| anyhow::anyhow!("zenoh subscriber on `{key_expr}`: {e}"))?;
+    let stop = Arc::clone(&site.stop);
+    let importer =
+        Arc::new(Mutex::new(Importer { site, imports: HashMap::new(), refused: HashMap::new() }));
+    let (sender, backlog_rx) = mpsc::channel();
+    let backlog = Arc::new(Backlog { sender, waiting: AtomicUsize::new(0) });
+    let subscriber = {
+        let importer = Arc::clone(&importer);
+        let backlog = Arc::clone(&backlog);
+        let session = importer.lock().site.session.clone();
+        session
+            .declare_subscriber(key_expr.clone())
+            .callback(move |sample| {
+                let key = sample.key_expr().as_str();
+                let payload = sample.payload().to_bytes();
+                // Checked under the importer's lock: the import thread takes a message
+                // off the backlog and handles it under that lock, so `waiting` is 0 here
+                // only once every message before this one was handled.
+                if let Some(mut importer) = importer.try_lock() {
+                    if backlog.waiting.load(Ordering::Acquire) == 0
+                        && importer.message(key, &payload, Queries::Forbidden) == Handled::Done
+                    {
+                        return;
+                    }
+                    backlog.push(key, payload.into_owned());
+                    return;
+                }
+                backlog.push(key, payload.into_owned());
+            })
+            .wait()
+            .map_err(|e| anyhow::anyhow!("zenoh subscriber on `{key_expr}`: {e}"))?
+    };
     let thread =
         std::thread::Builder::new().name(format!("import-{key_expr}")).spawn(move || {
             let span = tracing::info_span!("import", key = %key_expr);
             let _entered = span.enter();
-            let mut importer = Importer { site, imports: HashMap::new(), refused: HashMap::new() };
+            // Undeclared when this thread ends.
+            let _subscriber = subscriber;
             let mut discovered = Instant::now() - DISCOVER_EVERY;
-            while !importer.site.stop.load(Ordering::Relaxed) {
+            while !stop.load(Ordering::Relaxed) {
                 if discovered.elapsed() >= DISCOVER_EVERY {
-                    importer.discover(&key_expr);
+                    importer.lock().discover(&key_expr);
                     discovered = Instant::now();
                 }
-                match subscriber.recv_timeout(Duration::from_millis(100)) {
-                    Ok(Some(sample)) => {
-                        let key = sample.key_expr().as_str().to_owned();
-                        importer.message(&key, &sample.payload().to_bytes());
+                match backlog_rx.recv_timeout(Duration::from_millis(100)) {
+                    Ok((key, payload)) => {
+                        let mut importer = importer.lock();
+                        importer.message(&key, &payload, Queries::Allowed);
+                        backlog.waiting.fetch_sub(1, Ordering::AcqRel);
                     }
-                    Ok(None) => {}
-                    Err(e) => {
-                        tracing::warn!(error = %e, "the subscriber closed");
-                        return;
+                    // The callback holds a sender as long as the subscriber lives.
+                    Err(mpsc::RecvTimeoutError::Timeout | mpsc::RecvTimeoutError::Disconnected) => {
                     }
                 }
             }
@@ -218,34 +292,45 @@ impl Importer {
             }
         };
         for answer in answers.ok {
-            self.decoded(&id.0, &id.1, &answer.payload, true);
+            self.decoded(&id.0, &id.1, &answer.payload, true, Queries::Allowed);
         }
     }
 
-    /// A message on the data key.
-    fn message(&mut self, key: &str, payload: &[u8]) {
+    /// A message on the data key. With [`Queries::Forbidden`], one that needs a query
+    /// first is left untouched ([`Handled::NeedsQuery`]).
+    fn message(&mut self, key: &str, payload: &[u8], queries: Queries) -> Handled {
         let Some((domain, name)) = key::parse(key) else {
             tracing::debug!(%key, "a message on a key that names no trajectory");
-            return;
+            return Handled::Done;
         };
         if domain == self.site.domain {
-            return;
+            return Handled::Done;
         }
         let id = (domain.to_owned(), name.to_owned());
         if self.refused.contains_key(&id) {
             self.count(domain, name, |c| c.refused += 1);
-            return;
+            return Handled::Done;
         }
         if !self.imports.contains_key(&id) {
+            if queries == Queries::Forbidden {
+                return Handled::NeedsQuery;
+            }
             // Not known yet: ask this one key (its history then covers this message).
             self.discover(key);
-            return;
+            return Handled::Done;
         }
-        self.decoded(domain, name, payload, false);
+        self.decoded(domain, name, payload, false, queries)
     }
 
     /// Validates a message and adds its structure.
-    fn decoded(&mut self, domain: &str, name: &str, payload: &[u8], from_history: bool) {
+    fn decoded(
+        &mut self,
+        domain: &str,
+        name: &str,
+        payload: &[u8],
+        from_history: bool,
+        queries: Queries,
+    ) -> Handled {
         let (header, es) = match wire::decode(payload) {
             Ok(m) => m,
             Err(e) => {
@@ -254,17 +339,22 @@ impl Importer {
                     c.malformed += 1;
                     c.error = Some(e.to_string());
                 });
-                return;
+                return Handled::Done;
             }
         };
         let id = (domain.to_owned(), name.to_owned());
-        let Some(imported) = self.imports.get(&id) else { return };
-        if header.type_hash != imported.type_hash {
+        let Some(imported) = self.imports.get(&id) else { return Handled::Done };
+        let type_changed = header.type_hash != imported.type_hash;
+        let session_changed = !from_history && imported.session != header.session;
+        if (type_changed || session_changed) && queries == Queries::Forbidden {
+            return Handled::NeedsQuery;
+        }
+        if type_changed {
             // The exporter's type changed (or the message lies): ask again.
             self.discover(&key::data_key(domain, name));
             if self.imports.get(&id).is_none_or(|i| i.type_hash != header.type_hash) {
                 self.count(domain, name, |c| c.refused += 1);
-                return;
+                return Handled::Done;
             }
         }
         if !from_history {
@@ -281,6 +371,7 @@ impl Importer {
         if let Some(imported) = self.imports.get_mut(&id) {
             apply(imported, &self.site.stats, domain, name, &header, es);
         }
+        Handled::Done
     }
 }
 
