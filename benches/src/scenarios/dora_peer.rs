@@ -35,8 +35,6 @@ use std::path::PathBuf;
 use anyhow::Context as _;
 
 use super::dora_run::{self, Pair};
-use super::ipc_esgm_image;
-use super::ipc_esgm_small;
 use super::ipc_payload::Kind;
 use crate::report::{Measurement, Method, Wait};
 use crate::scenario::{Context, Scenario};
@@ -61,13 +59,6 @@ impl Dora {
     pub const SMALL: Dora = Dora { name: "dora-small", kind: Kind::Small };
     /// The image's size.
     pub const IMAGE: Dora = Dora { name: "dora-image", kind: Kind::Image };
-
-    fn esgm_row(&self) -> &'static str {
-        match self.kind {
-            Kind::Small => ipc_esgm_small::NAME,
-            Kind::Image => ipc_esgm_image::NAME,
-        }
-    }
 
     fn bytes(&self) -> anyhow::Result<usize> {
         match self.kind {
@@ -151,7 +142,7 @@ impl Scenario for Dora {
                     .payload_bytes(bytes as u64)
                     .method(Method::HalfRoundTrip)
                     .wait_strategy(mode.label())
-                    .baseline(self.esgm_row())
+                    .baseline(self.kind.esgm_row())
                     .note(self.note()),
             );
         }
@@ -161,7 +152,10 @@ impl Scenario for Dora {
     /// esgm is to be faster than its closest peer at every size: dora's row over
     /// esgm's ≥ 1.
     fn targets(&self) -> Vec<Target> {
-        Wait::BOTH.iter().map(|&w| Target::at_least(self.name, self.esgm_row(), w, 1.0)).collect()
+        Wait::BOTH
+            .iter()
+            .map(|&w| Target::at_least(self.name, self.kind.esgm_row(), w, 1.0))
+            .collect()
     }
 }
 

@@ -35,6 +35,15 @@ pub enum Kind {
 }
 
 impl Kind {
+    /// esgm's own row of this payload (`esgm-small`, `esgm-image`): the row a peer's
+    /// row of the same size is held to.
+    pub fn esgm_row(self) -> &'static str {
+        match self {
+            Kind::Small => super::ipc_esgm_small::NAME,
+            Kind::Image => super::ipc_esgm_image::NAME,
+        }
+    }
+
     /// The registered type name.
     pub fn type_name(self) -> &'static str {
         match self {

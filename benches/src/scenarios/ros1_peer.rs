@@ -20,8 +20,6 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context as _, bail};
 
-use super::ipc_esgm_image;
-use super::ipc_esgm_small;
 use super::ipc_payload::Kind;
 use crate::latency::Latency;
 use crate::report::{Measurement, Method, Wait};
@@ -46,13 +44,6 @@ impl Ros1 {
     pub const SMALL: Ros1 = Ros1 { name: "ros1-small", kind: Kind::Small };
     /// The image's size.
     pub const IMAGE: Ros1 = Ros1 { name: "ros1-image", kind: Kind::Image };
-
-    fn esgm_row(&self) -> &'static str {
-        match self.kind {
-            Kind::Small => ipc_esgm_small::NAME,
-            Kind::Image => ipc_esgm_image::NAME,
-        }
-    }
 }
 
 /// The built peer program, if there is one: `ESGM_ROS1_PINGPONG`, else the place
@@ -112,7 +103,7 @@ impl Scenario for Ros1 {
                     .payload_bytes(bytes as u64)
                     .method(Method::HalfRoundTrip)
                     .wait_strategy(mode.label())
-                    .baseline(self.esgm_row())
+                    .baseline(self.kind.esgm_row())
                     .note("std_msgs/UInt8MultiArray over TCPROS (TCP_NODELAY, loopback); the C++ reader checks sequence and last byte, it cannot validate an esgm archive"));
         }
         Ok(rows)
@@ -120,7 +111,10 @@ impl Scenario for Ros1 {
 
     /// esgm is to be faster than ROS 1 at every size: ROS 1's row over esgm's ≥ 1.
     fn targets(&self) -> Vec<Target> {
-        Wait::BOTH.iter().map(|&w| Target::at_least(self.name, self.esgm_row(), w, 1.0)).collect()
+        Wait::BOTH
+            .iter()
+            .map(|&w| Target::at_least(self.name, self.kind.esgm_row(), w, 1.0))
+            .collect()
     }
 }
 

@@ -8,8 +8,6 @@
 //! as skipped, with the command that runs them. What is measured is in
 //! `zenoh_echo` (built with the feature only).
 
-use super::ipc_esgm_image;
-use super::ipc_esgm_small;
 use super::ipc_payload::Kind;
 use crate::peer_role::PeerRole;
 use crate::report::{Measurement, Wait};
@@ -39,13 +37,6 @@ impl Zenoh {
     pub const TCP_SMALL: Zenoh = Zenoh { name: "zenoh-tcp-small", kind: Kind::Small, shm: false };
     /// The image with shared memory off.
     pub const TCP_IMAGE: Zenoh = Zenoh { name: "zenoh-tcp-image", kind: Kind::Image, shm: false };
-
-    fn esgm_row(&self) -> &'static str {
-        match self.kind {
-            Kind::Small => ipc_esgm_small::NAME,
-            Kind::Image => ipc_esgm_image::NAME,
-        }
-    }
 }
 
 impl Scenario for Zenoh {
@@ -76,7 +67,7 @@ impl Scenario for Zenoh {
 
     #[cfg(feature = "zenoh")]
     fn run(&self, ctx: &Context) -> anyhow::Result<Vec<Measurement>> {
-        super::zenoh_echo::measure(ctx, self.name, self.kind, self.esgm_row(), self.shm)
+        super::zenoh_echo::measure(ctx, self.name, self.kind, self.kind.esgm_row(), self.shm)
     }
 
     #[cfg(not(feature = "zenoh"))]
@@ -91,7 +82,10 @@ impl Scenario for Zenoh {
         if !self.shm {
             return Vec::new();
         }
-        Wait::BOTH.iter().map(|&w| Target::at_least(self.name, self.esgm_row(), w, 1.0)).collect()
+        Wait::BOTH
+            .iter()
+            .map(|&w| Target::at_least(self.name, self.kind.esgm_row(), w, 1.0))
+            .collect()
     }
 
     #[cfg(feature = "zenoh")]
