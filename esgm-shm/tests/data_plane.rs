@@ -143,6 +143,45 @@ fn a_large_structure_grows_the_segment() {
     assert_eq!(s.wait_for_sample(TIMEOUT).unwrap().unwrap().to_owned().unwrap(), big);
 }
 
+/// The publisher loans each next structure's slice ahead (the module docs of
+/// `publisher`): a spare too small, far too large, or in the way of an image loan
+/// must never cost a sample, nor leave the publisher without room to loan.
+#[test]
+fn the_loan_made_ahead_serves_every_size_and_makes_room_for_images() {
+    let domain = unique_domain("spare");
+    let (pub_node, sub_node) = (node(), node());
+    let p = publisher(&domain, "mixed", "Mixed").max_len(256).subscriber_buffer_size(16);
+    let p = p.create(&pub_node).unwrap();
+    let s = subscriber(&domain, "mixed", "Mixed").create(&sub_node).unwrap();
+    let small = |t: i64| EntityStructure::new("m", t, t).with("v", t);
+    let big =
+        |t: i64| EntityStructure::new("m", t, t).with("data", Octets::from(vec![7u8; 50_000]));
+    // Small, then larger than the spare, then small after a large spare, twice over.
+    let sent = [small(1), big(2), small(3), small(4), big(5), big(6), small(7)];
+    for es in &sent {
+        p.publish(es).unwrap();
+    }
+    for es in &sent {
+        let got = s.wait_for_sample(TIMEOUT).unwrap().expect("every structure arrives");
+        assert_eq!(&got.to_owned().unwrap(), es);
+    }
+
+    // A spare is held now. As many loans as without it: two images at once, or an
+    // image and a structure sent while the image is still loaned.
+    let mut first = p.loan_image(64, 48, RGB8).unwrap();
+    let mut second = p.loan_image(64, 48, RGB8).expect("the spare made room for a second loan");
+    fill(first.pixels_mut(), 3);
+    fill(second.pixels_mut(), 4);
+    first.send("cam0", 8, 8).unwrap();
+    p.publish(&small(9)).unwrap();
+    second.send("cam0", 10, 10).unwrap();
+    p.publish(&small(11)).unwrap();
+    let times: Vec<i64> = (0..4)
+        .map(|_| s.wait_for_sample(TIMEOUT).unwrap().expect("sample").header().valid_time)
+        .collect();
+    assert_eq!(times, [8, 9, 10, 11]);
+}
+
 #[test]
 fn a_fixed_size_publisher_refuses_larger_samples() {
     let domain = unique_domain("fixed");

@@ -22,6 +22,17 @@
 //! [`TrajectoryPublisher::loan_structure`] splits `publish` in two: encode into the
 //! loan now, send later ([`crate::structure_loan`]).
 //!
+//! # The next loan, made ahead
+//! After each structure it sends, the publisher loans the slice for the next one (of
+//! the same size) and keeps it. A loan walks iceoryx2's connections for returned
+//! chunks and takes one from the segment's pool; in a pipeline paced like a camera
+//! every one of those touches is a cache miss, 13–20 µs of a 50 µs stage on this
+//! machine (BENCHMARKS.md, "Where a stage's time goes"). Made ahead it runs while the
+//! readers wake, and the next publish starts encoding at once. The spare counts as one
+//! of the publisher's loans, which iceoryx2 sizes the pool for; an image loan gives it
+//! back first, and a structure it does not fit (smaller than the spare's half, or
+//! larger) loans its own.
+//!
 //! Images written by a camera go through [`TrajectoryPublisher::loan_image`] instead,
 //! which lets the camera fill the pixels in place (see [`crate::image_loan`]).
 //!
@@ -257,6 +268,7 @@ impl TrajectoryPublisherBuilder {
             sequence: Cell::new(0),
             max_len: max_blocks * BLOCK_LEN,
             notify_failures: Cell::new(0),
+            spare: Spare::default(),
         })
     }
 }
@@ -278,7 +290,31 @@ pub struct TrajectoryPublisher {
     /// The configured maximum sample size in bytes (see the module docs).
     max_len: usize,
     notify_failures: Cell<u64>,
+    /// The next structure's loan, made after the last send (see the module docs).
+    spare: Spare,
 }
+
+/// The spare loan of a [`TrajectoryPublisher`], if one is held.
+#[derive(Default)]
+struct Spare(std::cell::RefCell<Option<UninitSample>>);
+
+impl std::fmt::Debug for Spare {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let held = self.0.try_borrow().map(|s| s.as_ref().map(|s| s.payload().len()));
+        f.debug_tuple("Spare").field(&held.ok().flatten()).finish()
+    }
+}
+
+/// A spare up to this many blocks (1 KiB) serves any smaller structure; a larger one
+/// serves structures at least half its size.
+const SPARE_SLACK_BLOCKS: usize = 64;
+
+/// A loaned slice not yet written.
+type UninitSample = iceoryx2::sample_mut_uninit::SampleMutUninit<
+    ShmService,
+    [std::mem::MaybeUninit<Block16>],
+    SampleHeader,
+>;
 
 /// A sample whose payload is written, waiting for its header.
 pub(crate) type LoanedSample = SampleMut<ShmService, [Block16], SampleHeader>;
@@ -383,10 +419,42 @@ impl TrajectoryPublisher {
         add_time: Option<Time>,
     ) -> Result<Published, PublishError> {
         let loan = self.loan_structure(es)?;
-        match add_time {
+        let blocks = loan.blocks();
+        let sent = match add_time {
             Some(add_time) => loan.send_added(add_time),
             None => loan.send(),
+        };
+        self.loan_spare(blocks);
+        sent
+    }
+
+    /// Loans the next structure's slice now, after a send, while its readers wake:
+    /// the loan's walk over iceoryx2's chunks then costs the next publish nothing.
+    /// Failing (every chunk in use) only means the next publish loans itself.
+    fn loan_spare(&self, blocks: usize) {
+        let mut spare = self.spare.0.borrow_mut();
+        if spare.is_none() {
+            *spare = self.port.loan_slice_uninit(blocks).ok();
         }
+    }
+
+    /// Gives the spare back before a loan of another kind (an image, a reset), so
+    /// that the publisher has as many loans for those as it would have without it.
+    fn give_back_spare(&self) {
+        drop(self.spare.0.borrow_mut().take());
+    }
+
+    /// A slice of at least `blocks` blocks: the spare if it fits (large enough, and
+    /// not so large that zeroing and sending its slack would cost more than a loan),
+    /// or a new loan (the spare is given back first).
+    fn loan_blocks(&self, blocks: usize) -> Result<UninitSample, LoanError> {
+        if let Some(spare) = self.spare.0.borrow_mut().take() {
+            let len = spare.payload().len();
+            if (blocks..=blocks.saturating_mul(2).max(SPARE_SLACK_BLOCKS)).contains(&len) {
+                return Ok(spare);
+            }
+        }
+        self.port.loan_slice_uninit(blocks)
     }
 
     /// Encodes `es` into loaned shared memory now, for sending later with
@@ -399,8 +467,7 @@ impl TrajectoryPublisher {
         }
         let mut retried = false;
         loop {
-            let mut sample =
-                self.port.loan_slice_uninit(blocks_for(want)).map_err(PublishError::Loan)?;
+            let mut sample = self.loan_blocks(blocks_for(want)).map_err(PublishError::Loan)?;
             let bytes = as_uninit_bytes(sample.payload_mut());
             match codec::encode_into_uninit(es, bytes) {
                 Ok(len) => {
@@ -448,6 +515,7 @@ impl TrajectoryPublisher {
         format: i64,
     ) -> Result<ImageChunk, PublishError> {
         let pixel_len = pixel_len(width, height, format)?;
+        self.give_back_spare();
         let sample = self
             .port
             .loan_slice_uninit(blocks_for(image_loan_len(pixel_len)))
@@ -472,6 +540,7 @@ impl TrajectoryPublisher {
     /// ([`SampleHeader::KIND_RESET`]) in stream order, so a reader forgets exactly the
     /// samples sent before it.
     pub fn publish_reset(&self) -> Result<Published, PublishError> {
+        self.give_back_spare();
         let mut sample = self.port.loan_slice_uninit(1).map_err(PublishError::Loan)?;
         zero_fill(as_uninit_bytes(sample.payload_mut()));
         // SAFETY: `zero_fill` initialised the whole payload.

@@ -54,6 +54,11 @@ impl<'p> StructureLoan<'p> {
         Self { publisher, sample, archive_len, valid_time, create_time, flags }
     }
 
+    /// The slice's length in blocks: what the writer's next loan is made ahead at.
+    pub(crate) fn blocks(&self) -> usize {
+        self.sample.payload().len()
+    }
+
     /// True if the structure is an image whose pixels were written in place
     /// ([`crate::ImageLoan`]).
     pub fn is_image_in_place(&self) -> bool {
