@@ -577,6 +577,14 @@ impl ImportWaiter {
         }
     }
 
+    /// The word and the sequence the last feed saw, if the word still holds it: what
+    /// to sleep on. `None` if a sample was sent since (or nothing was seen yet): look
+    /// again instead of sleeping.
+    fn unchanged_word(&self) -> Option<(&WakeWord, u32)> {
+        let (word, seen) = self.word()?;
+        seen.filter(|&s| s == word.sequence()).map(|s| (word, s))
+    }
+
     /// After a sleep on the word that saw no change: a word whose file was made anew
     /// (the domain restarted with this process in it) is mapped again at the next
     /// wait, to meet the new writer.
@@ -610,13 +618,10 @@ impl FeedWaiter for JoinedWaiter {
             return false;
         }
         let timeout = timeout.min(WAIT_SLICE);
-        let words: Option<Vec<_>> = self.waiters.iter().map(ImportWaiter::word).collect();
-        if let Some(words) = words {
+        if self.waiters.iter().all(|w| w.word().is_some()) {
             // Sleep only if no word changed since the last feed (nor was never seen).
-            let seen: Option<Vec<(&WakeWord, u32)>> = words
-                .iter()
-                .map(|&(w, seen)| seen.filter(|&s| s == w.sequence()).map(|s| (w, s)))
-                .collect();
+            let seen: Option<Vec<(&WakeWord, u32)>> =
+                self.waiters.iter().map(ImportWaiter::unchanged_word).collect();
             if let Some(seen) = seen
                 && let Err(e) = crate::wake_word::sleep_any(&seen, timeout)
             {
@@ -696,8 +701,8 @@ impl FeedWaiter for ImportWaiter {
         if !self.listen() {
             return false;
         }
-        if let Some((word, seen)) = self.word() {
-            if let Some(seen) = seen.filter(|&s| s == word.sequence()) {
+        if self.word().is_some() {
+            if let Some((word, seen)) = self.unchanged_word() {
                 word.sleep(seen, timeout.min(WAIT_SLICE));
             }
             self.check_word();
