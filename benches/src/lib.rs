@@ -52,6 +52,7 @@
 pub mod args;
 pub mod config;
 pub mod cpu;
+pub mod domain_end;
 pub mod inbox;
 pub mod json;
 pub mod latency;

@@ -46,6 +46,7 @@ use esgm_shm::unique_domain;
 use super::ipc_connect_echo::{connect, make_for, next, stamped, subscribe};
 use super::ipc_payload::Kind;
 use super::zenoh_peer;
+use crate::domain_end::DomainEnd;
 use crate::latency::Latency;
 use crate::patience::Patience;
 use crate::report::{Measurement, Method, Wait};
@@ -193,6 +194,7 @@ impl Scenario for Bridge {
         };
         iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
         let (a, b) = (unique_domain("esgm-bench-bridge-a"), unique_domain("esgm-bench-bridge-b"));
+        let _ends = (DomainEnd::new(&a), DomainEnd::new(&b));
         let _coordinator_a = Coordinator::spawn(&a, Registry::new(TypeRegistry::with_library()))
             .with_context(|| format!("could not start a coordinator for {a}"))?;
         let _coordinator_b = Coordinator::spawn(&b, Registry::new(TypeRegistry::with_library()))

@@ -29,6 +29,7 @@ use super::ipc_payload::{Kind, read_value};
 use super::ros2_dds::{PUBLISHER, SUBSCRIBER, TOPIC, WAIT_AT_MOST};
 use super::ros2_peer::Path;
 use super::ros2_process::LinkedProcess;
+use crate::domain_end::DomainEnd;
 use crate::latency::Latency;
 use crate::patience::Patience;
 use crate::peer_process::FINISH_TIMEOUT;
@@ -357,6 +358,8 @@ struct EsgmSide {
     // Dropped first: the connection goes before its coordinator.
     esgm: ShmEsgm,
     _coordinator: CoordinatorThread,
+    /// Dropped after them: the domain's words go.
+    _end: DomainEnd,
     domain: String,
 }
 
@@ -368,7 +371,7 @@ impl EsgmSide {
         let coordinator = Coordinator::spawn(&domain, Registry::new(TypeRegistry::with_library()))
             .with_context(|| format!("could not start a coordinator for {domain}"))?;
         let esgm = connect(&domain, &format!("bench-{name}"))?;
-        Ok(Self { esgm, _coordinator: coordinator, domain })
+        Ok(Self { esgm, _coordinator: coordinator, _end: DomainEnd::new(&domain), domain })
     }
 }
 

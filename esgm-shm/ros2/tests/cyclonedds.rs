@@ -107,6 +107,16 @@ impl Drop for Running {
     }
 }
 
+/// Ends a test's domain as `esgm down` would, whatever the test's outcome: the futex
+/// words a killed `esgm-ros2` kept counted are removed from `/dev/shm`.
+struct WordsGone(String);
+
+impl Drop for WordsGone {
+    fn drop(&mut self) {
+        esgm_shm::wake_word::remove_domain(&self.0);
+    }
+}
+
 fn wait_for(mut cond: impl FnMut() -> bool) -> bool {
     let deadline = Instant::now() + WAIT;
     while Instant::now() < deadline {
@@ -125,6 +135,7 @@ fn a_ros2_node_on_cyclonedds_feeds_an_image_trajectory_and_reads_an_exported_pos
     };
     let python = python::venv_python();
     let domain = esgm_shm::unique_domain("ros2");
+    let _words = WordsGone(domain.clone());
     let _coordinator = Coordinator::spawn(&domain, Registry::new(TypeRegistry::with_library()))
         .expect("start a coordinator");
     let esgm = ShmEsgm::builder().domain(&domain).host("ros2-test").connect().unwrap();
@@ -213,6 +224,7 @@ fn a_type_without_a_standard_message_is_read_as_its_generated_one() {
     };
     let python = python::venv_python();
     let domain = esgm_shm::unique_domain("ros2gen");
+    let _words = WordsGone(domain.clone());
     let _coordinator = Coordinator::spawn(&domain, Registry::new(TypeRegistry::with_library()))
         .expect("start a coordinator");
     let esgm = ShmEsgm::builder().domain(&domain).host("ros2-gen-test").connect().unwrap();
@@ -303,6 +315,7 @@ fn a_publisher_with_incompatible_qos_is_named_not_silent() {
     };
     let python = python::venv_python();
     let domain = esgm_shm::unique_domain("ros2qos");
+    let _words = WordsGone(domain.clone());
     let _coordinator = Coordinator::spawn(&domain, Registry::new(TypeRegistry::with_library()))
         .expect("start a coordinator");
     let mut bridge = ns.command(ESGM_ROS2);

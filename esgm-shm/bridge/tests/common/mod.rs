@@ -57,6 +57,9 @@ impl Drop for Domain {
     fn drop(&mut self) {
         // The connection first, then the coordinator.
         self.esgm.take();
+        // The domain ends here: the words a killed bridge kept counted go with it, as
+        // at `esgm down`.
+        esgm_shm::wake_word::remove_domain(&self.name);
     }
 }
 
