@@ -8,6 +8,14 @@
 //! shared, not process-private, futex) and the writer of a word wakes its sleeper with
 //! `FUTEX_WAKE`, every time, as iceoryx2's notifier does. No payload is moved: this is
 //! the cost of the wake-up alone, half a round trip.
+//!
+//! `floor-futex-paced` is the same wake-up paced like the pipeline's camera: the
+//! measuring process sleeps [`PACE`] between hops, so both cores are idle when the
+//! ping comes, as they are between a robot's frames. On a virtual machine a core that
+//! has been idle that long is halted, and waking it costs the hypervisor's round trip
+//! on top of the futex; the caches have also been used by other work. It is the floor
+//! of a `pipeline-<stage>` row, where `floor-futex` (each hop 50 µs after the last,
+//! cores still awake) is the floor of the ping-pong rows.
 
 use std::fs::{File, OpenOptions};
 use std::hint::black_box;
@@ -38,21 +46,44 @@ const LEN: usize = 4096;
 /// Where the `pong` word is: a cache line after `ping`.
 const PONG_OFFSET: usize = 64;
 
+/// The paced row's name.
+pub const PACED_NAME: &str = "floor-futex-paced";
+/// The time between two hops of the paced row: the pipeline camera's period.
+pub const PACE: Duration = Duration::from_millis(50);
+
 /// See the module docs.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct FloorFutex;
+#[derive(Debug, Clone, Copy)]
+pub struct FloorFutex {
+    /// Each hop [`PACE`] after the last (only blocking, as a paced reader would).
+    paced: bool,
+}
+
+impl FloorFutex {
+    /// The wake-up floor of the ping-pong rows.
+    pub const BACK_TO_BACK: FloorFutex = FloorFutex { paced: false };
+    /// The wake-up floor of a pipeline's stage, paced like its camera.
+    pub const PACED: FloorFutex = FloorFutex { paced: true };
+}
 
 impl Scenario for FloorFutex {
     fn name(&self) -> &'static str {
-        NAME
+        if self.paced { PACED_NAME } else { NAME }
     }
 
     fn summary(&self) -> &'static str {
-        "two processes ping-ponging through a futex word in shared memory: the wake-up floor"
+        if self.paced {
+            "the futex floor with each hop 50 ms after the last, like the pipeline's \
+             camera: the wake-up of an idle core, the floor of a pipeline stage"
+        } else {
+            "two processes ping-ponging through a futex word in shared memory: the wake-up floor"
+        }
     }
 
     fn run(&self, ctx: &Context) -> anyhow::Result<Vec<Measurement>> {
-        WaitMode::SPIN_AND_BLOCK.iter().map(|&mode| measure(ctx, mode)).collect()
+        if self.paced {
+            return Ok(vec![measure(ctx, self.name(), WaitMode::Block, Some(PACE))?]);
+        }
+        WaitMode::SPIN_AND_BLOCK.iter().map(|&mode| measure(ctx, self.name(), mode, None)).collect()
     }
 
     fn run_peer(&self, role: &PeerRole) -> anyhow::Result<Vec<String>> {
@@ -69,8 +100,15 @@ impl Scenario for FloorFutex {
     }
 }
 
-fn measure(ctx: &Context, mode: WaitMode) -> anyhow::Result<Measurement> {
-    let samples = ctx.samples(100_000, 10_000);
+/// Half round trips of `name`: back to back (each hop [`crate::scenario::EVENT_GAP`]
+/// after the last under a blocking `mode`), or each `pace` after the last.
+fn measure(
+    ctx: &Context,
+    name: &'static str,
+    mode: WaitMode,
+    pace: Option<Duration>,
+) -> anyhow::Result<Measurement> {
+    let samples = if pace.is_some() { ctx.samples(300, 20) } else { ctx.samples(100_000, 10_000) };
     let warmup = ctx.warmup(samples);
     let domain = unique_domain("esgm-bench-futex");
     let words = Words::open(&domain, true)?;
@@ -82,7 +120,10 @@ fn measure(ctx: &Context, mode: WaitMode) -> anyhow::Result<Measurement> {
     let mut latency = Latency::new()?;
     let total = u32::try_from(warmup + samples + 1).context("too many samples for a word")?;
     for seq in 2..=total {
-        ctx.before_hop(mode.wait());
+        match pace {
+            Some(pace) => std::thread::sleep(pace),
+            None => ctx.before_hop(mode.wait()),
+        }
         let start = Instant::now();
         words.set(words.ping(), seq, mode);
         let got = words.wait_change(words.pong(), seq - 1, mode, &mut patience, "pong")?;
@@ -96,14 +137,20 @@ fn measure(ctx: &Context, mode: WaitMode) -> anyhow::Result<Measurement> {
     }
     words.set(words.ping(), STOP, mode);
     peer.finish(FINISH_TIMEOUT)?;
-    Ok(latency
-        .measurement(NAME, mode.wait())
+    let mut row = latency
+        .measurement(name, mode.wait())
         .method(Method::HalfRoundTrip)
         .wait_strategy(match mode {
             WaitMode::Spin => "busy-poll the word",
             _ => "FUTEX_WAIT / FUTEX_WAKE (shared)",
-        })
-        .baseline(ipc_floor_iceoryx2::NAME))
+        });
+    row = match pace {
+        Some(pace) => row
+            .baseline(NAME)
+            .note(format!("each hop {} ms after the last: both cores idle", pace.as_millis())),
+        None => row.baseline(ipc_floor_iceoryx2::NAME),
+    };
+    Ok(row)
 }
 
 /// The two words, in a page of `/dev/shm` both processes map; the creator removes the

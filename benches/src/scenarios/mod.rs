@@ -19,7 +19,8 @@
 //! - [`ipc_floor_iceoryx2`]: the floor, raw iceoryx2 with a 64-byte message, and the
 //!   same on the thread-safe service type esgm uses (`floor-iceoryx2-threadsafe`);
 //! - [`ipc_floor_futex`]: `floor-futex`, the wake-up alone through a futex word in
-//!   shared memory (issue 27);
+//!   shared memory (issue 27), and `floor-futex-paced`, the same once per camera
+//!   frame: the floor of a pipeline stage;
 //! - [`ipc_uds_small`] and [`ipc_uds_image`]: the baselines, the codec's bytes through a
 //!   Unix socket ([`ipc_uds_echo`], [`ipc_uds_frames`]);
 //! - [`ipc_esgm_small`] and [`ipc_esgm_image`]: esgm-shm's trajectories, a small
@@ -141,7 +142,8 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(inproc_sampling_jitter::InprocSamplingJitter),
         Box::new(ipc_floor_iceoryx2::FloorIceoryx2::PLAIN),
         Box::new(ipc_floor_iceoryx2::FloorIceoryx2::THREADSAFE),
-        Box::new(ipc_floor_futex::FloorFutex),
+        Box::new(ipc_floor_futex::FloorFutex::BACK_TO_BACK),
+        Box::new(ipc_floor_futex::FloorFutex::PACED),
         Box::new(ipc_uds_small::UdsSmall),
         Box::new(ipc_esgm_small::EsgmSmall),
         Box::new(ipc_esgm_image::EsgmImage),
