@@ -280,6 +280,9 @@ pub struct TrajectoryPublisher {
     type_name: String,
     type_id: u64,
     service: DataService,
+    /// The next structure's loan, made after the last send (see the module docs).
+    /// Before `port`, so that it is given back before the port goes.
+    spare: Spare,
     port: Publisher<ShmService, [Block16], SampleHeader>,
     notifier: Notifier<ShmService>,
     /// Rung before the notifier: readers sleeping on the futex word ([`WakeWord`]).
@@ -290,8 +293,6 @@ pub struct TrajectoryPublisher {
     /// The configured maximum sample size in bytes (see the module docs).
     max_len: usize,
     notify_failures: Cell<u64>,
-    /// The next structure's loan, made after the last send (see the module docs).
-    spare: Spare,
 }
 
 /// The spare loan of a [`TrajectoryPublisher`], if one is held.
