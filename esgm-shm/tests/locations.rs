@@ -534,3 +534,38 @@ fn a_replica_accounts_for_every_sample_of_a_burst() {
     let latest = there.get_latest().unwrap();
     assert_eq!(latest.structure.valid_time, N as Time - 1, "the last one arrives");
 }
+
+/// A reader asleep in `recv` while the name is re-pointed is woken by the new
+/// trajectory's first sample, not at the end of its sleep's slice: the import it slept
+/// on rings its word when it goes.
+#[test]
+fn a_reader_asleep_while_the_name_is_re_pointed_wakes_for_the_new_stream() {
+    let c = coordinator("loc-repoint-asleep");
+    let a = location(&c, "a");
+    let b = location(&c, "b");
+    let first = a.create_trajectory(TrajectorySpec::primitive("track", "RobotState")).unwrap();
+    first.add(state(10, 1.0)).unwrap();
+    let there = b.get_entity_trajectory_structure("track").unwrap();
+    assert!(wait_for(|| there.stats().map(|s| s.stored) == Ok(1)), "{:?}", there.stats());
+    let sub = there.subscribe(SubscribeOptions::default()).unwrap();
+    let asleep = std::thread::spawn(move || {
+        let started = Instant::now();
+        let got = sub.recv_timeout(TIMEOUT);
+        (got.map(|s| x(&s)), started.elapsed())
+    });
+    // Asleep on the first trajectory's writer by now.
+    std::thread::sleep(Duration::from_millis(300));
+    let second =
+        a.create_trajectory(TrajectorySpec::primitive("track", "RobotState").replace()).unwrap();
+    let added = Instant::now();
+    while !asleep.is_finished() && added.elapsed() < TIMEOUT {
+        second.add(state(5 + added.elapsed().as_millis() as i64, 100.0)).unwrap();
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let (got, waited) = asleep.join().unwrap();
+    assert_eq!(got.ok(), Some(100.0), "the sleeping reader never saw the new stream");
+    assert!(
+        waited < Duration::from_secs(5),
+        "the sleeping reader was woken only after {waited:?}, not by the new stream"
+    );
+}

@@ -101,23 +101,30 @@ pub(crate) struct Import {
     /// receiver thread does not listen to its samples (the worker feeds the replica
     /// each time it wakes), so a sample wakes one thread in this process, not two.
     workers: Arc<std::sync::atomic::AtomicUsize>,
+    /// Threads of this process asleep on this import's writer right now, workers and
+    /// user subscriptions alike: when the import goes it wakes them, so they follow
+    /// the trajectory (re-pointed, destroyed, disconnected) at once, not at the end of
+    /// their sleep's slice.
+    sleepers: Arc<std::sync::atomic::AtomicUsize>,
     /// Checks each structure's attributes against the trajectory's type; `None` if
     /// the record's definitions do not resolve (logged at the start).
     checker: Option<TypeChecker>,
     /// Rings the location thread to ask the registry who writes, once per wait: what
     /// is held meanwhile borrows shared memory (an image a chunk).
     verify: crossbeam_channel::Sender<()>,
-    /// This process's node, to wake the workers waiting on this import when it goes.
+    /// This process's node, to wake the threads waiting on this import when it goes.
     node: SharedNode,
 }
 
 impl Drop for Import {
-    /// Wakes the subscriptions of this process that wait on this import's writer
-    /// themselves: the trajectory was destroyed, re-pointed (they follow the new
-    /// import) or the connection closed (they end). They sleep up to [`WAIT_SLICE`]
-    /// otherwise.
+    /// Wakes the threads of this process asleep on this import's writer (user
+    /// subscriptions and workers, counted in `sleepers` and `workers`): the trajectory
+    /// was destroyed, re-pointed (they follow the new import) or the connection closed
+    /// (they end). They would sleep up to [`WAIT_SLICE`] otherwise.
     fn drop(&mut self) {
-        if self.workers.load(std::sync::atomic::Ordering::Acquire) == 0 {
+        let asleep =
+            |n: &std::sync::atomic::AtomicUsize| n.load(std::sync::atomic::Ordering::SeqCst);
+        if asleep(&self.workers) == 0 && asleep(&self.sleepers) == 0 {
             return;
         }
         let Some(wake) = self.sample_wake() else { return };
@@ -245,6 +252,7 @@ impl Import {
             check: WriterCheck::new(record.port.map(|p| p.publisher)),
             writer,
             workers: Arc::default(),
+            sleepers: Arc::default(),
             checker,
             verify: verify.clone(),
             lost: 0,
@@ -449,6 +457,7 @@ impl ReplicaFeed for ImportFeed {
             node: self.node.clone(),
             mirrors: Weak::clone(&self.mirrors),
             import: Weak::new(),
+            sleepers: None,
             worker: None,
         }))
     }
@@ -461,6 +470,7 @@ impl ReplicaFeed for ImportFeed {
             node: self.node.clone(),
             mirrors: Weak::clone(&self.mirrors),
             import: Weak::new(),
+            sleepers: None,
             worker: Some(None),
         }))
     }
@@ -489,6 +499,9 @@ struct ImportWaiter {
     /// The import listened to, fed without a look-up in the set of mirrors; it is gone
     /// (the upgrade fails) once the set dropped it.
     import: Weak<parking_lot::Mutex<Import>>,
+    /// The import's count of this process's threads asleep on it
+    /// ([`ImportWaiter::fall_asleep`]).
+    sleepers: Option<Arc<std::sync::atomic::AtomicUsize>>,
     /// A worker's waiter: the import's count of waiting workers it is counted in (see
     /// [`Import::receiver_wakes`]); `None` for a user's subscription.
     worker: Option<Option<Arc<std::sync::atomic::AtomicUsize>>>,
@@ -508,14 +521,16 @@ impl ImportWaiter {
         let import = mirrors.import(&self.trajectory);
         let current = import.as_ref().and_then(|i| {
             let i = i.lock();
-            i.sample_wake().map(|w| (i.generation, w, Arc::clone(&i.workers)))
+            i.sample_wake()
+                .map(|w| (i.generation, w, Arc::clone(&i.workers), Arc::clone(&i.sleepers)))
         });
-        let (Some(import), Some((generation, wake, workers))) = (import, current) else {
+        let (Some(import), Some((generation, wake, workers, sleepers))) = (import, current) else {
             self.import = Weak::new();
             self.stand_down();
             return false;
         };
         self.import = Arc::downgrade(&import);
+        self.sleepers = Some(sleepers);
         if self.listening.as_ref().is_some_and(|(g, _)| *g == generation) {
             return true;
         }
@@ -548,7 +563,28 @@ impl ImportWaiter {
     }
 }
 
+/// A waiter counted among its import's sleepers while this lives (see
+/// [`ImportWaiter::fall_asleep`]).
+struct Asleep(Arc<std::sync::atomic::AtomicUsize>);
+
+impl Drop for Asleep {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, std::sync::atomic::Ordering::SeqCst);
+    }
+}
+
 impl ImportWaiter {
+    /// Counts this waiter among its import's sleepers before it sleeps, so that the
+    /// import wakes it when it goes; `None` if the import is already gone (look
+    /// again instead of sleeping). Counted first, then the import looked at: either
+    /// the import's drop sees the count and rings, or this sees the import gone.
+    fn fall_asleep(&self) -> Option<Asleep> {
+        let sleepers = self.sleepers.as_ref()?;
+        sleepers.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+        let asleep = Asleep(Arc::clone(sleepers));
+        self.import.upgrade().map(|_| asleep)
+    }
+
     /// No longer counted as the import's waiting worker: the receiver listens again.
     fn stand_down(&mut self) {
         let Some(Some(workers)) = self.worker.as_mut().map(Option::take) else { return };
@@ -622,7 +658,10 @@ impl FeedWaiter for JoinedWaiter {
             // Sleep only if no word changed since the last feed (nor was never seen).
             let seen: Option<Vec<(&WakeWord, u32)>> =
                 self.waiters.iter().map(ImportWaiter::unchanged_word).collect();
+            let asleep: Option<Vec<Asleep>> =
+                self.waiters.iter().map(ImportWaiter::fall_asleep).collect();
             if let Some(seen) = seen
+                && let Some(_asleep) = asleep
                 && let Err(e) = crate::wake_word::sleep_any(&seen, timeout)
             {
                 tracing::warn!(error = %e,
@@ -638,6 +677,12 @@ impl FeedWaiter for JoinedWaiter {
         let listeners: Option<Vec<&Listener<ShmService>>> =
             self.waiters.iter().map(ImportWaiter::listener).collect();
         let Some(listeners) = listeners else { return false };
+        let asleep: Option<Vec<Asleep>> =
+            self.waiters.iter().map(ImportWaiter::fall_asleep).collect();
+        let Some(_asleep) = asleep else {
+            self.feed();
+            return true;
+        };
         match crate::wait::wait_any(&listeners, timeout) {
             Ok(()) => {
                 self.feed();
@@ -702,7 +747,9 @@ impl FeedWaiter for ImportWaiter {
             return false;
         }
         if self.word().is_some() {
-            if let Some((word, seen)) = self.unchanged_word() {
+            if let Some((word, seen)) = self.unchanged_word()
+                && let Some(_asleep) = self.fall_asleep()
+            {
                 word.sleep(seen, timeout.min(WAIT_SLICE));
             }
             self.check_word();
@@ -710,6 +757,10 @@ impl FeedWaiter for ImportWaiter {
             return true;
         }
         let Some(listener) = self.listener() else { return false };
+        let Some(_asleep) = self.fall_asleep() else {
+            self.feed();
+            return true;
+        };
         match crate::wait::timed_wait(listener, timeout.min(WAIT_SLICE)) {
             Ok(_) => {
                 self.feed();
