@@ -36,10 +36,10 @@ use anyhow::Context as _;
 
 use super::dora_run::{self, Pair};
 use super::ipc_payload::Kind;
-use crate::report::{Measurement, Method, Wait};
+use super::peer_rows::{PeerRows, faster_than};
+use crate::report::Measurement;
 use crate::scenario::{Context, Scenario};
 use crate::target::Target;
-use crate::wait_mode::WaitMode;
 
 /// The dora release measured: the CLI build.sh installs and the node's `dora-node-api`.
 pub const VERSION: &str = "1.1.0";
@@ -124,38 +124,17 @@ impl Scenario for Dora {
         let samples = ctx.samples(full, quick);
         let warmup = ctx.warmup(samples);
         let cores = ctx.pinning().map(|p| (p.measuring_core(), p.peer_core()));
-        let mut rows = Vec::new();
-        for mode in WaitMode::SPIN_AND_BLOCK {
-            let pair = Pair { cli: &cli, node: &node, mode, bytes, samples, warmup, cores };
-            // A peer outside this project failing is a finding for the table, not a
-            // reason to lose the rest of the run (as ROS 1's and Zenoh's).
-            let latency = match dora_run::run(&pair) {
-                Ok(latency) => latency,
-                Err(e) => {
-                    ctx.skip(self.name, format!("the dora pair failed ({}): {e:#}", mode.label()));
-                    continue;
-                }
-            };
-            rows.push(
-                latency
-                    .measurement(self.name, mode.wait())
-                    .payload_bytes(bytes as u64)
-                    .method(Method::HalfRoundTrip)
-                    .wait_strategy(mode.label())
-                    .baseline(self.kind.esgm_row())
-                    .note(self.note()),
-            );
-        }
-        Ok(rows)
+        let note = self.note();
+        let rows = PeerRows { name: self.name, kind: self.kind, bytes, peer: "dora", note: &note };
+        Ok(rows.measure(ctx, |mode| {
+            dora_run::run(&Pair { cli: &cli, node: &node, mode, bytes, samples, warmup, cores })
+        }))
     }
 
     /// esgm is to be faster than its closest peer at every size: dora's row over
     /// esgm's ≥ 1.
     fn targets(&self) -> Vec<Target> {
-        Wait::BOTH
-            .iter()
-            .map(|&w| Target::at_least(self.name, self.kind.esgm_row(), w, 1.0))
-            .collect()
+        faster_than(self.name, self.kind)
     }
 }
 

@@ -112,6 +112,7 @@ pub mod ipc_uds_echo;
 pub mod ipc_uds_frames;
 pub mod ipc_uds_image;
 pub mod ipc_uds_small;
+pub mod peer_rows;
 pub mod pipeline_woken;
 pub mod python_peer;
 pub mod record_image;

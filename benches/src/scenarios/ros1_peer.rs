@@ -21,8 +21,9 @@ use std::time::{Duration, Instant};
 use anyhow::{Context as _, bail};
 
 use super::ipc_payload::Kind;
+use super::peer_rows::{PeerRows, faster_than};
 use crate::latency::Latency;
-use crate::report::{Measurement, Method, Wait};
+use crate::report::Measurement;
 use crate::scenario::{Context, Scenario};
 use crate::target::Target;
 use crate::wait_mode::WaitMode;
@@ -87,34 +88,21 @@ impl Scenario for Ros1 {
         let samples = ctx.samples(full, quick);
         let warmup = ctx.warmup(samples);
         let cores = ctx.pinning().map(|p| (p.measuring_core(), p.peer_core()));
-        let mut rows = Vec::new();
-        for mode in WaitMode::SPIN_AND_BLOCK {
-            // A peer outside this project (its packages, its master) failing is a finding
-            // for the table, not a reason to lose the rest of the run.
-            let latency = match run_pair(&program, mode, bytes, samples, warmup, cores) {
-                Ok(latency) => latency,
-                Err(e) => {
-                    ctx.skip(self.name, format!("the ROS 1 pair failed ({}): {e:#}", mode.label()));
-                    continue;
-                }
-            };
-            rows.push(latency
-                    .measurement(self.name, mode.wait())
-                    .payload_bytes(bytes as u64)
-                    .method(Method::HalfRoundTrip)
-                    .wait_strategy(mode.label())
-                    .baseline(self.kind.esgm_row())
-                    .note("std_msgs/UInt8MultiArray over TCPROS (TCP_NODELAY, loopback); the C++ reader checks sequence and last byte, it cannot validate an esgm archive"));
-        }
-        Ok(rows)
+        let rows = PeerRows {
+            name: self.name,
+            kind: self.kind,
+            bytes,
+            peer: "ROS 1",
+            note: "std_msgs/UInt8MultiArray over TCPROS (TCP_NODELAY, loopback); the C++ \
+                   reader checks sequence and last byte, it cannot validate an esgm archive",
+        };
+        // A peer outside this project (its packages, its master) failing is a finding.
+        Ok(rows.measure(ctx, |mode| run_pair(&program, mode, bytes, samples, warmup, cores)))
     }
 
     /// esgm is to be faster than ROS 1 at every size: ROS 1's row over esgm's ≥ 1.
     fn targets(&self) -> Vec<Target> {
-        Wait::BOTH
-            .iter()
-            .map(|&w| Target::at_least(self.name, self.kind.esgm_row(), w, 1.0))
-            .collect()
+        faster_than(self.name, self.kind)
     }
 }
 

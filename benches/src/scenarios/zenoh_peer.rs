@@ -9,8 +9,9 @@
 //! `zenoh_echo` (built with the feature only).
 
 use super::ipc_payload::Kind;
+use super::peer_rows::faster_than;
 use crate::peer_role::PeerRole;
-use crate::report::{Measurement, Wait};
+use crate::report::Measurement;
 use crate::scenario::{Context, Scenario};
 use crate::target::Target;
 
@@ -82,10 +83,7 @@ impl Scenario for Zenoh {
         if !self.shm {
             return Vec::new();
         }
-        Wait::BOTH
-            .iter()
-            .map(|&w| Target::at_least(self.name, self.kind.esgm_row(), w, 1.0))
-            .collect()
+        faster_than(self.name, self.kind)
     }
 
     #[cfg(feature = "zenoh")]
