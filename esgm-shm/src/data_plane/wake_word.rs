@@ -16,7 +16,10 @@
 //!   `FUTEX_WAKE` only when somebody sleeps (a publish nobody waits for costs one
 //!   atomic add and one load, no system call);
 //! - `users`: processes that map the page, counted under an advisory lock; the last to
-//!   leave removes the file.
+//!   leave removes the file;
+//! - then one slot per mapping (an open file description, locked by it with an OFD
+//!   record lock for as long as it maps the page), counting the threads asleep through
+//!   it.
 //!
 //! A reader loads `sequence`, looks for a sample, and sleeps with `FUTEX_WAIT` only if
 //! `sequence` still holds what it loaded: a sample sent after the look changed the
@@ -32,9 +35,18 @@
 //! cannot be opened (no room in `/dev/shm`, another user's file) falls back to the
 //! event, as does every reader when [`WAKE_ENV`] is `event`.
 //!
-//! A process killed while it slept leaves `sleepers` one too high: its writer then
-//! calls `FUTEX_WAKE` after each sample (about a microsecond, nobody woken) until the
-//! page is made anew. A process killed while mapping it leaves `users` too high and the
+//! # A process killed while it slept
+//! It leaves `sleepers` too high, and its writer would call `FUTEX_WAKE` after each
+//! sample (about a microsecond, nobody woken) until the page is made anew. So a
+//! sleeper counts itself in `sleepers` first and in its mapping's slot second, and out
+//! in the reverse order: a death at any point leaves `sleepers` at least the sum of the
+//! slots. The kernel drops a dead process's record locks; a writer whose rings woke
+//! nobody [`FRUITLESS_RINGS`] times in a row looks, under the file's lock, for slots
+//! that hold sleepers but no lock, and counts them out of `sleepers`. A slot whose lock
+//! is held belongs to a live mapping and is never touched, whatever process or PID
+//! namespace it is in. A process killed between its two counts leaves one sleeper that
+//! no slot holds; that stays, as before. A process killed while mapping it leaves
+//! `users` too high and the
 //! file (one page) in `/dev/shm` until the domain's end removes every word of the
 //! domain ([`remove_domain`]: `esgm down`, the end of `esgm up` and of `esgm demo`,
 //! and a coordinator asked to shut down).
@@ -69,6 +81,14 @@ const LEN: usize = 4096;
 const SEQUENCE: usize = 0;
 const SLEEPERS: usize = 64;
 const USERS: usize = 128;
+/// Where the mappings' slots begin, and how many there are: a 32-bit count each.
+const SLOTS: usize = 192;
+const SLOT_COUNT: usize = (LEN - SLOTS) / 4;
+/// Rings in a row that woke nobody while sleepers were counted, before the writer
+/// looks for sleepers of dead processes; doubled after each look that found none, up
+/// to [`MAX_FRUITLESS_RINGS`], so that a count nobody can mend costs the look rarely.
+pub const FRUITLESS_RINGS: u32 = 64;
+const MAX_FRUITLESS_RINGS: u32 = 1 << 16;
 /// How often an open retries a file its last user removed meanwhile.
 const OPEN_ATTEMPTS: usize = 8;
 /// The most words [`sleep_any`] waits on (the kernel's limit for `futex_waitv`).
@@ -133,9 +153,17 @@ pub fn remove_domain(domain: &str) -> usize {
 #[derive(Debug)]
 pub struct WakeWord {
     base: NonNull<u8>,
-    /// Held open so that the last user can lock the file to remove it.
+    /// Held open so that the last user can lock the file to remove it; its open file
+    /// description holds the record lock on `slot`.
     file: File,
     path: PathBuf,
+    /// This mapping's slot, if one was free (the sleepers of a mapping without one are
+    /// counted only in the total, and cannot be counted out if their process dies).
+    slot: Option<usize>,
+    /// Rings in a row that woke nobody while sleepers were counted (this process's).
+    fruitless: AtomicU32,
+    /// How many such rings start the next look for dead sleepers.
+    look_after: AtomicU32,
 }
 
 // SAFETY: the mapping is only used through atomics, and it lives as long as the value.
@@ -156,8 +184,15 @@ impl WakeWord {
         for _ in 0..OPEN_ATTEMPTS {
             let file =
                 OpenOptions::new().read(true).write(true).create(true).mode(mode).open(&path)?;
-            if let Some(base) = Self::map_locked(&file, &path, mode)? {
-                return Ok(WakeWord { base, file, path });
+            if let Some((base, slot)) = Self::map_locked(&file, &path, mode)? {
+                return Ok(WakeWord {
+                    base,
+                    file,
+                    path,
+                    slot,
+                    fruitless: AtomicU32::new(0),
+                    look_after: AtomicU32::new(FRUITLESS_RINGS),
+                });
             }
         }
         Err(std::io::Error::new(
@@ -166,10 +201,14 @@ impl WakeWord {
         ))
     }
 
-    /// Under the file's lock: maps it and counts this process among its users, or
-    /// `None` if its last user removed it meanwhile (open the new one, or every
-    /// process would not meet on the same word).
-    fn map_locked(file: &File, path: &Path, mode: u32) -> std::io::Result<Option<NonNull<u8>>> {
+    /// Under the file's lock: maps it, counts this process among its users and claims
+    /// a slot, or `None` if its last user removed it meanwhile (open the new one, or
+    /// every process would not meet on the same word).
+    fn map_locked(
+        file: &File,
+        path: &Path,
+        mode: u32,
+    ) -> std::io::Result<Option<(NonNull<u8>, Option<usize>)>> {
         let _lock = Flock::exclusive(file)?;
         let meta = file.metadata()?;
         let same =
@@ -199,7 +238,30 @@ impl WakeWord {
         let base = NonNull::new(base.cast::<u8>()).ok_or(std::io::ErrorKind::Other)?;
         // SAFETY: just mapped, LEN long.
         unsafe { counter_at(base, USERS) }.fetch_add(1, Ordering::SeqCst);
-        Ok(Some(base))
+        Ok(Some((base, Self::claim_slot(file, base))))
+    }
+
+    /// Under the file's lock: locks the first slot no live mapping holds, counting out
+    /// the sleepers a dead holder left in it. `None` if every slot is held, or the
+    /// kernel has no OFD locks (before Linux 3.15).
+    fn claim_slot(file: &File, base: NonNull<u8>) -> Option<usize> {
+        let start = std::process::id() as usize % SLOT_COUNT;
+        for slot in (0..SLOT_COUNT).map(|i| (start + i) % SLOT_COUNT) {
+            match slot_lock(file, slot, libc::F_WRLCK as libc::c_short) {
+                Ok(()) => {
+                    // SAFETY: mapped by the caller, LEN long.
+                    unsafe { count_out(base, slot) };
+                    return Some(slot);
+                }
+                Err(e) if matches!(e.raw_os_error(), Some(libc::EAGAIN | libc::EACCES)) => {}
+                Err(e) => {
+                    tracing::debug!(error = %e,
+                        "no record lock on a wake-up word; its sleepers cannot be counted out");
+                    return None;
+                }
+            }
+        }
+        None
     }
 
     fn counter(&self, offset: usize) -> &AtomicU32 {
@@ -218,18 +280,77 @@ impl WakeWord {
     pub fn ring(&self) {
         self.counter(SEQUENCE).fetch_add(1, Ordering::SeqCst);
         if self.counter(SLEEPERS).load(Ordering::SeqCst) != 0 {
-            futex_wake(self.counter(SEQUENCE));
+            if futex_wake(self.counter(SEQUENCE)) == 0 {
+                self.fruitless_ring();
+            } else {
+                self.fruitless.store(0, Ordering::Relaxed);
+            }
         }
+    }
+
+    /// A ring woke nobody though sleepers are counted: a sleeper between its count and
+    /// its sleep, or one whose process died asleep. After enough in a row, looks for
+    /// the dead ([`WakeWord::count_out_the_dead`]).
+    fn fruitless_ring(&self) {
+        let rings = self.fruitless.fetch_add(1, Ordering::Relaxed) + 1;
+        let look_after = self.look_after.load(Ordering::Relaxed);
+        if rings < look_after {
+            return;
+        }
+        self.fruitless.store(0, Ordering::Relaxed);
+        let next = match self.count_out_the_dead() {
+            Ok(0) => look_after.saturating_mul(2).min(MAX_FRUITLESS_RINGS),
+            Ok(_) => FRUITLESS_RINGS,
+            // Another process holds the file's lock (opening or leaving): next ring.
+            Err(_) => look_after,
+        };
+        self.look_after.store(next, Ordering::Relaxed);
+    }
+
+    /// Counts out of `sleepers` the threads that slept through a mapping that is gone
+    /// (its process died asleep); returns how many. Under the file's lock, taken
+    /// without waiting (`WouldBlock` if another process holds it), so that no mapping
+    /// claims a slot meanwhile. A writer calls it itself when its rings wake nobody;
+    /// it is public for diagnostics and tests.
+    pub fn count_out_the_dead(&self) -> std::io::Result<u32> {
+        let _lock = Flock::try_exclusive(&self.file)?;
+        let mut counted_out = 0;
+        for slot in (0..SLOT_COUNT).filter(|&s| Some(s) != self.slot) {
+            if self.counter(SLOTS + 4 * slot).load(Ordering::SeqCst) == 0 {
+                continue;
+            }
+            // A lock this description can take is held by no live mapping.
+            if slot_lock(&self.file, slot, libc::F_WRLCK as libc::c_short).is_ok() {
+                // SAFETY: the page lives as long as `self`.
+                counted_out += unsafe { count_out(self.base, slot) };
+                let _ = slot_lock(&self.file, slot, libc::F_UNLCK as libc::c_short);
+            }
+        }
+        Ok(counted_out)
+    }
+
+    /// How many threads are counted asleep on the word, in every process: for
+    /// diagnostics and tests.
+    pub fn sleepers(&self) -> u32 {
+        self.counter(SLEEPERS).load(Ordering::SeqCst)
+    }
+
+    /// Counts the calling thread asleep until the result is dropped: in the total,
+    /// then in this mapping's slot (see the module docs for why in that order).
+    fn count_in(&self) -> CountedAsleep<'_> {
+        self.counter(SLEEPERS).fetch_add(1, Ordering::SeqCst);
+        if let Some(slot) = self.slot {
+            self.counter(SLOTS + 4 * slot).fetch_add(1, Ordering::SeqCst);
+        }
+        CountedAsleep(self)
     }
 
     /// Sleeps until the sequence is no longer `seen`, at most `timeout`; returns at
     /// once if it already changed. A wake-up is not a promise of a sample (a signal,
     /// a ring for another reason): look, then sleep again.
     pub fn sleep(&self, seen: u32, timeout: Duration) {
-        let sleepers = self.counter(SLEEPERS);
-        sleepers.fetch_add(1, Ordering::SeqCst);
+        let _asleep = self.count_in();
         futex_wait(self.counter(SEQUENCE), seen, timeout);
-        sleepers.fetch_sub(1, Ordering::SeqCst);
     }
 
     /// True if this word's file is no longer the one its path names (removed while
@@ -238,6 +359,19 @@ impl WakeWord {
     pub fn stale(&self) -> bool {
         let Ok(meta) = self.file.metadata() else { return true };
         !std::fs::metadata(&self.path).is_ok_and(|m| m.ino() == meta.ino() && m.dev() == meta.dev())
+    }
+}
+
+/// A thread counted asleep on a word ([`WakeWord::count_in`]); counted out, slot
+/// first, when dropped.
+struct CountedAsleep<'a>(&'a WakeWord);
+
+impl Drop for CountedAsleep<'_> {
+    fn drop(&mut self) {
+        if let Some(slot) = self.0.slot {
+            self.0.counter(SLOTS + 4 * slot).fetch_sub(1, Ordering::SeqCst);
+        }
+        self.0.counter(SLEEPERS).fetch_sub(1, Ordering::SeqCst);
     }
 }
 
@@ -267,6 +401,42 @@ unsafe fn counter_at<'a>(base: NonNull<u8>, offset: usize) -> &'a AtomicU32 {
     unsafe { AtomicU32::from_ptr(base.as_ptr().add(offset).cast::<u32>()) }
 }
 
+/// Empties `slot` of the page at `base` and counts what it held out of the total;
+/// returns it. The caller holds the slot's record lock.
+///
+/// # Safety
+/// `base` is a live mapping of [`LEN`] bytes.
+unsafe fn count_out(base: NonNull<u8>, slot: usize) -> u32 {
+    // SAFETY: forwarded to the caller.
+    let held = unsafe { counter_at(base, SLOTS + 4 * slot) }.swap(0, Ordering::SeqCst);
+    if held != 0 {
+        // SAFETY: as above. The total is at least every slot's count (counted in
+        // first, out last), so this does not wrap.
+        unsafe { counter_at(base, SLEEPERS) }.fetch_sub(held, Ordering::SeqCst);
+    }
+    held
+}
+
+/// Takes (`F_WRLCK`) or releases (`F_UNLCK`) the OFD record lock on `slot`'s bytes,
+/// without waiting. An OFD lock belongs to the open file description, so that two
+/// mappings in one process hold two slots, and the kernel drops it with the
+/// description's last descriptor: when its process dies.
+fn slot_lock(file: &File, slot: usize, kind: libc::c_short) -> std::io::Result<()> {
+    let lock = libc::flock {
+        l_type: kind,
+        l_whence: libc::SEEK_SET as libc::c_short,
+        l_start: (SLOTS + 4 * slot) as libc::off_t,
+        l_len: 4,
+        l_pid: 0,
+    };
+    // SAFETY: a valid descriptor and a valid `struct flock` for the call.
+    if unsafe { libc::fcntl(file.as_raw_fd(), libc::F_OFD_SETLK, &lock) } == 0 {
+        Ok(())
+    } else {
+        Err(std::io::Error::last_os_error())
+    }
+}
+
 /// Sleeps until any of `words` is no longer at its `seen` sequence, at most
 /// `timeout`: one `futex_waitv(2)` (Linux 5.16) whatever their number. `Err` if the
 /// kernel cannot (too old, or more than [`MAX_WAIT_ANY`] words): wait another way.
@@ -294,9 +464,7 @@ pub fn sleep_any(words: &[(&WakeWord, u32)], timeout: Duration) -> std::io::Resu
         })
         .collect();
     let until = monotonic_after(timeout);
-    for (w, _) in words {
-        w.counter(SLEEPERS).fetch_add(1, Ordering::SeqCst);
-    }
+    let asleep: Vec<CountedAsleep<'_>> = words.iter().map(|(w, _)| w.count_in()).collect();
     // SAFETY: `waiters` and `until` outlive the call; every address is a mapped word.
     let r = unsafe {
         libc::syscall(
@@ -309,9 +477,7 @@ pub fn sleep_any(words: &[(&WakeWord, u32)], timeout: Duration) -> std::io::Resu
         )
     };
     let error = (r < 0).then(std::io::Error::last_os_error);
-    for (w, _) in words {
-        w.counter(SLEEPERS).fetch_sub(1, Ordering::SeqCst);
-    }
+    drop(asleep);
     match error.and_then(|e| e.raw_os_error()) {
         // Woken, a word changed before the sleep, the deadline, or a signal: the
         // caller looks at what arrived either way.
@@ -366,8 +532,9 @@ fn futex_wait(word: &AtomicU32, seen: u32, timeout: Duration) {
     }
 }
 
-/// `FUTEX_WAKE` of every sleeper of a shared word.
-fn futex_wake(word: &AtomicU32) {
+/// `FUTEX_WAKE` of every sleeper of a shared word; returns how many it woke (-1 on
+/// an error).
+fn futex_wake(word: &AtomicU32) -> libc::c_long {
     // SAFETY: the word is mapped for the call's duration.
     unsafe {
         libc::syscall(
@@ -379,7 +546,7 @@ fn futex_wake(word: &AtomicU32) {
             0usize,
             0u32,
         )
-    };
+    }
 }
 
 /// An exclusive `flock(2)` on a file, released when dropped.
@@ -396,6 +563,18 @@ impl<'a> Flock<'a> {
             if e.kind() != std::io::ErrorKind::Interrupted {
                 return Err(e);
             }
+        }
+    }
+}
+
+impl<'a> Flock<'a> {
+    /// The lock if no other open file description holds it now.
+    fn try_exclusive(file: &'a File) -> std::io::Result<Self> {
+        // SAFETY: a valid open descriptor.
+        if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0 {
+            Ok(Flock(file))
+        } else {
+            Err(std::io::Error::last_os_error())
         }
     }
 }
