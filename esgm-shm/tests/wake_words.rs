@@ -64,6 +64,17 @@ impl Drop for Sleeper {
 }
 
 /// Waits until `word` counts `n` sleepers.
+/// Removes the domain's words when dropped, as `esgm down` would: a killed sleeper
+/// stays counted as a user of the word, so its file would stay in `/dev/shm`.
+/// Declared before the words, so that it drops after them.
+struct DomainEnd(String);
+
+impl Drop for DomainEnd {
+    fn drop(&mut self) {
+        esgm_shm::wake_word::remove_domain(&self.0);
+    }
+}
+
 fn until_sleepers(word: &WakeWord, n: u32) {
     let deadline = Instant::now() + WAIT;
     while word.sleepers() != n {
@@ -74,7 +85,8 @@ fn until_sleepers(word: &WakeWord, n: u32) {
 
 #[test]
 fn a_process_killed_asleep_is_counted_out_by_the_writers_rings() {
-    let service = wake_service_name(&unique_domain("wake-dead"), "t");
+    let end = DomainEnd(unique_domain("wake-dead"));
+    let service = wake_service_name(&end.0, "t");
     let writer = WakeWord::open(&service).unwrap();
     let child = Sleeper::spawn(&service, "forever");
     until_sleepers(&writer, 1);
@@ -86,11 +98,14 @@ fn a_process_killed_asleep_is_counted_out_by_the_writers_rings() {
     assert_eq!(writer.sleepers(), 1, "a few rings that wake nobody are no proof of death");
     writer.ring();
     assert_eq!(writer.sleepers(), 0, "counted out at the last fruitless ring");
+    drop((writer, end));
+    assert!(!esgm_shm::wake_word::path_for(&service).exists(), "the domain's end removed the word");
 }
 
 #[test]
 fn a_live_sleeper_is_never_counted_out_in_any_process() {
-    let service = wake_service_name(&unique_domain("wake-live"), "t");
+    let end = DomainEnd(unique_domain("wake-live"));
+    let service = wake_service_name(&end.0, "t");
     let writer = WakeWord::open(&service).unwrap();
     let dead = Sleeper::spawn(&service, "forever");
     let live = Sleeper::spawn(&service, "once");
@@ -115,4 +130,6 @@ fn a_live_sleeper_is_never_counted_out_in_any_process() {
         own.join().unwrap();
     });
     until_sleepers(&writer, 0);
+    drop((writer, end));
+    assert!(!esgm_shm::wake_word::path_for(&service).exists(), "the domain's end removed the word");
 }
