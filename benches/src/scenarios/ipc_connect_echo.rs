@@ -40,6 +40,7 @@
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
+use crate::domain_end::DomainEnd;
 use anyhow::{Context as _, bail};
 use esgm_core::library::Image;
 use esgm_core::store::RecvError;
@@ -109,6 +110,9 @@ pub fn ping_pong(
     // iceoryx2's warnings (no config file, buffer sizes adjusted) are not news here.
     iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
     let domain = unique_domain("esgm-bench-connect");
+    // Dropped after every process of the domain: removes its futex words, which a
+    // peer killed on a failure would leave in /dev/shm.
+    let _end = DomainEnd::new(&domain);
     // Dropped last (declared first): it stops when the measurement is over or failed.
     let coordinator = Coordinator::spawn(&domain, Registry::new(TypeRegistry::with_library()))
         .with_context(|| format!("could not start a coordinator for {domain}"))?;

@@ -33,6 +33,7 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
+use crate::domain_end::DomainEnd;
 use anyhow::{Context as _, bail};
 use camera_publisher::{CameraSensor, FrameSource, SyntheticScene};
 use cu_workers::{
@@ -213,6 +214,9 @@ fn run_system(ctx: &Context, run_for: Duration) -> anyhow::Result<(Collected, Ve
     // iceoryx2's warnings (no config file, buffer sizes adjusted) are not news here.
     iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
     let domain = unique_domain("esgm-bench-pipe");
+    // Dropped after every process of the domain: removes its futex words, which a
+    // peer killed on a failure would leave in /dev/shm.
+    let _end = DomainEnd::new(&domain);
     let coordinator = spawn_coordinator(ctx, NAME, &domain)?;
     let mut workers: Vec<PeerProcess> = Vec::new();
     for worker in std::iter::once("camera").chain(UNITS) {
