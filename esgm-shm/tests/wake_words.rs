@@ -64,9 +64,32 @@ impl Drop for Sleeper {
 }
 
 /// Waits until `word` counts `n` sleepers.
-/// Removes the domain's words when dropped, as `esgm down` would: a killed sleeper
-/// stays counted as a user of the word, so its file would stay in `/dev/shm`.
-/// Declared before the words, so that it drops after them.
+/// A writer's mapping of one word, in a domain of its own that ends when this is
+/// dropped (see [`DomainEnd`]).
+struct Word {
+    // Dropped in this order: the writer's mapping, then the domain's words.
+    writer: WakeWord,
+    service: String,
+    _end: DomainEnd,
+}
+
+impl Word {
+    fn new(prefix: &str) -> Self {
+        let end = DomainEnd(unique_domain(prefix));
+        let service = wake_service_name(&end.0, "t");
+        Self { writer: WakeWord::open(&service).unwrap(), service, _end: end }
+    }
+
+    /// Ends the domain and checks that its word's file is gone.
+    fn end(self) {
+        let path = esgm_shm::wake_word::path_for(&self.service);
+        drop(self);
+        assert!(!path.exists(), "the domain's end removed the word");
+    }
+}
+
+/// Removes a domain's words when dropped, as `esgm down` would: a killed sleeper stays
+/// counted as a user of the word, so its file would stay in `/dev/shm`.
 struct DomainEnd(String);
 
 impl Drop for DomainEnd {
@@ -85,11 +108,10 @@ fn until_sleepers(word: &WakeWord, n: u32) {
 
 #[test]
 fn a_process_killed_asleep_is_counted_out_by_the_writers_rings() {
-    let end = DomainEnd(unique_domain("wake-dead"));
-    let service = wake_service_name(&end.0, "t");
-    let writer = WakeWord::open(&service).unwrap();
-    let child = Sleeper::spawn(&service, "forever");
-    until_sleepers(&writer, 1);
+    let word = Word::new("wake-dead");
+    let writer = &word.writer;
+    let child = Sleeper::spawn(&word.service, "forever");
+    until_sleepers(writer, 1);
     child.kill();
     assert_eq!(writer.sleepers(), 1, "the dead sleeper is still counted");
     for _ in 1..FRUITLESS_RINGS {
@@ -98,20 +120,18 @@ fn a_process_killed_asleep_is_counted_out_by_the_writers_rings() {
     assert_eq!(writer.sleepers(), 1, "a few rings that wake nobody are no proof of death");
     writer.ring();
     assert_eq!(writer.sleepers(), 0, "counted out at the last fruitless ring");
-    drop((writer, end));
-    assert!(!esgm_shm::wake_word::path_for(&service).exists(), "the domain's end removed the word");
+    word.end();
 }
 
 #[test]
 fn a_live_sleeper_is_never_counted_out_in_any_process() {
-    let end = DomainEnd(unique_domain("wake-live"));
-    let service = wake_service_name(&end.0, "t");
-    let writer = WakeWord::open(&service).unwrap();
-    let dead = Sleeper::spawn(&service, "forever");
-    let live = Sleeper::spawn(&service, "once");
+    let word = Word::new("wake-live");
+    let writer = &word.writer;
+    let dead = Sleeper::spawn(&word.service, "forever");
+    let live = Sleeper::spawn(&word.service, "once");
     std::thread::scope(|s| {
         // A thread of this process asleep through the writer's own mapping.
-        let (writer, seen) = (&writer, writer.sequence());
+        let seen = writer.sequence();
         let own = s.spawn(move || {
             let deadline = Instant::now() + WAIT;
             while writer.sequence() == seen && Instant::now() < deadline {
@@ -129,7 +149,6 @@ fn a_live_sleeper_is_never_counted_out_in_any_process() {
         assert!(status.success(), "the live sleeper was woken by the ring: {output}");
         own.join().unwrap();
     });
-    until_sleepers(&writer, 0);
-    drop((writer, end));
-    assert!(!esgm_shm::wake_word::path_for(&service).exists(), "the domain's end removed the word");
+    until_sleepers(writer, 0);
+    word.end();
 }
