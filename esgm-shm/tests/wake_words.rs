@@ -63,7 +63,6 @@ impl Drop for Sleeper {
     }
 }
 
-/// Waits until `word` counts `n` sleepers.
 /// A writer's mapping of one word, in a domain of its own that ends when this is
 /// dropped (see [`DomainEnd`]).
 struct Word {
@@ -98,6 +97,7 @@ impl Drop for DomainEnd {
     }
 }
 
+/// Waits until `word` counts `n` sleepers.
 fn until_sleepers(word: &WakeWord, n: u32) {
     let deadline = Instant::now() + WAIT;
     while word.sleepers() != n {

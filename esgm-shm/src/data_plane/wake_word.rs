@@ -9,8 +9,8 @@
 //!
 //! # The word
 //! Every trajectory has one page of POSIX shared memory, named after its domain and
-//! wake-up service (`/dev/shm/esgm_wake@<domain>@<hash>`). It holds three 32-bit counters, each on its
-//! own cache line:
+//! wake-up service (`/dev/shm/esgm_wake@<domain>@<hash>`). It holds three 32-bit
+//! counters, each on its own cache line, and then the mappings' slots:
 //! - `sequence`, the futex word: the writer adds one after every sample it sends;
 //! - `sleepers`: readers asleep on `sequence` right now, so that a writer calls
 //!   `FUTEX_WAKE` only when somebody sleeps (a publish nobody waits for costs one
@@ -42,9 +42,10 @@
 //! in the reverse order: a death at any point leaves `sleepers` at least the sum of the
 //! slots. The kernel drops a dead process's record locks; a writer whose rings woke
 //! nobody [`FRUITLESS_RINGS`] times in a row looks, under the file's lock, for slots
-//! that hold sleepers but no lock, and counts them out of `sleepers`. A slot whose lock
-//! is held belongs to a live mapping and is never touched, whatever process or PID
-//! namespace it is in. A process killed between its two counts leaves one sleeper that
+//! that hold sleepers but no lock, and counts them out of `sleepers` (after a look that
+//! finds none, it waits twice as many rings for the next, up to 65,536). A slot whose
+//! lock is held belongs to a live open file description and is never touched, whatever
+//! process or PID namespace it is in. A process killed between its two counts leaves one sleeper that
 //! no slot holds; that stays, as before. A process killed while mapping it leaves
 //! `users` too high and the
 //! file (one page) in `/dev/shm` until the domain's end removes every word of the
@@ -160,10 +161,15 @@ pub struct WakeWord {
     /// This mapping's slot, if one was free (the sleepers of a mapping without one are
     /// counted only in the total, and cannot be counted out if their process dies).
     slot: Option<usize>,
-    /// Rings in a row that woke nobody while sleepers were counted (this process's).
+    /// This mapping's rings in a row that called `FUTEX_WAKE` (sleepers were counted)
+    /// and woke nobody.
     fruitless: AtomicU32,
     /// How many such rings start the next look for dead sleepers.
     look_after: AtomicU32,
+    /// Held by the thread looking for dead sleepers: two threads of this mapping share
+    /// its record and file locks, so a second look at once could count out a slot
+    /// that the first emptied and a new mapping claimed meanwhile.
+    looking: std::sync::Mutex<()>,
 }
 
 // SAFETY: the mapping is only used through atomics, and it lives as long as the value.
@@ -192,6 +198,7 @@ impl WakeWord {
                     slot,
                     fruitless: AtomicU32::new(0),
                     look_after: AtomicU32::new(FRUITLESS_RINGS),
+                    looking: std::sync::Mutex::new(()),
                 });
             }
         }
@@ -301,7 +308,8 @@ impl WakeWord {
         let next = match self.count_out_the_dead() {
             Ok(0) => look_after.saturating_mul(2).min(MAX_FRUITLESS_RINGS),
             Ok(_) => FRUITLESS_RINGS,
-            // Another process holds the file's lock (opening or leaving): next ring.
+            // Another thread looks, or another process holds the file's lock (opening
+            // or leaving): look again after as many rings.
             Err(_) => look_after,
         };
         self.look_after.store(next, Ordering::Relaxed);
@@ -309,10 +317,18 @@ impl WakeWord {
 
     /// Counts out of `sleepers` the threads that slept through a mapping that is gone
     /// (its process died asleep); returns how many. Under the file's lock, taken
-    /// without waiting (`WouldBlock` if another process holds it), so that no mapping
-    /// claims a slot meanwhile. A writer calls it itself when its rings wake nobody;
-    /// it is public for diagnostics and tests.
+    /// without waiting (`WouldBlock` if another process holds it, or another thread of
+    /// this mapping looks), so that no mapping claims a slot meanwhile. A writer calls
+    /// it itself when its rings wake nobody; it is public for diagnostics and tests.
     pub fn count_out_the_dead(&self) -> std::io::Result<u32> {
+        let _looking = match self.looking.try_lock() {
+            Ok(guard) => guard,
+            // Nothing a look leaves half-done matters to the next one.
+            Err(std::sync::TryLockError::Poisoned(poisoned)) => poisoned.into_inner(),
+            Err(std::sync::TryLockError::WouldBlock) => {
+                return Err(std::io::ErrorKind::WouldBlock.into());
+            }
+        };
         let _lock = Flock::try_exclusive(&self.file)?;
         let mut counted_out = 0;
         for slot in (0..SLOT_COUNT).filter(|&s| Some(s) != self.slot) {
