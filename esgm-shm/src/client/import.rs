@@ -35,6 +35,7 @@ use iceoryx2::prelude::ServiceName;
 use parking_lot::Mutex;
 
 use super::blocking_add::{AddClient, BlockingAddError};
+use super::coverage::{Coverage, Receiving};
 use super::mirrors::SharedMirrors;
 use super::settings::{
     bridge_qos, fixed_sample_len, generation_domain, inbox_domain, inbox_qos, join_service,
@@ -106,6 +107,10 @@ pub(crate) struct Import {
     /// the trajectory (re-pointed, destroyed, disconnected) at once, not at the end of
     /// their sleep's slice.
     sleepers: Arc<std::sync::atomic::AtomicUsize>,
+    /// This process's count in the writer's word as a receiver of its samples, covered
+    /// while a thread sleeps on the word ([`super::coverage`]); `None` where the word
+    /// cannot be mapped (the writer then always notifies).
+    coverage: Option<Arc<Coverage>>,
     /// Checks each structure's attributes against the trajectory's type; `None` if
     /// the record's definitions do not resolve (logged at the start).
     checker: Option<TypeChecker>,
@@ -253,6 +258,7 @@ impl Import {
             writer,
             workers: Arc::default(),
             sleepers: Arc::default(),
+            coverage: Coverage::open(sample_wake.name.as_str()),
             checker,
             verify: verify.clone(),
             lost: 0,
@@ -266,6 +272,14 @@ impl Import {
     /// The wake-up service of this import's samples.
     fn sample_wake(&self) -> Option<EventSpec> {
         self.wakes.first().copied()
+    }
+
+    /// The receiver thread's listener on `wake` counted in the writer's word, if `wake`
+    /// is this import's samples' (see [`super::coverage`]): take it after the listener
+    /// exists, drop it before the listener.
+    pub fn receiving(&self, wake: &EventSpec) -> Option<Receiving> {
+        let samples = self.sample_wake().is_some_and(|w| w.name == wake.name);
+        self.coverage.as_ref().filter(|_| samples).map(Coverage::receiving)
     }
 
     /// The wake-up services the receiver thread listens to: without the samples'
@@ -458,6 +472,7 @@ impl ReplicaFeed for ImportFeed {
             mirrors: Weak::clone(&self.mirrors),
             import: Weak::new(),
             sleepers: None,
+            coverage: None,
             worker: None,
         }))
     }
@@ -471,6 +486,7 @@ impl ReplicaFeed for ImportFeed {
             mirrors: Weak::clone(&self.mirrors),
             import: Weak::new(),
             sleepers: None,
+            coverage: None,
             worker: Some(None),
         }))
     }
@@ -502,6 +518,9 @@ struct ImportWaiter {
     /// The import's count of this process's threads asleep on it
     /// ([`ImportWaiter::fall_asleep`]).
     sleepers: Option<Arc<std::sync::atomic::AtomicUsize>>,
+    /// The import's count of this process in the writer's word, covered while this
+    /// waiter sleeps on the word ([`super::coverage`]).
+    coverage: Option<Arc<Coverage>>,
     /// A worker's waiter: the import's count of waiting workers it is counted in (see
     /// [`Import::receiver_wakes`]); `None` for a user's subscription.
     worker: Option<Option<Arc<std::sync::atomic::AtomicUsize>>>,
@@ -521,16 +540,21 @@ impl ImportWaiter {
         let import = mirrors.import(&self.trajectory);
         let current = import.as_ref().and_then(|i| {
             let i = i.lock();
-            i.sample_wake()
-                .map(|w| (i.generation, w, Arc::clone(&i.workers), Arc::clone(&i.sleepers)))
+            i.sample_wake().map(|w| {
+                let counts = (Arc::clone(&i.sleepers), i.coverage.clone());
+                (i.generation, w, Arc::clone(&i.workers), counts)
+            })
         });
-        let (Some(import), Some((generation, wake, workers, sleepers))) = (import, current) else {
+        let (Some(import), Some((generation, wake, workers, (sleepers, coverage)))) =
+            (import, current)
+        else {
             self.import = Weak::new();
             self.stand_down();
             return false;
         };
         self.import = Arc::downgrade(&import);
         self.sleepers = Some(sleepers);
+        self.coverage = coverage;
         if self.listening.as_ref().is_some_and(|(g, _)| *g == generation) {
             return true;
         }
@@ -564,12 +588,16 @@ impl ImportWaiter {
 }
 
 /// A waiter counted among its import's sleepers while this lives (see
-/// [`ImportWaiter::fall_asleep`]).
-struct Asleep(Arc<std::sync::atomic::AtomicUsize>);
+/// [`ImportWaiter::fall_asleep`]), and covering its process's receiver if it sleeps on
+/// the word.
+struct Asleep {
+    count: Arc<std::sync::atomic::AtomicUsize>,
+    _covering: Option<super::coverage::Asleep>,
+}
 
 impl Drop for Asleep {
     fn drop(&mut self) {
-        self.0.fetch_sub(1, std::sync::atomic::Ordering::SeqCst);
+        self.count.fetch_sub(1, std::sync::atomic::Ordering::SeqCst);
     }
 }
 
@@ -578,10 +606,15 @@ impl ImportWaiter {
     /// import wakes it when it goes; `None` if the import is already gone (look
     /// again instead of sleeping). Counted first, then the import looked at: either
     /// the import's drop sees the count and rings, or this sees the import gone.
-    fn fall_asleep(&self) -> Option<Asleep> {
+    ///
+    /// A waiter about to sleep on the word (`on_word`) also covers its process's
+    /// receiver ([`super::coverage`]) from now until the result is dropped, which must
+    /// come before it feeds the replica: the writer may then skip the notify.
+    fn fall_asleep(&self, on_word: bool) -> Option<Asleep> {
         let sleepers = self.sleepers.as_ref()?;
         sleepers.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
-        let asleep = Asleep(Arc::clone(sleepers));
+        let covering = self.coverage.as_ref().filter(|_| on_word).map(Coverage::asleep);
+        let asleep = Asleep { count: Arc::clone(sleepers), _covering: covering };
         self.import.upgrade().map(|_| asleep)
     }
 
@@ -659,7 +692,7 @@ impl FeedWaiter for JoinedWaiter {
             let seen: Option<Vec<(&WakeWord, u32)>> =
                 self.waiters.iter().map(ImportWaiter::unchanged_word).collect();
             let asleep: Option<Vec<Asleep>> =
-                self.waiters.iter().map(ImportWaiter::fall_asleep).collect();
+                self.waiters.iter().map(|w| w.fall_asleep(true)).collect();
             if let Some(seen) = seen
                 && let Some(_asleep) = asleep
                 && let Err(e) = crate::wake_word::sleep_any(&seen, timeout)
@@ -678,7 +711,7 @@ impl FeedWaiter for JoinedWaiter {
             self.waiters.iter().map(ImportWaiter::listener).collect();
         let Some(listeners) = listeners else { return false };
         let asleep: Option<Vec<Asleep>> =
-            self.waiters.iter().map(ImportWaiter::fall_asleep).collect();
+            self.waiters.iter().map(|w| w.fall_asleep(false)).collect();
         let Some(_asleep) = asleep else {
             self.feed();
             return true;
@@ -748,7 +781,7 @@ impl FeedWaiter for ImportWaiter {
         }
         if self.word().is_some() {
             if let Some((word, seen)) = self.unchanged_word()
-                && let Some(_asleep) = self.fall_asleep()
+                && let Some(_asleep) = self.fall_asleep(true)
             {
                 word.sleep(seen, timeout.min(WAIT_SLICE));
             }
@@ -757,7 +790,7 @@ impl FeedWaiter for ImportWaiter {
             return true;
         }
         let Some(listener) = self.listener() else { return false };
-        let Some(_asleep) = self.fall_asleep() else {
+        let Some(_asleep) = self.fall_asleep(false) else {
             self.feed();
             return true;
         };

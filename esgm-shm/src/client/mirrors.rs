@@ -52,6 +52,17 @@ impl Route {
     }
 }
 
+impl Route {
+    /// The receiver's listener on `wake` counted in the writer's word, if it carries an
+    /// import's samples ([`Import::receiving`]).
+    pub fn receiving(&self, wake: &EventSpec) -> Option<super::coverage::Receiving> {
+        match self {
+            Route::Import(import) => import.lock().receiving(wake),
+            Route::Inbox(_) | Route::Join(_) => None,
+        }
+    }
+}
+
 /// The exports and imports of one connection, by trajectory name. The map is only the
 /// index: each entry is locked on its own ([`Mirror`]).
 #[derive(Debug, Default)]

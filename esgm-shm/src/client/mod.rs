@@ -61,6 +61,7 @@
 
 pub(crate) mod admin;
 mod blocking_add;
+mod coverage;
 mod export;
 pub mod holdings;
 mod image_loans;

@@ -137,7 +137,7 @@ fn run(node_name: &NodeName, doorbell: &EventSpec, mirrors: &SharedMirrors) {
     };
     // Listeners live across changes of the set: a change opens the new services' and
     // drops the gone ones', never all of them again.
-    let mut listening: HashMap<ServiceName, Listener<ShmService>> = HashMap::new();
+    let mut listening: HashMap<ServiceName, Heard> = HashMap::new();
     let bell = match listener(&node, doorbell) {
         Ok(l) => Some(l),
         Err(e) => {
@@ -157,8 +157,10 @@ fn run(node_name: &NodeName, doorbell: &EventSpec, mirrors: &SharedMirrors) {
                 continue;
             }
             match listener(&node, spec) {
-                Ok(l) => {
-                    listening.insert(spec.name, l);
+                Ok(listener) => {
+                    // Counted once it listens; served once below, after the count.
+                    let receiving = route.receiving(spec);
+                    listening.insert(spec.name, Heard { _receiving: receiving, listener });
                     fresh.push(route.clone());
                 }
                 Err(e) => {
@@ -199,9 +201,17 @@ fn listener(node: &ShmNode, service: &EventSpec) -> Result<Listener<ShmService>,
         .and_then(|s| s.listener_builder().create().map_err(|e| format!("{e:?}")))
 }
 
+/// A service the receiver listens to.
+struct Heard {
+    /// Its listener counted in the writer's word, for an import's samples (see
+    /// [`super::coverage`]). Before `listener`: counted out before the listener goes.
+    _receiving: Option<super::coverage::Receiving>,
+    listener: Listener<ShmService>,
+}
+
 /// What the receiver waits on between two changes of the set of mirrors.
 struct Listening<'a> {
-    listeners: &'a HashMap<ServiceName, Listener<ShmService>>,
+    listeners: &'a HashMap<ServiceName, Heard>,
     /// Where each service's notifications go.
     routes: &'a HashMap<ServiceName, Route>,
     /// Services without a listener: served at every [`RECHECK`].
@@ -239,7 +249,7 @@ fn wait_while_unchanged(
     };
     let mut by_id = HashMap::with_capacity(set.listeners.len() + 1);
     let mut guards = Vec::with_capacity(set.listeners.len() + 1);
-    let all = set.listeners.iter().map(|(name, l)| (Some(*name), l));
+    let all = set.listeners.iter().map(|(name, heard)| (Some(*name), &heard.listener));
     for (name, listener) in all.chain(bell.map(|b| (None, b))) {
         match waitset.attach_notification(listener) {
             Ok(guard) => {

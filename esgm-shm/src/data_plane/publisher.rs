@@ -61,13 +61,13 @@ use crate::image_loan::{ImageChunk, ImageLoan};
 use crate::payload::{BLOCK_LEN, Block16, SampleHeader, as_uninit_bytes, blocks_for, zero_fill};
 use crate::qos::{Delivery, TrajectoryQos};
 use crate::service::{
-    DataService, OpenError, ShmNode, open_data_service, open_wake_service, with_room,
+    DataService, OpenError, ShmNode, WakeService, open_data_service, open_wake_service, with_room,
 };
 use crate::service_name::{DEFAULT_DOMAIN, TrajectoryServiceNames};
 use crate::size_hint::archived_size_hint;
 use crate::structure_loan::StructureLoan;
 use crate::type_id::type_id;
-use crate::wake_word::WakeWord;
+use crate::wake_word::{Ring, WakeWord};
 
 /// Default initial size of a publisher's samples: small structures fit without growth.
 pub const DEFAULT_INITIAL_MAX_LEN: usize = 4096;
@@ -262,12 +262,14 @@ impl TrajectoryPublisherBuilder {
             service,
             port,
             notifier,
+            wake,
             word,
             clock: self.clock.clone().unwrap_or_else(SystemClock::shared),
             lossless_timeout: self.lossless_timeout,
             sequence: Cell::new(0),
             max_len: max_blocks * BLOCK_LEN,
             notify_failures: Cell::new(0),
+            notifies_spared: Cell::new(0),
             spare: Spare::default(),
         })
     }
@@ -285,6 +287,9 @@ pub struct TrajectoryPublisher {
     spare: Spare,
     port: Publisher<ShmService, [Block16], SampleHeader>,
     notifier: Notifier<ShmService>,
+    /// The notifier's service, whose listeners a ring that found every receiver
+    /// covered is compared with ([`Ring::Covered`]).
+    wake: WakeService,
     /// Rung before the notifier: readers sleeping on the futex word ([`WakeWord`]).
     word: Option<WakeWord>,
     clock: SharedClock,
@@ -293,6 +298,17 @@ pub struct TrajectoryPublisher {
     /// The configured maximum sample size in bytes (see the module docs).
     max_len: usize,
     notify_failures: Cell<u64>,
+    /// Notifies skipped because every listener's process was covered.
+    notifies_spared: Cell<u64>,
+}
+
+/// Which listeners of the wake-up event a send must notify.
+#[derive(Debug, Clone, Copy)]
+enum Listeners {
+    /// Every one: a new reader waits for its history on a listener of its own.
+    All,
+    /// Those whose process no thread asleep on the word covers ([`Ring::Covered`]).
+    Uncovered,
 }
 
 /// The spare loan of a [`TrajectoryPublisher`], if one is held.
@@ -381,6 +397,13 @@ impl TrajectoryPublisher {
         self.notify_failures.get()
     }
 
+    /// How many sends skipped the iceoryx2 notify because every process listening to
+    /// it had a thread asleep on the futex word, which the ring woke and which feeds
+    /// that process (see [`crate::wake_word`]): for diagnostics and tests.
+    pub fn notifies_spared(&self) -> u64 {
+        self.notifies_spared.get()
+    }
+
     /// Connects subscribers that appeared since the last send and hands them the
     /// history; see the module docs.
     pub fn update_connections(&self) -> Result<(), PublishError> {
@@ -392,7 +415,8 @@ impl TrajectoryPublisher {
     /// trajectory's join service) knows, once woken, that its queue holds it.
     pub fn welcome(&self) -> Result<(), PublishError> {
         self.update_connections()?;
-        self.wake();
+        // Every listener: the reader that rang waits on its own, which nobody covers.
+        self.wake(Listeners::All);
         Ok(())
     }
 
@@ -576,7 +600,7 @@ impl TrajectoryPublisher {
             // the timeout: either way the number is used, so a reader that missed it
             // sees a gap in the sequence and counts the sample as lost.
             self.sequence.set(sequence + 1);
-            self.wake();
+            self.wake(Listeners::Uncovered);
         }
         let subscribers = sent.map_err(|e| match e {
             SendError::UnableToDeliver => {
@@ -594,9 +618,24 @@ impl TrajectoryPublisher {
         self.sequence.set(self.sequence.get() + 1);
     }
 
-    fn wake(&self) {
-        if let Some(word) = &self.word {
-            word.ring();
+    fn wake(&self, listeners: Listeners) {
+        let ring = self.word.as_ref().map(WakeWord::ring);
+        if let (Some(Ring::Covered { receivers }), Listeners::Uncovered, Some(word)) =
+            (ring, listeners, &self.word)
+        {
+            // Read after the ring's sequentially consistent add: a listener made before
+            // this send is counted.
+            let listening = self.wake.dynamic_config().number_of_listeners();
+            match listening.cmp(&(receivers as usize)) {
+                std::cmp::Ordering::Equal => {
+                    self.notifies_spared.set(self.notifies_spared.get() + 1);
+                    return;
+                }
+                // A receiver's process died: its listener went, its count stays.
+                std::cmp::Ordering::Less => word.receivers_unheard(),
+                // A listener nobody covers (a reader sleeping on the event itself).
+                std::cmp::Ordering::Greater => {}
+            }
         }
         // A failed wake-up is not a failed publish: the sample is delivered, and a
         // reader's timed wait bounds the delay. Log the first, count all.

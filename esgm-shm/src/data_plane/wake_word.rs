@@ -35,6 +35,26 @@
 //! cannot be opened (no room in `/dev/shm`, another user's file) falls back to the
 //! event, as does every reader when [`WAKE_ENV`] is `event`.
 //!
+//! # A notify nobody needs
+//! A process that reads another's trajectory listens to its event on its receiver
+//! thread, which feeds the process's replica. When one of its threads sleeps on the
+//! word and feeds the replica itself once woken, that notify only wakes a second
+//! thread for nothing: a datagram and a wake-up, 3–4 µs of every hop on this machine
+//! (BENCHMARKS.md). So the page also counts, in the sleepers' cache line:
+//! - `receivers`: processes whose receiver listens to the event (counted in after its
+//!   listener exists, out before it goes);
+//! - `covered`: those of them with a thread asleep on the word, which feeds the replica
+//!   once woken (counted in before that thread looks at the word, out before it feeds).
+//!
+//! Each is counted in the process's slot too, as flags, in the order that leaves the
+//! total too high for `receivers` and too low for `covered` if the process dies
+//! between the two. A ring reports [`Ring::Covered`] when every receiver is covered
+//! and it woke every counted sleeper; the writer then skips the notify if iceoryx2
+//! counts exactly that many listeners (another listener, a reader sleeping on the event,
+//! is one nobody covers). A dead process's flags are counted out with its sleepers
+//! ([`WakeWord::count_out_the_dead`]); until then it counts on both sides, or only
+//! among the receivers, and either way makes no other process's notify skipped.
+//!
 //! # A process killed while it slept
 //! It leaves `sleepers` too high, and its writer would call `FUTEX_WAKE` after each
 //! sample (about a microsecond, nobody woken) until the page is made anew. So a
@@ -81,7 +101,15 @@ const LEN: usize = 4096;
 /// not slow the writer's add.
 const SEQUENCE: usize = 0;
 const SLEEPERS: usize = 64;
+/// In the sleepers' line: the writer reads all three after each ring.
+const RECEIVERS: usize = 72;
+const COVERED: usize = 76;
 const USERS: usize = 128;
+/// A slot's flags: its mapping is counted among the receivers, and among the covered.
+/// The bits below count its sleepers.
+const RECEIVER_FLAG: u32 = 1 << 31;
+const COVERED_FLAG: u32 = 1 << 30;
+const SLEEPER_BITS: u32 = COVERED_FLAG - 1;
 /// Where the mappings' slots begin, and how many there are: a 32-bit count each.
 const SLOTS: usize = 192;
 const SLOT_COUNT: usize = (LEN - SLOTS) / 4;
@@ -283,16 +311,43 @@ impl WakeWord {
     }
 
     /// Tells every reader of the trajectory that a sample was sent (after the send):
-    /// an atomic add, and a `FUTEX_WAKE` only if somebody sleeps.
-    pub fn ring(&self) {
+    /// an atomic add, and a `FUTEX_WAKE` only if somebody sleeps. Returns whether the
+    /// processes that listen to the trajectory's event need its notify too (see the
+    /// module docs).
+    pub fn ring(&self) -> Ring {
         self.counter(SEQUENCE).fetch_add(1, Ordering::SeqCst);
-        if self.counter(SLEEPERS).load(Ordering::SeqCst) != 0 {
-            if futex_wake(self.counter(SEQUENCE)) == 0 {
+        let sleepers = self.counter(SLEEPERS).load(Ordering::SeqCst);
+        let mut woken = 0;
+        if sleepers != 0 {
+            woken = futex_wake(self.counter(SEQUENCE));
+            if woken == 0 {
                 self.fruitless_ring();
             } else {
                 self.fruitless.store(0, Ordering::Relaxed);
             }
         }
+        // Receivers first: one counted out after this load only lowers `covered`, and
+        // one counted in after it is served by its receiver's first look (it listens
+        // before it is counted).
+        let receivers = self.counter(RECEIVERS).load(Ordering::SeqCst);
+        if receivers == 0 || receivers > SLOT_COUNT as u32 {
+            return Ring::Notify;
+        }
+        let covered = self.counter(COVERED).load(Ordering::SeqCst);
+        // A sleeper counted but not woken is between its count and its sleep (it will
+        // feed anyway), woken by an earlier ring, or dead: notify, to be sure.
+        if covered == receivers && woken >= libc::c_long::from(sleepers) {
+            Ring::Covered { receivers }
+        } else {
+            Ring::Notify
+        }
+    }
+
+    /// The writer saw fewer listeners on the trajectory's event than receivers counted
+    /// here: a receiver's process died, and its counts stay until a look for the dead,
+    /// which this brings nearer like a fruitless ring.
+    pub(crate) fn receivers_unheard(&self) {
+        self.fruitless_ring();
     }
 
     /// A ring woke nobody though sleepers are counted: a sleeper between its count and
@@ -316,7 +371,8 @@ impl WakeWord {
     }
 
     /// Counts out of `sleepers` the threads that slept through a mapping that is gone
-    /// (its process died asleep); returns how many. Under the file's lock, taken
+    /// (its process died asleep), and out of `receivers` and `covered` the receivers
+    /// whose mapping is gone; returns how many of both. Under the file's lock, taken
     /// without waiting (`WouldBlock` if another process holds it, or another thread of
     /// this mapping looks), so that no mapping claims a slot meanwhile. A writer calls
     /// it itself when its rings wake nobody; it is public for diagnostics and tests.
@@ -349,6 +405,51 @@ impl WakeWord {
     /// diagnostics and tests.
     pub fn sleepers(&self) -> u32 {
         self.counter(SLEEPERS).load(Ordering::SeqCst)
+    }
+
+    /// How many processes are counted as receivers of the trajectory's event, and how
+    /// many of them as covered by a sleeper (see the module docs): for diagnostics and
+    /// tests.
+    pub fn receivers(&self) -> (u32, u32) {
+        (
+            self.counter(RECEIVERS).load(Ordering::SeqCst),
+            self.counter(COVERED).load(Ordering::SeqCst),
+        )
+    }
+
+    /// Counts this mapping's process among the receivers: the total first, then the
+    /// slot, so that a death between the two leaves the total too high (a notify sent
+    /// for nothing, never one skipped). False, and nothing counted, for a mapping
+    /// without a slot: nothing could count it out if its process died.
+    pub(crate) fn count_receiver_in(&self) -> bool {
+        let Some(slot) = self.slot else { return false };
+        self.counter(RECEIVERS).fetch_add(1, Ordering::SeqCst);
+        self.counter(SLOTS + 4 * slot).fetch_or(RECEIVER_FLAG, Ordering::SeqCst);
+        true
+    }
+
+    /// Counts this mapping's process out of the receivers: the slot first, then the
+    /// total.
+    pub(crate) fn count_receiver_out(&self) {
+        let Some(slot) = self.slot else { return };
+        self.counter(SLOTS + 4 * slot).fetch_and(!RECEIVER_FLAG, Ordering::SeqCst);
+        self.counter(RECEIVERS).fetch_sub(1, Ordering::SeqCst);
+    }
+
+    /// Counts this mapping's process as covered: the slot first, then the total, so that
+    /// a death between the two leaves the total too low (a notify sent for nothing).
+    /// Only for a mapping counted among the receivers.
+    pub(crate) fn count_covered_in(&self) {
+        let Some(slot) = self.slot else { return };
+        self.counter(SLOTS + 4 * slot).fetch_or(COVERED_FLAG, Ordering::SeqCst);
+        self.counter(COVERED).fetch_add(1, Ordering::SeqCst);
+    }
+
+    /// Counts this mapping's process out of the covered: the total first, then the slot.
+    pub(crate) fn count_covered_out(&self) {
+        let Some(slot) = self.slot else { return };
+        self.counter(COVERED).fetch_sub(1, Ordering::SeqCst);
+        self.counter(SLOTS + 4 * slot).fetch_and(!COVERED_FLAG, Ordering::SeqCst);
     }
 
     /// Counts the calling thread asleep until the result is dropped: in the total,
@@ -417,20 +518,47 @@ unsafe fn counter_at<'a>(base: NonNull<u8>, offset: usize) -> &'a AtomicU32 {
     unsafe { AtomicU32::from_ptr(base.as_ptr().add(offset).cast::<u32>()) }
 }
 
-/// Empties `slot` of the page at `base` and counts what it held out of the total;
-/// returns it. The caller holds the slot's record lock.
+/// Empties `slot` of the page at `base` and counts what it held out of the totals:
+/// its sleepers, and its process as a receiver and as covered; returns how many of
+/// those it held. The caller holds the slot's record lock.
 ///
 /// # Safety
 /// `base` is a live mapping of [`LEN`] bytes.
 unsafe fn count_out(base: NonNull<u8>, slot: usize) -> u32 {
     // SAFETY: forwarded to the caller.
-    let held = unsafe { counter_at(base, SLOTS + 4 * slot) }.swap(0, Ordering::SeqCst);
-    if held != 0 {
-        // SAFETY: as above. The total is at least every slot's count (counted in
-        // first, out last), so this does not wrap.
-        unsafe { counter_at(base, SLEEPERS) }.fetch_sub(held, Ordering::SeqCst);
+    let counter = |offset| unsafe { counter_at(base, offset) };
+    let held = counter(SLOTS + 4 * slot).swap(0, Ordering::SeqCst);
+    let sleepers = held & SLEEPER_BITS;
+    if sleepers != 0 {
+        // The total is at least every slot's count (counted in first, out last), so
+        // this does not wrap.
+        counter(SLEEPERS).fetch_sub(sleepers, Ordering::SeqCst);
     }
-    held
+    // Covered before receivers: a look that stops between leaves `covered` the lower.
+    if held & COVERED_FLAG != 0 {
+        counter(COVERED).fetch_sub(1, Ordering::SeqCst);
+    }
+    let receiver = held & RECEIVER_FLAG != 0;
+    if receiver {
+        counter(RECEIVERS).fetch_sub(1, Ordering::SeqCst);
+    }
+    sleepers + u32::from(receiver)
+}
+
+/// What a ring tells the writer about the processes that listen to the trajectory's
+/// event (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Ring {
+    /// Notify the event: some receiver has no thread asleep on the word that this
+    /// ring woke, or none is counted.
+    Notify,
+    /// Every one of the `receivers` counted has a thread asleep on the word, which this
+    /// ring woke and which feeds its process's replica: if the event has exactly that
+    /// many listeners, they are theirs, and the notify would wake them for nothing.
+    Covered {
+        /// The receivers counted, to compare with the event's listeners.
+        receivers: u32,
+    },
 }
 
 /// Takes (`F_WRLCK`) or releases (`F_UNLCK`) the OFD record lock on `slot`'s bytes,
@@ -677,6 +805,26 @@ mod tests {
         word.sleep(seen, Duration::from_secs(20));
         assert!(start.elapsed() < Duration::from_secs(20));
         t.join().unwrap();
+    }
+
+    #[test]
+    fn a_dead_receivers_counts_are_counted_out_by_a_look_and_a_sleeper_not_woken_is_notified() {
+        let name = unique();
+        let writer = WakeWord::open(&name).unwrap();
+        let dead = WakeWord::open(&name).unwrap();
+        assert!(dead.count_receiver_in());
+        dead.count_covered_in();
+        assert_eq!(writer.ring(), Ring::Covered { receivers: 1 });
+        // Counted asleep, but in no futex wait: a ring cannot wake it.
+        let asleep = dead.count_in();
+        assert_eq!(writer.ring(), Ring::Notify, "a counted sleeper the ring did not wake");
+        std::mem::forget(asleep);
+        // As if its process died: the mapping and its record lock go, its counts stay.
+        drop(dead);
+        assert_eq!(writer.receivers(), (1, 1), "nothing counts a dead mapping out by itself");
+        assert_eq!(writer.count_out_the_dead().unwrap(), 2, "one sleeper, one receiver");
+        assert_eq!((writer.receivers(), writer.sleepers()), ((0, 0), 0));
+        assert_eq!(writer.ring(), Ring::Notify, "no receiver left");
     }
 
     #[test]

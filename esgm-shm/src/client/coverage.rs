@@ -1,0 +1,178 @@
+//! Whether this process's receiver needs the writer's notify for an import: counted
+//! in the trajectory's futex word, so that the writer skips a notify that would only
+//! wake the receiver for nothing.
+//!
+//! A sample from another process wakes the subscription or worker sleeping on the
+//! writer's word, which feeds the replica itself ([`super::import`]). While the
+//! receiver thread also listens to the writer's event, the same sample wakes it too:
+//! a datagram and a second wake-up, 3–4 µs of every hop on this machine, for a
+//! replica already fed. So each import counts its process in the word (see
+//! [`crate::wake_word`]):
+//! - as a *receiver* while the receiver thread listens to the writer's event
+//!   ([`Coverage::receiving`], from after the listener exists until before it goes);
+//! - as *covered* while, in addition, one of its threads is asleep on the word
+//!   ([`Coverage::asleep`]: counted before it looks at the word for the last time, and
+//!   out before it feeds the replica).
+//!
+//! A sample sent while the process is covered is fed by the thread the ring wakes,
+//! since that thread feeds after it is counted out; one sent while it is not reaches
+//! the receiver through the notify. Every sample is fed either way.
+
+use std::sync::Arc;
+
+use parking_lot::Mutex;
+
+use crate::wake_word::WakeWord;
+
+/// One import's count in its trajectory's word: its own mapping (its own slot, which
+/// a look for the dead can count out if this process dies) and what this process has
+/// counted there.
+#[derive(Debug)]
+pub(crate) struct Coverage {
+    word: WakeWord,
+    state: Mutex<State>,
+}
+
+/// What this process has counted: its threads asleep on the word, the receiver's
+/// listeners, and whether the word counts it as a receiver and as covered.
+#[derive(Debug, Default)]
+struct State {
+    asleep: usize,
+    listeners: usize,
+    receiver: bool,
+    covered: bool,
+}
+
+impl Coverage {
+    /// This process's count in the word of the wake-up service `service`; `None` where
+    /// readers do not sleep on words ([`crate::wake_word::WAKE_ENV`]) or the word cannot
+    /// be mapped (the writer then always notifies, as without this).
+    pub fn open(service: &str) -> Option<Arc<Coverage>> {
+        if !crate::wake_word::futex_enabled() {
+            return None;
+        }
+        match WakeWord::open(service) {
+            Ok(word) => Some(Arc::new(Coverage { word, state: Mutex::default() })),
+            Err(e) => {
+                tracing::debug!(service, error = %e,
+                    "cannot map the wake-up word; the writer always notifies the receiver");
+                None
+            }
+        }
+    }
+
+    /// Counts the receiver's listener on the writer's event until the result is
+    /// dropped: take it after the listener exists, and drop it before the listener.
+    pub fn receiving(self: &Arc<Self>) -> Receiving {
+        let mut state = self.state.lock();
+        state.listeners += 1;
+        if state.listeners == 1 && self.word.count_receiver_in() {
+            state.receiver = true;
+            if state.asleep > 0 {
+                self.word.count_covered_in();
+                state.covered = true;
+            }
+        }
+        Receiving(Arc::clone(self))
+    }
+
+    /// Counts the calling thread asleep on the word until the result is dropped: take
+    /// it before the last look at the word before sleeping, and drop it before
+    /// feeding the replica.
+    pub fn asleep(self: &Arc<Self>) -> Asleep {
+        let mut state = self.state.lock();
+        state.asleep += 1;
+        if state.asleep == 1 && state.receiver {
+            self.word.count_covered_in();
+            state.covered = true;
+        }
+        Asleep(Arc::clone(self))
+    }
+}
+
+/// The receiver's listener counted ([`Coverage::receiving`]).
+#[derive(Debug)]
+pub(crate) struct Receiving(Arc<Coverage>);
+
+impl Drop for Receiving {
+    fn drop(&mut self) {
+        let coverage = &self.0;
+        let mut state = coverage.state.lock();
+        state.listeners -= 1;
+        if state.listeners > 0 || !state.receiver {
+            return;
+        }
+        if state.covered {
+            coverage.word.count_covered_out();
+            state.covered = false;
+        }
+        coverage.word.count_receiver_out();
+        state.receiver = false;
+    }
+}
+
+/// A thread counted asleep ([`Coverage::asleep`]).
+#[derive(Debug)]
+pub(crate) struct Asleep(Arc<Coverage>);
+
+impl Drop for Asleep {
+    fn drop(&mut self) {
+        let coverage = &self.0;
+        let mut state = coverage.state.lock();
+        state.asleep -= 1;
+        if state.asleep == 0 && state.covered {
+            coverage.word.count_covered_out();
+            state.covered = false;
+        }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used, reason = "a failure is a failed test")]
+mod tests {
+    use super::*;
+    use crate::wake_word::Ring;
+
+    /// A word's writer, and the service it belongs to (each `Coverage::open` of it is
+    /// a mapping of its own, as another process's would be).
+    fn word() -> (WakeWord, String) {
+        let domain = crate::service_name::unique_domain("coverage");
+        let service = crate::service_name::wake_service_name(&domain, "t");
+        (WakeWord::open(&service).unwrap(), service)
+    }
+
+    #[test]
+    fn a_process_is_covered_only_while_its_receiver_listens_and_a_thread_sleeps() {
+        let (writer, service) = word();
+        let coverage = Coverage::open(&service).unwrap();
+        let asleep = coverage.asleep();
+        assert_eq!(writer.receivers(), (0, 0), "no receiver: nothing to cover");
+        let receiving = coverage.receiving();
+        assert_eq!(writer.receivers(), (1, 1), "a receiver that comes finds the sleeper");
+        let second = coverage.asleep();
+        drop(asleep);
+        assert_eq!(writer.receivers(), (1, 1), "one thread still sleeps");
+        drop(second);
+        assert_eq!(writer.receivers(), (1, 0), "nobody sleeps: the receiver needs the notify");
+        assert_eq!(writer.ring(), Ring::Notify);
+        let asleep = coverage.asleep();
+        assert_eq!(writer.ring(), Ring::Covered { receivers: 1 });
+        drop(receiving);
+        assert_eq!(writer.receivers(), (0, 0), "the receiver left, covered or not");
+        assert_eq!(writer.ring(), Ring::Notify);
+        drop(asleep);
+        assert_eq!(writer.receivers(), (0, 0));
+    }
+
+    #[test]
+    fn a_receiver_not_covered_is_notified_whoever_else_is() {
+        let (writer, service) = word();
+        let (one, other) = (Coverage::open(&service).unwrap(), Coverage::open(&service).unwrap());
+        let (_one, _other) = (one.receiving(), other.receiving());
+        let _asleep = one.asleep();
+        assert_eq!(writer.receivers(), (2, 1));
+        assert_eq!(writer.ring(), Ring::Notify, "the other one needs it");
+        let _also = other.asleep();
+        assert_eq!(writer.ring(), Ring::Covered { receivers: 2 });
+    }
+}
