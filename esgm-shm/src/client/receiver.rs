@@ -10,6 +10,11 @@
 //! inline (see [`super::export`]), a structure crosses a process boundary with one
 //! wake-up: this one.
 //!
+//! While a thread of this process sleeps on an import's futex word, it feeds that
+//! import itself once woken, and the writer skips the notify that would wake this
+//! thread too ([`super::coverage`]): this thread's listener on the import's samples is
+//! counted in the word from after it exists until before it goes.
+//!
 //! Cost proportional to use: a wake-up serves the one mirror its service belongs to
 //! ([`Route`]), looked up by the WaitSet's attachment id, under that mirror's own lock,
 //! whatever the number of mirrors. When the set changes (a generation the location bumps and then rings the
