@@ -154,14 +154,41 @@ mod tests {
         assert_eq!(writer.receivers(), (1, 1), "one thread still sleeps");
         drop(second);
         assert_eq!(writer.receivers(), (1, 0), "nobody sleeps: the receiver needs the notify");
-        assert_eq!(writer.ring(), Ring::Notify);
+        assert_eq!(writer.ring(), Ring { receivers: 1, covered: false });
         let asleep = coverage.asleep();
-        assert_eq!(writer.ring(), Ring::Covered { receivers: 1 });
+        assert_eq!(writer.ring(), Ring { receivers: 1, covered: true });
         drop(receiving);
         assert_eq!(writer.receivers(), (0, 0), "the receiver left, covered or not");
-        assert_eq!(writer.ring(), Ring::Notify);
+        assert_eq!(writer.ring(), Ring { receivers: 0, covered: false });
         drop(asleep);
         assert_eq!(writer.receivers(), (0, 0));
+    }
+
+    #[test]
+    fn a_dead_receivers_count_is_counted_out_once_iceoryx2_has_no_listener_for_it() {
+        let domain = crate::service_name::unique_domain("coverage-unheard");
+        let node = iceoryx2::prelude::NodeBuilder::new().create::<crate::ShmService>().unwrap();
+        let publisher = crate::publisher::TrajectoryPublisher::builder("t", "RobotState")
+            .domain(&domain)
+            .create(&node)
+            .unwrap();
+        let service = crate::service_name::wake_service_name(&domain, "t");
+        let watcher = WakeWord::open(&service).unwrap();
+        // A receiver whose process died after iceoryx2 cleaned its listener up: its
+        // count stays, its slot's lock went.
+        let dead = WakeWord::open(&service).unwrap();
+        assert!(dead.count_receiver_in());
+        drop(dead);
+        let es = esgm_core::EntityStructure::new("robot1", 10, 11).with("x", 1.0);
+        for _ in 1..crate::wake_word::FRUITLESS_RINGS {
+            publisher.publish(&es).unwrap();
+        }
+        assert_eq!(watcher.receivers(), (1, 0), "not before as many sends as fruitless rings");
+        publisher.publish(&es).unwrap();
+        assert_eq!(watcher.receivers(), (0, 0), "counted out by the writer's look");
+        assert_eq!(publisher.notifies_spared(), 0);
+        drop(publisher);
+        crate::wake_word::remove_domain(&domain);
     }
 
     #[test]
@@ -171,8 +198,8 @@ mod tests {
         let (_one, _other) = (one.receiving(), other.receiving());
         let _asleep = one.asleep();
         assert_eq!(writer.receivers(), (2, 1));
-        assert_eq!(writer.ring(), Ring::Notify, "the other one needs it");
+        assert_eq!(writer.ring(), Ring { receivers: 2, covered: false }, "the other needs it");
         let _also = other.asleep();
-        assert_eq!(writer.ring(), Ring::Covered { receivers: 2 });
+        assert_eq!(writer.ring(), Ring { receivers: 2, covered: true });
     }
 }

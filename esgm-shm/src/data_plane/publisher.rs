@@ -67,7 +67,7 @@ use crate::service_name::{DEFAULT_DOMAIN, TrajectoryServiceNames};
 use crate::size_hint::archived_size_hint;
 use crate::structure_loan::StructureLoan;
 use crate::type_id::type_id;
-use crate::wake_word::{Ring, WakeWord};
+use crate::wake_word::WakeWord;
 
 /// Default initial size of a publisher's samples: small structures fit without growth.
 pub const DEFAULT_INITIAL_MAX_LEN: usize = 4096;
@@ -288,7 +288,7 @@ pub struct TrajectoryPublisher {
     port: Publisher<ShmService, [Block16], SampleHeader>,
     notifier: Notifier<ShmService>,
     /// The notifier's service, whose listeners a ring that found every receiver
-    /// covered is compared with ([`Ring::Covered`]).
+    /// covered is compared with ([`crate::wake_word::Ring::covered`]).
     wake: WakeService,
     /// Rung before the notifier: readers sleeping on the futex word ([`WakeWord`]).
     word: Option<WakeWord>,
@@ -307,7 +307,8 @@ pub struct TrajectoryPublisher {
 enum Listeners {
     /// Every one: a new reader waits for its history on a listener of its own.
     All,
-    /// Those whose process no thread asleep on the word covers ([`Ring::Covered`]).
+    /// Those whose process no thread asleep on the word covers
+    /// ([`crate::wake_word::Ring::covered`]).
     Uncovered,
 }
 
@@ -619,22 +620,26 @@ impl TrajectoryPublisher {
     }
 
     fn wake(&self, listeners: Listeners) {
-        let ring = self.word.as_ref().map(WakeWord::ring);
-        if let (Some(Ring::Covered { receivers }), Listeners::Uncovered, Some(word)) =
-            (ring, listeners, &self.word)
-        {
-            // Read after the ring's sequentially consistent add: a listener made before
-            // this send is counted.
-            let listening = self.wake.dynamic_config().number_of_listeners();
-            match listening.cmp(&(receivers as usize)) {
-                std::cmp::Ordering::Equal => {
-                    self.notifies_spared.set(self.notifies_spared.get() + 1);
-                    return;
+        if let Some(word) = &self.word {
+            let ring = word.ring();
+            if ring.receivers > 0 {
+                // Read after the ring's sequentially consistent add: a listener made
+                // before this send is counted.
+                let listening = self.wake.dynamic_config().number_of_listeners();
+                match listening.cmp(&(ring.receivers as usize)) {
+                    std::cmp::Ordering::Equal
+                        if ring.covered && matches!(listeners, Listeners::Uncovered) =>
+                    {
+                        self.notifies_spared.set(self.notifies_spared.get() + 1);
+                        return;
+                    }
+                    // A receiver's process died: its listener went, its count stays.
+                    std::cmp::Ordering::Less => word.receivers_unheard(),
+                    // Some receiver is not covered, a listener nobody counts (a reader
+                    // sleeping on the event itself), or a new reader waits for its
+                    // history: they need the notify.
+                    _ => {}
                 }
-                // A receiver's process died: its listener went, its count stays.
-                std::cmp::Ordering::Less => word.receivers_unheard(),
-                // A listener nobody covers (a reader sleeping on the event itself).
-                std::cmp::Ordering::Greater => {}
             }
         }
         // A failed wake-up is not a failed publish: the sample is delivered, and a

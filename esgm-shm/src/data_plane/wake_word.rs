@@ -48,12 +48,16 @@
 //!
 //! Each is counted in the process's slot too, as flags, in the order that leaves the
 //! total too high for `receivers` and too low for `covered` if the process dies
-//! between the two. A ring reports [`Ring::Covered`] when every receiver is covered
+//! between the two. A ring reports [`Ring::covered`] when every receiver is covered
 //! and it woke every counted sleeper; the writer then skips the notify if iceoryx2
 //! counts exactly that many listeners (another listener, a reader sleeping on the event,
 //! is one nobody covers). A dead process's flags are counted out with its sleepers
-//! ([`WakeWord::count_out_the_dead`]); until then it counts on both sides, or only
-//! among the receivers, and either way makes no other process's notify skipped.
+//! ([`WakeWord::count_out_the_dead`]), by a look that fruitless rings start, and also
+//! sends that see fewer listeners than receivers (iceoryx2 cleaned the dead listener
+//! up); until then it counts on both sides, or only among the receivers, and either
+//! way makes no other process's notify skipped. A process killed between counting
+//! itself as a receiver in the total and in its slot leaves a receiver that no look
+//! can count out: the writer then always notifies, as before this count existed.
 //!
 //! # A process killed while it slept
 //! It leaves `sleepers` too high, and its writer would call `FUTEX_WAKE` after each
@@ -192,7 +196,10 @@ pub struct WakeWord {
     /// This mapping's rings in a row that called `FUTEX_WAKE` (sleepers were counted)
     /// and woke nobody.
     fruitless: AtomicU32,
-    /// How many such rings start the next look for dead sleepers.
+    /// This mapping's sends that saw fewer listeners on the event than receivers
+    /// counted ([`WakeWord::receivers_unheard`]).
+    unheard: AtomicU32,
+    /// How many such rings (or sends) start the next look for the dead.
     look_after: AtomicU32,
     /// Held by the thread looking for dead sleepers: two threads of this mapping share
     /// its record and file locks, so a second look at once could count out a slot
@@ -225,6 +232,7 @@ impl WakeWord {
                     path,
                     slot,
                     fruitless: AtomicU32::new(0),
+                    unheard: AtomicU32::new(0),
                     look_after: AtomicU32::new(FRUITLESS_RINGS),
                     looking: std::sync::Mutex::new(()),
                 });
@@ -331,35 +339,42 @@ impl WakeWord {
         // before it is counted).
         let receivers = self.counter(RECEIVERS).load(Ordering::SeqCst);
         if receivers == 0 || receivers > SLOT_COUNT as u32 {
-            return Ring::Notify;
+            return Ring { receivers, covered: false };
         }
         let covered = self.counter(COVERED).load(Ordering::SeqCst);
         // A sleeper counted but not woken is between its count and its sleep (it will
         // feed anyway), woken by an earlier ring, or dead: notify, to be sure.
-        if covered == receivers && woken >= libc::c_long::from(sleepers) {
-            Ring::Covered { receivers }
-        } else {
-            Ring::Notify
-        }
+        let covered = covered == receivers && woken >= libc::c_long::from(sleepers);
+        Ring { receivers, covered }
     }
 
     /// The writer saw fewer listeners on the trajectory's event than receivers counted
-    /// here: a receiver's process died, and its counts stay until a look for the dead,
-    /// which this brings nearer like a fruitless ring.
+    /// here: a receiver's process died (iceoryx2 cleaned its listener up), and its count
+    /// stays until a look for the dead. After as many such sends as fruitless rings
+    /// start one, looks.
     pub(crate) fn receivers_unheard(&self) {
-        self.fruitless_ring();
+        let sends = self.unheard.fetch_add(1, Ordering::Relaxed) + 1;
+        if sends >= self.look_after.load(Ordering::Relaxed) {
+            self.unheard.store(0, Ordering::Relaxed);
+            self.look();
+        }
     }
 
     /// A ring woke nobody though sleepers are counted: a sleeper between its count and
     /// its sleep, or one whose process died asleep. After enough in a row, looks for
-    /// the dead ([`WakeWord::count_out_the_dead`]).
+    /// the dead.
     fn fruitless_ring(&self) {
         let rings = self.fruitless.fetch_add(1, Ordering::Relaxed) + 1;
-        let look_after = self.look_after.load(Ordering::Relaxed);
-        if rings < look_after {
-            return;
+        if rings >= self.look_after.load(Ordering::Relaxed) {
+            self.fruitless.store(0, Ordering::Relaxed);
+            self.look();
         }
-        self.fruitless.store(0, Ordering::Relaxed);
+    }
+
+    /// Looks for the dead ([`WakeWord::count_out_the_dead`]), and sets how many rings
+    /// start the next look: twice as many after a look that found none.
+    fn look(&self) {
+        let look_after = self.look_after.load(Ordering::Relaxed);
         let next = match self.count_out_the_dead() {
             Ok(0) => look_after.saturating_mul(2).min(MAX_FRUITLESS_RINGS),
             Ok(_) => FRUITLESS_RINGS,
@@ -548,17 +563,14 @@ unsafe fn count_out(base: NonNull<u8>, slot: usize) -> u32 {
 /// What a ring tells the writer about the processes that listen to the trajectory's
 /// event (see the module docs).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Ring {
-    /// Notify the event: some receiver has no thread asleep on the word that this
-    /// ring woke, or none is counted.
-    Notify,
-    /// Every one of the `receivers` counted has a thread asleep on the word, which this
-    /// ring woke and which feeds its process's replica: if the event has exactly that
-    /// many listeners, they are theirs, and the notify would wake them for nothing.
-    Covered {
-        /// The receivers counted, to compare with the event's listeners.
-        receivers: u32,
-    },
+pub struct Ring {
+    /// The processes counted as receivers: iceoryx2 counting fewer listeners means one
+    /// of them died ([`WakeWord::receivers_unheard`]).
+    pub receivers: u32,
+    /// Every one of them has a thread asleep on the word, which this ring woke and
+    /// which feeds its process's replica: if the event has exactly `receivers`
+    /// listeners, they are theirs, and the notify would wake them for nothing.
+    pub covered: bool,
 }
 
 /// Takes (`F_WRLCK`) or releases (`F_UNLCK`) the OFD record lock on `slot`'s bytes,
@@ -814,17 +826,17 @@ mod tests {
         let dead = WakeWord::open(&name).unwrap();
         assert!(dead.count_receiver_in());
         dead.count_covered_in();
-        assert_eq!(writer.ring(), Ring::Covered { receivers: 1 });
+        assert_eq!(writer.ring(), Ring { receivers: 1, covered: true });
         // Counted asleep, but in no futex wait: a ring cannot wake it.
         let asleep = dead.count_in();
-        assert_eq!(writer.ring(), Ring::Notify, "a counted sleeper the ring did not wake");
+        assert!(!writer.ring().covered, "a counted sleeper the ring did not wake");
         std::mem::forget(asleep);
         // As if its process died: the mapping and its record lock go, its counts stay.
         drop(dead);
         assert_eq!(writer.receivers(), (1, 1), "nothing counts a dead mapping out by itself");
         assert_eq!(writer.count_out_the_dead().unwrap(), 2, "one sleeper, one receiver");
         assert_eq!((writer.receivers(), writer.sleepers()), ((0, 0), 0));
-        assert_eq!(writer.ring(), Ring::Notify, "no receiver left");
+        assert_eq!(writer.ring(), Ring { receivers: 0, covered: false }, "no receiver left");
     }
 
     #[test]
