@@ -1,4 +1,4 @@
-//! Whether this process's receiver needs the writer's notify for an import: counted
+//! Whether this connection's receiver needs the writer's notify for an import: counted
 //! in the trajectory's futex word, so that the writer skips a notify that would only
 //! wake the receiver for nothing.
 //!
@@ -6,17 +6,19 @@
 //! writer's word, which feeds the replica itself ([`super::import`]). While the
 //! receiver thread also listens to the writer's event, the same sample wakes it too:
 //! a datagram and a second wake-up, 3–4 µs of every hop on this machine, for a
-//! replica already fed. So each import counts its process in the word (see
-//! [`crate::wake_word`]):
+//! replica already fed. So each import counts its connection in the word (see
+//! [`crate::wake_word`]; two connections of one process count as two):
 //! - as a *receiver* while the receiver thread listens to the writer's event
 //!   ([`Coverage::receiving`], from after the listener exists until before it goes);
 //! - as *covered* while, in addition, one of its threads is asleep on the word
 //!   ([`Coverage::asleep`]: counted before it looks at the word for the last time, and
 //!   out before it feeds the replica).
 //!
-//! A sample sent while the process is covered is fed by the thread the ring wakes,
-//! since that thread feeds after it is counted out; one sent while it is not reaches
-//! the receiver through the notify. Every sample is fed either way.
+//! A sample sent while the connection is covered is fed by its thread asleep, which
+//! feeds after it is counted out, on every path; one sent while it is not reaches the
+//! receiver through the notify. Every sample is fed either way. A thread asleep on a
+//! word made anew (the domain restarted while this connection stayed) covers nothing:
+//! this count is in the old file.
 
 use std::sync::Arc;
 
@@ -76,17 +78,21 @@ impl Coverage {
         Receiving(Arc::clone(self))
     }
 
-    /// Counts the calling thread asleep on the word until the result is dropped: take
-    /// it before the last look at the word before sleeping, and drop it before
-    /// feeding the replica.
-    pub fn asleep(self: &Arc<Self>) -> Asleep {
+    /// Counts the calling thread asleep on `word` until the result is dropped: take it
+    /// before the last look at the word before sleeping, and drop it before feeding
+    /// the replica. `None` if `word` is not the file this count is in (it was made
+    /// anew): the writer of the old one must still notify.
+    pub fn asleep(self: &Arc<Self>, word: &WakeWord) -> Option<Asleep> {
+        if !self.word.same_file(word) {
+            return None;
+        }
         let mut state = self.state.lock();
         state.asleep += 1;
         if state.asleep == 1 && state.receiver {
             self.word.count_covered_in();
             state.covered = true;
         }
-        Asleep(Arc::clone(self))
+        Some(Asleep(Arc::clone(self)))
     }
 }
 
@@ -131,37 +137,97 @@ impl Drop for Asleep {
 #[allow(clippy::unwrap_used, reason = "a failure is a failed test")]
 mod tests {
     use super::*;
-    use crate::wake_word::Ring;
 
     /// A word's writer, and the service it belongs to (each `Coverage::open` of it is
-    /// a mapping of its own, as another process's would be).
+    /// a mapping of its own, as another connection's would be).
     fn word() -> (WakeWord, String) {
         let domain = crate::service_name::unique_domain("coverage");
         let service = crate::service_name::wake_service_name(&domain, "t");
         (WakeWord::open(&service).unwrap(), service)
     }
 
+    /// Whether a ring of `writer` finds every receiver covered, and how many receivers.
+    fn ring(writer: &WakeWord) -> (u32, bool) {
+        // As many listeners as receivers: what the writer needs to skip the notify.
+        let receivers = writer.receivers().0 as usize;
+        let ring = writer.ring_counting(|| receivers);
+        (ring.receivers, ring.covered)
+    }
+
+    /// Rings `writer` while a thread of each of `connections` sleeps on the word (through
+    /// a mapping of its own, as a subscription's waiter does), covering it; returns what
+    /// the ring found, once the ring woke them. Rings only once every one of them is
+    /// asleep in the kernel, not merely counted.
+    fn ring_with_sleepers(
+        writer: &WakeWord,
+        service: &str,
+        connections: &[&Arc<Coverage>],
+    ) -> (u32, bool) {
+        std::thread::scope(|s| {
+            let (tx, rx) = std::sync::mpsc::channel();
+            for coverage in connections {
+                let word = WakeWord::open(service).unwrap();
+                let tx = tx.clone();
+                s.spawn(move || {
+                    // SAFETY: no argument; the calling thread's id.
+                    tx.send(unsafe { libc::gettid() }).unwrap();
+                    let seen = word.sequence();
+                    let _asleep = coverage.asleep(&word).unwrap();
+                    word.sleep(seen, std::time::Duration::from_secs(20));
+                });
+            }
+            let tids: Vec<i32> = rx.iter().take(connections.len()).collect();
+            let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+            while writer.sleepers() < connections.len() as u32 || !tids.iter().all(|&t| asleep(t)) {
+                assert!(std::time::Instant::now() < deadline, "the sleepers never slept");
+                std::thread::sleep(std::time::Duration::from_millis(1));
+            }
+            ring(writer)
+        })
+    }
+
+    /// True if the thread `tid` of this process sleeps in the kernel (after its count,
+    /// a sleeper's only blocking call is its futex wait).
+    fn asleep(tid: i32) -> bool {
+        let stat = std::fs::read_to_string(format!("/proc/self/task/{tid}/stat")).unwrap();
+        // The state follows the command name's closing parenthesis.
+        stat.rsplit_once(") ").is_some_and(|(_, rest)| rest.starts_with('S'))
+    }
+
     #[test]
-    fn a_process_is_covered_only_while_its_receiver_listens_and_a_thread_sleeps() {
+    fn a_connection_is_covered_only_while_its_receiver_listens_and_a_thread_sleeps() {
         let (writer, service) = word();
         let coverage = Coverage::open(&service).unwrap();
-        let asleep = coverage.asleep();
+        let asleep = coverage.asleep(&writer).unwrap();
         assert_eq!(writer.receivers(), (0, 0), "no receiver: nothing to cover");
         let receiving = coverage.receiving();
         assert_eq!(writer.receivers(), (1, 1), "a receiver that comes finds the sleeper");
-        let second = coverage.asleep();
+        let second = coverage.asleep(&writer).unwrap();
         drop(asleep);
         assert_eq!(writer.receivers(), (1, 1), "one thread still sleeps");
         drop(second);
         assert_eq!(writer.receivers(), (1, 0), "nobody sleeps: the receiver needs the notify");
-        assert_eq!(writer.ring(), Ring { receivers: 1, covered: false });
-        let asleep = coverage.asleep();
-        assert_eq!(writer.ring(), Ring { receivers: 1, covered: true });
+        assert_eq!(ring(&writer), (1, false));
+        assert_eq!(ring_with_sleepers(&writer, &service, &[&coverage]), (1, true));
+        let asleep = coverage.asleep(&writer).unwrap();
+        assert_eq!(ring(&writer), (1, false), "counted covered, but no thread the ring woke");
         drop(receiving);
         assert_eq!(writer.receivers(), (0, 0), "the receiver left, covered or not");
-        assert_eq!(writer.ring(), Ring { receivers: 0, covered: false });
+        assert_eq!(ring(&writer), (0, false));
         drop(asleep);
         assert_eq!(writer.receivers(), (0, 0));
+    }
+
+    #[test]
+    fn a_thread_asleep_on_a_word_made_anew_covers_nothing() {
+        let (writer, service) = word();
+        let coverage = Coverage::open(&service).unwrap();
+        let _receiving = coverage.receiving();
+        // The domain ended and the word was made again while this connection stayed.
+        assert_eq!(crate::wake_word::remove_domain(service.split('/').nth(1).unwrap()), 1);
+        let anew = WakeWord::open(&service).unwrap();
+        assert!(coverage.asleep(&anew).is_none(), "its count is in the old file");
+        assert_eq!(writer.receivers(), (1, 0), "the old file's writer still notifies");
     }
 
     #[test]
@@ -186,7 +252,6 @@ mod tests {
         assert_eq!(watcher.receivers(), (1, 0), "not before as many sends as fruitless rings");
         publisher.publish(&es).unwrap();
         assert_eq!(watcher.receivers(), (0, 0), "counted out by the writer's look");
-        assert_eq!(publisher.notifies_spared(), 0);
         drop(publisher);
         crate::wake_word::remove_domain(&domain);
     }
@@ -196,10 +261,11 @@ mod tests {
         let (writer, service) = word();
         let (one, other) = (Coverage::open(&service).unwrap(), Coverage::open(&service).unwrap());
         let (_one, _other) = (one.receiving(), other.receiving());
-        let _asleep = one.asleep();
-        assert_eq!(writer.receivers(), (2, 1));
-        assert_eq!(writer.ring(), Ring { receivers: 2, covered: false }, "the other needs it");
-        let _also = other.asleep();
-        assert_eq!(writer.ring(), Ring { receivers: 2, covered: true });
+        assert_eq!(
+            ring_with_sleepers(&writer, &service, &[&one]),
+            (2, false),
+            "the other needs it"
+        );
+        assert_eq!(ring_with_sleepers(&writer, &service, &[&one, &other]), (2, true));
     }
 }

@@ -607,13 +607,14 @@ impl ImportWaiter {
     /// again instead of sleeping). Counted first, then the import looked at: either
     /// the import's drop sees the count and rings, or this sees the import gone.
     ///
-    /// A waiter about to sleep on the word (`on_word`) also covers its process's
+    /// A waiter about to sleep on a word (`word`) also covers its connection's
     /// receiver ([`super::coverage`]) from now until the result is dropped, which must
-    /// come before it feeds the replica: the writer may then skip the notify.
-    fn fall_asleep(&self, on_word: bool) -> Option<Asleep> {
+    /// come before it feeds the replica, on every path: the writer may skip the notify
+    /// meanwhile.
+    fn fall_asleep(&self, word: Option<&WakeWord>) -> Option<Asleep> {
         let sleepers = self.sleepers.as_ref()?;
         sleepers.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
-        let covering = self.coverage.as_ref().filter(|_| on_word).map(Coverage::asleep);
+        let covering = self.coverage.as_ref().zip(word).and_then(|(c, w)| c.asleep(w));
         let asleep = Asleep { count: Arc::clone(sleepers), _covering: covering };
         self.import.upgrade().map(|_| asleep)
     }
@@ -691,14 +692,21 @@ impl FeedWaiter for JoinedWaiter {
             // Sleep only if no word changed since the last feed (nor was never seen).
             let seen: Option<Vec<(&WakeWord, u32)>> =
                 self.waiters.iter().map(ImportWaiter::unchanged_word).collect();
-            let asleep: Option<Vec<Asleep>> =
-                self.waiters.iter().map(|w| w.fall_asleep(true)).collect();
-            if let Some(seen) = seen
-                && let Some(_asleep) = asleep
-                && let Err(e) = crate::wake_word::sleep_any(&seen, timeout)
-            {
+            let slept = seen.map_or(Ok(()), |seen| {
+                let asleep: Option<Vec<Asleep>> = self
+                    .waiters
+                    .iter()
+                    .zip(&seen)
+                    .map(|(w, (word, _))| w.fall_asleep(Some(word)))
+                    .collect();
+                // Counted out (the covers dropped) before any feed below.
+                asleep.map_or(Ok(()), |_asleep| crate::wake_word::sleep_any(&seen, timeout))
+            });
+            if let Err(e) = slept {
                 tracing::warn!(error = %e,
                     "cannot sleep on the inputs' words; waiting on the channel");
+                // What a skipped notify left to this connection is fed before leaving.
+                self.feed();
                 return false;
             }
             self.waiters.iter_mut().for_each(ImportWaiter::check_word);
@@ -711,7 +719,7 @@ impl FeedWaiter for JoinedWaiter {
             self.waiters.iter().map(ImportWaiter::listener).collect();
         let Some(listeners) = listeners else { return false };
         let asleep: Option<Vec<Asleep>> =
-            self.waiters.iter().map(|w| w.fall_asleep(false)).collect();
+            self.waiters.iter().map(|w| w.fall_asleep(None)).collect();
         let Some(_asleep) = asleep else {
             self.feed();
             return true;
@@ -781,7 +789,7 @@ impl FeedWaiter for ImportWaiter {
         }
         if self.word().is_some() {
             if let Some((word, seen)) = self.unchanged_word()
-                && let Some(_asleep) = self.fall_asleep(true)
+                && let Some(_asleep) = self.fall_asleep(Some(word))
             {
                 word.sleep(seen, timeout.min(WAIT_SLICE));
             }
@@ -790,7 +798,7 @@ impl FeedWaiter for ImportWaiter {
             return true;
         }
         let Some(listener) = self.listener() else { return false };
-        let Some(_asleep) = self.fall_asleep(false) else {
+        let Some(_asleep) = self.fall_asleep(None) else {
             self.feed();
             return true;
         };

@@ -8,9 +8,9 @@
 //! thread; other processes' adds through the writer's gate, whose tap publishes them
 //! — without waking any other thread of esgm on the way. With the writer publishing
 //! inline (see [`super::export`]), a structure crosses a process boundary with one
-//! wake-up: this one.
+//! wake-up: this one, or the one of a thread that waits on the writer itself.
 //!
-//! While a thread of this process sleeps on an import's futex word, it feeds that
+//! While a thread of this connection sleeps on an import's futex word, it feeds that
 //! import itself once woken, and the writer skips the notify that would wake this
 //! thread too ([`super::coverage`]): this thread's listener on the import's samples is
 //! counted in the word from after it exists until before it goes.
@@ -107,10 +107,12 @@ impl Drop for Receiver {
 /// Puts the calling thread (the receiver) in `SCHED_BATCH`: the same share of the CPU
 /// as any thread, but its wake-ups never preempt a running thread.
 ///
-/// A sample written in another process wakes two threads here at once: a subscription
-/// or worker that waits on the writer itself (on the trajectory's futex word), and
-/// this thread (on the iceoryx2 event), which feeds the replica for everything that
-/// does not wait. On a busy core, this thread preempting the reader that is taking the
+/// A sample written in another process can wake two threads here at once: a
+/// subscription or worker that waits on the writer itself (on the trajectory's futex
+/// word), and this thread (on the iceoryx2 event), which feeds the replica for
+/// everything that does not wait. (The writer skips the notify when every connection
+/// listening has such a thread asleep, [`super::coverage`]; not, for instance, while
+/// another connection reads the trajectory without waiting.) On a busy core, this thread preempting the reader that is taking the
 /// sample cost every hop of `connect-small` (event) about 4 µs, a quarter of it
 /// (16.5 µs → 12.4 µs in the same pinned setting, BENCHMARKS.md). A batch thread
 /// still runs as soon as the core is free, and gets its fair share under load, so the

@@ -302,13 +302,24 @@ pub struct TrajectoryPublisher {
     notifies_spared: Cell<u64>,
 }
 
+/// Notifies skipped by every publisher of this process ([`notifies_spared_here`]).
+static SPARED: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+
+/// How many sends of this process's publishers skipped the iceoryx2 notify, every
+/// reader's connection being covered ([`TrajectoryPublisher::notifies_spared`]): for
+/// diagnostics and tests, where the publisher is a connection's own.
+pub fn notifies_spared_here() -> u64 {
+    SPARED.load(std::sync::atomic::Ordering::Relaxed)
+}
+
 /// Which listeners of the wake-up event a send must notify.
 #[derive(Debug, Clone, Copy)]
 enum Listeners {
     /// Every one: a new reader waits for its history on a listener of its own.
     All,
-    /// Those whose process no thread asleep on the word covers
-    /// ([`crate::wake_word::Ring::covered`]).
+    /// Every one, unless every listener belongs to a connection covered by a thread
+    /// asleep on the word ([`crate::wake_word::Ring::covered`]): a notify goes to all
+    /// or to none.
     Uncovered,
 }
 
@@ -398,9 +409,9 @@ impl TrajectoryPublisher {
         self.notify_failures.get()
     }
 
-    /// How many sends skipped the iceoryx2 notify because every process listening to
-    /// it had a thread asleep on the futex word, which the ring woke and which feeds
-    /// that process (see [`crate::wake_word`]): for diagnostics and tests.
+    /// How many sends skipped the iceoryx2 notify because every connection listening
+    /// to it was counted as covered by a thread asleep on the futex word, which feeds
+    /// it once woken (see [`crate::wake_word`]): for diagnostics and tests.
     pub fn notifies_spared(&self) -> u64 {
         self.notifies_spared.get()
     }
@@ -621,25 +632,18 @@ impl TrajectoryPublisher {
 
     fn wake(&self, listeners: Listeners) {
         if let Some(word) = &self.word {
-            let ring = word.ring();
-            if ring.receivers > 0 {
-                // Read after the ring's sequentially consistent add: a listener made
-                // before this send is counted.
-                let listening = self.wake.dynamic_config().number_of_listeners();
-                match listening.cmp(&(ring.receivers as usize)) {
-                    std::cmp::Ordering::Equal
-                        if ring.covered && matches!(listeners, Listeners::Uncovered) =>
-                    {
-                        self.notifies_spared.set(self.notifies_spared.get() + 1);
-                        return;
-                    }
-                    // A receiver's process died: its listener went, its count stays.
-                    std::cmp::Ordering::Less => word.receivers_unheard(),
-                    // Some receiver is not covered, a listener nobody counts (a reader
-                    // sleeping on the event itself), or a new reader waits for its
-                    // history: they need the notify.
-                    _ => {}
-                }
+            // Read after the ring's sequentially consistent add: a listener made before
+            // this send is counted.
+            let ring = word.ring_counting(|| self.wake.dynamic_config().number_of_listeners());
+            if ring.covered && matches!(listeners, Listeners::Uncovered) {
+                self.notifies_spared.set(self.notifies_spared.get() + 1);
+                SPARED.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                word.notify_spared();
+                return;
+            }
+            // A receiver's process died: its listener went, its count stays.
+            if ring.listeners < ring.receivers as usize {
+                word.receivers_unheard();
             }
         }
         // A failed wake-up is not a failed publish: the sample is delivered, and a

@@ -9,17 +9,19 @@
 //!
 //! # The word
 //! Every trajectory has one page of POSIX shared memory, named after its domain and
-//! wake-up service (`/dev/shm/esgm_wake@<domain>@<hash>`). It holds three 32-bit
-//! counters, each on its own cache line, and then the mappings' slots:
+//! wake-up service (`/dev/shm/esgm_wake@<domain>@<hash>`). It holds, on three cache
+//! lines, and then the mappings' slots:
 //! - `sequence`, the futex word: the writer adds one after every sample it sends;
 //! - `sleepers`: readers asleep on `sequence` right now, so that a writer calls
 //!   `FUTEX_WAKE` only when somebody sleeps (a publish nobody waits for costs one
-//!   atomic add and one load, no system call);
+//!   atomic add and a few loads, no system call); beside it, on the same line,
+//!   `receivers` and `covered` (see "A notify nobody needs");
 //! - `users`: processes that map the page, counted under an advisory lock; the last to
 //!   leave removes the file;
-//! - then one slot per mapping (an open file description, locked by it with an OFD
-//!   record lock for as long as it maps the page), counting the threads asleep through
-//!   it.
+//! - then one 32-bit slot per mapping (an open file description, locked by it with an
+//!   OFD record lock for as long as it maps the page), counting the threads asleep
+//!   through it, with two flags: its connection is counted among the receivers, and
+//!   among the covered.
 //!
 //! A reader loads `sequence`, looks for a sample, and sleeps with `FUTEX_WAIT` only if
 //! `sequence` still holds what it loaded: a sample sent after the look changed the
@@ -28,36 +30,45 @@
 //! sees the sleeper and wakes it, or the reader's sleep sees the new sequence.
 //!
 //! # Where iceoryx2's event stays
-//! The writer still notifies the trajectory's iceoryx2 event after ringing the word.
-//! Waits over many trajectories at once (a process's receiver thread) and one-off
+//! The writer still notifies the trajectory's iceoryx2 event after ringing the word,
+//! unless nobody needs it (below). Waits over many trajectories at once (a process's receiver thread) and one-off
 //! waits (a new reader's history) sleep on listeners, which have descriptors for
 //! `poll(2)`; a notify with no listener asleep costs an atomic. A reader whose word
 //! cannot be opened (no room in `/dev/shm`, another user's file) falls back to the
 //! event, as does every reader when [`WAKE_ENV`] is `event`.
 //!
 //! # A notify nobody needs
-//! A process that reads another's trajectory listens to its event on its receiver
-//! thread, which feeds the process's replica. When one of its threads sleeps on the
-//! word and feeds the replica itself once woken, that notify only wakes a second
-//! thread for nothing: a datagram and a wake-up, 3–4 µs of every hop on this machine
-//! (BENCHMARKS.md). So the page also counts, in the sleepers' cache line:
-//! - `receivers`: processes whose receiver listens to the event (counted in after its
-//!   listener exists, out before it goes);
+//! A connection that reads another process's trajectory listens to its event on its
+//! receiver thread, which feeds the connection's replica. When one of the
+//! connection's threads sleeps on the word and feeds the replica itself once woken,
+//! the notify only wakes a second thread for nothing: a datagram and a wake-up, 3–4 µs
+//! of every hop on this machine (BENCHMARKS.md). So the page also counts, in one
+//! 64-bit word of the sleepers' line:
+//! - `receivers`: connections whose receiver listens to the event (counted in after
+//!   its listener exists, out before it goes);
 //! - `covered`: those of them with a thread asleep on the word, which feeds the replica
-//!   once woken (counted in before that thread looks at the word, out before it feeds).
+//!   once woken (counted in before that thread looks at the word for the last time, out
+//!   before it feeds);
+//! - and how many times either changed.
 //!
-//! Each is counted in the process's slot too, as flags, in the order that leaves the
-//! total too high for `receivers` and too low for `covered` if the process dies
-//! between the two. A ring reports [`Ring::covered`] when every receiver is covered
-//! and it woke every counted sleeper; the writer then skips the notify if iceoryx2
-//! counts exactly that many listeners (another listener, a reader sleeping on the event,
-//! is one nobody covers). A dead process's flags are counted out with its sleepers
-//! ([`WakeWord::count_out_the_dead`]), by a look that fruitless rings start, and also
-//! sends that see fewer listeners than receivers (iceoryx2 cleaned the dead listener
-//! up); until then it counts on both sides, or only among the receivers, and either
-//! way makes no other process's notify skipped. A process killed between counting
-//! itself as a receiver in the total and in its slot leaves a receiver that no look
-//! can count out: the writer then always notifies, as before this count existed.
+//! The writer skips the notify only if, read at once after its add, every receiver is
+//! covered; the ring woke at least as many threads as sleepers and as covered
+//! connections were counted; iceoryx2 counts exactly as many listeners as receivers
+//! (a listener nobody counts, a reader sleeping on the event, needs the notify); and
+//! the counts did not change while the listeners were counted. All of it is read
+//! before the `FUTEX_WAKE`: a thread woken counts itself out at once.
+//!
+//! Each connection's flags are kept in its mapping's slot too, set and cleared in the
+//! orders that leave `receivers` too high and `covered` too low if its process dies
+//! between the two steps: a notify sent for nothing, never one skipped. A dead
+//! process's flags are counted out with its sleepers ([`WakeWord::count_out_the_dead`])
+//! by a look, which the writer starts after [`FRUITLESS_RINGS`] rings that woke fewer
+//! threads than sleepers were counted, as many sends that saw fewer listeners than
+//! receivers (iceoryx2 cleaned a dead receiver's listener up), or as many notifies
+//! skipped; after a look that finds none, it waits twice as many, up to 65,536. A
+//! process killed inside one of its steps (between a total and its slot) can leave
+//! `receivers` too high or `covered` too low where no look mends them: the writer
+//! then always notifies, as it did before these counts existed.
 //!
 //! # A process killed while it slept
 //! It leaves `sleepers` too high, and its writer would call `FUTEX_WAKE` after each
@@ -65,9 +76,10 @@
 //! sleeper counts itself in `sleepers` first and in its mapping's slot second, and out
 //! in the reverse order: a death at any point leaves `sleepers` at least the sum of the
 //! slots. The kernel drops a dead process's record locks; a writer whose rings woke
-//! nobody [`FRUITLESS_RINGS`] times in a row looks, under the file's lock, for slots
-//! that hold sleepers but no lock, and counts them out of `sleepers` (after a look that
-//! finds none, it waits twice as many rings for the next, up to 65,536). A slot whose
+//! fewer threads than sleepers were counted [`FRUITLESS_RINGS`] times looks, under
+//! the file's lock, for slots that hold sleepers but no lock, and counts them out of
+//! `sleepers` (after a look that finds none, it waits twice as many rings for the
+//! next, up to 65,536). A slot whose
 //! lock is held belongs to a live open file description and is never touched, whatever
 //! process or PID namespace it is in. A process killed between its two counts leaves one sleeper that
 //! no slot holds; that stays, as before. A process killed while mapping it leaves
@@ -82,7 +94,7 @@ use std::os::unix::fs::{MetadataExt as _, OpenOptionsExt as _};
 use std::path::{Path, PathBuf};
 use std::ptr::NonNull;
 use std::sync::OnceLock;
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::process::access::ShmAccess;
@@ -105,9 +117,14 @@ const LEN: usize = 4096;
 /// not slow the writer's add.
 const SEQUENCE: usize = 0;
 const SLEEPERS: usize = 64;
-/// In the sleepers' line: the writer reads all three after each ring.
-const RECEIVERS: usize = 72;
-const COVERED: usize = 76;
+/// In the sleepers' line, one 64-bit word the writer reads at once after each ring:
+/// the receivers (its low 16 bits), the covered (the next 16) and a count of changes
+/// (the high 32), so that the writer sees whether either changed while it looked at
+/// the event's listeners.
+const COUNTS: usize = 72;
+const FIELD: u64 = 0xFFFF;
+const COVERED_SHIFT: u32 = 16;
+const CHANGE: u64 = 1 << 32;
 const USERS: usize = 128;
 /// A slot's flags: its mapping is counted among the receivers, and among the covered.
 /// The bits below count its sleepers.
@@ -117,9 +134,10 @@ const SLEEPER_BITS: u32 = COVERED_FLAG - 1;
 /// Where the mappings' slots begin, and how many there are: a 32-bit count each.
 const SLOTS: usize = 192;
 const SLOT_COUNT: usize = (LEN - SLOTS) / 4;
-/// Rings in a row that woke nobody while sleepers were counted, before the writer
-/// looks for sleepers of dead processes; doubled after each look that found none, up
-/// to [`MAX_FRUITLESS_RINGS`], so that a count nobody can mend costs the look rarely.
+/// Rings that woke fewer threads than sleepers were counted (or sends that saw fewer
+/// listeners than receivers, or notifies skipped) before the writer looks for the
+/// counts of dead processes; doubled after each look that found none, up to
+/// [`MAX_FRUITLESS_RINGS`], so that a count nobody can mend costs the look rarely.
 pub const FRUITLESS_RINGS: u32 = 64;
 const MAX_FRUITLESS_RINGS: u32 = 1 << 16;
 /// How often an open retries a file its last user removed meanwhile.
@@ -193,13 +211,18 @@ pub struct WakeWord {
     /// This mapping's slot, if one was free (the sleepers of a mapping without one are
     /// counted only in the total, and cannot be counted out if their process dies).
     slot: Option<usize>,
-    /// This mapping's rings in a row that called `FUTEX_WAKE` (sleepers were counted)
-    /// and woke nobody.
+    /// The file's device and inode, to tell whether two mappings are of one file.
+    identity: (u64, u64),
+    /// This mapping's rings that woke fewer threads than sleepers were counted, since
+    /// the last look for the dead.
     fruitless: AtomicU32,
     /// This mapping's sends that saw fewer listeners on the event than receivers
-    /// counted ([`WakeWord::receivers_unheard`]).
+    /// counted ([`WakeWord::receivers_unheard`]), since the last look.
     unheard: AtomicU32,
-    /// How many such rings (or sends) start the next look for the dead.
+    /// This mapping's notifies skipped ([`WakeWord::notify_spared`]), since the last
+    /// look: a dead connection counted on both sides would go unseen otherwise.
+    spared: AtomicU32,
+    /// How many of any of those start the next look for the dead.
     look_after: AtomicU32,
     /// Held by the thread looking for dead sleepers: two threads of this mapping share
     /// its record and file locks, so a second look at once could count out a slot
@@ -226,13 +249,16 @@ impl WakeWord {
             let file =
                 OpenOptions::new().read(true).write(true).create(true).mode(mode).open(&path)?;
             if let Some((base, slot)) = Self::map_locked(&file, &path, mode)? {
+                let meta = file.metadata()?;
                 return Ok(WakeWord {
                     base,
+                    identity: (meta.dev(), meta.ino()),
                     file,
                     path,
                     slot,
                     fruitless: AtomicU32::new(0),
                     unheard: AtomicU32::new(0),
+                    spared: AtomicU32::new(0),
                     look_after: AtomicU32::new(FRUITLESS_RINGS),
                     looking: std::sync::Mutex::new(()),
                 });
@@ -319,54 +345,67 @@ impl WakeWord {
     }
 
     /// Tells every reader of the trajectory that a sample was sent (after the send):
-    /// an atomic add, and a `FUTEX_WAKE` only if somebody sleeps. Returns whether the
-    /// processes that listen to the trajectory's event need its notify too (see the
-    /// module docs).
-    pub fn ring(&self) -> Ring {
+    /// an atomic add, and a `FUTEX_WAKE` only if somebody sleeps.
+    pub fn ring(&self) {
+        let _nobody_counted = self.ring_counting(|| 0);
+    }
+
+    /// [`WakeWord::ring`], and whether the connections that listen to the trajectory's
+    /// event need its notify too (see the module docs): `listeners` counts them
+    /// (iceoryx2's count of the event's listeners).
+    ///
+    /// Everything is read before the wake-up: a thread woken counts itself out of
+    /// `covered` at once, often before this thread is back from the system call.
+    pub(crate) fn ring_counting(&self, listeners: impl FnOnce() -> usize) -> Ring {
         self.counter(SEQUENCE).fetch_add(1, Ordering::SeqCst);
         let sleepers = self.counter(SLEEPERS).load(Ordering::SeqCst);
+        // Receivers and covered at once, after the add: a connection covered after
+        // this load looks at the word after the add, and feeds.
+        let snapshot = self.counts().load(Ordering::SeqCst);
+        let (receivers, covered) = decode(snapshot);
+        let mut listening = 0;
+        let mut steady = false;
+        if receivers > 0 {
+            listening = listeners();
+            // Unchanged meanwhile: the listeners counted are those receivers'.
+            steady = self.counts().load(Ordering::SeqCst) == snapshot;
+        }
         let mut woken = 0;
         if sleepers != 0 {
             woken = futex_wake(self.counter(SEQUENCE));
-            if woken == 0 {
-                self.fruitless_ring();
-            } else {
-                self.fruitless.store(0, Ordering::Relaxed);
+            // A sleeper between its count and its sleep, woken by an earlier ring, or
+            // dead: after enough of these, look for the dead.
+            if woken < libc::c_long::from(sleepers) {
+                self.due(&self.fruitless);
             }
         }
-        // Receivers first: one counted out after this load only lowers `covered`, and
-        // one counted in after it is served by its receiver's first look (it listens
-        // before it is counted).
-        let receivers = self.counter(RECEIVERS).load(Ordering::SeqCst);
-        if receivers == 0 || receivers > SLOT_COUNT as u32 {
-            return Ring { receivers, covered: false };
-        }
-        let covered = self.counter(COVERED).load(Ordering::SeqCst);
-        // A sleeper counted but not woken is between its count and its sleep (it will
-        // feed anyway), woken by an earlier ring, or dead: notify, to be sure.
-        let covered = covered == receivers && woken >= libc::c_long::from(sleepers);
-        Ring { receivers, covered }
+        // A sleeper counted but not woken, or a covered connection whose thread this
+        // ring did not wake (before its sleep, or dead): notify, to be sure.
+        let woke_all = woken >= libc::c_long::from(sleepers.max(covered));
+        let covered = steady && covered == receivers && listening == receivers as usize && woke_all;
+        Ring { receivers, listeners: listening, covered }
     }
 
     /// The writer saw fewer listeners on the trajectory's event than receivers counted
     /// here: a receiver's process died (iceoryx2 cleaned its listener up), and its count
-    /// stays until a look for the dead. After as many such sends as fruitless rings
-    /// start one, looks.
+    /// stays until a look for the dead, which enough of these start.
     pub(crate) fn receivers_unheard(&self) {
-        let sends = self.unheard.fetch_add(1, Ordering::Relaxed) + 1;
-        if sends >= self.look_after.load(Ordering::Relaxed) {
-            self.unheard.store(0, Ordering::Relaxed);
-            self.look();
-        }
+        self.due(&self.unheard);
     }
 
-    /// A ring woke nobody though sleepers are counted: a sleeper between its count and
-    /// its sleep, or one whose process died asleep. After enough in a row, looks for
-    /// the dead.
-    fn fruitless_ring(&self) {
-        let rings = self.fruitless.fetch_add(1, Ordering::Relaxed) + 1;
-        if rings >= self.look_after.load(Ordering::Relaxed) {
-            self.fruitless.store(0, Ordering::Relaxed);
+    /// The writer skipped a notify: enough of these start a look for the dead too, so
+    /// that a dead connection counted both as a receiver and as covered (killed between
+    /// its cover and its sleep) is counted out even while every ring wakes somebody.
+    pub(crate) fn notify_spared(&self) {
+        self.due(&self.spared);
+    }
+
+    /// Counts one more reason to look for the dead in `reasons`, and looks once there
+    /// are enough.
+    fn due(&self, reasons: &AtomicU32) {
+        let n = reasons.fetch_add(1, Ordering::Relaxed) + 1;
+        if n >= self.look_after.load(Ordering::Relaxed) {
+            reasons.store(0, Ordering::Relaxed);
             self.look();
         }
     }
@@ -422,48 +461,57 @@ impl WakeWord {
         self.counter(SLEEPERS).load(Ordering::SeqCst)
     }
 
-    /// How many processes are counted as receivers of the trajectory's event, and how
-    /// many of them as covered by a sleeper (see the module docs): for diagnostics and
-    /// tests.
+    /// How many connections are counted as receivers of the trajectory's event, and
+    /// how many of them as covered by a sleeper (see the module docs): for diagnostics
+    /// and tests.
     pub fn receivers(&self) -> (u32, u32) {
-        (
-            self.counter(RECEIVERS).load(Ordering::SeqCst),
-            self.counter(COVERED).load(Ordering::SeqCst),
-        )
+        decode(self.counts().load(Ordering::SeqCst))
     }
 
-    /// Counts this mapping's process among the receivers: the total first, then the
+    /// True if `other` maps the same file: a connection covers only a word its
+    /// receiver is counted in.
+    pub(crate) fn same_file(&self, other: &WakeWord) -> bool {
+        self.identity == other.identity
+    }
+
+    fn counts(&self) -> &AtomicU64 {
+        // SAFETY: the page lives as long as `self`.
+        unsafe { counts_at(self.base) }
+    }
+
+    /// Counts this mapping's connection among the receivers: the total first, then the
     /// slot, so that a death between the two leaves the total too high (a notify sent
     /// for nothing, never one skipped). False, and nothing counted, for a mapping
     /// without a slot: nothing could count it out if its process died.
     pub(crate) fn count_receiver_in(&self) -> bool {
         let Some(slot) = self.slot else { return false };
-        self.counter(RECEIVERS).fetch_add(1, Ordering::SeqCst);
+        adjust(self.counts(), 1, 0);
         self.counter(SLOTS + 4 * slot).fetch_or(RECEIVER_FLAG, Ordering::SeqCst);
         true
     }
 
-    /// Counts this mapping's process out of the receivers: the slot first, then the
+    /// Counts this mapping's connection out of the receivers: the slot first, then the
     /// total.
     pub(crate) fn count_receiver_out(&self) {
         let Some(slot) = self.slot else { return };
         self.counter(SLOTS + 4 * slot).fetch_and(!RECEIVER_FLAG, Ordering::SeqCst);
-        self.counter(RECEIVERS).fetch_sub(1, Ordering::SeqCst);
+        adjust(self.counts(), -1, 0);
     }
 
-    /// Counts this mapping's process as covered: the slot first, then the total, so that
-    /// a death between the two leaves the total too low (a notify sent for nothing).
-    /// Only for a mapping counted among the receivers.
+    /// Counts this mapping's connection as covered: the slot first, then the total, so
+    /// that a death between the two leaves the total too low (a notify sent for
+    /// nothing). Only for a mapping counted among the receivers.
     pub(crate) fn count_covered_in(&self) {
         let Some(slot) = self.slot else { return };
         self.counter(SLOTS + 4 * slot).fetch_or(COVERED_FLAG, Ordering::SeqCst);
-        self.counter(COVERED).fetch_add(1, Ordering::SeqCst);
+        adjust(self.counts(), 0, 1);
     }
 
-    /// Counts this mapping's process out of the covered: the total first, then the slot.
+    /// Counts this mapping's connection out of the covered: the total first, then the
+    /// slot.
     pub(crate) fn count_covered_out(&self) {
         let Some(slot) = self.slot else { return };
-        self.counter(COVERED).fetch_sub(1, Ordering::SeqCst);
+        adjust(self.counts(), 0, -1);
         self.counter(SLOTS + 4 * slot).fetch_and(!COVERED_FLAG, Ordering::SeqCst);
     }
 
@@ -534,42 +582,77 @@ unsafe fn counter_at<'a>(base: NonNull<u8>, offset: usize) -> &'a AtomicU32 {
 }
 
 /// Empties `slot` of the page at `base` and counts what it held out of the totals:
-/// its sleepers, and its process as a receiver and as covered; returns how many of
-/// those it held. The caller holds the slot's record lock.
+/// its sleepers, and its connection as covered and as a receiver; returns how many
+/// sleepers and receivers it held. The caller holds the slot's record lock, so nobody
+/// else changes the slot; each step is taken in its owner's order (see the module
+/// docs), so that a look that dies midway leaves the totals erring the same way.
 ///
 /// # Safety
 /// `base` is a live mapping of [`LEN`] bytes.
 unsafe fn count_out(base: NonNull<u8>, slot: usize) -> u32 {
     // SAFETY: forwarded to the caller.
-    let counter = |offset| unsafe { counter_at(base, offset) };
-    let held = counter(SLOTS + 4 * slot).swap(0, Ordering::SeqCst);
-    let sleepers = held & SLEEPER_BITS;
-    if sleepers != 0 {
-        // The total is at least every slot's count (counted in first, out last), so
-        // this does not wrap.
-        counter(SLEEPERS).fetch_sub(sleepers, Ordering::SeqCst);
-    }
-    // Covered before receivers: a look that stops between leaves `covered` the lower.
+    let (slot, counts) = unsafe { (counter_at(base, SLOTS + 4 * slot), counts_at(base)) };
+    let held = slot.load(Ordering::SeqCst);
     if held & COVERED_FLAG != 0 {
-        counter(COVERED).fetch_sub(1, Ordering::SeqCst);
+        adjust(counts, 0, -1);
+        slot.fetch_and(!COVERED_FLAG, Ordering::SeqCst);
     }
     let receiver = held & RECEIVER_FLAG != 0;
     if receiver {
-        counter(RECEIVERS).fetch_sub(1, Ordering::SeqCst);
+        slot.fetch_and(!RECEIVER_FLAG, Ordering::SeqCst);
+        adjust(counts, -1, 0);
+    }
+    let sleepers = held & SLEEPER_BITS;
+    if sleepers != 0 {
+        slot.fetch_sub(sleepers, Ordering::SeqCst);
+        // SAFETY: as above. The total is at least every slot's count (counted in
+        // first, out last), so this does not wrap.
+        unsafe { counter_at(base, SLEEPERS) }.fetch_sub(sleepers, Ordering::SeqCst);
     }
     sleepers + u32::from(receiver)
 }
 
-/// What a ring tells the writer about the processes that listen to the trajectory's
-/// event (see the module docs).
+/// The 64-bit word of receivers and covered of the page at `base` (see [`COUNTS`]).
+///
+/// # Safety
+/// `base` is a live mapping of [`LEN`] bytes for as long as the result is used.
+unsafe fn counts_at<'a>(base: NonNull<u8>) -> &'a AtomicU64 {
+    // SAFETY: within the page, 8-aligned (the page is page-aligned); other processes
+    // use it atomically too.
+    unsafe { AtomicU64::from_ptr(base.as_ptr().add(COUNTS).cast::<u64>()) }
+}
+
+/// Adds `receivers` and `covered` (each -1, 0 or 1) to the counts, and one to their
+/// changes. A field already at 0 stays there (a count a death left too low is not
+/// made to wrap, which would read as too high).
+fn adjust(counts: &AtomicU64, receivers: i64, covered: i64) {
+    let step = |field: u64, by: i64| field.saturating_add_signed(by).min(FIELD);
+    let _always = counts.fetch_update(Ordering::SeqCst, Ordering::SeqCst, |c| {
+        let r = step(c & FIELD, receivers);
+        let v = step((c >> COVERED_SHIFT) & FIELD, covered);
+        Some(((c & !(CHANGE - 1)).wrapping_add(CHANGE)) | (v << COVERED_SHIFT) | r)
+    });
+}
+
+/// The receivers and the covered of a counts word.
+fn decode(counts: u64) -> (u32, u32) {
+    ((counts & FIELD) as u32, ((counts >> COVERED_SHIFT) & FIELD) as u32)
+}
+
+/// What a ring tells the writer about the connections that listen to the
+/// trajectory's event (see the module docs).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Ring {
-    /// The processes counted as receivers: iceoryx2 counting fewer listeners means one
-    /// of them died ([`WakeWord::receivers_unheard`]).
+    /// The connections counted as receivers.
     pub receivers: u32,
-    /// Every one of them has a thread asleep on the word, which this ring woke and
-    /// which feeds its process's replica: if the event has exactly `receivers`
-    /// listeners, they are theirs, and the notify would wake them for nothing.
+    /// The event's listeners the writer counted (0 if no receiver was counted):
+    /// fewer than `receivers` means one of them died
+    /// ([`WakeWord::receivers_unheard`]).
+    pub listeners: usize,
+    /// The notify is needed by nobody: every listener is a receiver's, every
+    /// receiver was counted as covered, the counts did not change while the listeners
+    /// were counted, and the ring woke at least as many threads as sleepers and as
+    /// covered connections were counted.
     pub covered: bool,
 }
 
@@ -826,17 +909,19 @@ mod tests {
         let dead = WakeWord::open(&name).unwrap();
         assert!(dead.count_receiver_in());
         dead.count_covered_in();
-        assert_eq!(writer.ring(), Ring { receivers: 1, covered: true });
+        let ring = writer.ring_counting(|| 1);
+        assert_eq!((ring.receivers, ring.covered), (1, false), "covered, but no thread woken");
         // Counted asleep, but in no futex wait: a ring cannot wake it.
         let asleep = dead.count_in();
-        assert!(!writer.ring().covered, "a counted sleeper the ring did not wake");
+        assert!(!writer.ring_counting(|| 1).covered, "a counted sleeper the ring did not wake");
         std::mem::forget(asleep);
         // As if its process died: the mapping and its record lock go, its counts stay.
         drop(dead);
         assert_eq!(writer.receivers(), (1, 1), "nothing counts a dead mapping out by itself");
         assert_eq!(writer.count_out_the_dead().unwrap(), 2, "one sleeper, one receiver");
         assert_eq!((writer.receivers(), writer.sleepers()), ((0, 0), 0));
-        assert_eq!(writer.ring(), Ring { receivers: 0, covered: false }, "no receiver left");
+        let ring = writer.ring_counting(|| 1);
+        assert_eq!((ring.receivers, ring.listeners, ring.covered), (0, 0, false), "none left");
     }
 
     #[test]
