@@ -106,6 +106,12 @@ impl Connect {
                 run.replies - run.held
             ));
         }
+        row = row.note(format!(
+            "{} of {} pings sent without the iceoryx2 notify (the peer's connection covered \
+             by its thread asleep on the trajectory's word, so its receiver thread was not \
+             woken)",
+            run.notifies_spared, run.replies
+        ));
         for note in &run.peer_notes {
             row = row.note(format!("peer: {note}"));
         }

@@ -89,6 +89,9 @@ pub struct ConnectRun {
     /// Replies whose pixels the measuring process read in shared memory (held, not
     /// copied onto its heap).
     pub held: u64,
+    /// Measured pings whose writer skipped the iceoryx2 notify: the peer's connection
+    /// was covered by its thread asleep on the word (`esgm_shm::wake_word`).
+    pub notifies_spared: u64,
     /// What the peer reported.
     pub peer_notes: Vec<String>,
 }
@@ -157,8 +160,11 @@ pub fn ping_pong(
         write: Latency::new()?,
         replies: 0,
         held: 0,
+        notifies_spared: 0,
         peer_notes: Vec::new(),
     };
+    let mut spared_before = 0;
+    let mut dones_spared = 0;
     for i in 1..=warmup + samples {
         let seq = i as i64;
         if let Some(ready) = &ready {
@@ -172,6 +178,9 @@ pub fn ping_pong(
         let structure = stamped(make_for(&ping, kind, i), seq);
         let made = making.elapsed();
 
+        if i == warmup + 1 {
+            spared_before = esgm_shm::publisher::notifies_spared_here();
+        }
         ctx.before_hop(mode.wait());
         let start = Instant::now();
         add(&ping, structure)?;
@@ -180,7 +189,12 @@ pub fn ping_pong(
         black_box(value);
         let round_trip = start.elapsed();
         if let Some(done) = &done {
+            let before = esgm_shm::publisher::notifies_spared_here();
             add(done, stamped(Kind::Small.make(i), seq))?;
+            // Counted out below: the row counts the measured pings' notifies.
+            if i > warmup {
+                dones_spared += esgm_shm::publisher::notifies_spared_here() - before;
+            }
         }
 
         if i > warmup {
@@ -190,6 +204,10 @@ pub fn ping_pong(
             run.held += u64::from(held);
         }
     }
+    // Every publisher of this process is the measuring connection's: its pings, and a
+    // paced row's `done` signals.
+    run.notifies_spared =
+        esgm_shm::publisher::notifies_spared_here() - spared_before - dones_spared;
     add(&ping, stamped(hello, STOP))?;
     run.peer_notes = peer.finish(FINISH_TIMEOUT)?;
     // The connection goes before its coordinator.
