@@ -45,6 +45,24 @@ struct State {
     covered: bool,
 }
 
+impl State {
+    /// Counts the connection as covered in `word`, if it is not yet.
+    fn cover(&mut self, word: &WakeWord) {
+        if !self.covered {
+            word.count_covered_in();
+            self.covered = true;
+        }
+    }
+
+    /// Counts the connection out of the covered in `word`, if it is counted.
+    fn uncover(&mut self, word: &WakeWord) {
+        if self.covered {
+            word.count_covered_out();
+            self.covered = false;
+        }
+    }
+}
+
 impl Coverage {
     /// This process's count in the word of the wake-up service `service`; `None` where
     /// readers do not sleep on words ([`crate::wake_word::WAKE_ENV`]) or the word cannot
@@ -71,8 +89,7 @@ impl Coverage {
         if state.listeners == 1 && self.word.count_receiver_in() {
             state.receiver = true;
             if state.asleep > 0 {
-                self.word.count_covered_in();
-                state.covered = true;
+                state.cover(&self.word);
             }
         }
         Receiving(Arc::clone(self))
@@ -88,9 +105,8 @@ impl Coverage {
         }
         let mut state = self.state.lock();
         state.asleep += 1;
-        if state.asleep == 1 && state.receiver {
-            self.word.count_covered_in();
-            state.covered = true;
+        if state.receiver {
+            state.cover(&self.word);
         }
         Some(Asleep(Arc::clone(self)))
     }
@@ -105,15 +121,11 @@ impl Drop for Receiving {
         let coverage = &self.0;
         let mut state = coverage.state.lock();
         state.listeners -= 1;
-        if state.listeners > 0 || !state.receiver {
-            return;
+        if state.listeners == 0 && state.receiver {
+            state.uncover(&coverage.word);
+            coverage.word.count_receiver_out();
+            state.receiver = false;
         }
-        if state.covered {
-            coverage.word.count_covered_out();
-            state.covered = false;
-        }
-        coverage.word.count_receiver_out();
-        state.receiver = false;
     }
 }
 
@@ -126,9 +138,8 @@ impl Drop for Asleep {
         let coverage = &self.0;
         let mut state = coverage.state.lock();
         state.asleep -= 1;
-        if state.asleep == 0 && state.covered {
-            coverage.word.count_covered_out();
-            state.covered = false;
+        if state.asleep == 0 {
+            state.uncover(&coverage.word);
         }
     }
 }
