@@ -31,8 +31,9 @@
 //!
 //! # Where iceoryx2's event stays
 //! The writer still notifies the trajectory's iceoryx2 event after ringing the word,
-//! unless nobody needs it (below). Waits over many trajectories at once (a process's receiver thread) and one-off
-//! waits (a new reader's history) sleep on listeners, which have descriptors for
+//! unless nobody needs it (below). Waits over many trajectories at once (a process's
+//! receiver thread) and one-off waits (a new reader's history) sleep on listeners,
+//! which have descriptors for
 //! `poll(2)`; a notify with no listener asleep costs an atomic. A reader whose word
 //! cannot be opened (no room in `/dev/shm`, another user's file) falls back to the
 //! event, as does every reader when [`WAKE_ENV`] is `event`.
@@ -68,7 +69,11 @@
 //! skipped; after a look that finds none, it waits twice as many, up to 65,536. A
 //! process killed inside one of its steps (between a total and its slot) can leave
 //! `receivers` too high or `covered` too low where no look mends them: the writer
-//! then always notifies, as it did before these counts existed.
+//! then always notifies, as it did before these counts existed. A process killed
+//! between its cover and its sleep stays counted on both sides until a look; its
+//! count could make a notify skipped only while another connection has two threads
+//! asleep on the word (the ring must wake as many threads as covered connections) and
+//! a listener nobody counts waits, and the look that skipped notifies start clears it.
 //!
 //! # A process killed while it slept
 //! It leaves `sleepers` too high, and its writer would call `FUTEX_WAKE` after each
