@@ -2,7 +2,7 @@
 
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, OnceLock, Weak};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
@@ -59,7 +59,9 @@ impl ViewServerBuilder {
             server: OnceLock::new(),
             counters: Arc::new(Counters::default()),
         });
-        let listener = Arc::new(Listener(Arc::clone(&state)));
+        // Weak: the server holds its listener for its life, and the state holds the
+        // server; a strong reference would keep both, and the connection, for ever.
+        let listener = Arc::new(Listener(Arc::downgrade(&state)));
         let handle = WebSocketServer::new()
             .name(format!("esgm {}", self.domain))
             .bind(self.host.clone(), self.port)
@@ -172,6 +174,16 @@ struct State {
     counters: Arc<Counters>,
 }
 
+impl Drop for State {
+    /// Stops the WebSocket server (its port is free again, its clients' tasks are
+    /// aborted) before the connection goes.
+    fn drop(&mut self) {
+        if let Some(server) = self.server.take() {
+            drop(server.stop());
+        }
+    }
+}
+
 impl State {
     /// Creates channels for new trajectories and closes those of trajectories gone.
     fn follow(&self) {
@@ -254,11 +266,14 @@ fn discover(state: &State, stop: &AtomicBool) {
     }
 }
 
-struct Listener(Arc<State>);
+/// The server's callbacks, on the state while it lives (a client's last messages
+/// after the server was dropped find it gone).
+struct Listener(Weak<State>);
 
 impl ServerListener for Listener {
     fn on_subscribe(&self, _client: Client, channel: ChannelView) {
-        let mut channels = self.0.channels.lock();
+        let Some(state) = self.0.upgrade() else { return };
+        let mut channels = state.channels.lock();
         let Some(w) = channels.get_mut(&channel.id()) else { return };
         w.subscribers += 1;
         if w.forwarder.is_none() {
@@ -266,18 +281,19 @@ impl ServerListener for Listener {
             // The forwarder opens the trajectory on its own thread: this callback
             // runs on the server's and must not wait.
             w.forwarder = Some(Forwarder::start(
-                self.0.esgm.clone(),
+                state.esgm.clone(),
                 w.trajectory.clone(),
                 w.encoding,
                 Arc::clone(&w.channel),
-                Arc::clone(&self.0.counters),
+                Arc::clone(&state.counters),
             ));
         }
     }
 
     fn on_unsubscribe(&self, _client: Client, channel: ChannelView) {
+        let Some(state) = self.0.upgrade() else { return };
         let forwarder = {
-            let mut channels = self.0.channels.lock();
+            let mut channels = state.channels.lock();
             let Some(w) = channels.get_mut(&channel.id()) else { return };
             w.subscribers = w.subscribers.saturating_sub(1);
             if w.subscribers > 0 {

@@ -180,4 +180,9 @@ fn foxglove_client_subscribes_receives_an_image_and_unsubscribes() {
         writer.create_trajectory(TrajectorySpec::primitive("later", "RobotState")).unwrap();
     advertised(&mut socket, &mut seen, "/later");
     drop(socket);
+
+    // Dropping the server stops it: its port is closed.
+    let port = server.port();
+    drop(server);
+    wait_until("the port closes", || std::net::TcpStream::connect(("127.0.0.1", port)).is_err());
 }
