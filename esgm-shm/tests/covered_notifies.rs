@@ -44,11 +44,7 @@ fn a_reader_asleep_covers_its_receiver_and_an_uncovered_receiver_is_still_notifi
     let replica = reader.get_entity_trajectory_structure("robot").unwrap();
     let stream = replica.subscribe(SubscribeOptions::default().capacity(64)).unwrap();
     let (service, word) = word_of(c.domain(), "robot");
-    assert!(
-        wait_for(|| word.receivers() == (1, 0)),
-        "the reader's receiver listens: {:?}",
-        word.receivers()
-    );
+    assert_eq!(word.receivers(), (0, 0), "nothing is counted before the reader sleeps");
 
     // The reader's thread sleeps on the word between samples: each one finds its
     // receiver covered, and wakes the thread, which feeds the replica.
@@ -77,16 +73,21 @@ fn a_reader_asleep_covers_its_receiver_and_an_uncovered_receiver_is_still_notifi
     assert!(esgm_shm::publisher::notifies_spared_here() > spared, "the writer skipped notifies");
     assert!(wait_for(|| word.receivers() == (1, 0)), "nobody asleep: {:?}", word.receivers());
 
-    // A second reading process, whose threads never wait: only its receiver feeds its
-    // replica. The reader asleep covers its own process, not this one.
+    // A second reading process, whose thread slept once and now never waits: only its
+    // receiver feeds its replica. The reader asleep covers its own process, not this.
     let other = location(&c, "other");
     assert!(wait_for(|| other.get_entity_trajectory_structure("robot").is_ok()));
     let seen = other.get_entity_trajectory_structure("robot").unwrap();
+    let once = seen.subscribe(SubscribeOptions::default()).unwrap();
     assert!(
-        wait_for(|| word.receivers() == (2, 0)),
-        "both receivers listen: {:?}",
+        wait_for(|| {
+            let _nothing_sent = once.recv_timeout(Duration::from_millis(5));
+            word.receivers() == (2, 0)
+        }),
+        "both receivers counted: {:?}",
         word.receivers()
     );
+    drop(once);
     assert!(wait_for(|| seen.get_latest().is_ok_and(|s| x(&s) == (SAMPLES - 1) as f64)));
     for check in 0..CHECKS {
         let value = 1_000.0 + check as f64;

@@ -26,19 +26,26 @@ use parking_lot::Mutex;
 
 use crate::wake_word::WakeWord;
 
-/// One import's count in its trajectory's word: its own mapping (its own slot, which
-/// a look for the dead can count out if this process dies) and what this process has
-/// counted there.
+/// One import's count in its trajectory's word: its own mapping of the word (its own
+/// slot, which a look for the dead can count out if this process dies), made when a
+/// thread of the connection first sleeps on the word, and what it has counted there.
 #[derive(Debug)]
 pub(crate) struct Coverage {
-    word: WakeWord,
+    /// The wake-up service whose word this counts in.
+    service: String,
     state: Mutex<State>,
 }
 
-/// What this process has counted: its threads asleep on the word, the receiver's
+/// What this connection has counted: its threads asleep on the word, the receiver's
 /// listeners, and whether the word counts it as a receiver and as covered.
 #[derive(Debug, Default)]
 struct State {
+    /// Mapped at the first sleep: an import nobody sleeps on costs no file, no
+    /// descriptor and no page (its receiver is then not counted, and the writer
+    /// notifies it, as every listener nobody counts).
+    word: Option<WakeWord>,
+    /// The mapping was tried (it failed if `word` is `None`).
+    tried: bool,
     asleep: usize,
     listeners: usize,
     receiver: bool,
@@ -46,39 +53,51 @@ struct State {
 }
 
 impl State {
-    /// Counts the connection as covered in `word`, if it is not yet.
-    fn cover(&mut self, word: &WakeWord) {
-        if !self.covered {
+    /// Counts the connection as a receiver in the word, if it is mapped and the
+    /// receiver listens, and as covered if a thread sleeps.
+    fn count_receiver(&mut self) {
+        let Some(word) = &self.word else { return };
+        if self.listeners > 0 && !self.receiver && word.count_receiver_in() {
+            self.receiver = true;
+        }
+        if self.asleep > 0 {
+            self.cover();
+        }
+    }
+
+    /// Counts the connection as covered, if it is counted as a receiver and not yet.
+    fn cover(&mut self) {
+        if let Some(word) = self.word.as_ref().filter(|_| self.receiver && !self.covered) {
             word.count_covered_in();
             self.covered = true;
         }
     }
 
-    /// Counts the connection out of the covered in `word`, if it is counted.
-    fn uncover(&mut self, word: &WakeWord) {
-        if self.covered {
+    /// Counts the connection out of the covered, if it is counted.
+    fn uncover(&mut self) {
+        if let Some(word) = self.word.as_ref().filter(|_| self.covered) {
             word.count_covered_out();
             self.covered = false;
+        }
+    }
+
+    /// Counts the connection out of the receivers (and the covered), if it is counted.
+    fn uncount_receiver(&mut self) {
+        self.uncover();
+        if let Some(word) = self.word.as_ref().filter(|_| self.receiver) {
+            word.count_receiver_out();
+            self.receiver = false;
         }
     }
 }
 
 impl Coverage {
-    /// This process's count in the word of the wake-up service `service`; `None` where
-    /// readers do not sleep on words ([`crate::wake_word::WAKE_ENV`]) or the word cannot
-    /// be mapped (the writer then always notifies, as without this).
-    pub fn open(service: &str) -> Option<Arc<Coverage>> {
-        if !crate::wake_word::futex_enabled() {
-            return None;
-        }
-        match WakeWord::open(service) {
-            Ok(word) => Some(Arc::new(Coverage { word, state: Mutex::default() })),
-            Err(e) => {
-                tracing::debug!(service, error = %e,
-                    "cannot map the wake-up word; the writer always notifies the receiver");
-                None
-            }
-        }
+    /// This connection's count in the word of the wake-up service `service`; `None`
+    /// where readers do not sleep on words ([`crate::wake_word::WAKE_ENV`]). Nothing is
+    /// mapped until a thread sleeps ([`Coverage::asleep`]).
+    pub fn new(service: &str) -> Option<Arc<Coverage>> {
+        crate::wake_word::futex_enabled()
+            .then(|| Arc::new(Coverage { service: service.to_owned(), state: Mutex::default() }))
     }
 
     /// Counts the receiver's listener on the writer's event until the result is
@@ -86,28 +105,31 @@ impl Coverage {
     pub fn receiving(self: &Arc<Self>) -> Receiving {
         let mut state = self.state.lock();
         state.listeners += 1;
-        if state.listeners == 1 && self.word.count_receiver_in() {
-            state.receiver = true;
-            if state.asleep > 0 {
-                state.cover(&self.word);
-            }
-        }
+        state.count_receiver();
         Receiving(Arc::clone(self))
     }
 
     /// Counts the calling thread asleep on `word` until the result is dropped: take it
     /// before the last look at the word before sleeping, and drop it before feeding
-    /// the replica. `None` if `word` is not the file this count is in (it was made
-    /// anew): the writer of the old one must still notify.
+    /// the replica. Maps the word the first time. `None` if it cannot be mapped, or if
+    /// `word` is not the file this count is in (it was made anew): the writer of the
+    /// other one must still notify.
     pub fn asleep(self: &Arc<Self>, word: &WakeWord) -> Option<Asleep> {
-        if !self.word.same_file(word) {
+        let mut state = self.state.lock();
+        if !state.tried {
+            state.tried = true;
+            match WakeWord::open(&self.service) {
+                Ok(mapped) => state.word = Some(mapped),
+                Err(e) => tracing::debug!(service = %self.service, error = %e,
+                    "cannot map the wake-up word; the writer always notifies the receiver"),
+            }
+            state.count_receiver();
+        }
+        if !state.word.as_ref().is_some_and(|w| w.same_file(word)) {
             return None;
         }
-        let mut state = self.state.lock();
         state.asleep += 1;
-        if state.receiver {
-            state.cover(&self.word);
-        }
+        state.cover();
         Some(Asleep(Arc::clone(self)))
     }
 }
@@ -118,13 +140,10 @@ pub(crate) struct Receiving(Arc<Coverage>);
 
 impl Drop for Receiving {
     fn drop(&mut self) {
-        let coverage = &self.0;
-        let mut state = coverage.state.lock();
+        let mut state = self.0.state.lock();
         state.listeners -= 1;
-        if state.listeners == 0 && state.receiver {
-            state.uncover(&coverage.word);
-            coverage.word.count_receiver_out();
-            state.receiver = false;
+        if state.listeners == 0 {
+            state.uncount_receiver();
         }
     }
 }
@@ -135,11 +154,10 @@ pub(crate) struct Asleep(Arc<Coverage>);
 
 impl Drop for Asleep {
     fn drop(&mut self) {
-        let coverage = &self.0;
-        let mut state = coverage.state.lock();
+        let mut state = self.0.state.lock();
         state.asleep -= 1;
         if state.asleep == 0 {
-            state.uncover(&coverage.word);
+            state.uncover();
         }
     }
 }
@@ -157,11 +175,10 @@ mod tests {
         (WakeWord::open(&service).unwrap(), service)
     }
 
-    /// Whether a ring of `writer` finds every receiver covered, and how many receivers.
-    fn ring(writer: &WakeWord) -> (u32, bool) {
-        // As many listeners as receivers: what the writer needs to skip the notify.
-        let receivers = writer.receivers().0 as usize;
-        let ring = writer.ring_counting(|| receivers);
+    /// How many receivers a ring of `writer` finds, and whether every one is covered,
+    /// with `listeners` on the event (one per connection with a receiving guard).
+    fn ring(writer: &WakeWord, listeners: usize) -> (u32, bool) {
+        let ring = writer.ring_counting(|| listeners);
         (ring.receivers, ring.covered)
     }
 
@@ -173,6 +190,7 @@ mod tests {
         writer: &WakeWord,
         service: &str,
         connections: &[&Arc<Coverage>],
+        listeners: usize,
     ) -> (u32, bool) {
         std::thread::scope(|s| {
             let (tx, rx) = std::sync::mpsc::channel();
@@ -193,7 +211,7 @@ mod tests {
                 assert!(std::time::Instant::now() < deadline, "the sleepers never slept");
                 std::thread::sleep(std::time::Duration::from_millis(1));
             }
-            ring(writer)
+            ring(writer, listeners)
         })
     }
 
@@ -208,32 +226,41 @@ mod tests {
     #[test]
     fn a_connection_is_covered_only_while_its_receiver_listens_and_a_thread_sleeps() {
         let (writer, service) = word();
-        let coverage = Coverage::open(&service).unwrap();
-        let asleep = coverage.asleep(&writer).unwrap();
-        assert_eq!(writer.receivers(), (0, 0), "no receiver: nothing to cover");
+        let coverage = Coverage::new(&service).unwrap();
         let receiving = coverage.receiving();
-        assert_eq!(writer.receivers(), (1, 1), "a receiver that comes finds the sleeper");
+        assert_eq!(writer.receivers(), (0, 0), "nothing is mapped before a thread sleeps");
+        let asleep = coverage.asleep(&writer).unwrap();
+        assert_eq!(writer.receivers(), (1, 1), "the first sleep counts the receiver, covered");
         let second = coverage.asleep(&writer).unwrap();
         drop(asleep);
         assert_eq!(writer.receivers(), (1, 1), "one thread still sleeps");
         drop(second);
         assert_eq!(writer.receivers(), (1, 0), "nobody sleeps: the receiver needs the notify");
-        assert_eq!(ring(&writer), (1, false));
-        assert_eq!(ring_with_sleepers(&writer, &service, &[&coverage]), (1, true));
+        assert_eq!(ring(&writer, 1), (1, false));
+        assert_eq!(ring_with_sleepers(&writer, &service, &[&coverage], 1), (1, true));
+        assert_eq!(
+            ring_with_sleepers(&writer, &service, &[&coverage], 2),
+            (1, false),
+            "a listener nobody counts"
+        );
         let asleep = coverage.asleep(&writer).unwrap();
-        assert_eq!(ring(&writer), (1, false), "counted covered, but no thread the ring woke");
+        assert_eq!(ring(&writer, 1), (1, false), "counted covered, but no thread the ring woke");
         drop(receiving);
         assert_eq!(writer.receivers(), (0, 0), "the receiver left, covered or not");
-        assert_eq!(ring(&writer), (0, false));
         drop(asleep);
+        let again = coverage.receiving();
+        let _asleep = coverage.asleep(&writer).unwrap();
+        assert_eq!(writer.receivers(), (1, 1), "a receiver that comes finds the sleeper");
+        drop(again);
         assert_eq!(writer.receivers(), (0, 0));
     }
 
     #[test]
     fn a_thread_asleep_on_a_word_made_anew_covers_nothing() {
         let (writer, service) = word();
-        let coverage = Coverage::open(&service).unwrap();
+        let coverage = Coverage::new(&service).unwrap();
         let _receiving = coverage.receiving();
+        drop(coverage.asleep(&writer).unwrap());
         // The domain ended and the word was made again while this connection stayed.
         assert_eq!(crate::wake_word::remove_domain(service.split('/').nth(1).unwrap()), 1);
         let anew = WakeWord::open(&service).unwrap();
@@ -270,13 +297,15 @@ mod tests {
     #[test]
     fn a_receiver_not_covered_is_notified_whoever_else_is() {
         let (writer, service) = word();
-        let (one, other) = (Coverage::open(&service).unwrap(), Coverage::open(&service).unwrap());
+        let (one, other) = (Coverage::new(&service).unwrap(), Coverage::new(&service).unwrap());
         let (_one, _other) = (one.receiving(), other.receiving());
+        // The other's thread slept once, and is busy now: counted, not covered.
+        drop(other.asleep(&writer).unwrap());
         assert_eq!(
-            ring_with_sleepers(&writer, &service, &[&one]),
+            ring_with_sleepers(&writer, &service, &[&one], 2),
             (2, false),
             "the other needs it"
         );
-        assert_eq!(ring_with_sleepers(&writer, &service, &[&one, &other]), (2, true));
+        assert_eq!(ring_with_sleepers(&writer, &service, &[&one, &other], 2), (2, true));
     }
 }

@@ -258,7 +258,7 @@ impl Import {
             writer,
             workers: Arc::default(),
             sleepers: Arc::default(),
-            coverage: Coverage::open(sample_wake.name.as_str()),
+            coverage: Coverage::new(sample_wake.name.as_str()),
             checker,
             verify: verify.clone(),
             lost: 0,
