@@ -152,8 +152,44 @@ impl Recorder {
     pub fn start<E>(
         esgm: &E,
         names: &[String],
+        writer: RecordingWriter,
+        buffer: usize,
+    ) -> Result<Self, RecorderError>
+    where
+        E: Esgm,
+        E::Trajectory: Send + 'static,
+    {
+        Self::start_from(esgm, names, writer, buffer, 0)
+    }
+
+    /// Starts recording `names` of `esgm` into `writer` with what each trajectory
+    /// holds already (up to `buffer` of its newest structures), then from now on.
+    ///
+    /// For a recorder that waited for its trajectories to appear (a replay, a system
+    /// starting up): a structure written between a trajectory's creation and the
+    /// recorder's subscription is in the trajectory's cache, and would be missed
+    /// otherwise. A structure already held and arriving meanwhile is recorded once.
+    pub fn start_with_held<E>(
+        esgm: &E,
+        names: &[String],
+        writer: RecordingWriter,
+        buffer: usize,
+    ) -> Result<Self, RecorderError>
+    where
+        E: Esgm,
+        E::Trajectory: Send + 'static,
+    {
+        Self::start_from(esgm, names, writer, buffer, buffer)
+    }
+
+    /// [`Recorder::start`], with each subscription replaying the last `held` stored
+    /// structures first.
+    fn start_from<E>(
+        esgm: &E,
+        names: &[String],
         mut writer: RecordingWriter,
         buffer: usize,
+        held: usize,
     ) -> Result<Self, RecorderError>
     where
         E: Esgm,
@@ -189,7 +225,7 @@ impl Recorder {
             let subscribe_err =
                 |source| RecorderError::Subscribe { trajectory: name.clone(), source };
             let samples = trajectory
-                .subscribe(SubscribeOptions::default().capacity(buffer))
+                .subscribe(SubscribeOptions::default().capacity(buffer).last(held))
                 .map_err(subscribe_err)?;
             let violations = trajectory.subscribe_violations(buffer).map_err(subscribe_err)?;
             let id = writer.add_trajectory(info, types)?;

@@ -324,6 +324,38 @@ fn a_live_recorder_keeps_violations_and_counts_what_it_misses() {
 }
 
 #[test]
+fn a_recorder_that_waited_records_what_the_trajectory_held_and_one_that_did_not_starts_now() {
+    let esgm = InProcessEsgm::default();
+    esgm.create_primitive_entity_trajectory_structure("robot_state", "RobotState").expect("create");
+    let t = esgm.get_entity_trajectory_structure("robot_state").expect("get");
+    // Written between the trajectory's creation and the recorders' subscriptions.
+    for i in 0..3 {
+        t.add(robot(i)).expect("add");
+    }
+    let dir = tempfile::tempdir().expect("tempdir");
+    let names = ["robot_state".to_owned()];
+    let open = |name: &str| {
+        RecordingWriter::create(dir.path().join(name), RecordOptions::default()).expect("create")
+    };
+    let held = Recorder::start_with_held(&esgm, &names, open("held.mcap"), 1024).expect("start");
+    let now = Recorder::start(&esgm, &names, open("now.mcap"), 1024).expect("start");
+    for i in 3..5 {
+        t.add(robot(i)).expect("add");
+    }
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while held.stats().recorded() < 5 || now.stats().recorded() < 2 {
+        assert!(Instant::now() < deadline, "{:?} {:?}", held.stats(), now.stats());
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let (held, now) = (held.stop().expect("stop").0, now.stop().expect("stop").0);
+    assert_eq!(held.structures["robot_state"], 5, "what it held, then the rest, once each");
+    assert_eq!(now.structures["robot_state"], 2, "from its start on");
+    let read = read_all(&Recording::open(dir.path().join("held.mcap")).expect("open"));
+    let read: Vec<_> = read.into_iter().map(|s| s.1).collect();
+    assert_eq!(read, (0..5).map(robot).collect::<Vec<_>>(), "in order");
+}
+
+#[test]
 fn a_trajectory_destroyed_while_recorded_ends_its_recording_and_keeps_what_it_held() {
     let esgm = InProcessEsgm::default();
     esgm.create_primitive_entity_trajectory_structure("robot_state", "RobotState").expect("create");

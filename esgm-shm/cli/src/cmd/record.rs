@@ -58,7 +58,9 @@ pub struct Args {
     #[arg(long)]
     pub ros2: bool,
     /// Wait for the named trajectories to exist (a replay or a system starting up)
-    /// instead of refusing names that do not exist yet.
+    /// instead of refusing names that do not exist yet, and record what each holds
+    /// already (the structures written before the recorder subscribed, up to
+    /// --buffer of them), then everything after.
     #[arg(long)]
     pub wait: bool,
     /// Structures buffered per trajectory before the recorder drops (and counts) one.
@@ -95,7 +97,13 @@ pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
         .meta("started_unix_ns", SystemClock.now().to_string());
     let writer = RecordingWriter::create(&a.output, options)
         .with_context(|| format!("cannot record into {}", a.output.display()))?;
-    let recorder = Recorder::start(&esgm, &names, writer, a.buffer)?;
+    // Waited for: what was written between a trajectory's creation and this
+    // subscription is in its cache, and belongs to the recording.
+    let recorder = if a.wait {
+        Recorder::start_with_held(&esgm, &names, writer, a.buffer)?
+    } else {
+        Recorder::start(&esgm, &names, writer, a.buffer)?
+    };
     if !json {
         eprintln!(
             "recording {} trajector{} of `{domain}` into {} (Ctrl-C stops)",
