@@ -49,6 +49,13 @@ pub struct Args {
     #[arg(long)]
     pub list: bool,
 
+    /// Hold idle cores' wake-up within this many microseconds for the whole run (0:
+    /// idle cores poll), as `esgm up --cpu-latency` does for a robot; needs root. Every
+    /// blocking row is mostly the woken core leaving its idle state, so a run with it
+    /// and one without say how much of a row is the machine's idle policy.
+    #[arg(long, value_name = "MICROSECONDS", value_parser = esgm_shm::process::cpu_latency::parse_micros)]
+    pub cpu_latency: Option<std::time::Duration>,
+
     /// Internal: run as the peer process of cross-process scenario SCENARIO (esgm-bench
     /// starts itself this way; see `peer_role`).
     #[arg(long, hide = true, value_name = "SCENARIO", requires_all = ["peer_wait", "peer_domain"])]
@@ -107,6 +114,7 @@ impl Args {
             only,
             samples: self.samples,
             list: self.list,
+            cpu_latency: self.cpu_latency.filter(|_| peer.is_none()),
             peer,
         })
     }

@@ -22,6 +22,8 @@ pub struct RunConfig {
     pub samples: Option<u64>,
     /// List the scenarios instead of running them.
     pub list: bool,
+    /// The CPU latency held for the run (`--cpu-latency`), if any.
+    pub cpu_latency: Option<std::time::Duration>,
     /// Run as the peer process of a cross-process scenario instead of measuring.
     pub peer: Option<PeerRole>,
 }

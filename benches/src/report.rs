@@ -249,11 +249,64 @@ pub struct Skipped {
     pub reason: String,
 }
 
+/// How the machine's idle cores were set during a run. A blocking row's wake-up is
+/// mostly the woken core leaving its idle state, so two runs' blocking rows compare
+/// only if these match (see `esgm_shm::process::cpu_latency`).
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Machine {
+    /// The kernel's cpuidle driver (`haltpoll` on a KVM guest, `intel_idle`,
+    /// `acpi_idle`…), if it says.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cpuidle_driver: Option<String>,
+    /// A KVM guest's halt polling, in ns (`haltpoll`'s `guest_halt_poll_ns`; 0: an
+    /// idle vCPU halts at once), if the machine has it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub guest_halt_poll_ns: Option<u64>,
+    /// The CPU latency the kernel kept idle cores to when the run started (the
+    /// smallest request held, `--cpu-latency` included), in µs; `None` if unknown.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cpu_latency_us: Option<u64>,
+}
+
+impl Machine {
+    /// What the machine says now.
+    pub fn now() -> Self {
+        let read = |path: &str| std::fs::read_to_string(path).ok().map(|s| s.trim().to_owned());
+        Self {
+            cpuidle_driver: read("/sys/devices/system/cpu/cpuidle/current_driver"),
+            guest_halt_poll_ns: read("/sys/module/haltpoll/parameters/guest_halt_poll_ns")
+                .and_then(|s| s.parse().ok()),
+            cpu_latency_us: esgm_shm::process::cpu_latency::current()
+                .and_then(|d| u64::try_from(d.as_micros()).ok()),
+        }
+    }
+
+    /// One line for the table's header.
+    pub fn describe(&self) -> String {
+        let driver = self.cpuidle_driver.as_deref().unwrap_or("unknown");
+        let mut line = format!("idle cores: cpuidle {driver}");
+        if let Some(ns) = self.guest_halt_poll_ns {
+            line.push_str(&format!(", guest halt polling {ns} ns"));
+        }
+        match self.cpu_latency_us {
+            // The kernel's default is about 2,000 s: no request held.
+            Some(us) if us < 1_000_000 => line.push_str(&format!(", wake-up held within {us} µs")),
+            Some(_) => line.push_str(", no CPU latency request held"),
+            None => {}
+        }
+        line
+    }
+}
+
 /// Everything a run measured, in run order.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Report {
     /// One row per scenario and wait strategy.
     pub scenarios: Vec<Measurement>,
+    /// How the machine's idle cores were set while the rows ran: what every blocking
+    /// row's wake-up stands on.
+    #[serde(default)]
+    pub machine: Machine,
     /// Memory figures (the `memory` scenario), beside the latency rows.
     #[serde(default)]
     pub memory: Vec<MemoryRow>,

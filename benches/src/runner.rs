@@ -39,8 +39,14 @@ pub fn run(
     if let Some(p) = config.pin {
         p.pin_measuring_thread().context("--pin")?;
     }
+    // Held until the last scenario ends.
+    let _held = config
+        .cpu_latency
+        .map(esgm_shm::process::cpu_latency::CpuLatency::request)
+        .transpose()
+        .context("--cpu-latency")?;
     let ctx = Context::new(config);
-    let mut report = Report::default();
+    let mut report = Report { machine: crate::report::Machine::now(), ..Report::default() };
     let (total, run_started) = (selected.len(), Instant::now());
     for (done, scenario) in selected.into_iter().enumerate() {
         // Progress lines are a courtesy; a closed stderr must not stop the run.

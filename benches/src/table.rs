@@ -79,6 +79,7 @@ pub fn render(report: &Report, config: &RunConfig) -> String {
         None => "not pinned".to_owned(),
     };
     let _ = writeln!(out, "esgm-bench: latency, baselines measured in the same run ({pinning})");
+    let _ = writeln!(out, "{}", report.machine.describe());
     for row in &rows {
         let mut line = String::new();
         for (i, cell) in row.iter().enumerate() {
@@ -356,8 +357,19 @@ mod tests {
             memory: Vec::new(),
             skipped: Vec::new(),
             failed: Vec::new(),
+            machine: crate::report::Machine {
+                cpuidle_driver: Some("haltpoll".into()),
+                guest_halt_poll_ns: Some(0),
+                cpu_latency_us: Some(0),
+            },
         };
         let text = render(&report, &RunConfig::default());
+        assert!(
+            text.contains(
+                "idle cores: cpuidle haltpoll, guest halt polling 0 ns, wake-up held within 0 µs"
+            ),
+            "{text}"
+        );
         let target = "hop / floor (spin)   ×2.50  (p99 ×2.50)  target ≤ ×3.00  met";
         assert!(text.contains(target), "{text}");
         assert!(text.contains("(floor not run)"), "{text}");

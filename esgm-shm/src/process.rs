@@ -9,6 +9,7 @@
 //! alike: privately unless the domain was started to allow others ([`share_domain`]).
 
 pub mod access;
+pub mod cpu_latency;
 
 use std::sync::OnceLock;
 

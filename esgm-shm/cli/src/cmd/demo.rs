@@ -37,6 +37,10 @@ pub struct Args {
     /// Milliseconds between camera images.
     #[arg(long, default_value_t = 250)]
     pub image_period_ms: u32,
+    /// Keep idle cores' wake-up within this many microseconds while the demo runs, as
+    /// `esgm up --cpu-latency` does (needs root).
+    #[arg(long, value_name = "MICROSECONDS", value_parser = esgm_shm::process::cpu_latency::parse_micros)]
+    pub cpu_latency: Option<std::time::Duration>,
 }
 
 /// The tutorial's trajectories in data-flow order.
@@ -61,8 +65,17 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
     // A state directory of its own, removed at the end: the demo leaves nothing.
     let state = StateDir::at(std::env::temp_dir().join(format!("esgm-{domain}")));
     // The coordinator's log (worker restarts among it) goes to this terminal.
-    let mut coordinator =
-        super::up::spawn_detached(&domain, Some(state.path()), false, Stdio::inherit(), false)?;
+    let setup = super::up::Setup { cpu_latency: a.cpu_latency, ..super::up::Setup::default() };
+    let mut coordinator = super::up::spawn_detached_with(
+        &domain,
+        Some(state.path()),
+        &setup,
+        Stdio::inherit(),
+        false,
+    )?;
+    if let Some(latency) = a.cpu_latency {
+        println!("idle cores wake within {} µs while the demo runs", latency.as_micros());
+    }
     let result = drive(&domain, a, &plan);
     let processes: Vec<ProcessRecord> = match super::ps::processes(&domain) {
         Ok(p) => p,

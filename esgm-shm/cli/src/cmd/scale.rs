@@ -182,10 +182,11 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
         readers: DEFAULT_READERS,
     };
     let state = StateDir::at(std::env::temp_dir().join(format!("esgm-{domain}")));
+    let setup = super::up::Setup { limits, ..super::up::Setup::default() };
     let coordinator = super::up::spawn_detached_with(
         &domain,
         Some(state.path()),
-        limits,
+        &setup,
         Stdio::inherit(),
         true,
     )?;

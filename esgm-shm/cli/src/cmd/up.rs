@@ -31,6 +31,7 @@ use esgm_shm::capacity::{DEFAULT_MAX_PROCESSES, DEFAULT_READERS, DomainLimits};
 use esgm_shm::control::server::{cleanup_dead_nodes, log_cleanup};
 use esgm_shm::control::{ControlClient, Coordinator, Request, Response, StateDir};
 use esgm_shm::process::access::{ACCESS_ENV, ShmAccess, Widener, widen_domain};
+use esgm_shm::process::cpu_latency::{self, CPU_LATENCY_ENV, CpuLatency};
 
 use super::supervise::Supervisor;
 use crate::config::apply::SYSTEM_HOST;
@@ -75,6 +76,26 @@ pub struct Args {
     /// of its own, at most --max-processes [default: 16, or --max-processes if fewer].
     #[arg(long, value_name = "N", env = READERS_ENV)]
     pub readers: Option<usize>,
+    /// Keep every core's wake-up from idle within this many microseconds while the
+    /// domain runs (0: idle cores poll instead of sleeping). A blocking hop between
+    /// processes is mostly the woken core leaving its idle state: on a VM that halts idle
+    /// cores, 40 µs instead of 4 µs (see `esgm_shm::process::cpu_latency`). It costs
+    /// power, and a VM's host CPU; it needs root (`/dev/cpu_dma_latency`).
+    #[arg(long, value_name = "MICROSECONDS", env = CPU_LATENCY_ENV, value_parser = cpu_latency::parse_micros)]
+    pub cpu_latency: Option<Duration>,
+}
+
+/// How a coordinator that another command starts is set up ([`spawn_detached_with`]).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Setup {
+    /// Restarted if it crashes (`--supervise`).
+    pub supervise: bool,
+    /// Who may use the domain's shared memory.
+    pub access: ShmAccess,
+    /// The domain's limits.
+    pub limits: DomainLimits,
+    /// The CPU latency it holds while it runs (`--cpu-latency`).
+    pub cpu_latency: Option<Duration>,
 }
 
 /// The environment variables a coordinator started by another command reads its
@@ -137,16 +158,10 @@ pub fn run(domain: &str, args: &Args) -> anyhow::Result<()> {
             .append(true)
             .open(&log_path)
             .with_context(|| format!("cannot open {}", log_path.display()))?;
-        let pid = spawn_coordinator(
-            domain,
-            Some(state.path()),
-            args.supervise,
-            access,
-            limits,
-            Stdio::from(log),
-            true,
-        )?
-        .id();
+        let setup =
+            Setup { supervise: args.supervise, access, limits, cpu_latency: args.cpu_latency };
+        let pid =
+            spawn_coordinator(domain, Some(state.path()), &setup, Stdio::from(log), true)?.id();
         println!("coordinator of `{domain}` serving (pid {pid}); stop it with `esgm down`");
         if access != ShmAccess::Private {
             println!("its shared memory is open to {access} (ESGM_SHM_ACCESS={access})");
@@ -163,6 +178,12 @@ pub fn run(domain: &str, args: &Args) -> anyhow::Result<()> {
     }
     if args.supervise {
         return supervise_coordinator(domain, args, access, &state);
+    }
+    // Held from before serving until the coordinator ends: a domain asked to wake fast
+    // that cannot does not start.
+    let held = args.cpu_latency.map(CpuLatency::request).transpose()?;
+    if let (Some(held), false) = (&held, args.quiet) {
+        eprintln!("idle cores wake within {} µs while `{domain}` runs", held.latency().as_micros());
     }
     serve(domain, plan, args.quiet, access, limits, state)
 }
@@ -191,6 +212,9 @@ fn supervise_coordinator(
         command.env(MAX_PROCESSES_ENV, args.max_processes.to_string());
         if let Some(readers) = args.readers {
             command.env(READERS_ENV, readers.to_string());
+        }
+        if let Some(latency) = args.cpu_latency {
+            command.env(CPU_LATENCY_ENV, latency.as_micros().to_string());
         }
         if args.quiet || !first {
             command.arg("--quiet");
@@ -347,36 +371,49 @@ pub fn spawn_detached(
     stderr: Stdio,
     outliving: bool,
 ) -> anyhow::Result<std::process::Child> {
-    let limits = DomainLimits::default();
-    spawn_coordinator(domain, state_dir, supervise, ShmAccess::Private, limits, stderr, outliving)
+    spawn_coordinator(
+        domain,
+        state_dir,
+        &Setup { supervise, ..Setup::default() },
+        stderr,
+        outliving,
+    )
 }
 
-/// [`spawn_detached`] (unsupervised) of a domain with `limits`.
+/// [`spawn_detached`] (unsupervised unless `setup` says so) of a domain set up as
+/// `setup` says.
 pub fn spawn_detached_with(
     domain: &str,
     state_dir: Option<&Path>,
-    limits: DomainLimits,
+    setup: &Setup,
     stderr: Stdio,
     outliving: bool,
 ) -> anyhow::Result<std::process::Child> {
-    spawn_coordinator(domain, state_dir, false, ShmAccess::Private, limits, stderr, outliving)
+    spawn_coordinator(domain, state_dir, setup, stderr, outliving)
 }
 
-/// [`spawn_detached`] with the domain's shared memory open to `access`.
+/// Starts `esgm up` set up as `setup` says, and waits until it answers.
 fn spawn_coordinator(
     domain: &str,
     state_dir: Option<&Path>,
-    supervise: bool,
-    access: ShmAccess,
-    limits: DomainLimits,
+    setup: &Setup,
     stderr: Stdio,
     outliving: bool,
 ) -> anyhow::Result<std::process::Child> {
+    if let Some(latency) = setup.cpu_latency {
+        // Said here, not as a coordinator that "exited at once".
+        drop(CpuLatency::request(latency)?);
+    }
     let exe = std::env::current_exe().context("cannot find the esgm executable")?;
     let mut command = Command::new(exe);
-    command.args(["up", "--quiet", "--domain", domain]).env(ACCESS_ENV, access.as_str());
-    command.env(MAX_PROCESSES_ENV, limits.max_processes.to_string());
-    command.env(READERS_ENV, limits.readers.to_string());
+    command.args(["up", "--quiet", "--domain", domain]).env(ACCESS_ENV, setup.access.as_str());
+    command.env(MAX_PROCESSES_ENV, setup.limits.max_processes.to_string());
+    command.env(READERS_ENV, setup.limits.readers.to_string());
+    match setup.cpu_latency {
+        Some(latency) => command.env(CPU_LATENCY_ENV, latency.as_micros().to_string()),
+        // Not inherited from this command's environment unless asked for.
+        None => command.env_remove(CPU_LATENCY_ENV),
+    };
     if !matches!(std::env::var_os("NO_COLOR"), Some(v) if !v.is_empty()) {
         // Its log goes to a file (or the demo's terminal): plain text.
         command.env("NO_COLOR", "1");
@@ -384,7 +421,7 @@ fn spawn_coordinator(
     if let Some(dir) = state_dir {
         command.arg("--state-dir").arg(dir);
     }
-    if supervise {
+    if setup.supervise {
         command.arg("--supervise");
     }
     if outliving {
