@@ -150,6 +150,10 @@ pub fn run(domain: &str, args: &Args) -> anyhow::Result<()> {
     let access = args.access()?;
     let limits = args.limits()?;
     if args.detach {
+        if let Some(latency) = args.cpu_latency {
+            // Refused before anything is made, the state directory included.
+            drop(CpuLatency::request(latency)?);
+        }
         state.create().context("cannot create the state directory")?;
         std::fs::create_dir_all(state.log_dir()).context("cannot create the log directory")?;
         let log_path = state.log_dir().join("coordinator.log");
