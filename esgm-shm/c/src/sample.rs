@@ -1,0 +1,705 @@
+//! Reading a sample (M3): its name and times, and its attributes by name or by index,
+//! typed, through nested frames and sequences.
+//!
+//! Nothing is copied to read: a string, a sequence or an image's pixels is lent as a
+//! pointer into the sample, valid while the caller holds a handle on it (the sample's,
+//! or a frame's of it); an image's pixels stay in the writer's shared memory chunk,
+//! which the sample holds mapped whatever the writer does meanwhile (exits, crashes,
+//! resets the trajectory). A sample's small attributes were decoded once when it
+//! entered this process's replica; reading one here is a lookup, never a decode.
+//!
+//! A missing attribute is `ESGM_NO_SUCH_ATTRIBUTE` (the message lists those there
+//! are); one of another sort `ESGM_INVALID_TYPE` (it names both sorts).
+
+use std::ffi::c_char;
+use std::sync::Arc;
+
+use esgm_shm::prelude::*;
+
+use crate::handles::{self, handle};
+use crate::status::{Error, Result, esgm_status, guard};
+use crate::strings::{copy_out, esgm_str_t, put, text};
+use crate::structure::{esgm_pos2_t, esgm_pose_t, esgm_vec3_t};
+use crate::types::sort_to_c;
+
+/// One step from a structure into a frame nested in it.
+#[derive(Debug, Clone, Copy)]
+enum Step {
+    /// The `EntityFrame` attribute at this index.
+    Frame(usize),
+    /// Item `.1` of the `EntityFrameSeq` attribute at index `.0`.
+    Item(usize, usize),
+}
+
+/// A sample, or a frame nested in one: the sample (shared, never copied) and the way
+/// down to the frame.
+#[derive(Debug, Clone)]
+pub(crate) struct View {
+    sample: Sample,
+    path: Vec<Step>,
+}
+
+impl View {
+    /// The whole sample.
+    pub(crate) fn of(sample: Sample) -> Self {
+        Self { sample, path: Vec::new() }
+    }
+
+    /// The frame's name and attributes.
+    fn frame(&self) -> (&str, &[AttributeValuePair]) {
+        let mut name = self.sample.structure.name.as_str();
+        let mut attributes = self.sample.structure.attributes.as_slice();
+        for step in &self.path {
+            // Every step was checked when the view was made, and a sample never
+            // changes: each resolves.
+            let frame = match *step {
+                Step::Frame(i) => match attributes.get(i).map(|a| &a.value) {
+                    Some(Value::EntityFrame(f)) => Some(f.as_ref()),
+                    _ => None,
+                },
+                Step::Item(i, j) => match attributes.get(i).map(|a| &a.value) {
+                    Some(Value::EntityFrameSeq(seq)) => seq.get(j),
+                    _ => None,
+                },
+            };
+            let Some(f) = frame else { return (name, &[]) };
+            name = f.name.as_str();
+            attributes = f.attributes.as_slice();
+        }
+        (name, attributes)
+    }
+
+    /// The attribute `name` and its index.
+    fn find(&self, name: &str) -> Result<(usize, &Value)> {
+        let (frame, attributes) = self.frame();
+        attributes
+            .iter()
+            .position(|a| a.name == name)
+            .map(|i| (i, &attributes[i].value))
+            .ok_or_else(|| {
+                let there: Vec<&str> = attributes.iter().map(|a| a.name.as_str()).collect();
+                Error::new(
+                    esgm_status::ESGM_NO_SUCH_ATTRIBUTE,
+                    format!(
+                        "`{frame}` has no attribute `{name}`; it has {}",
+                        if there.is_empty() { "none".to_owned() } else { there.join(", ") }
+                    ),
+                )
+            })
+    }
+
+    /// The attribute at `index`.
+    fn at(&self, index: usize) -> Result<&AttributeValuePair> {
+        let (frame, attributes) = self.frame();
+        attributes.get(index).ok_or_else(|| {
+            Error::new(
+                esgm_status::ESGM_OUT_OF_RANGE,
+                format!("`{frame}` has {} attributes; there is no index {index}", attributes.len()),
+            )
+        })
+    }
+
+    /// The view one step further down.
+    fn down(&self, step: Step) -> Self {
+        let mut path = self.path.clone();
+        path.push(step);
+        Self { sample: self.sample.clone(), path }
+    }
+}
+
+/// A sample (an entity structure as stored, with its add and query time), or a frame
+/// nested in one. Everything read from it is valid while it lives.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[allow(non_camel_case_types, reason = "a C type, named as C code names them")]
+pub struct esgm_sample_t {
+    /// The handle's id; 0 is the null handle.
+    pub id: u64,
+}
+
+handle!(esgm_sample_t => View);
+
+/// The samples a query returned, in valid-time order.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[allow(non_camel_case_types, reason = "a C type, named as C code names them")]
+pub struct esgm_sample_list_t {
+    /// The handle's id; 0 is the null handle.
+    pub id: u64,
+}
+
+handle!(esgm_sample_list_t => Vec<Sample>);
+
+/// A sample's name and times.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+#[allow(non_camel_case_types, reason = "a C type, named as C code names them")]
+pub struct esgm_sample_info_t {
+    /// The structure's (or frame's) name.
+    pub name: esgm_str_t,
+    /// When it is valid (ns).
+    pub valid_time: i64,
+    /// When it was created (ns).
+    pub create_time: i64,
+    /// When it entered the trajectory (ns).
+    pub add_time: i64,
+    /// When the query it answers was asked (ns; a subscriber's: the add time).
+    pub query_time: i64,
+    /// Its number of attributes.
+    pub attribute_count: usize,
+}
+
+/// An attribute's value as C reads it: `sort` says which fields hold it. Pointers are
+/// into the sample, valid while its handle lives.
+///
+/// - `ESGM_SORT_LONG`, `ESGM_SORT_TIME`: `long_value`;
+/// - `ESGM_SORT_DOUBLE`, `ESGM_SORT_ALTITUDE`: `double_value`;
+/// - `ESGM_SORT_BOOL`: `bool_value`;
+/// - `ESGM_SORT_STRING`, `ESGM_SORT_SYMBOL`: `text`;
+/// - `ESGM_SORT_OCTET_SEQ`: `data` (bytes) and `len`;
+/// - `ESGM_SORT_LONG_SEQ`, `ESGM_SORT_DOUBLE_SEQ`: `data` (`int64_t`s or `double`s) and
+///   `len`;
+/// - the other sequences, `ESGM_SORT_AGG`, `ESGM_SORT_COLLECTION`,
+///   `ESGM_SORT_ENTITY_FRAME_SEQ`: `len` items, read with `esgm_sample_item` (frames
+///   with `esgm_sample_frame_at`);
+/// - `ESGM_SORT_VEC`: `vec`; `ESGM_SORT_POS2`: `pos2`;
+/// - `ESGM_SORT_POSITION`, `ESGM_SORT_POSITION_ALTITUDE`,
+///   `ESGM_SORT_POSITION_ALTITUDE_ROTATION`, `ESGM_SORT_ROTATION`: `pose`'s fields;
+/// - `ESGM_SORT_ENTITY_FRAME`: nothing here; `esgm_sample_frame` reads it.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+#[allow(non_camel_case_types, reason = "a C type, named as C code names them")]
+pub struct esgm_value_t {
+    /// The attribute's name (empty for a sequence's item).
+    pub name: esgm_str_t,
+    /// Its sort (an `esgm_sort`).
+    pub sort: i32,
+    /// An integer or a time.
+    pub long_value: i64,
+    /// A float or an altitude.
+    pub double_value: f64,
+    /// A boolean.
+    pub bool_value: bool,
+    /// A string or a symbol.
+    pub text: esgm_str_t,
+    /// Bytes, integers or floats of a sequence.
+    pub data: *const std::ffi::c_void,
+    /// The number of bytes or items.
+    pub len: usize,
+    /// A vector.
+    pub vec: esgm_vec3_t,
+    /// A 2-D point.
+    pub pos2: esgm_pos2_t,
+    /// A position, altitude and rotation.
+    pub pose: esgm_pose_t,
+}
+
+impl esgm_value_t {
+    /// `value`, named `name`, lent from its sample.
+    fn of(name: &str, value: &Value) -> Self {
+        let mut v = Self {
+            name: esgm_str_t::of(name),
+            sort: sort_to_c(value.sort()),
+            long_value: 0,
+            double_value: 0.0,
+            bool_value: false,
+            text: esgm_str_t::of(""),
+            data: std::ptr::null(),
+            len: 0,
+            vec: esgm_vec3_t::default(),
+            pos2: esgm_pos2_t::default(),
+            pose: esgm_pose_t::default(),
+        };
+        match value {
+            Value::NoValue | Value::EntityFrame(_) => {}
+            Value::Long(x) | Value::Time(x) => v.long_value = *x,
+            Value::Double(x) | Value::Altitude(x) => v.double_value = *x,
+            Value::Bool(b) => v.bool_value = *b,
+            Value::String(s) | Value::Symbol(s) => v.text = esgm_str_t::of(s),
+            Value::OctetSeq(o) => (v.data, v.len) = (o.as_ptr().cast(), o.len()),
+            Value::LongSeq(x) => (v.data, v.len) = (x.as_ptr().cast(), x.len()),
+            Value::DoubleSeq(x) => (v.data, v.len) = (x.as_ptr().cast(), x.len()),
+            Value::SymbolSeq(x) => v.len = x.len(),
+            Value::VecSeq(x) => v.len = x.len(),
+            Value::Pos2Seq(x) => v.len = x.len(),
+            Value::Agg(x) | Value::Collection(x) => v.len = x.len(),
+            Value::EntityFrameSeq(x) => v.len = x.len(),
+            Value::Vec(x) => v.vec = (*x).into(),
+            Value::Pos2(p) => v.pos2 = (*p).into(),
+            Value::Position(p) => v.pose.position = (*p).into(),
+            Value::Rotation(r) => v.pose.rotation = (*r).into(),
+            Value::PositionAltitude(p) => {
+                v.pose.position = p.position.into();
+                v.pose.altitude = p.altitude;
+            }
+            Value::PositionAltitudeRotation(p) => {
+                v.pose.position = p.position.into();
+                v.pose.altitude = p.altitude;
+                v.pose.rotation = p.rotation.into();
+            }
+        }
+        v
+    }
+}
+
+/// The view `s` names.
+pub(crate) fn view(s: esgm_sample_t) -> Result<Arc<View>> {
+    handles::get(s)
+}
+
+/// A handle on `sample`, written to `out`.
+pub(crate) fn give(sample: Sample, out: *mut esgm_sample_t) -> Result<()> {
+    crate::strings::writable(out, "out")?;
+    let h: esgm_sample_t = handles::insert(View::of(sample));
+    unsafe { put(out, "out", h) }
+}
+
+/// Its name and times.
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_info(s: esgm_sample_t, out: *mut esgm_sample_info_t) -> esgm_status {
+    guard(|| {
+        let v = view(s)?;
+        let (name, attributes) = v.frame();
+        let info = esgm_sample_info_t {
+            name: esgm_str_t::of(name),
+            valid_time: v.sample.structure.valid_time,
+            create_time: v.sample.structure.create_time,
+            add_time: v.sample.add_time,
+            query_time: v.sample.query_time,
+            attribute_count: attributes.len(),
+        };
+        // The name lives in the sample, which the handle keeps.
+        unsafe { put(out, "out", info) }
+    })
+}
+
+/// The attribute `attribute` as a value of whatever sort it is.
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_value(
+    s: esgm_sample_t,
+    attribute: *const c_char,
+    out: *mut esgm_value_t,
+) -> esgm_status {
+    guard(|| {
+        let v = view(s)?;
+        let name = unsafe { text(attribute, "attribute") }?;
+        let (_, value) = v.find(name)?;
+        let read = esgm_value_t::of(name, value);
+        unsafe { put(out, "out", read) }
+    })
+}
+
+/// The attribute at `index` (0 to its count − 1, in the structure's order), with its
+/// name.
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_value_at(
+    s: esgm_sample_t,
+    index: usize,
+    out: *mut esgm_value_t,
+) -> esgm_status {
+    guard(|| {
+        let v = view(s)?;
+        let a = v.at(index)?;
+        let read = esgm_value_t::of(&a.name, &a.value);
+        unsafe { put(out, "out", read) }
+    })
+}
+
+/// Item `index` of the sequence attribute `attribute` (a symbol, vector, point or
+/// value of a `SymbolSeq`, `VecSeq`, `Pos2Seq`, `Agg` or `Collection`; an integer or
+/// float of a `LongSeq` or `DoubleSeq`). A frame sequence's items are frames:
+/// `esgm_sample_frame_at`.
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_item(
+    s: esgm_sample_t,
+    attribute: *const c_char,
+    index: usize,
+    out: *mut esgm_value_t,
+) -> esgm_status {
+    guard(|| {
+        let v = view(s)?;
+        let name = unsafe { text(attribute, "attribute") }?;
+        let (_, value) = v.find(name)?;
+        let len = match value {
+            Value::SymbolSeq(x) => x.len(),
+            Value::VecSeq(x) => x.len(),
+            Value::Pos2Seq(x) => x.len(),
+            Value::Agg(x) | Value::Collection(x) => x.len(),
+            Value::LongSeq(x) => x.len(),
+            Value::DoubleSeq(x) => x.len(),
+            Value::EntityFrameSeq(_) => {
+                return Err(Error::new(
+                    esgm_status::ESGM_INVALID_TYPE,
+                    format!(
+                        "attribute `{name}` is EntityFrameSeq: read its frames with esgm_sample_frame_at"
+                    ),
+                ));
+            }
+            other => {
+                return Err(Error::new(
+                    esgm_status::ESGM_INVALID_TYPE,
+                    format!("attribute `{name}` is {}, not a sequence", other.sort()),
+                ));
+            }
+        };
+        if index >= len {
+            return Err(Error::new(
+                esgm_status::ESGM_OUT_OF_RANGE,
+                format!("attribute `{name}` has {len} items; there is no index {index}"),
+            ));
+        }
+        let item = match value {
+            Value::SymbolSeq(x) => {
+                let mut read = esgm_value_t::of("", &Value::NoValue);
+                read.sort = sort_to_c(ValueSort::Symbol);
+                read.text = esgm_str_t::of(&x[index]);
+                read
+            }
+            Value::Agg(x) | Value::Collection(x) => esgm_value_t::of("", &x[index]),
+            Value::VecSeq(x) => esgm_value_t::of("", &Value::Vec(x[index])),
+            Value::Pos2Seq(x) => esgm_value_t::of("", &Value::Pos2(x[index])),
+            Value::LongSeq(x) => esgm_value_t::of("", &Value::Long(x[index])),
+            Value::DoubleSeq(x) => esgm_value_t::of("", &Value::Double(x[index])),
+            _ => esgm_value_t::of("", &Value::NoValue),
+        };
+        unsafe { put(out, "out", item) }
+    })
+}
+
+/// The value of `attribute`, which must be of `sort` (a wrong one is named).
+fn typed(v: &View, attribute: *const c_char, sort: ValueSort) -> Result<&Value> {
+    let name = unsafe { text(attribute, "attribute") }?;
+    let (_, value) = v.find(name)?;
+    if value.sort() != sort {
+        let (frame, _) = v.frame();
+        return Err(Error::new(
+            esgm_status::ESGM_INVALID_TYPE,
+            format!("attribute `{name}` of `{frame}` is {}, not {sort}", value.sort()),
+        ));
+    }
+    Ok(value)
+}
+
+/// Reads a `Long` attribute.
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_get_long(
+    s: esgm_sample_t,
+    attribute: *const c_char,
+    out: *mut i64,
+) -> esgm_status {
+    guard(|| {
+        let v = view(s)?;
+        let Value::Long(x) = typed(&v, attribute, ValueSort::Long)? else { unreachable_sort() };
+        unsafe { put(out, "out", *x) }
+    })
+}
+
+/// Reads a `Double` attribute.
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_get_double(
+    s: esgm_sample_t,
+    attribute: *const c_char,
+    out: *mut f64,
+) -> esgm_status {
+    guard(|| {
+        let v = view(s)?;
+        let Value::Double(x) = typed(&v, attribute, ValueSort::Double)? else { unreachable_sort() };
+        unsafe { put(out, "out", *x) }
+    })
+}
+
+/// Reads a `Bool` attribute.
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_get_bool(
+    s: esgm_sample_t,
+    attribute: *const c_char,
+    out: *mut bool,
+) -> esgm_status {
+    guard(|| {
+        let v = view(s)?;
+        let Value::Bool(x) = typed(&v, attribute, ValueSort::Bool)? else { unreachable_sort() };
+        unsafe { put(out, "out", *x) }
+    })
+}
+
+/// Reads a `Time` attribute (ns).
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_get_time(
+    s: esgm_sample_t,
+    attribute: *const c_char,
+    out: *mut i64,
+) -> esgm_status {
+    guard(|| {
+        let v = view(s)?;
+        let Value::Time(x) = typed(&v, attribute, ValueSort::Time)? else { unreachable_sort() };
+        unsafe { put(out, "out", *x) }
+    })
+}
+
+/// Reads a `String` attribute, lent while the sample lives.
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_get_string(
+    s: esgm_sample_t,
+    attribute: *const c_char,
+    out: *mut esgm_str_t,
+) -> esgm_status {
+    guard(|| {
+        let v = view(s)?;
+        let Value::String(x) = typed(&v, attribute, ValueSort::String)? else { unreachable_sort() };
+        unsafe { put(out, "out", esgm_str_t::of(x)) }
+    })
+}
+
+/// Reads an `OctetSeq` attribute (an image's pixels): `len` bytes at `data`, in the
+/// writer's shared memory where it was written there, valid while the sample lives.
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_get_octets(
+    s: esgm_sample_t,
+    attribute: *const c_char,
+    data: *mut *const u8,
+    len: *mut usize,
+) -> esgm_status {
+    guard(|| {
+        crate::strings::writable(data, "data")?;
+        crate::strings::writable(len, "len")?;
+        let v = view(s)?;
+        let Value::OctetSeq(o) = typed(&v, attribute, ValueSort::OctetSeq)? else {
+            unreachable_sort()
+        };
+        unsafe {
+            put(data, "data", o.as_ptr())?;
+            put(len, "len", o.len())
+        }
+    })
+}
+
+/// Writes true to `out` if the `OctetSeq` attribute's bytes are read in place in
+/// another process's shared memory (a held image), false if on this process's heap.
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_octets_are_shared(
+    s: esgm_sample_t,
+    attribute: *const c_char,
+    out: *mut bool,
+) -> esgm_status {
+    guard(|| {
+        let v = view(s)?;
+        let Value::OctetSeq(o) = typed(&v, attribute, ValueSort::OctetSeq)? else {
+            unreachable_sort()
+        };
+        unsafe { put(out, "out", o.is_held()) }
+    })
+}
+
+/// Reads a `LongSeq` attribute: `len` integers at `data`, valid while the sample lives.
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_get_long_seq(
+    s: esgm_sample_t,
+    attribute: *const c_char,
+    data: *mut *const i64,
+    len: *mut usize,
+) -> esgm_status {
+    guard(|| {
+        crate::strings::writable(data, "data")?;
+        crate::strings::writable(len, "len")?;
+        let v = view(s)?;
+        let Value::LongSeq(x) = typed(&v, attribute, ValueSort::LongSeq)? else {
+            unreachable_sort()
+        };
+        unsafe {
+            put(data, "data", x.as_ptr())?;
+            put(len, "len", x.len())
+        }
+    })
+}
+
+/// Reads a `DoubleSeq` attribute: `len` floats at `data`, valid while the sample lives.
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_get_double_seq(
+    s: esgm_sample_t,
+    attribute: *const c_char,
+    data: *mut *const f64,
+    len: *mut usize,
+) -> esgm_status {
+    guard(|| {
+        crate::strings::writable(data, "data")?;
+        crate::strings::writable(len, "len")?;
+        let v = view(s)?;
+        let Value::DoubleSeq(x) = typed(&v, attribute, ValueSort::DoubleSeq)? else {
+            unreachable_sort()
+        };
+        unsafe {
+            put(data, "data", x.as_ptr())?;
+            put(len, "len", x.len())
+        }
+    })
+}
+
+/// `typed` checked the sort: the match that follows it cannot miss.
+fn unreachable_sort() -> ! {
+    unreachable!("the attribute's sort was checked")
+}
+
+/// The `EntityFrame` attribute `attribute`, as a new handle (to free) that reads like
+/// a sample.
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_frame(
+    s: esgm_sample_t,
+    attribute: *const c_char,
+    out: *mut esgm_sample_t,
+) -> esgm_status {
+    guard(|| {
+        crate::strings::writable(out, "out")?;
+        let v = view(s)?;
+        let name = unsafe { text(attribute, "attribute") }?;
+        let (index, value) = v.find(name)?;
+        if !matches!(value, Value::EntityFrame(_)) {
+            return Err(Error::new(
+                esgm_status::ESGM_INVALID_TYPE,
+                format!("attribute `{name}` is {}, not EntityFrame", value.sort()),
+            ));
+        }
+        let h: esgm_sample_t = handles::insert(v.down(Step::Frame(index)));
+        unsafe { put(out, "out", h) }
+    })
+}
+
+/// Frame `index` of the `EntityFrameSeq` attribute `attribute` (its count is the
+/// value's `len`), as a new handle (to free) that reads like a sample.
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_frame_at(
+    s: esgm_sample_t,
+    attribute: *const c_char,
+    index: usize,
+    out: *mut esgm_sample_t,
+) -> esgm_status {
+    guard(|| {
+        crate::strings::writable(out, "out")?;
+        let v = view(s)?;
+        let name = unsafe { text(attribute, "attribute") }?;
+        let (at, value) = v.find(name)?;
+        let Value::EntityFrameSeq(seq) = value else {
+            return Err(Error::new(
+                esgm_status::ESGM_INVALID_TYPE,
+                format!("attribute `{name}` is {}, not EntityFrameSeq", value.sort()),
+            ));
+        };
+        if index >= seq.len() {
+            return Err(Error::new(
+                esgm_status::ESGM_OUT_OF_RANGE,
+                format!("attribute `{name}` has {} frames; there is no index {index}", seq.len()),
+            ));
+        }
+        let h: esgm_sample_t = handles::insert(v.down(Step::Item(at, index)));
+        unsafe { put(out, "out", h) }
+    })
+}
+
+/// The sample (or frame) as JSON, for printing: name, times and attributes (an image's
+/// bytes as its length only), copied into `buf` as `esgm_stats_json` does.
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_to_json(
+    s: esgm_sample_t,
+    buf: *mut c_char,
+    capacity: usize,
+    len: *mut usize,
+) -> esgm_status {
+    guard(|| {
+        let v = view(s)?;
+        let (name, attributes) = v.frame();
+        let mut fields = serde_json::Map::new();
+        for a in attributes {
+            fields.insert(a.name.clone(), json_value(&a.value));
+        }
+        let text = serde_json::json!({
+            "name": name,
+            "valid_time": v.sample.structure.valid_time,
+            "create_time": v.sample.structure.create_time,
+            "add_time": v.sample.add_time,
+            "attributes": fields,
+        })
+        .to_string();
+        unsafe { copy_out(&text, buf, capacity, len) }
+    })
+}
+
+/// A value as plain JSON (numbers, strings, arrays, objects); bytes as their count.
+fn json_value(value: &Value) -> serde_json::Value {
+    use serde_json::json;
+    match value {
+        Value::NoValue => serde_json::Value::Null,
+        Value::Long(x) | Value::Time(x) => json!(x),
+        Value::Double(x) | Value::Altitude(x) => json!(x),
+        Value::Bool(b) => json!(b),
+        Value::String(s) | Value::Symbol(s) => json!(s),
+        Value::OctetSeq(o) => json!({ "octets": o.len() }),
+        Value::LongSeq(x) => json!(x),
+        Value::DoubleSeq(x) => json!(x),
+        Value::SymbolSeq(x) => json!(x),
+        Value::Agg(x) | Value::Collection(x) => x.iter().map(json_value).collect(),
+        Value::EntityFrame(f) => frame_json(f),
+        Value::EntityFrameSeq(seq) => seq.iter().map(frame_json).collect(),
+        other => serde_json::to_value(other).unwrap_or(serde_json::Value::Null),
+    }
+}
+
+fn frame_json(f: &EntityFrame) -> serde_json::Value {
+    let mut fields = serde_json::Map::new();
+    fields.insert("name".into(), serde_json::json!(f.name));
+    for a in &f.attributes {
+        fields.insert(a.name.clone(), json_value(&a.value));
+    }
+    serde_json::Value::Object(fields)
+}
+
+/// Another handle on the same sample (or frame), to free separately: keep an input of
+/// a unit's callback beyond the call this way.
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_clone(s: esgm_sample_t, out: *mut esgm_sample_t) -> esgm_status {
+    guard(|| {
+        crate::strings::writable(out, "out")?;
+        let v = view(s)?;
+        let h: esgm_sample_t = handles::insert_arc(v);
+        unsafe { put(out, "out", h) }
+    })
+}
+
+/// Frees a sample's handle; its memory (an image's shared memory chunk) goes when no
+/// handle or process holds it. Null is fine.
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_free(s: esgm_sample_t) -> esgm_status {
+    guard(|| handles::free(s))
+}
+
+/// The number of samples in `list`.
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_list_len(list: esgm_sample_list_t, out: *mut usize) -> esgm_status {
+    guard(|| {
+        let n = handles::get(list)?.len();
+        unsafe { put(out, "out", n) }
+    })
+}
+
+/// Sample `index` of `list`, as a new handle to free.
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_list_get(
+    list: esgm_sample_list_t,
+    index: usize,
+    out: *mut esgm_sample_t,
+) -> esgm_status {
+    guard(|| {
+        let l = handles::get(list)?;
+        let sample = l.get(index).cloned().ok_or_else(|| {
+            Error::new(
+                esgm_status::ESGM_OUT_OF_RANGE,
+                format!("the list has {} samples; there is no index {index}", l.len()),
+            )
+        })?;
+        give(sample, out)
+    })
+}
+
+/// Frees a list (samples taken from it stay). Null is fine.
+#[unsafe(no_mangle)]
+pub extern "C" fn esgm_sample_list_free(list: esgm_sample_list_t) -> esgm_status {
+    guard(|| handles::free(list))
+}
