@@ -1017,7 +1017,7 @@ enum esgm_status esgm_set_log_level(struct esgm_t esgm, int32_t level);
 /**
  * The log level (an `esgm_log_level`).
  */
-enum esgm_status esgm_log_level(struct esgm_t esgm, int32_t *out);
+enum esgm_status esgm_get_log_level(struct esgm_t esgm, int32_t *out);
 
 /**
  * Serves this process's units and sensors until the system ends: returns `ESGM_OK`

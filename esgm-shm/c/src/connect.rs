@@ -75,6 +75,9 @@ pub(crate) struct Domain {
     closed: AtomicBool,
     /// The gate every unit and sensor callback of this ESGM passes.
     pub(crate) gate: Arc<Gate>,
+    /// The user pointers of its units and sensors, released when it is freed (esgm's
+    /// own threads may hold a unit a little longer; the gate keeps them from calling).
+    users: parking_lot::Mutex<Vec<std::sync::Weak<crate::units::User>>>,
     /// Opens this process's shared memory files to the users the domain admits, while
     /// it lives (a worker of a domain started with `--allow-group`).
     _widener: Option<esgm_shm::process::access::Widener>,
@@ -86,6 +89,7 @@ impl Domain {
             runtime: RwLock::new(Some(Arc::new(runtime))),
             closed: AtomicBool::new(false),
             gate: Arc::new(Gate::default()),
+            users: parking_lot::Mutex::new(Vec::new()),
             _widener: widener,
         }
     }
@@ -93,6 +97,13 @@ impl Domain {
     /// The runtime, unless `esgm_free` was called.
     pub(crate) fn runtime(&self) -> Result<Arc<Runtime>> {
         self.runtime.read().clone().ok_or_else(freed)
+    }
+
+    /// Remembers a unit's or sensor's user pointer, to release it when freed.
+    pub(crate) fn keep_user(&self, user: &Arc<crate::units::User>) {
+        let mut users = self.users.lock();
+        users.retain(|u| u.strong_count() > 0);
+        users.push(Arc::downgrade(user));
     }
 
     /// Fails once `esgm_free` was called: handles made from this ESGM stop working.
@@ -234,6 +245,12 @@ pub extern "C" fn esgm_free(esgm: esgm_t) -> esgm_status {
         let d = handles::take(esgm)?;
         d.closed.store(true, Ordering::Release);
         d.gate.close();
+        // Nothing calls a callback of this ESGM any more: its user pointers go now.
+        for user in d.users.lock().drain(..) {
+            if let Some(u) = user.upgrade() {
+                u.release();
+            }
+        }
         let runtime = d.runtime.write().take();
         // The runtime (its threads, its connection) goes now, unless a call of another
         // thread still holds it: then when that call returns.
@@ -380,7 +397,7 @@ pub extern "C" fn esgm_set_log_level(esgm: esgm_t, level: i32) -> esgm_status {
 
 /// The log level (an `esgm_log_level`).
 #[unsafe(no_mangle)]
-pub extern "C" fn esgm_log_level(esgm: esgm_t, out: *mut i32) -> esgm_status {
+pub extern "C" fn esgm_get_log_level(esgm: esgm_t, out: *mut i32) -> esgm_status {
     guard(|| {
         let (_, rt) = runtime(esgm)?;
         let level = match on!(&*rt, e => e.log_level()) {

@@ -71,7 +71,7 @@ struct CSensor {
     name: String,
     get:
         unsafe extern "C" fn(*mut c_void, i64, esgm_sensor_context_t, *mut esgm_structure_t) -> i32,
-    user: User,
+    user: Arc<User>,
     gate: Arc<Gate>,
 }
 
@@ -142,9 +142,10 @@ pub extern "C" fn esgm_add_sensor_interface(
     user: *mut c_void,
     free_user: esgm_free_fn,
 ) -> esgm_status {
-    let user = User::new(user, free_user);
+    let user = Arc::new(User::new(user, free_user));
     guard(move || {
         let (d, rt) = runtime(esgm)?;
+        d.keep_user(&user);
         let name = unsafe { text(name, "name") }?;
         let type_name = unsafe { text(type_name, "type_name") }?;
         let get = get_current_value

@@ -43,11 +43,12 @@ pub type esgm_compute_fn = Option<
 #[allow(non_camel_case_types, reason = "a C type, named as C code names them")]
 pub type esgm_free_fn = Option<unsafe extern "C" fn(user: *mut c_void)>;
 
-/// A user's pointer and how to release it.
+/// A user's pointer and how to release it: once, when the unit or sensor goes, or when
+/// its ESGM is freed (which first makes sure nothing calls it any more).
 #[derive(Debug)]
 pub(crate) struct User {
     ptr: *mut c_void,
-    free: esgm_free_fn,
+    free: parking_lot::Mutex<esgm_free_fn>,
 }
 
 // SAFETY: esgm only hands the pointer back to the user's own functions, which the
@@ -57,23 +58,28 @@ unsafe impl Send for User {}
 unsafe impl Sync for User {}
 
 impl User {
-    /// `ptr`, released by `free` (if any) when dropped.
+    /// `ptr`, released by `free` (if any) once.
     pub(crate) fn new(ptr: *mut c_void, free: esgm_free_fn) -> Self {
-        Self { ptr, free }
+        Self { ptr, free: parking_lot::Mutex::new(free) }
     }
 
     /// The pointer, to pass back.
     pub(crate) fn ptr(&self) -> *mut c_void {
         self.ptr
     }
+
+    /// Calls the release function, unless it was called already.
+    pub(crate) fn release(&self) {
+        if let Some(f) = self.free.lock().take() {
+            // SAFETY: the user's release function with the user's pointer, once.
+            unsafe { f(self.ptr) };
+        }
+    }
 }
 
 impl Drop for User {
     fn drop(&mut self) {
-        if let Some(f) = self.free {
-            // SAFETY: the user's release function with the user's pointer, once.
-            unsafe { f(self.ptr) };
-        }
+        self.release();
     }
 }
 
@@ -139,7 +145,7 @@ struct CUnit {
         *mut esgm_structure_t,
     ) -> i32,
     compute_at: esgm_compute_fn,
-    user: User,
+    user: Arc<User>,
     gate: Arc<Gate>,
 }
 
@@ -229,9 +235,10 @@ pub extern "C" fn esgm_add_comp_unit(
 ) -> esgm_status {
     // Whatever happens, the user's pointer is released exactly once: by the unit when
     // it goes, or here when it is never made.
-    let user = User::new(user, free_user);
+    let user = Arc::new(User::new(user, free_user));
     guard(move || {
         let (d, rt) = runtime(esgm)?;
+        d.keep_user(&user);
         let name = unsafe { text(name, "name") }?;
         let type_name = unsafe { text(type_name, "type_name") }?;
         let inputs = unsafe { texts(input_types, n, "input_types") }?;
