@@ -1,0 +1,277 @@
+//! esgm from C and C++, as programs written in those languages meet it (SPEC L3): the
+//! C ABI's test program (`tests/c/api_test.c`), plain and under AddressSanitizer and
+//! UndefinedBehaviorSanitizer; the C++ wrapper's (`esgm-shm/cpp/tests/api_test.cpp`),
+//! built with g++ and with clang++, warnings as errors; and the examples
+//! (`esgm-shm/cpp/examples`). Each is built with CMake against the esgm package of this
+//! checkout, linked to the `libesgm_c.so` this test run built, and run on both runtimes:
+//! in process, and against a coordinator on a thread of this test.
+//!
+//! CMake, g++ and clang++ are needed (`.ci/run` installs them): in CI a missing one
+//! fails these tests; elsewhere they are skipped with a note.
+#![allow(clippy::panic, clippy::unwrap_used, clippy::expect_used)] // a test fails loudly
+
+#[path = "../../cli/tests/common/capability.rs"]
+mod capability;
+
+use std::io::{BufRead as _, BufReader, Write as _};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::{Mutex, OnceLock};
+use std::time::{Duration, Instant};
+
+use esgm_shm::control::{Coordinator, CoordinatorThread, Registry};
+
+/// How long one program may run before it counts as hung.
+const RUN_TIMEOUT: Duration = Duration::from_secs(300);
+
+fn checkout() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").canonicalize().unwrap()
+}
+
+/// The directory of the `libesgm_c.so` this test run built: this test's own directory
+/// (`deps`) or the profile's, whichever holds the newer one.
+fn library_dir() -> PathBuf {
+    let exe = std::env::current_exe().unwrap();
+    let deps = exe.parent().unwrap().to_path_buf();
+    let profile = deps.parent().unwrap().to_path_buf();
+    let modified =
+        |dir: &Path| std::fs::metadata(dir.join("libesgm_c.so")).and_then(|m| m.modified()).ok();
+    match (modified(&deps), modified(&profile)) {
+        (Some(a), Some(b)) if b > a => profile,
+        (Some(_), _) => deps,
+        (None, Some(_)) => profile,
+        (None, None) => panic!("no libesgm_c.so in {} or {}", deps.display(), profile.display()),
+    }
+}
+
+/// Where the CMake builds go.
+fn build_root() -> PathBuf {
+    PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("esgm-c-programs")
+}
+
+/// What these tests need of the machine, or why not.
+fn tools() -> Result<(), String> {
+    for (tool, args) in
+        [("cmake", ["--version"]), ("g++", ["--version"]), ("clang++", ["--version"])]
+    {
+        capability::runs(tool, &args)?;
+    }
+    Ok(())
+}
+
+/// Configures and builds the CMake project `source` into `build` (once per process),
+/// with `options`; returns the build directory.
+fn cmake(source: &str, build: &str, options: &[&str], cxx: Option<&str>) -> PathBuf {
+    static BUILT: OnceLock<Mutex<()>> = OnceLock::new();
+    let _one_at_a_time = BUILT.get_or_init(|| Mutex::new(())).lock().unwrap();
+    let dir = build_root().join(build);
+    let library = format!("-DESGM_LIBRARY_DIR={}", library_dir().display());
+    let mut configure = Command::new("cmake");
+    configure
+        .arg("-S")
+        .arg(checkout().join(source))
+        .arg("-B")
+        .arg(&dir)
+        .arg(&library)
+        .arg("-DCMAKE_BUILD_TYPE=Debug")
+        .args(options);
+    if let Some(cxx) = cxx {
+        configure.env("CXX", cxx);
+    }
+    run_ok(&mut configure, "cmake configure");
+    run_ok(Command::new("cmake").arg("--build").arg(&dir).arg("-j2"), "cmake --build");
+    dir
+}
+
+/// Runs a build step; its output is shown when it fails.
+fn run_ok(command: &mut Command, what: &str) {
+    let out = command.output().unwrap_or_else(|e| panic!("{what}: cannot run: {e}"));
+    assert!(
+        out.status.success(),
+        "{what} failed ({}):\n{}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Waits for `child` with a deadline; kills it and fails if it runs longer.
+fn finish(mut child: Child, what: &str) -> String {
+    let deadline = Instant::now() + RUN_TIMEOUT;
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            let out = child.wait_with_output().unwrap();
+            let text = format!(
+                "{}{}",
+                String::from_utf8_lossy(&out.stdout),
+                String::from_utf8_lossy(&out.stderr)
+            );
+            assert!(status.success(), "{what} failed ({status}):\n{text}");
+            return text;
+        }
+        if Instant::now() > deadline {
+            let _killed = child.kill();
+            let out = child.wait_with_output().unwrap();
+            panic!(
+                "{what} did not finish within {RUN_TIMEOUT:?}:\n{}{}",
+                String::from_utf8_lossy(&out.stdout),
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// Runs `program args…` to completion (status 0), under the sanitizers' strict options.
+fn run(program: &Path, args: &[&str]) -> String {
+    let what = format!("{} {}", program.display(), args.join(" "));
+    let child = program_command(program)
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap_or_else(|e| panic!("cannot run {what}: {e}"));
+    finish(child, &what)
+}
+
+fn program_command(program: &Path) -> Command {
+    let mut c = Command::new(program);
+    // A sanitizer's report fails the program (and so the test); leaks are reported.
+    c.env("ASAN_OPTIONS", "abort_on_error=0:detect_leaks=1:halt_on_error=1")
+        .env("UBSAN_OPTIONS", "print_stacktrace=1:halt_on_error=1")
+        .stdin(Stdio::null());
+    c
+}
+
+/// A coordinator on a thread of this test, in a domain of its own.
+fn coordinator(prefix: &str) -> CoordinatorThread {
+    let domain = esgm_shm::unique_domain(prefix);
+    Coordinator::spawn(&domain, Registry::new(esgm_core::TypeRegistry::with_library()))
+        .expect("start a coordinator")
+}
+
+/// The C ABI's tests on both runtimes, in a program built `build` with `options`.
+fn c_api(build: &str, options: &[&str]) {
+    let dir = cmake("esgm-shm/c/tests/c", build, options, None);
+    let program = dir.join("api_test");
+    let out = run(&program, &["in-process"]);
+    assert!(out.contains("every check held"), "{out}");
+    let c = coordinator("c-api");
+    let out = run(&program, &["shm", c.domain()]);
+    assert!(out.contains("every check held"), "{out}");
+    let out = run(&program, &["killed-writer", c.domain()]);
+    assert!(out.contains("every check held"), "{out}");
+}
+
+#[test]
+fn the_c_abi_on_both_runtimes() {
+    if capability::needs("cmake, g++ and clang++", tools()).is_none() {
+        return;
+    }
+    c_api("c", &[]);
+}
+
+#[test]
+fn the_c_abi_under_address_and_undefined_behavior_sanitizers() {
+    if capability::needs("cmake, g++ and clang++", tools()).is_none() {
+        return;
+    }
+    c_api("c-sanitized", &["-DESGM_SANITIZE=ON"]);
+}
+
+/// Handles used after the domain went down: the program connects and says so, the
+/// coordinator stops, and every call it then makes returns a status (no crash, no
+/// sanitizer report).
+#[test]
+fn handles_after_the_domain_went_down() {
+    if capability::needs("cmake, g++ and clang++", tools()).is_none() {
+        return;
+    }
+    let dir = cmake("esgm-shm/c/tests/c", "c-sanitized", &["-DESGM_SANITIZE=ON"], None);
+    let c = coordinator("c-down");
+    let domain = c.domain().to_owned();
+    let mut child = program_command(&dir.join("api_test"))
+        .args(["down", &domain])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdout = BufReader::new(child.stdout.take().unwrap());
+    let mut line = String::new();
+    stdout.read_line(&mut line).unwrap();
+    assert_eq!(line.trim(), "connected", "the program did not connect");
+    drop(c); // the domain goes down
+    writeln!(child.stdin.take().unwrap(), "go").unwrap();
+    let errors = finish(child, "api_test down");
+    let mut rest = String::new();
+    std::io::Read::read_to_string(&mut stdout, &mut rest).unwrap();
+    assert!(rest.contains("every check held"), "{rest}{errors}");
+}
+
+#[test]
+fn the_cpp_wrapper_with_gcc_and_clang_on_both_runtimes() {
+    if capability::needs("cmake, g++ and clang++", tools()).is_none() {
+        return;
+    }
+    for (build, cxx) in [("cpp-gcc", "g++"), ("cpp-clang", "clang++")] {
+        let dir = cmake("esgm-shm/cpp/tests", build, &[], Some(cxx));
+        let program = dir.join("cpp_api_test");
+        let out = run(&program, &["in-process"]);
+        assert!(out.contains("every check held"), "{cxx}: {out}");
+        let c = coordinator("cpp-api");
+        let out = run(&program, &["shm", c.domain()]);
+        assert!(out.contains("every check held"), "{cxx}: {out}");
+    }
+}
+
+/// The C++ camera renders the Rust camera's scene, pixel for pixel, with the same
+/// ground truth: `esgm demo --config tutorial_cpp.toml` checks it against the same.
+#[test]
+fn the_cpp_camera_renders_the_rust_scene() {
+    if capability::needs("cmake, g++ and clang++", tools()).is_none() {
+        return;
+    }
+    let dir = cmake("esgm-shm/cpp/tests", "cpp-gcc", &[], Some("g++"));
+    for (seed, blobs, t) in
+        [(0_u64, 3_usize, 1_795_000_000_123_456_789_i64), (7, 5, 42), (3, 1, -5)]
+    {
+        let out = run(
+            &dir.join("cpp_api_test"),
+            &["scene", &seed.to_string(), &blobs.to_string(), &t.to_string()],
+        );
+        let scene =
+            camera_publisher::SyntheticScene::builder().blobs(blobs).seed(seed).create().unwrap();
+        let frame = camera_publisher::FrameSource::frame(&scene, t);
+        let mut hash: u64 = 1_469_598_103_934_665_603;
+        for b in frame.image_data.iter() {
+            hash = (hash ^ u64::from(*b)).wrapping_mul(1_099_511_628_211);
+        }
+        let truth: Vec<String> =
+            scene.truth(t).iter().map(|b| format!("{} {} {}", b.x, b.y, b.size)).collect();
+        let expected = format!("{hash}\n{}\n", truth.join("\n"));
+        assert_eq!(out, expected, "seed {seed}, {blobs} blobs, t {t}");
+    }
+}
+
+/// The examples build with warnings as errors, and the seed's tutorial in C++ and the
+/// C robot run in process.
+#[test]
+fn the_examples_build_and_run() {
+    if capability::needs("cmake, g++ and clang++", tools()).is_none() {
+        return;
+    }
+    let dir = cmake("esgm-shm/cpp/examples", "examples", &["-DESGM_WERROR=ON"], None);
+    for program in ["tutorial_camera", "driving_direction_unit", "tutorial", "robot_c"] {
+        assert!(dir.join(program).is_file(), "{program} was not built");
+    }
+    let out = run(&dir.join("tutorial"), &[]);
+    assert!(out.contains("get current driving direction... valid at"), "{out}");
+    assert!(out.contains("got sample driving_dir ="), "{out}");
+    let out = run(&dir.join("robot_c"), &[]);
+    assert!(out.contains("20 states pushed"), "{out}");
+    // Against a system of processes too.
+    let c = coordinator("c-robot");
+    let out = run(&dir.join("robot_c"), &[c.domain(), "5"]);
+    assert!(out.contains("5 states pushed"), "{out}");
+}
