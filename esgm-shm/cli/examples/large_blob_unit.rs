@@ -5,7 +5,8 @@
 //! ```toml
 //! [[unit]]
 //! name = "LargeBlob"
-//! exec = "target/release/examples/large_blob_unit"   # relative to the file
+//! program = "target/release/examples/large_blob_unit"   # relative to the file, or a
+//!                                                       # bare name found on PATH
 //! args = ["--min-size", "2000"]
 //!
 //! [[trajectory]]

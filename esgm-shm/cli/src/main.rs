@@ -49,7 +49,8 @@ enum Command {
     Ps,
     /// What the system's processes logged (`esgm up` keeps a log per process).
     Logs(cmd::logs::Args),
-    /// The seed's tutorial as separate processes: coordinator, camera, robot, units.
+    /// The seed's tutorial as separate processes: coordinator, camera, robot, units
+    /// (--config FILE: as that file declares them).
     Demo(cmd::demo::Args),
     /// The tutorial run hard for minutes (camera 30 Hz, robot 1 kHz), watched for
     /// memory growth and losses; writes soak.json and soak.png.

@@ -1,13 +1,20 @@
 //! `esgm demo`: the seed's tutorial (chapters 8–10) as separate processes — a
 //! coordinator, a camera, a robot and three unit workers, supervised — driven from
 //! this process as the seed's main program drives its ESGM.
+//!
+//! `--config FILE` runs the tutorial as another file declares it (a camera or units
+//! of the user's own, in C++ say) through the same checks: the file must declare the
+//! tutorial's five trajectories, whoever computes them, so that its result can be
+//! held to the same ground truth and the same zero image copies.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use camera_publisher::SyntheticScene;
+use camera_publisher::{CameraArgs, SyntheticScene};
+use clap::Parser as _;
+use esgm_core::esgm::TrajectorySource;
 use esgm_core::library::{Blob, DrivingDirection, RobotState};
 use esgm_core::{
     Entity, EntityTrajectoryStructure, Esgm, InProcessTrajectory, Sample, SubscribeOptions, Time,
@@ -18,7 +25,7 @@ use esgm_shm::control::server::cleanup_dead_nodes;
 use esgm_shm::control::{ProcessRecord, StateDir};
 use esgm_shm::{ShmEsgm, unique_domain};
 
-use crate::config::{self, Plan};
+use crate::config::{self, Plan, Serves};
 use crate::session;
 use crate::show::ms;
 
@@ -35,8 +42,15 @@ pub struct Args {
     #[arg(long, default_value_t = 3)]
     pub blobs: usize,
     /// Milliseconds between camera images.
-    #[arg(long, default_value_t = 250)]
+    #[arg(long, default_value_t = 250, conflicts_with = "config")]
     pub image_period_ms: u32,
+    /// Run the system this file declares instead of the built-in tutorial.toml
+    /// (relative paths in it are taken from its directory, as `esgm apply` takes
+    /// them). It must declare the tutorial's trajectories robot_state, images, blobs,
+    /// current_blob and driving_direction; its camera and periods are its own, and
+    /// --seed/--blobs name the scene the result is checked against.
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
     /// Keep idle cores' wake-up within this many microseconds while the demo runs, as
     /// `esgm up --cpu-latency` does (needs root).
     #[arg(long, value_name = "MICROSECONDS", value_parser = esgm_shm::process::cpu_latency::parse_micros)]
@@ -49,6 +63,62 @@ const PIPELINE: [&str; 5] = ["robot_state", "images", "blobs", "current_blob", "
 /// The system, as a configuration file (also shipped as an example of the format).
 const TUTORIAL: &str = include_str!("../../tutorial.toml");
 
+/// The types the demo reads from the tutorial's trajectories (the others it only
+/// counts): a file naming them must give them these types.
+const READ_AS: [(&str, &str); 3] = [
+    ("robot_state", "RobotState"),
+    ("current_blob", "Blob"),
+    ("driving_direction", "DrivingDirection"),
+];
+
+/// A system file `esgm demo --config` cannot run as the tutorial: what to change.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum NotTheTutorial {
+    /// The file lacks trajectories the demo reads or times: declare them.
+    #[error(
+        "{file}: declares no trajectory {}; esgm demo --config runs the tutorial's {}",
+        missing.iter().map(|m| format!("`{m}`")).collect::<Vec<_>>().join(", "),
+        PIPELINE.join(", ")
+    )]
+    MissingTrajectories {
+        /// The file, as given.
+        file: String,
+        /// The trajectories it does not declare.
+        missing: Vec<&'static str>,
+    },
+    /// The file's built-in camera draws another scene than the one the result is
+    /// checked against: give the file's seed and blobs on the command line.
+    #[error(
+        "{file}:{line}: sensor `{sensor}` draws {drawn}, but esgm demo checks the result \
+         against {checked}; {hint}"
+    )]
+    OtherScene {
+        /// The file, as given.
+        file: String,
+        /// The line of the sensor's declaration.
+        line: usize,
+        /// The sensor sampled by `images`.
+        sensor: String,
+        /// What the file's camera draws.
+        drawn: String,
+        /// What the check expects.
+        checked: String,
+        /// What to do.
+        hint: String,
+    },
+    /// A trajectory the demo reads has another type: compute the tutorial's type.
+    #[error("trajectory `{trajectory}` is of type `{found}`; esgm demo reads `{expected}` from it")]
+    WrongType {
+        /// The trajectory.
+        trajectory: String,
+        /// Its type in the running system.
+        found: String,
+        /// The type the demo reads.
+        expected: &'static str,
+    },
+}
+
 /// Runs the demo; an inconsistent result, or an image a process copied, is an error
 /// (exit 1).
 pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
@@ -58,10 +128,17 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
     if a.image_period_ms == 0 {
         bail!("--image-period-ms must be positive");
     }
-    let plan = plan(a)?;
+    let plan = match &a.config {
+        Some(file) => plan_of_file(a, file)?,
+        None => plan(a)?,
+    };
     // A fresh system unless the user named one.
     let domain = if domain == "esgm" { unique_domain("demo") } else { domain.to_owned() };
-    println!("esgm demo: the seed's tutorial as separate processes, domain `{domain}`");
+    let system = match &a.config {
+        Some(file) => format!("the tutorial of {}", file.display()),
+        None => "the seed's tutorial".to_owned(),
+    };
+    println!("esgm demo: {system} as separate processes, domain `{domain}`");
     // A state directory of its own, removed at the end: the demo leaves nothing.
     let state = StateDir::at(std::env::temp_dir().join(format!("esgm-{domain}")));
     // The coordinator's log (worker restarts among it) goes to this terminal.
@@ -167,6 +244,73 @@ fn plan(a: &Args) -> anyhow::Result<Plan> {
     Ok(config::parse("tutorial.toml", &toml::to_string(&doc)?, Path::new("."))?)
 }
 
+/// The system a file declares, loaded as `esgm apply` loads it (its programs found),
+/// if it is the tutorial's: its five trajectories, and a built-in camera (if it has
+/// one) drawing the scene the result is checked against.
+fn plan_of_file(a: &Args, file: &Path) -> anyhow::Result<Plan> {
+    let plan = config::load(file)?;
+    let declared = |name: &str| plan.trajectories.iter().find(|t| t.what.spec.name == name);
+    let missing: Vec<&'static str> =
+        PIPELINE.into_iter().filter(|name| declared(name).is_none()).collect();
+    if !missing.is_empty() {
+        bail!(NotTheTutorial::MissingTrajectories { file: plan.file.clone(), missing });
+    }
+    same_scene(a, &plan)?;
+    Ok(plan)
+}
+
+/// If `images` is sampled from a built-in camera of the plan, it must draw the scene
+/// `--seed`/`--blobs` name (at the size the built-in demo draws): a camera of the
+/// user's own is trusted to, and a mismatch shows in the check at the end.
+fn same_scene(a: &Args, plan: &Plan) -> anyhow::Result<()> {
+    let sensor = plan.trajectories.iter().find_map(|t| match &t.what.spec.source {
+        TrajectorySource::Sampled { sensor, .. } if t.what.spec.name == "images" => {
+            Some(sensor.clone())
+        }
+        _ => None,
+    });
+    let Some(sensor) = sensor else { return Ok(()) };
+    let camera = plan.workers.iter().find(|w| {
+        w.what.serves == Serves::Sensor(sensor.clone())
+            && w.what.program.is_none()
+            && w.what.spec.args.starts_with(&["worker".to_owned(), "camera".to_owned()])
+    });
+    let Some(camera) = camera else { return Ok(()) };
+    let words = |args: &[String]| std::iter::once("camera".to_owned()).chain(args.to_vec());
+    let drawn = CameraArgs::try_parse_from(words(&camera.what.spec.args[2..]))
+        .context("the file's camera takes arguments `esgm worker camera` does not")?;
+    let checked = CameraArgs::try_parse_from(words(&[
+        "--seed".to_owned(),
+        a.seed.to_string(),
+        "--blobs".to_owned(),
+        a.blobs.to_string(),
+    ]))
+    .context("--seed and --blobs")?;
+    let scene = |c: &CameraArgs| match &c.dir {
+        Some(dir) => format!("the frames of {}", dir.display()),
+        None => format!("seed {}, {} blobs at {}x{}", c.seed, c.blobs, c.width, c.height),
+    };
+    if scene(&drawn) == scene(&checked) {
+        return Ok(());
+    }
+    // Only the seed and the number of blobs are the demo's to choose.
+    let hint =
+        if drawn.dir.is_none() && (drawn.width, drawn.height) == (checked.width, checked.height) {
+            format!("run it with --seed {} --blobs {}", drawn.seed, drawn.blobs)
+        } else {
+            "the demo checks a synthetic camera of the default size, as tutorial.toml declares it"
+                .to_owned()
+        };
+    bail!(NotTheTutorial::OtherScene {
+        file: plan.file.clone(),
+        line: camera.line,
+        sensor,
+        drawn: scene(&drawn),
+        checked: scene(&checked),
+        hint,
+    })
+}
+
 fn drive(domain: &str, a: &Args, plan: &Plan) -> anyhow::Result<()> {
     // The seed's main program, declared: the camera, the units and the robot run in
     // processes `esgm up` keeps alive; each trajectory is written by the process that
@@ -187,9 +331,19 @@ fn drive(domain: &str, a: &Args, plan: &Plan) -> anyhow::Result<()> {
     let directions = esgm.get_entity_trajectory_structure("driving_direction")?;
     let current_blob = esgm.get_entity_trajectory_structure("current_blob")?;
     let robot_state = esgm.get_entity_trajectory_structure("robot_state")?;
+    let trajectories = esgm.trajectories()?;
+    for (name, expected) in READ_AS {
+        if let Some(t) = trajectories.iter().find(|t| t.name == name && t.type_name != expected) {
+            bail!(NotTheTutorial::WrongType {
+                trajectory: name.to_owned(),
+                found: t.type_name.clone(),
+                expected,
+            });
+        }
+    }
     println!("\n  {:<18} {:<10} {:<17} source", "trajectory", "kind", "type");
     for name in PIPELINE {
-        if let Some(i) = esgm.trajectories()?.into_iter().find(|i| i.name == name) {
+        if let Some(i) = trajectories.iter().find(|i| i.name == name) {
             let source = match (&i.source, i.inputs.as_slice()) {
                 (Some(s), []) => s.clone(),
                 (Some(s), inputs) => format!("{s}({})", inputs.join(", ")),
@@ -356,5 +510,86 @@ fn check(
         Ok(())
     } else {
         bail!("MISMATCH: the selected blob is not the largest disc of the scene")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use clap::Parser as _;
+
+    use super::*;
+
+    /// `esgm demo ARGS…`'s options.
+    fn args(words: &[&str]) -> Args {
+        let cli = crate::Cli::try_parse_from(["esgm", "demo"].iter().chain(words)).unwrap();
+        match cli.command {
+            crate::Command::Demo(a) => a,
+            _ => unreachable!("parsed as esgm demo"),
+        }
+    }
+
+    fn refusal(text: &str, words: &[&str]) -> String {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("system.toml");
+        std::fs::write(&file, text).unwrap();
+        let mut words = words.to_vec();
+        let path = file.to_str().unwrap().to_owned();
+        words.extend(["--config", &path]);
+        let e = plan_of_file(&args(&words), &file).unwrap_err();
+        e.to_string().replace(&path, "system.toml")
+    }
+
+    #[test]
+    fn the_tutorial_as_a_file_is_the_demos_system() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("tutorial.toml");
+        std::fs::write(&file, TUTORIAL).unwrap();
+        let plan = plan_of_file(&args(&["--config", file.to_str().unwrap()]), &file).unwrap();
+        assert_eq!(plan.trajectories.len(), PIPELINE.len());
+    }
+
+    #[test]
+    fn a_file_is_refused_naming_every_trajectory_it_lacks() {
+        let e =
+            refusal("[[trajectory]]\nname = \"robot_state\"\nprimitive = \"RobotState\"\n", &[]);
+        assert_eq!(
+            e,
+            "system.toml: declares no trajectory `images`, `blobs`, `current_blob`, \
+             `driving_direction`; esgm demo --config runs the tutorial's robot_state, images, \
+             blobs, current_blob, driving_direction"
+        );
+    }
+
+    #[test]
+    fn a_built_in_camera_must_draw_the_scene_the_result_is_checked_against() {
+        let seven = TUTORIAL.replace("seed = 0", "seed = 7");
+        let e = refusal(&seven, &[]);
+        assert!(e.starts_with("system.toml:33: sensor `camera` draws seed 7, 3 blobs"), "{e}");
+        assert!(e.ends_with("run it with --seed 7 --blobs 3"), "{e}");
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("seven.toml");
+        std::fs::write(&file, &seven).unwrap();
+        let path = file.to_str().unwrap();
+        assert!(plan_of_file(&args(&["--seed", "7", "--config", path]), &file).is_ok());
+
+        let small = TUTORIAL.replace("# width = 640", "width = 320");
+        let e = refusal(&small, &[]);
+        assert!(e.contains("at 320x480") && e.ends_with("as tutorial.toml declares it"), "{e}");
+    }
+
+    #[test]
+    fn the_image_period_is_the_files_own() {
+        let e = crate::Cli::try_parse_from([
+            "esgm",
+            "demo",
+            "--config",
+            "f.toml",
+            "--image-period-ms",
+            "100",
+        ])
+        .unwrap_err();
+        assert_eq!(e.kind(), clap::error::ErrorKind::ArgumentConflict);
     }
 }

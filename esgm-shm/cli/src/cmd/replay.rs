@@ -140,7 +140,7 @@ fn rerun(json: bool, a: &Args, rec: &Recording) -> anyhow::Result<()> {
     let mut units = Vec::new();
     for u in &plan.units {
         let d = &u.what;
-        if d.exec.is_some() {
+        if d.has_program() {
             bail!(
                 "{}:{}: unit `{}` runs a program of its own; --in-process runs built-in units only",
                 plan.file,

@@ -131,7 +131,7 @@ pub fn bridge_worker(b: &BridgeDecl, program: &Path, base: &Path) -> anyhow::Res
         args,
         env: Vec::new(),
     };
-    Ok(Worker { spec, serves: Serves::Bridge(name) })
+    Ok(Worker { spec, serves: Serves::Bridge(name), program: None })
 }
 
 /// The `esgm-bridge` executable, or why there is none.

@@ -60,7 +60,7 @@ fn attr(spec: &str) -> anyhow::Result<Attr> {
 }
 
 /// `[[sensor]]`: a pull sensor served by a process the system keeps running — a
-/// built-in camera, your own executable, or a class written in Python.
+/// built-in camera, your own program, or a class written in Python.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SensorDecl {
@@ -68,7 +68,10 @@ pub struct SensorDecl {
     pub name: String,
     /// `"synthetic"` (moving bright blobs), or a directory of PNG/JPEG frames.
     pub camera: Option<String>,
-    /// Your own executable serving the sensor (it registers it under `name`).
+    /// Your own program serving the sensor (it registers it under `name`): a bare
+    /// name found on `PATH`, or a path relative to this file.
+    pub program: Option<String>,
+    /// The older name of `program`.
     pub exec: Option<String>,
     /// A class written in Python serving the sensor, `"FILE.py:CLASS"` (relative to
     /// this file): run as a worker by `python -m esgm.worker`.
@@ -96,7 +99,7 @@ pub struct SensorDecl {
 
 /// `[[unit]]`: a computational unit served by a process the system keeps running —
 /// built in (BlobDetection, BlobSelection, DrivingDirection, MovingAverage), your
-/// own executable, or a class written in Python.
+/// own program, or a class written in Python.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct UnitDecl {
@@ -104,7 +107,10 @@ pub struct UnitDecl {
     pub name: String,
     /// Which built-in unit (default: the one called `name`).
     pub builtin: Option<String>,
-    /// Your own executable serving the unit (it registers it under `name`).
+    /// Your own program serving the unit (it registers it under `name`): a bare name
+    /// found on `PATH`, or a path relative to this file.
+    pub program: Option<String>,
+    /// The older name of `program`.
     pub exec: Option<String>,
     /// A class written in Python serving the unit, `"FILE.py:CLASS"` (relative to
     /// this file): run as a worker by `python -m esgm.worker`.
@@ -123,6 +129,14 @@ pub struct UnitDecl {
     pub type_name: Option<String>,
     /// MovingAverage: samples in the window.
     pub window: Option<usize>,
+}
+
+impl UnitDecl {
+    /// Whether a program of the user's serves it (`program`, or its older name
+    /// `exec`), not one of esgm's.
+    pub fn has_program(&self) -> bool {
+        self.program.is_some() || self.exec.is_some()
+    }
 }
 
 /// The built-in units a worker can serve.

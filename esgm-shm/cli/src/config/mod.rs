@@ -12,11 +12,12 @@
 //!
 //! [[sensor]]                     # a pull sensor in a process esgm keeps running
 //! name = "camera"
-//! camera = "synthetic"           # or a directory of PNG/JPEG frames, or exec = "path"
+//! camera = "synthetic"           # or a directory of PNG/JPEG frames, or your own
+//!                                #   program = "name" (found on PATH) or "path"
 //!
-//! [[unit]]                       # a computational unit: built in, exec = "path",
-//!                                #   or python = "blobs.py:BlobDetection"
-//! name = "BlobDetection"
+//! [[unit]]                       # a computational unit: built in, your own
+//! name = "BlobDetection"         #   program = "name" or "path" (exec: its older
+//!                                #   name), or python = "blobs.py:BlobDetection"
 //!
 //! [[robot]]                      # the tutorial's robot (pushes robot_state)
 //!
@@ -33,13 +34,14 @@
 //! ```
 //!
 //! Every error names the file and line of the declaration it is about. A file is
-//! checked whole — syntax, policies, sorts, and every name it uses against itself and
-//! the running system — before anything is changed, so a file with an error leaves the
-//! running system as it was.
+//! checked whole — syntax, policies, sorts, the programs it runs (see [`program`]), and
+//! every name it uses against itself and the running system — before anything is
+//! changed, so a file with an error leaves the running system as it was.
 
 pub mod apply;
 pub mod bridge;
 pub mod decl;
+pub mod program;
 pub mod python;
 pub mod ros2;
 
@@ -116,6 +118,9 @@ pub struct Worker {
     pub spec: ProcessSpec,
     /// What it registers.
     pub serves: Serves,
+    /// The user's program it runs, as declared: `spec.program` is that program as
+    /// written until [`Plan::find_programs`] puts the absolute path found there.
+    pub program: Option<program::UserProgram>,
 }
 
 /// A trajectory to create and the process that writes it (for primitive ones).
@@ -166,17 +171,45 @@ impl Plan {
     pub fn error(&self, line: usize, message: impl std::fmt::Display) -> ConfigError {
         ConfigError { file: self.file.clone(), line, message: message.to_string() }
     }
+
+    /// Finds every user's program the plan runs (a bare name on this process's `PATH`,
+    /// a path from the file's directory) and has the supervisor run the absolute path
+    /// found; the first that cannot run is an error naming its line, what it serves and
+    /// the program.
+    pub fn find_programs(&mut self) -> Result<(), ConfigError> {
+        let file = &self.file;
+        for Item { line, what } in &mut self.workers {
+            let Some(program) = &what.program else { continue };
+            let serving = match &what.serves {
+                Serves::Sensor(n) => format!("sensor `{n}`"),
+                Serves::Unit(n) => format!("unit `{n}`"),
+                Serves::Pushes(t) => format!("process pushing `{t}`"),
+                Serves::Bridge(n) => format!("bridge `{n}`"),
+            };
+            what.spec.program = program.find().map_err(|e| ConfigError {
+                file: file.clone(),
+                line: *line,
+                message: format!("{serving}: {e}"),
+            })?;
+        }
+        Ok(())
+    }
 }
 
-/// Reads and checks a configuration file.
+/// Reads and checks a configuration file, and finds the programs it runs (see
+/// [`Plan::find_programs`]): the plan to apply.
 pub fn load(path: &Path) -> anyhow::Result<Plan> {
     let text = std::fs::read_to_string(path)
         .with_context(|| format!("cannot read the configuration `{}`", path.display()))?;
     let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
-    Ok(parse(&path.display().to_string(), &text, &base)?)
+    let mut plan = parse(&path.display().to_string(), &text, &base)?;
+    plan.find_programs()?;
+    Ok(plan)
 }
 
-/// Checks a configuration given as text; `base` resolves relative paths in it.
+/// Checks a configuration given as text; `base` resolves relative paths in it. The
+/// users' programs it runs are as written, not looked for: [`load`] (or
+/// [`Plan::find_programs`]) finds them before a plan is applied.
 pub fn parse(file: &str, text: &str, base: &Path) -> Result<Plan, ConfigError> {
     let line_of = |offset: usize| text[..offset.min(text.len())].matches('\n').count() + 1;
     let parsed: SystemFile = toml::from_str(text).map_err(|e| ConfigError {
@@ -276,7 +309,7 @@ fn check_duplicates(plan: &Plan) -> Result<(), ConfigError> {
     Ok(())
 }
 
-/// The environment variable naming the sensor or unit an `exec` program was declared
+/// The environment variable naming the sensor or unit a user's program was declared
 /// for (one program can serve differently named units).
 pub const NAME_ENV: &str = "ESGM_NAME";
 
@@ -309,37 +342,42 @@ fn spec(name: String, program: &Path, args: Vec<String>) -> ProcessSpec {
     ProcessSpec { name, program: program.display().to_string(), args, env: Vec::new() }
 }
 
-/// A user's executable: relative paths are taken from the configuration's directory;
-/// `ESGM_NAME` tells it the sensor or unit name it was declared for.
-fn user_program(
+/// A user's program serving `declared` as process `name`: run as written until
+/// [`Plan::find_programs`] finds it (a relative path is taken from the configuration's
+/// directory already); `ESGM_NAME` tells it the sensor or unit name it was declared for.
+fn user_worker(
     name: String,
     declared: &str,
-    exec: &str,
+    program: program::UserProgram,
     args: &[String],
     env: &std::collections::BTreeMap<String, String>,
-    base: &Path,
-) -> ProcessSpec {
-    let program = if exec.contains('/') && Path::new(exec).is_relative() {
-        base.join(exec).display().to_string()
+    serves: Serves,
+) -> Worker {
+    let written = &program.declared;
+    let path = if written.contains('/') && Path::new(written).is_relative() {
+        program.base.join(written).display().to_string()
     } else {
-        exec.to_owned()
+        written.clone()
     };
-    ProcessSpec {
+    let spec = ProcessSpec {
         name,
-        program,
+        program: path,
         args: args.to_vec(),
         env: std::iter::once((NAME_ENV.to_owned(), declared.to_owned()))
             .chain(env.iter().map(|(k, v)| (k.clone(), v.clone())))
             .collect(),
-    }
+    };
+    Worker { spec, serves, program: Some(program) }
 }
 
 fn sensor_worker(s: &SensorDecl, esgm: &Path, base: &Path) -> anyhow::Result<Worker> {
     let process = sensor_process(&s.name);
     let serves = Serves::Sensor(s.name.clone());
-    let sources = [s.camera.is_some(), s.exec.is_some(), s.python.is_some()];
+    let what = format!("sensor `{}`", s.name);
+    let own = program::declared(&what, s.program.as_deref(), s.exec.as_deref(), base)?;
+    let sources = [s.camera.is_some(), own.is_some(), s.python.is_some()];
     if sources.iter().filter(|set| **set).count() > 1 {
-        anyhow::bail!("sensor `{}`: give one of camera, exec and python", s.name);
+        anyhow::bail!("{what}: give one of camera, program and python");
     }
     if s.interpreter.is_some() && s.python.is_none() {
         anyhow::bail!("sensor `{}`: interpreter is for python sensors", s.name);
@@ -361,7 +399,7 @@ fn sensor_worker(s: &SensorDecl, esgm: &Path, base: &Path) -> anyhow::Result<Wor
         }
         Ok(())
     };
-    let spec = match (&s.camera, &s.exec, &s.python) {
+    let spec = match (&s.camera, own, &s.python) {
         (_, _, Some(target)) => {
             only_for_cameras("python")?;
             let decl = python::PythonDecl {
@@ -372,12 +410,12 @@ fn sensor_worker(s: &SensorDecl, esgm: &Path, base: &Path) -> anyhow::Result<Wor
             };
             python::python_worker(python::PythonRole::Sensor, process, &s.name, decl, base)?
         }
-        (None, Some(exec), None) => {
-            only_for_cameras("exec")?;
-            user_program(process, &s.name, exec, &s.args, &s.env, base)
+        (None, Some(own), None) => {
+            only_for_cameras(own.key)?;
+            return Ok(user_worker(process, &s.name, own, &s.args, &s.env, serves));
         }
         (None, None, None) => anyhow::bail!(
-            "sensor `{}` needs camera = \"synthetic\" (or a frame directory), exec = \"path\" or python = \"FILE.py:CLASS\"",
+            "sensor `{}` needs camera = \"synthetic\" (or a frame directory), program = \"name or path\" or python = \"FILE.py:CLASS\"",
             s.name
         ),
         (Some(camera), _, None) => {
@@ -410,31 +448,37 @@ fn sensor_worker(s: &SensorDecl, esgm: &Path, base: &Path) -> anyhow::Result<Wor
                 }
             }
             if !s.args.is_empty() || !s.env.is_empty() {
-                anyhow::bail!("sensor `{}`: args and env are for exec and python sensors", s.name);
+                anyhow::bail!(
+                    "sensor `{}`: args and env are for program and python sensors",
+                    s.name
+                );
             }
             spec(process, esgm, args)
         }
     };
-    Ok(Worker { spec, serves })
+    Ok(Worker { spec, serves, program: None })
 }
 
 fn unit_worker(u: &UnitDecl, esgm: &Path, base: &Path) -> anyhow::Result<Worker> {
     let process = unit_process(&u.name);
     let serves = Serves::Unit(u.name.clone());
-    if u.exec.is_some() && u.python.is_some() {
-        anyhow::bail!("unit `{}`: give either exec or python, not both", u.name);
+    let what = format!("unit `{}`", u.name);
+    let own = program::declared(&what, u.program.as_deref(), u.exec.as_deref(), base)?;
+    if let (Some(own), Some(_)) = (&own, &u.python) {
+        anyhow::bail!("{what}: give either {} or python, not both", own.key);
     }
     if u.interpreter.is_some() && u.python.is_none() {
-        anyhow::bail!("unit `{}`: interpreter is for python units", u.name);
+        anyhow::bail!("{what}: interpreter is for python units");
     }
-    let own = if u.python.is_some() { "python" } else { "exec" };
-    if (u.exec.is_some() || u.python.is_some())
+    let kind = match (&own, &u.python) {
+        (_, Some(_)) => "python",
+        (Some(own), None) => own.key,
+        (None, None) => "",
+    };
+    if (own.is_some() || u.python.is_some())
         && (u.builtin.is_some() || u.type_name.is_some() || u.window.is_some())
     {
-        anyhow::bail!(
-            "unit `{}`: builtin, type and window are for built-in units, not {own} units",
-            u.name
-        );
+        anyhow::bail!("{what}: builtin, type and window are for built-in units, not {kind} units");
     }
     if let Some(target) = &u.python {
         let decl = python::PythonDecl {
@@ -444,18 +488,15 @@ fn unit_worker(u: &UnitDecl, esgm: &Path, base: &Path) -> anyhow::Result<Worker>
             env: &u.env,
         };
         let spec = python::python_worker(python::PythonRole::Unit, process, &u.name, decl, base)?;
-        return Ok(Worker { spec, serves });
+        return Ok(Worker { spec, serves, program: None });
     }
-    if let Some(exec) = &u.exec {
-        return Ok(Worker {
-            spec: user_program(process, &u.name, exec, &u.args, &u.env, base),
-            serves,
-        });
+    if let Some(own) = own {
+        return Ok(user_worker(process, &u.name, own, &u.args, &u.env, serves));
     }
     let builtin = u.builtin.clone().unwrap_or_else(|| u.name.clone());
     if !BUILTIN_UNITS.contains(&builtin.as_str()) {
         anyhow::bail!(
-            "unknown built-in unit `{builtin}`; built in: {}; or give exec = \"path\" or python = \"FILE.py:CLASS\"",
+            "unknown built-in unit `{builtin}`; built in: {}; or give your own program = \"name or path\" or python = \"FILE.py:CLASS\"",
             BUILTIN_UNITS.join(", ")
         );
     }
@@ -474,9 +515,9 @@ fn unit_worker(u: &UnitDecl, esgm: &Path, base: &Path) -> anyhow::Result<Worker>
         anyhow::bail!("unit `{}`: type and window are for MovingAverage", u.name);
     }
     if !u.args.is_empty() || !u.env.is_empty() {
-        anyhow::bail!("unit `{}`: args and env are for exec and python units", u.name);
+        anyhow::bail!("unit `{}`: args and env are for program and python units", u.name);
     }
-    Ok(Worker { spec: spec(process, esgm, args), serves })
+    Ok(Worker { spec: spec(process, esgm, args), serves, program: None })
 }
 
 fn robot_worker(r: &RobotDecl, esgm: &Path) -> anyhow::Result<Worker> {
@@ -494,6 +535,7 @@ fn robot_worker(r: &RobotDecl, esgm: &Path) -> anyhow::Result<Worker> {
     Ok(Worker {
         spec: spec(robot_process(&r.trajectory), esgm, args),
         serves: Serves::Pushes(r.trajectory.clone()),
+        program: None,
     })
 }
 
@@ -535,5 +577,49 @@ mod tests {
         let text = "[[type]]\nname = \"P\"\nattributes = [\"x: Double\"]\n[[type]]\nname = \"P\"\nattributes = [\"y: Double\"]\n";
         let e = parse("f.toml", text, Path::new(".")).unwrap_err();
         assert!(e.to_string().contains("declared twice (first at line 1)"), "{e}");
+    }
+
+    /// `parse` takes a program as written; finding it is an error naming the file, the
+    /// line, what it serves and the program, under the key it was given.
+    #[test]
+    fn programs_are_found_after_parsing_and_named_with_their_line() {
+        let text = "[[type]]\nname = \"P\"\nattributes = [\"x: Double\"]\n\n\
+                    [[sensor]]\nname = \"lidar\"\nprogram = \"esgm-no-such-program\"\n";
+        let mut plan = parse("system.toml", text, Path::new("/nonexistent")).unwrap();
+        assert_eq!(plan.workers[0].what.spec.program, "esgm-no-such-program");
+        let e = plan.find_programs().unwrap_err().to_string();
+        assert!(
+            e.starts_with(
+                "system.toml:5: sensor `lidar`: program `esgm-no-such-program` is not on PATH ("
+            ),
+            "{e}"
+        );
+
+        let text = "[[unit]]\nname = \"Detect\"\nexec = \"bin/detect\"\nargs = [\"-v\"]\n";
+        let mut plan = parse("system.toml", text, Path::new("/nonexistent")).unwrap();
+        assert_eq!(plan.workers[0].what.spec.args, ["-v"]);
+        let e = plan.find_programs().unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "system.toml:1: unit `Detect`: exec `bin/detect` does not exist (/nonexistent/bin/detect)"
+        );
+    }
+
+    #[test]
+    fn program_and_exec_together_are_refused_naming_both() {
+        for section in ["unit", "sensor"] {
+            let text =
+                format!("[[{section}]]\nname = \"X\"\nprogram = \"x_unit\"\nexec = \"./x_unit\"\n");
+            let e = parse("f.toml", &text, Path::new(".")).unwrap_err().to_string();
+            assert!(
+                e.starts_with(&format!(
+                    "f.toml:1: {section} `X`: give program = \"x_unit\" or exec"
+                )) && e.contains("not both"),
+                "{e}"
+            );
+        }
+        let text = "[[unit]]\nname = \"X\"\nprogram = \"x\"\nbuiltin = \"BlobDetection\"\n";
+        let e = parse("f.toml", text, Path::new(".")).unwrap_err().to_string();
+        assert!(e.contains("not program units"), "{e}");
     }
 }

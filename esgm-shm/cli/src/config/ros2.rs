@@ -78,7 +78,7 @@ pub fn ros2_worker(d: &Ros2Decl, program: &Path) -> anyhow::Result<Worker> {
         args,
         env: Vec::new(),
     };
-    Ok(Worker { spec, serves: Serves::Bridge(name) })
+    Ok(Worker { spec, serves: Serves::Bridge(name), program: None })
 }
 
 /// Runs `program --check args…`, which parses the settings as the process will and
