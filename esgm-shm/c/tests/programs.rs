@@ -275,3 +275,105 @@ fn the_examples_build_and_run() {
     let out = run(&dir.join("robot_c"), &[c.domain(), "5"]);
     assert!(out.contains("5 states pushed"), "{out}");
 }
+
+/// Installed like a C++ library: `cmake --install` of `esgm-shm/cpp` into a prefix, the
+/// examples built against that package (found through CMAKE_PREFIX_PATH, not the
+/// checkout), and a C program built with `pkg-config esgm`, shared and static.
+#[test]
+fn the_installed_package_builds_programs() {
+    if capability::needs(
+        "cmake, g++, clang++ and pkg-config",
+        tools().and_then(|()| capability::runs("pkg-config", &["--version"])),
+    )
+    .is_none()
+    {
+        return;
+    }
+    let prefix = build_root().join("prefix");
+    let _fresh = std::fs::remove_dir_all(&prefix);
+    let install = cmake(
+        "esgm-shm/cpp",
+        "install",
+        &[&format!("-DCMAKE_INSTALL_PREFIX={}", prefix.display())],
+        None,
+    );
+    run_ok(Command::new("cmake").arg("--install").arg(&install), "cmake --install");
+    for file in [
+        "lib/libesgm_c.so",
+        "lib/libesgm_c.a",
+        "include/esgm.h",
+        "include/esgm/esgm.hpp",
+        "lib/cmake/esgm/esgmConfig.cmake",
+        "lib/cmake/esgm/esgmConfigVersion.cmake",
+        "lib/pkgconfig/esgm.pc",
+    ] {
+        assert!(prefix.join(file).is_file(), "{file} was not installed");
+    }
+
+    let dir = build_root().join("examples-installed");
+    let _fresh = std::fs::remove_dir_all(&dir);
+    run_ok(
+        Command::new("cmake")
+            .arg("-S")
+            .arg(checkout().join("esgm-shm/cpp/examples"))
+            .arg("-B")
+            .arg(&dir)
+            .arg(format!("-DCMAKE_PREFIX_PATH={}", prefix.display()))
+            .arg("-DESGM_WERROR=ON"),
+        "cmake configure against the installed package",
+    );
+    let cache = std::fs::read_to_string(dir.join("CMakeCache.txt")).unwrap();
+    let found = prefix.join("lib/cmake/esgm");
+    assert!(
+        cache.contains(&format!("esgm_DIR:PATH={}", found.display())),
+        "the examples did not find the installed package"
+    );
+    run_ok(Command::new("cmake").arg("--build").arg(&dir).arg("-j2"), "cmake --build");
+    let out = run(&dir.join("robot_c"), &["", "3"]);
+    assert!(out.contains("3 states pushed"), "{out}");
+
+    // pkg-config: the shared library, then the static one with its private libraries.
+    let pc = prefix.join("lib/pkgconfig");
+    let flags = |args: &[&str]| {
+        let out = Command::new("pkg-config")
+            .args(args)
+            .arg("esgm")
+            .env("PKG_CONFIG_PATH", &pc)
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "pkg-config {args:?} esgm failed");
+        String::from_utf8(out.stdout)
+            .unwrap()
+            .split_whitespace()
+            .map(str::to_owned)
+            .collect::<Vec<_>>()
+    };
+    let source = checkout().join("esgm-shm/cpp/examples/robot_c.c");
+    let shared = dir.join("robot_c_pkg_config");
+    run_ok(
+        Command::new("cc")
+            .args(["-Wall", "-Wextra", "-Werror"])
+            .arg(&source)
+            .args(flags(&["--cflags", "--libs"]))
+            .arg(format!("-Wl,-rpath,{}", prefix.join("lib").display()))
+            .arg("-o")
+            .arg(&shared),
+        "cc with pkg-config",
+    );
+    let out = run(&shared, &["", "2"]);
+    assert!(out.contains("2 states pushed"), "{out}");
+    let statically = dir.join("robot_c_static");
+    run_ok(
+        Command::new("cc")
+            .arg(&source)
+            .args(flags(&["--cflags"]))
+            .arg(prefix.join("lib/libesgm_c.a"))
+            .args(flags(&["--libs-only-other", "--static"]))
+            .args(flags(&["--libs", "--static"]).into_iter().filter(|f| f != "-lesgm_c"))
+            .arg("-o")
+            .arg(&statically),
+        "cc with the static library",
+    );
+    let out = run(&statically, &["", "2"]);
+    assert!(out.contains("2 states pushed"), "{out}");
+}

@@ -22,6 +22,6 @@ function(esgm_make_targets include_dirs library_dir)
     set_target_properties(esgm::esgm_static PROPERTIES
       IMPORTED_LOCATION "${static}"
       INTERFACE_INCLUDE_DIRECTORIES "${include_dirs}"
-      INTERFACE_LINK_LIBRARIES "Threads::Threads;${CMAKE_DL_LIBS};m;rt")
+      INTERFACE_LINK_LIBRARIES "Threads::Threads;${CMAKE_DL_LIBS};m;rt;util;gcc_s")
   endif()
 endfunction()

@@ -22,7 +22,7 @@ static void check(enum esgm_status status, const char *what) {
 }
 
 int main(int argc, char **argv) {
-    const char *domain = argc > 1 ? argv[1] : NULL;
+    const char *domain = argc > 1 && argv[1][0] != '\0' ? argv[1] : NULL;
     int steps = argc > 2 ? atoi(argv[2]) : 20;
     esgm_t esgm;
     check(domain ? esgm_connect(domain, &esgm) : esgm_in_process(&esgm), "connect");
