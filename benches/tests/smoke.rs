@@ -194,6 +194,85 @@ fn quick_connect_image_reads_the_pixels_in_shared_memory() {
     assert!(stdout.contains("20 of 20 replies' pixels read in place"), "{stdout}");
 }
 
+/// The C++ rows run whenever a C++ compiler is there (the program is built on first
+/// use against this build's C ABI library), each at both waits, held to its `connect`
+/// row; without one, they are reported as not run, saying so.
+#[test]
+fn cpp_rows_run_through_the_c_abi_when_a_compiler_is_there() {
+    // Few samples: a debug build writes a frame in tens of milliseconds.
+    let (stdout, report) = run_quick_with("cpp-", 20);
+    let compiler = std::env::var_os("CXX").is_some()
+        || std::env::var_os("PATH")
+            .is_some_and(|p| std::env::split_paths(&p).any(|d| d.join("c++").is_file()));
+    if !compiler {
+        assert!(rows_with(&report, 20).is_empty(), "{report}");
+        let skipped = report["skipped"].as_array().cloned().unwrap_or_default();
+        assert_eq!(skipped.len(), 2, "{report}");
+        return;
+    }
+    assert_eq!(
+        rows_with(&report, 20),
+        [
+            key("cpp-image", "event"),
+            key("cpp-image", "spin"),
+            key("cpp-small", "event"),
+            key("cpp-small", "spin"),
+        ]
+    );
+    for row in report["scenarios"].as_array().unwrap() {
+        let baseline = if row["name"] == "cpp-small" { "connect-small" } else { "connect-image" };
+        assert_eq!(row["baseline"], baseline, "{row}");
+        assert!(row["p50_ns"].as_u64().is_some_and(|ns| ns > 0), "{row}");
+    }
+    assert!(stdout.contains("esgm_subscription_recv"), "{stdout}");
+    // The image's pixels were read where the C++ writer put them, in shared memory.
+    assert!(stdout.contains("20 of 20 replies' pixels read in place"), "{stdout}");
+    assert!(stdout.contains("cpp-small / connect-small (spin)"), "{stdout}");
+}
+
+/// Classic iceoryx's C peer is optional, as ROS 1 is: built (benches/iceoryx/build.sh)
+/// with its packages, and as root (its RouDi runs in a mount namespace of its own),
+/// both rows are measured at both waits; not built, both are reported as not run,
+/// saying how to build it.
+#[test]
+fn iceoryx_rows_are_measured_when_built_and_say_how_when_not() {
+    use esgm_benches::scenarios::iceoryx_c_peer;
+    let (stdout, report) = run_quick("iceoryx-c-");
+    let skipped = report["skipped"].as_array().cloned().unwrap_or_default();
+    let roudi = std::env::var_os("PATH")
+        .is_some_and(|p| std::env::split_paths(&p).any(|d| d.join("iox-roudi").is_file()));
+    if iceoryx_c_peer::program().is_none() || !roudi {
+        assert!(rows(&report).is_empty(), "{report}");
+        assert_eq!(skipped.len(), 2, "{report}");
+        for row in skipped {
+            let reason = row["reason"].as_str().unwrap_or_default();
+            assert!(reason.contains("benches/iceoryx/build.sh"), "{row}");
+        }
+        assert!(stdout.contains("benches/iceoryx/build.sh"), "{stdout}");
+        return;
+    }
+    // SAFETY: geteuid has no preconditions.
+    if unsafe { libc::geteuid() } != 0 {
+        // Built, but RouDi cannot have a namespace of its own: skipped with why.
+        assert_eq!(skipped.len(), 4, "{report}");
+        return;
+    }
+    assert!(skipped.is_empty(), "{report}");
+    assert_eq!(
+        rows(&report),
+        [
+            key("iceoryx-c-image", "event"),
+            key("iceoryx-c-image", "spin"),
+            key("iceoryx-c-small", "event"),
+            key("iceoryx-c-small", "spin"),
+        ]
+    );
+    for row in report["scenarios"].as_array().unwrap() {
+        let baseline = if row["name"] == "iceoryx-c-small" { "cpp-small" } else { "cpp-image" };
+        assert_eq!(row["baseline"], baseline, "{row}");
+    }
+}
+
 /// Without the `ros2` feature (CI's build) the ROS 2 rows are reported as not run,
 /// with the command that runs them, and their targets say so: nothing pretends to have
 /// measured DDS.

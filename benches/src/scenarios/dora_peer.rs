@@ -125,7 +125,13 @@ impl Scenario for Dora {
         let warmup = ctx.warmup(samples);
         let cores = ctx.pinning().map(|p| (p.measuring_core(), p.peer_core()));
         let note = self.note();
-        let rows = PeerRows { name: self.name, kind: self.kind, bytes, peer: "dora", note: &note };
+        let rows = PeerRows {
+            name: self.name,
+            baseline: self.kind.esgm_row(),
+            bytes,
+            peer: "dora",
+            note: &note,
+        };
         Ok(rows.measure(ctx, |mode| {
             dora_run::run(&Pair { cli: &cli, node: &node, mode, bytes, samples, warmup, cores })
         }))

@@ -56,6 +56,17 @@
 //! (`dora run`, [`dora_run`]; built by `benches/dora/build.sh`, skipped with that
 //! instruction when not built), against `esgm-small` and `esgm-image`.
 //!
+//! The C and C++ issue (37) adds, after `connect-*`:
+//! - [`ipc_cpp`]: `cpp-small` and `cpp-image`, the `connect` rows' hops made by two C++
+//!   processes through esgm's C ABI (`benches/cpp/cpp_pingpong.cpp`, built on first use
+//!   by [`cpp_program`]), held to `connect-small` and `connect-image`;
+//! - [`iceoryx_c_peer`]: `iceoryx-c-small` and `iceoryx-c-image`, a C peer: the same
+//!   payloads between two C processes on classic iceoryx's C binding, with a private
+//!   RouDi ([`iceoryx_roudi`]; built by `benches/iceoryx/build.sh`, skipped with that
+//!   instruction when not built), against the `cpp-*` rows.
+//!
+//! Both run their pair of programs through [`program_pair`].
+//!
 //! The Python issue (26) adds, after `connect-*`, [`python_peer`]: `python-small` and
 //! `python-image` (esgm's Python package, process to process) beside the same hop
 //! through iceoryx2's (`python-iceoryx2-*`) and Zenoh's (`python-zenoh-*`) Python
@@ -84,9 +95,12 @@
 
 pub mod bridge;
 pub mod control_churn;
+pub mod cpp_program;
 pub mod dora_peer;
 pub mod dora_run;
 pub mod file_write_image;
+pub mod iceoryx_c_peer;
+pub mod iceoryx_roudi;
 pub mod inproc_chain3;
 pub mod inproc_echo;
 pub mod inproc_floor_crossbeam;
@@ -95,6 +109,7 @@ pub mod inproc_hop_small;
 pub mod inproc_sampling_jitter;
 pub mod ipc_connect;
 pub mod ipc_connect_echo;
+pub mod ipc_cpp;
 pub mod ipc_esgm_echo;
 pub mod ipc_esgm_image;
 pub mod ipc_esgm_small;
@@ -114,6 +129,7 @@ pub mod ipc_uds_image;
 pub mod ipc_uds_small;
 pub mod peer_rows;
 pub mod pipeline_woken;
+pub mod program_pair;
 pub mod python_peer;
 pub mod record_image;
 pub mod record_small;
@@ -160,6 +176,10 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(ipc_connect::Connect::SMALL),
         Box::new(ipc_connect::Connect::SMALL_PACED),
         Box::new(ipc_connect::Connect::IMAGE),
+        Box::new(ipc_cpp::Cpp::SMALL),
+        Box::new(ipc_cpp::Cpp::IMAGE),
+        Box::new(iceoryx_c_peer::IceoryxC::SMALL),
+        Box::new(iceoryx_c_peer::IceoryxC::IMAGE),
         Box::new(python_peer::Python::ICEORYX2_SMALL),
         Box::new(python_peer::Python::ICEORYX2_IMAGE),
         Box::new(python_peer::Python::SMALL),
@@ -226,6 +246,8 @@ mod tests {
             "uds-image",
             "connect-small",
             "connect-image",
+            "cpp-small",
+            "cpp-image",
         ] {
             assert!(names.contains(&name), "{name} missing from {names:?}");
         }

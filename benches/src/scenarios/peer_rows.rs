@@ -1,10 +1,12 @@
-//! The rows of a peer outside this project (ROS 1, dora, Zenoh), held to esgm's row of
-//! the same payload.
+//! The rows of a peer outside this project (ROS 1, dora, Zenoh, classic iceoryx), held
+//! to an esgm row of the same payload.
 //!
 //! Every such peer is measured the same way: one row per wait, half a round trip, each
-//! with esgm's own row of that size (`esgm-small`, `esgm-image`) as its baseline, and
-//! the target that esgm is the faster at both waits. A peer failing is a finding for the
-//! table, skipped with its error, not a reason to lose the rest of the run.
+//! with an esgm row of that size as its baseline — esgm's own (`esgm-small`,
+//! `esgm-image`, [`Kind::esgm_row`]) for most, with the target that esgm is the faster
+//! at both waits; esgm from C++ (`cpp-small`, `cpp-image`) for a C peer. A peer failing
+//! is a finding for the table, skipped with its error, not a reason to lose the rest of
+//! the run.
 
 use super::ipc_payload::Kind;
 use crate::latency::Latency;
@@ -18,8 +20,8 @@ use crate::wait_mode::WaitMode;
 pub struct PeerRows<'a> {
     /// The rows' name (`ros1-small`, `dora-image`).
     pub name: &'static str,
-    /// The payload, which picks esgm's row to compare with.
-    pub kind: Kind,
+    /// The esgm row of the same payload that the rows are compared with.
+    pub baseline: &'static str,
     /// The payload's size in bytes, as the table shows it.
     pub bytes: usize,
     /// The peer's name in a skip's reason (`ROS 1`, `dora`).
@@ -52,7 +54,7 @@ impl PeerRows<'_> {
                     .payload_bytes(self.bytes as u64)
                     .method(Method::HalfRoundTrip)
                     .wait_strategy(mode.label())
-                    .baseline(self.kind.esgm_row())
+                    .baseline(self.baseline)
                     .note(self.note),
             );
         }

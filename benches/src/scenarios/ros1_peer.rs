@@ -90,7 +90,7 @@ impl Scenario for Ros1 {
         let cores = ctx.pinning().map(|p| (p.measuring_core(), p.peer_core()));
         let rows = PeerRows {
             name: self.name,
-            kind: self.kind,
+            baseline: self.kind.esgm_row(),
             bytes,
             peer: "ROS 1",
             note: "std_msgs/UInt8MultiArray over TCPROS (TCP_NODELAY, loopback); the C++ \
@@ -170,7 +170,7 @@ pub(crate) struct Guard(Option<Child>);
 
 impl Guard {
     /// No child.
-    fn none() -> Self {
+    pub(crate) fn none() -> Self {
         Self(None)
     }
 
