@@ -593,23 +593,28 @@ typedef struct esgm_pose_t {
 } esgm_pose_t;
 
 /**
- * An attribute's value as C reads it: `sort` says which fields hold it. Pointers are
- * into the sample, valid while its handle lives.
+ * One attribute's value, as C reads and writes it: `sort` says which fields hold it.
  *
  * - `ESGM_SORT_LONG`, `ESGM_SORT_TIME`: `long_value`;
  * - `ESGM_SORT_DOUBLE`, `ESGM_SORT_ALTITUDE`: `double_value`;
  * - `ESGM_SORT_BOOL`: `bool_value`;
  * - `ESGM_SORT_STRING`, `ESGM_SORT_SYMBOL`: `text`;
- * - `ESGM_SORT_OCTET_SEQ`: `data` (bytes) and `len`;
- * - `ESGM_SORT_LONG_SEQ`, `ESGM_SORT_DOUBLE_SEQ`: `data` (`int64_t`s or `double`s) and
+ * - `ESGM_SORT_OCTET_SEQ`: `data` (bytes) and `len`; written: copied, unless `handle`
+ *   is an `esgm_image_loan_t`'s id, whose pixels are handed over (and the loan taken);
+ * - `ESGM_SORT_LONG_SEQ`, `ESGM_SORT_DOUBLE_SEQ`: `data` (`int64_t`s or `double`s),
  *   `len`;
- * - the other sequences, `ESGM_SORT_AGG`, `ESGM_SORT_COLLECTION`,
- *   `ESGM_SORT_ENTITY_FRAME_SEQ`: `len` items, read with `esgm_sample_item` (frames
- *   with `esgm_sample_frame_at`);
+ * - `ESGM_SORT_SYMBOL_SEQ`, `ESGM_SORT_VEC_SEQ`, `ESGM_SORT_POS2_SEQ`, `ESGM_SORT_AGG`,
+ *   `ESGM_SORT_COLLECTION`: read, `len` items (`esgm_sample_item`); written, `data` is
+ *   `len` `esgm_str_t`s, `esgm_vec3_t`s, `esgm_pos2_t`s or `esgm_value_t`s;
+ * - `ESGM_SORT_ENTITY_FRAME_SEQ`: read, `len` frames (`esgm_sample_frame_at`); written,
+ *   `data` is `len` `esgm_structure_t`s (frames, taken);
+ * - `ESGM_SORT_ENTITY_FRAME`: read, nothing here (`esgm_sample_frame`); written,
+ *   `handle` is an `esgm_structure_t`'s id (a frame, taken);
  * - `ESGM_SORT_VEC`: `vec`; `ESGM_SORT_POS2`: `pos2`;
  * - `ESGM_SORT_POSITION`, `ESGM_SORT_POSITION_ALTITUDE`,
- *   `ESGM_SORT_POSITION_ALTITUDE_ROTATION`, `ESGM_SORT_ROTATION`: `pose`'s fields;
- * - `ESGM_SORT_ENTITY_FRAME`: nothing here; `esgm_sample_frame` reads it.
+ *   `ESGM_SORT_POSITION_ALTITUDE_ROTATION`, `ESGM_SORT_ROTATION`: `pose`'s fields.
+ *
+ * Read, its pointers are into the sample, valid while its handle lives.
  */
 typedef struct esgm_value_t {
   /**
@@ -637,7 +642,7 @@ typedef struct esgm_value_t {
    */
   struct esgm_str_t text;
   /**
-   * Bytes, integers or floats of a sequence.
+   * Bytes, numbers or items of a sequence.
    */
   const void *data;
   /**
@@ -656,6 +661,11 @@ typedef struct esgm_value_t {
    * A position, altitude and rotation.
    */
   struct esgm_pose_t pose;
+  /**
+   * Written: a frame's `esgm_structure_t` or an image's `esgm_image_loan_t` id
+   * (taken); 0 otherwise. Read: 0.
+   */
+  uint64_t handle;
 } esgm_value_t;
 
 /**
@@ -1991,6 +2001,49 @@ enum esgm_status esgm_add_comp_unit(struct esgm_t esgm,
  * uses it. Its user pointer is released once esgm calls it no more.
  */
 enum esgm_status esgm_remove_comp_unit(struct esgm_t esgm, const char *name);
+
+/**
+ * Sets `n` attributes of the structure `s` from `values` at once (frames and loans in
+ * them are taken).
+ */
+enum esgm_status esgm_structure_set_values(struct esgm_structure_t s,
+                                           const struct esgm_value_t *values,
+                                           size_t n);
+
+/**
+ * T4 in one call: adds a structure `name`, valid at `valid_time` and created at
+ * `create_time`, with the `n` attributes `values` (frames and loans in them taken),
+ * to `t`; a policy violation drops it (`ESGM_OUTCOME_DROPPED`). `outcome` may be null.
+ */
+enum esgm_status esgm_add_values(struct esgm_trajectory_t t,
+                                 const char *name,
+                                 int64_t valid_time,
+                                 int64_t create_time,
+                                 const struct esgm_value_t *values,
+                                 size_t n,
+                                 int32_t *outcome);
+
+/**
+ * `esgm_add_values`, waiting for the writer's gate: `ESGM_POLICY_VIOLATION` if it
+ * refused the structure.
+ */
+enum esgm_status esgm_add_values_blocking(struct esgm_trajectory_t t,
+                                          const char *name,
+                                          int64_t valid_time,
+                                          int64_t create_time,
+                                          const struct esgm_value_t *values,
+                                          size_t n,
+                                          int32_t *outcome);
+
+/**
+ * Reads every attribute of the sample (or frame) `s` at once into `out`, which has
+ * room for `capacity` values (read-only views, valid while `s` lives); `count` gets
+ * the number of attributes (more than `capacity` when some did not fit).
+ */
+enum esgm_status esgm_sample_values(struct esgm_sample_t s,
+                                    struct esgm_value_t *out,
+                                    size_t capacity,
+                                    size_t *count);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -32,7 +32,7 @@ pub enum esgm_outcome {
     ESGM_OUTCOME_DROPPED = 3,
 }
 
-fn outcome_of(o: &AddOutcome) -> esgm_outcome {
+pub(crate) fn outcome_of(o: &AddOutcome) -> esgm_outcome {
     match o {
         AddOutcome::Added => esgm_outcome::ESGM_OUTCOME_ADDED,
         AddOutcome::Held { .. } => esgm_outcome::ESGM_OUTCOME_HELD,

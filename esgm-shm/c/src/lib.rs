@@ -52,3 +52,4 @@ pub mod subscription;
 pub mod trajectory;
 pub mod types;
 pub mod units;
+pub mod values;

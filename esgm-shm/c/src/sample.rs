@@ -19,8 +19,8 @@ use esgm_shm::prelude::*;
 use crate::handles::{self, handle};
 use crate::status::{Error, Result, esgm_status, guard};
 use crate::strings::{copy_out, esgm_str_t, put, text};
-use crate::structure::{esgm_pos2_t, esgm_pose_t, esgm_vec3_t};
 use crate::types::sort_to_c;
+use crate::values::esgm_value_t;
 
 /// One step from a structure into a frame nested in it.
 #[derive(Debug, Clone, Copy)]
@@ -46,7 +46,7 @@ impl View {
     }
 
     /// The frame's name and attributes.
-    fn frame(&self) -> (&str, &[AttributeValuePair]) {
+    pub(crate) fn frame(&self) -> (&str, &[AttributeValuePair]) {
         let mut name = self.sample.structure.name.as_str();
         let mut attributes = self.sample.structure.attributes.as_slice();
         for step in &self.path {
@@ -147,99 +147,6 @@ pub struct esgm_sample_info_t {
     pub query_time: i64,
     /// Its number of attributes.
     pub attribute_count: usize,
-}
-
-/// An attribute's value as C reads it: `sort` says which fields hold it. Pointers are
-/// into the sample, valid while its handle lives.
-///
-/// - `ESGM_SORT_LONG`, `ESGM_SORT_TIME`: `long_value`;
-/// - `ESGM_SORT_DOUBLE`, `ESGM_SORT_ALTITUDE`: `double_value`;
-/// - `ESGM_SORT_BOOL`: `bool_value`;
-/// - `ESGM_SORT_STRING`, `ESGM_SORT_SYMBOL`: `text`;
-/// - `ESGM_SORT_OCTET_SEQ`: `data` (bytes) and `len`;
-/// - `ESGM_SORT_LONG_SEQ`, `ESGM_SORT_DOUBLE_SEQ`: `data` (`int64_t`s or `double`s) and
-///   `len`;
-/// - the other sequences, `ESGM_SORT_AGG`, `ESGM_SORT_COLLECTION`,
-///   `ESGM_SORT_ENTITY_FRAME_SEQ`: `len` items, read with `esgm_sample_item` (frames
-///   with `esgm_sample_frame_at`);
-/// - `ESGM_SORT_VEC`: `vec`; `ESGM_SORT_POS2`: `pos2`;
-/// - `ESGM_SORT_POSITION`, `ESGM_SORT_POSITION_ALTITUDE`,
-///   `ESGM_SORT_POSITION_ALTITUDE_ROTATION`, `ESGM_SORT_ROTATION`: `pose`'s fields;
-/// - `ESGM_SORT_ENTITY_FRAME`: nothing here; `esgm_sample_frame` reads it.
-#[repr(C)]
-#[derive(Debug, Clone, Copy)]
-#[allow(non_camel_case_types, reason = "a C type, named as C code names them")]
-pub struct esgm_value_t {
-    /// The attribute's name (empty for a sequence's item).
-    pub name: esgm_str_t,
-    /// Its sort (an `esgm_sort`).
-    pub sort: i32,
-    /// An integer or a time.
-    pub long_value: i64,
-    /// A float or an altitude.
-    pub double_value: f64,
-    /// A boolean.
-    pub bool_value: bool,
-    /// A string or a symbol.
-    pub text: esgm_str_t,
-    /// Bytes, integers or floats of a sequence.
-    pub data: *const std::ffi::c_void,
-    /// The number of bytes or items.
-    pub len: usize,
-    /// A vector.
-    pub vec: esgm_vec3_t,
-    /// A 2-D point.
-    pub pos2: esgm_pos2_t,
-    /// A position, altitude and rotation.
-    pub pose: esgm_pose_t,
-}
-
-impl esgm_value_t {
-    /// `value`, named `name`, lent from its sample.
-    fn of(name: &str, value: &Value) -> Self {
-        let mut v = Self {
-            name: esgm_str_t::of(name),
-            sort: sort_to_c(value.sort()),
-            long_value: 0,
-            double_value: 0.0,
-            bool_value: false,
-            text: esgm_str_t::of(""),
-            data: std::ptr::null(),
-            len: 0,
-            vec: esgm_vec3_t::default(),
-            pos2: esgm_pos2_t::default(),
-            pose: esgm_pose_t::default(),
-        };
-        match value {
-            Value::NoValue | Value::EntityFrame(_) => {}
-            Value::Long(x) | Value::Time(x) => v.long_value = *x,
-            Value::Double(x) | Value::Altitude(x) => v.double_value = *x,
-            Value::Bool(b) => v.bool_value = *b,
-            Value::String(s) | Value::Symbol(s) => v.text = esgm_str_t::of(s),
-            Value::OctetSeq(o) => (v.data, v.len) = (o.as_ptr().cast(), o.len()),
-            Value::LongSeq(x) => (v.data, v.len) = (x.as_ptr().cast(), x.len()),
-            Value::DoubleSeq(x) => (v.data, v.len) = (x.as_ptr().cast(), x.len()),
-            Value::SymbolSeq(x) => v.len = x.len(),
-            Value::VecSeq(x) => v.len = x.len(),
-            Value::Pos2Seq(x) => v.len = x.len(),
-            Value::Agg(x) | Value::Collection(x) => v.len = x.len(),
-            Value::EntityFrameSeq(x) => v.len = x.len(),
-            Value::Vec(x) => v.vec = (*x).into(),
-            Value::Pos2(p) => v.pos2 = (*p).into(),
-            Value::Position(p) => v.pose.position = (*p).into(),
-            Value::Rotation(r) => v.pose.rotation = (*r).into(),
-            Value::PositionAltitude(p) => {
-                v.pose.position = p.position.into();
-                v.pose.altitude = p.altitude;
-            }
-            Value::PositionAltitudeRotation(p) => {
-                v.pose.position = p.position.into();
-                v.pose.altitude = p.altitude;
-                v.pose.rotation = p.rotation.into();
-            }
-        }
-        v
-    }
 }
 
 /// The view `s` names.

@@ -486,7 +486,7 @@ pub extern "C" fn esgm_structure_set_json(
 }
 
 /// The frame `frame` holds, taking its handle (freed whether this succeeds or not).
-fn take_frame(frame: esgm_structure_t) -> Result<EntityFrame> {
+pub(crate) fn take_frame(frame: esgm_structure_t) -> Result<EntityFrame> {
     let b = handles::take(frame)?;
     Ok(std::mem::take(&mut b.lock().frame))
 }

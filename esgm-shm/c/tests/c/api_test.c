@@ -945,11 +945,70 @@ static void after_free(esgm_t e) {
     CHECK(unit_released == 2); /* the unit's pointer was released with its ESGM */
 }
 
+/* Many attributes in one call, both ways; a bad value frees what the call took. */
+static void values_in_one_call(esgm_t e) {
+    esgm_trajectory_t t = {0};
+    OK(esgm_create_primitive_entity_trajectory_structure(e, "c_values", "BlobSeq", &t));
+    esgm_structure_t blobs[2] = {{0}, {0}};
+    for (int i = 0; i < 2; i++) {
+        struct esgm_value_t b[3] = {
+            {.name = {"x", 1}, .sort = ESGM_SORT_LONG, .long_value = 10 * i},
+            {.name = {"y", 1}, .sort = ESGM_SORT_LONG, .long_value = 20 * i},
+            {.name = {"size", 4}, .sort = ESGM_SORT_LONG, .long_value = 100 + i},
+        };
+        OK(esgm_frame_new("blob", &blobs[i]));
+        OK(esgm_structure_set_values(blobs[i], b, 3));
+    }
+    struct esgm_value_t items = {.name = {"items", 5}, .sort = ESGM_SORT_ENTITY_FRAME_SEQ,
+                                 .data = blobs, .len = 2};
+    int32_t outcome = -1;
+    OK(esgm_add_values_blocking(t, "blobs", ESGM_SECOND, ESGM_SECOND, &items, 1, &outcome));
+    CHECK(outcome == ESGM_OUTCOME_ADDED);
+    FAILS(esgm_structure_free(blobs[0]), ESGM_INVALID_HANDLE, "freed"); /* taken */
+
+    esgm_sample_t s = {0};
+    OK(esgm_get_latest(t, &s));
+    struct esgm_value_t out[4];
+    size_t count = 0;
+    OK(esgm_sample_values(s, out, 4, &count));
+    CHECK(count == 1 && str_is(out[0].name, "items") && out[0].len == 2);
+    esgm_sample_t blob = {0};
+    OK(esgm_sample_frame_at(s, "items", 1, &blob));
+    OK(esgm_sample_values(blob, out, 2, &count));
+    CHECK(count == 3); /* two fit; three there */
+    CHECK(str_is(out[1].name, "y") && out[1].long_value == 20);
+    OK(esgm_sample_values(blob, NULL, 0, &count));
+    CHECK(count == 3);
+    FAILS(esgm_sample_values(blob, NULL, 3, &count), ESGM_INVALID_ARGUMENT, "`out`");
+    OK(esgm_sample_free(blob));
+    OK(esgm_sample_free(s));
+
+    /* A bad value: refused with its name; the frames after it are freed, not leaked. */
+    esgm_structure_t frame = {0};
+    OK(esgm_frame_new("blob", &frame));
+    struct esgm_value_t bad[2] = {
+        {.name = {"items", 5}, .sort = 999},
+        {.name = {"best", 4}, .sort = ESGM_SORT_ENTITY_FRAME, .handle = frame.id},
+    };
+    FAILS(esgm_add_values(t, "blobs", 2, 2, bad, 2, NULL), ESGM_INVALID_ARGUMENT, "items.sort");
+    FAILS(esgm_structure_free(frame), ESGM_INVALID_HANDLE, "freed");
+    struct esgm_value_t nodata = {.name = {"ls", 2}, .sort = ESGM_SORT_LONG_SEQ, .len = 3};
+    FAILS(esgm_add_values(t, "blobs", 2, 2, &nodata, 1, NULL), ESGM_INVALID_ARGUMENT,
+          "`ls.data` is null");
+    struct esgm_value_t bad_utf8 = {.name = {"\xff", 1}, .sort = ESGM_SORT_LONG};
+    FAILS(esgm_add_values(t, "blobs", 2, 2, &bad_utf8, 1, NULL), ESGM_INVALID_ARGUMENT,
+          "values[0].name");
+    FAILS(esgm_add_values(t, "blobs", 2, 2, NULL, 1, NULL), ESGM_INVALID_ARGUMENT, "values");
+    OK(esgm_trajectory_free(t));
+    OK(esgm_destroy_entity_trajectory_structure(e, "c_values"));
+}
+
 static int semantics(esgm_t e, int shared_images) {
     types(e);
     primitive_and_queries(e);
     policies_subscriptions_violations(e);
     frames_and_sequences(e);
+    values_in_one_call(e);
     images(e, shared_images);
     units_sensors_operators(e);
     system_operations(e);

@@ -404,6 +404,10 @@ private:
 template <class T>
 struct Entity;  // specialised by ESGM_ENTITY for typed structs
 
+namespace detail {
+class ValueList;
+}
+
 /// An entity structure (or nested frame) being built: set attributes, then add it to
 /// a trajectory or return it from a unit or sensor (which take it).
 class Structure {
@@ -488,6 +492,8 @@ public:
                                               detail::z(json).c_str()));
         return *this;
     }
+    /// Sets many attributes at once (one call into esgm), taking the frames in them.
+    Structure& set_values(detail::ValueList& values);
     /// Sets an attribute to no value.
     Structure& set_no_value(std::string_view attribute) {
         detail::check(esgm_structure_set_no_value(h_.get(), detail::z(attribute).c_str()));
@@ -942,6 +948,171 @@ struct is_entity_vector : std::false_type {};
 template <class U>
 struct is_entity_vector<std::vector<U>> : is_entity<U> {};
 
+/// Attribute values to write in one call (esgm_add_values, esgm_structure_set_values):
+/// views of the caller's data, plus the frames and loans the call takes. Frames made
+/// for it are freed if it is never handed over.
+class ValueList {
+public:
+    ValueList() = default;
+    ValueList(const ValueList&) = delete;
+    ValueList& operator=(const ValueList&) = delete;
+    ~ValueList() {
+        if (handed_over_) return;
+        for (const esgm_value_t& v : values_) {
+            if (v.sort == ESGM_SORT_ENTITY_FRAME && v.handle != 0) {
+                (void)esgm_structure_free(esgm_structure_t{v.handle});
+            }
+        }
+        for (const auto& frames : frames_) {
+            for (esgm_structure_t f : frames) (void)esgm_structure_free(f);
+        }
+    }
+    const esgm_value_t* data() const noexcept { return values_.data(); }
+    std::size_t size() const noexcept { return values_.size(); }
+    /// The C call took everything: nothing left to free.
+    void handed_over() noexcept { handed_over_ = true; }
+
+    /// Adds `value` (a field's; it must live until the values are handed over) as
+    /// attribute `name`: the sorts as Structure::set maps them.
+    template <class V>
+    void add(const char* name, const V& value) {
+        esgm_value_t v{};
+        v.name = esgm_str_t{name, std::char_traits<char>::length(name)};
+        using T = V;
+        if constexpr (std::is_same_v<T, bool>) {
+            v.sort = ESGM_SORT_BOOL;
+            v.bool_value = value;
+        } else if constexpr (std::is_integral_v<T>) {
+            v.sort = ESGM_SORT_LONG;
+            v.long_value = static_cast<std::int64_t>(value);
+        } else if constexpr (std::is_floating_point_v<T>) {
+            v.sort = ESGM_SORT_DOUBLE;
+            v.double_value = static_cast<double>(value);
+        } else if constexpr (std::is_same_v<T, std::string> || std::is_same_v<T, std::string_view>) {
+            v.sort = ESGM_SORT_STRING;
+            v.text = esgm_str_t{value.data(), value.size()};
+        } else if constexpr (std::is_same_v<T, Symbol>) {
+            v.sort = ESGM_SORT_SYMBOL;
+            v.text = esgm_str_t{value.name.data(), value.name.size()};
+        } else if constexpr (std::is_same_v<T, TimePoint>) {
+            v.sort = ESGM_SORT_TIME;
+            v.long_value = value.t;
+        } else if constexpr (std::is_same_v<T, Altitude>) {
+            v.sort = ESGM_SORT_ALTITUDE;
+            v.double_value = value.metres;
+        } else if constexpr (std::is_same_v<T, Vec3>) {
+            v.sort = ESGM_SORT_VEC;
+            v.vec = value;
+        } else if constexpr (std::is_same_v<T, Pos2>) {
+            v.sort = ESGM_SORT_POS2;
+            v.pos2 = value;
+        } else if constexpr (std::is_same_v<T, Position>) {
+            v.sort = ESGM_SORT_POSITION;
+            v.pose.position = value;
+        } else if constexpr (std::is_same_v<T, Rotation>) {
+            v.sort = ESGM_SORT_ROTATION;
+            v.pose.rotation = value;
+        } else if constexpr (std::is_same_v<T, PositionAltitude>) {
+            v.sort = ESGM_SORT_POSITION_ALTITUDE;
+            v.pose.position = value.position;
+            v.pose.altitude = value.altitude;
+        } else if constexpr (std::is_same_v<T, Pose>) {
+            v.sort = ESGM_SORT_POSITION_ALTITUDE_ROTATION;
+            v.pose = value;
+        } else if constexpr (std::is_same_v<T, std::vector<std::uint8_t>>) {
+            v.sort = ESGM_SORT_OCTET_SEQ;
+            v.data = value.data();
+            v.len = value.size();
+        } else if constexpr (std::is_same_v<T, std::vector<std::int64_t>>) {
+            v.sort = ESGM_SORT_LONG_SEQ;
+            v.data = value.data();
+            v.len = value.size();
+        } else if constexpr (std::is_same_v<T, std::vector<double>>) {
+            v.sort = ESGM_SORT_DOUBLE_SEQ;
+            v.data = value.data();
+            v.len = value.size();
+        } else if constexpr (std::is_same_v<T, std::vector<std::string>>) {
+            std::vector<esgm_str_t>& texts = texts_.emplace_back();
+            for (const std::string& t : value) texts.push_back(esgm_str_t{t.data(), t.size()});
+            v.sort = ESGM_SORT_SYMBOL_SEQ;
+            v.data = texts.data();
+            v.len = texts.size();
+        } else if constexpr (std::is_same_v<T, std::vector<Vec3>>) {
+            v.sort = ESGM_SORT_VEC_SEQ;
+            v.data = value.data();
+            v.len = value.size();
+        } else if constexpr (std::is_same_v<T, std::vector<Pos2>>) {
+            v.sort = ESGM_SORT_POS2_SEQ;
+            v.data = value.data();
+            v.len = value.size();
+        } else if constexpr (is_entity_vector<T>::value) {
+            std::vector<esgm_structure_t>& frames = frames_.emplace_back();
+            for (const auto& item : value) {
+                frames.push_back(Entity<typename T::value_type>::to_frame(item).release());
+            }
+            v.sort = ESGM_SORT_ENTITY_FRAME_SEQ;
+            v.data = frames.data();
+            v.len = frames.size();
+        } else {
+            v.sort = ESGM_SORT_ENTITY_FRAME;
+            v.handle = Entity<T>::to_frame(value).release().id;
+        }
+        values_.push_back(v);
+    }
+
+private:
+    std::vector<esgm_value_t> values_;
+    std::vector<std::vector<esgm_structure_t>> frames_;
+    std::vector<std::vector<esgm_str_t>> texts_;
+    bool handed_over_ = false;
+};
+
+/// A sample's attributes read in one call (esgm_sample_values), looked up by name:
+/// up to 16 on the stack, more on the heap.
+class ValueMap {
+public:
+    explicit ValueMap(const Sample& sample) : sample_(sample) {
+        check(esgm_sample_values(sample.get(), local_, LOCAL, &count_));
+        if (count_ > LOCAL) {
+            heap_.resize(count_);
+            check(esgm_sample_values(sample.get(), heap_.data(), heap_.size(), &count_));
+        }
+    }
+    /// Attribute `name` as a T (see Sample::get).
+    template <class T>
+    T get(const char* name) const {
+        const std::string_view wanted(name);
+        const esgm_value_t* values = count_ > LOCAL ? heap_.data() : local_;
+        for (std::size_t i = 0; i < count_; i++) {
+            if (view(values[i].name) == wanted) return get_value<T>(sample_, values[i], wanted);
+        }
+        std::string there;
+        for (std::size_t i = 0; i < count_; i++) {
+            there += (there.empty() ? "" : ", ") + std::string(view(values[i].name));
+        }
+        throw NoSuchAttribute("`" + std::string(sample_.name()) + "` has no attribute `" +
+                              std::string(wanted) + "`; it has " + (there.empty() ? "none" : there));
+    }
+
+private:
+    static constexpr std::size_t LOCAL = 16;
+    const Sample& sample_;
+    esgm_value_t local_[LOCAL];
+    std::size_t count_ = 0;
+    std::vector<esgm_value_t> heap_;
+};
+
+}  // namespace detail
+
+inline Structure& Structure::set_values(detail::ValueList& values) {
+    esgm_status st = esgm_structure_set_values(h_.get(), values.data(), values.size());
+    values.handed_over();
+    detail::check(st);
+    return *this;
+}
+
+namespace detail {
+
 /// Adds field `name` of C++ type F to `type`.
 template <class F>
 void add_field(Type& type, const char* name) {
@@ -1007,8 +1178,8 @@ void add_field(Type& type, const char* name) {
         ESGM_DETAIL_FE_1, unused)(m, __VA_ARGS__))
 
 #define ESGM_DETAIL_TYPE_FIELD(f) ::esgm::detail::add_field<decltype(Self::f)>(t, #f);
-#define ESGM_DETAIL_SET_FIELD(f) s.set(#f, value.f);
-#define ESGM_DETAIL_GET_FIELD(f) value.f = sample.get<decltype(Self::f)>(#f);
+#define ESGM_DETAIL_PUT_FIELD(f) out.add(#f, value.f);
+#define ESGM_DETAIL_GET_FIELD(f) value.f = values.get<decltype(Self::f)>(#f);
 
 /// Makes the struct `Type` an entity structure type named `NAME` whose attributes are
 /// the listed fields (each of a type SortOf knows, another ESGM_ENTITY struct — a
@@ -1029,18 +1200,24 @@ void add_field(Type& type, const char* name) {
             ESGM_DETAIL_FOR_EACH(ESGM_DETAIL_TYPE_FIELD, __VA_ARGS__)                    \
             return t;                                                                    \
         }                                                                                \
+        static void put_values(const Self& value, ::esgm::detail::ValueList& out) {      \
+            ESGM_DETAIL_FOR_EACH(ESGM_DETAIL_PUT_FIELD, __VA_ARGS__)                     \
+        }                                                                                \
         static ::esgm::Structure to_structure(const Self& value, std::string_view name,  \
                                               ::esgm::Time valid_time,                   \
                                               std::optional<::esgm::Time> create_time =  \
                                                   std::nullopt) {                        \
             ::esgm::Structure s(name, valid_time, create_time);                          \
-            ESGM_DETAIL_FOR_EACH(ESGM_DETAIL_SET_FIELD, __VA_ARGS__)                     \
+            ::esgm::detail::ValueList values;                                            \
+            put_values(value, values);                                                   \
+            s.set_values(values);                                                        \
             return s;                                                                    \
         }                                                                                \
         static ::esgm::Structure to_frame(const Self& value) {                           \
             return to_structure(value, NAME, 0, 0);                                      \
         }                                                                                \
         static Self from_sample(const ::esgm::Sample& sample) {                          \
+            const ::esgm::detail::ValueMap values(sample);                               \
             Self value{};                                                                \
             ESGM_DETAIL_FOR_EACH(ESGM_DETAIL_GET_FIELD, __VA_ARGS__)                     \
             return value;                                                                \
@@ -1286,13 +1463,17 @@ public:
     Outcome add(Structure&& s) { return added(esgm_add, std::move(s)); }
     Outcome add_blocking(Structure&& s) { return added(esgm_add_blocking, std::move(s)); }
     /// Adds a typed struct (ESGM_ENTITY) as a structure `name` valid at `valid_time`.
+    /// Adds a typed struct (ESGM_ENTITY) as a structure `name` valid at `valid_time`
+    /// (created then too, unless `create_time`): one call into esgm.
     template <class T, class = std::enable_if_t<detail::is_entity<T>::value>>
-    Outcome add(const T& value, std::string_view name, Time valid_time) {
-        return add(Entity<T>::to_structure(value, name, valid_time));
+    Outcome add(const T& value, std::string_view name, Time valid_time,
+                std::optional<Time> create_time = std::nullopt) {
+        return add_values(esgm_add_values, value, name, valid_time, create_time);
     }
     template <class T, class = std::enable_if_t<detail::is_entity<T>::value>>
-    Outcome add_blocking(const T& value, std::string_view name, Time valid_time) {
-        return add_blocking(Entity<T>::to_structure(value, name, valid_time));
+    Outcome add_blocking(const T& value, std::string_view name, Time valid_time,
+                         std::optional<Time> create_time = std::nullopt) {
+        return add_values(esgm_add_values_blocking, value, name, valid_time, create_time);
     }
     Outcome create_at(std::string_view name, Time valid_time, Structure&& attributes) {
         std::int32_t o = 0;
@@ -1364,6 +1545,22 @@ private:
         esgm_sample_t s{};
         detail::check(query(&s));
         return Sample(s);
+    }
+    template <class T>
+    Outcome add_values(esgm_status (*f)(esgm_trajectory_t, const char*, std::int64_t,
+                                        std::int64_t, const esgm_value_t*, size_t,
+                                        std::int32_t*),
+                       const T& value, std::string_view name, Time valid_time,
+                       std::optional<Time> create_time) {
+        detail::ValueList values;
+        Entity<T>::put_values(value, values);
+        std::int32_t o = 0;
+        const std::string n(name);
+        esgm_status st = f(h_.get(), n.c_str(), valid_time, create_time.value_or(valid_time),
+                           values.data(), values.size(), &o);
+        values.handed_over();
+        detail::check(st);
+        return static_cast<Outcome>(o);
     }
     Outcome added(esgm_status (*f)(esgm_trajectory_t, esgm_structure_t, std::int32_t*),
                   Structure&& s) {
