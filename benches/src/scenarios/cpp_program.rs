@@ -15,6 +15,8 @@
 //! Whatever stops the build (no compiler, no library, a compile error) is returned as
 //! the reason its rows are skipped.
 
+use std::fs::Permissions;
+use std::os::unix::fs::PermissionsExt;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, SystemTime};
@@ -67,7 +69,9 @@ pub fn program() -> anyhow::Result<PathBuf> {
     if program.is_file() && modified(&program)? >= newest_input {
         return Ok(program);
     }
-    std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
+    std::fs::create_dir_all(&out_dir)
+        .and_then(|()| std::fs::set_permissions(&out_dir, Permissions::from_mode(0o755)))
+        .with_context(|| format!("creating {}", out_dir.display()))?;
     build(&library, &out_dir, &program)?;
     Ok(program)
 }
@@ -134,6 +138,11 @@ fn build(library: &Path, out_dir: &Path, program: &Path) -> anyhow::Result<()> {
             first.join(" / ")
         );
     }
+    // The compiler makes the file as the process umask says, and iceoryx2 narrows the
+    // umask of this process (to 0o177) around each socket it binds; threads binding at
+    // once can leave it narrowed for good, and the program unexecutable. So set it.
+    std::fs::set_permissions(&partial, Permissions::from_mode(0o755))
+        .with_context(|| format!("making {} executable", partial.display()))?;
     std::fs::rename(&partial, program)
         .with_context(|| format!("moving the program into {}", program.display()))
 }
