@@ -140,7 +140,8 @@ fn build(library: &Path, out_dir: &Path, program: &Path) -> anyhow::Result<()> {
     }
     // The compiler makes the file as the process umask says, and iceoryx2 narrows the
     // umask of this process (to 0o177) around each socket it binds; threads binding at
-    // once can leave it narrowed for good, and the program unexecutable. So set it.
+    // once can leave it narrowed after they return (seen after the connect rows: a
+    // 0600 program, "Permission denied"). So the mode is set here.
     std::fs::set_permissions(&partial, Permissions::from_mode(0o755))
         .with_context(|| format!("making {} executable", partial.display()))?;
     std::fs::rename(&partial, program)
