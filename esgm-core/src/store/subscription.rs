@@ -184,6 +184,24 @@ impl<T> Subscription<T> {
         self.receiver.try_recv().ok()
     }
 
+    /// [`Subscription::try_recv`] that also says when the subscription has ended: the
+    /// next item if one is waiting, `None` if none is, [`RecvError::Closed`] once its
+    /// trajectory was destroyed or it was unsubscribed. A poll without a clock, for a
+    /// reader that spins (the C ABI's receive with a timeout of 0).
+    pub fn poll(&self) -> Result<Option<T>, RecvError> {
+        match self.receiver.try_recv() {
+            Ok(item) => return Ok(Some(item)),
+            Err(TryRecvError::Disconnected) => return Err(RecvError::Closed),
+            Err(TryRecvError::Empty) => {}
+        }
+        self.feed();
+        match self.receiver.try_recv() {
+            Ok(item) => Ok(Some(item)),
+            Err(TryRecvError::Empty) => Ok(None),
+            Err(TryRecvError::Disconnected) => Err(RecvError::Closed),
+        }
+    }
+
     /// Everything waiting now, without blocking.
     pub fn drain(&self) -> Vec<T> {
         self.feed();

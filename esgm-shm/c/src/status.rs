@@ -80,17 +80,21 @@ use esgm_status::*;
 #[derive(Debug)]
 pub(crate) struct Error {
     pub(crate) status: esgm_status,
-    pub(crate) message: String,
+    /// A static message (an empty poll's) costs no allocation.
+    pub(crate) message: std::borrow::Cow<'static, str>,
 }
 
 impl Error {
     /// A failure with `status`, said as `message`.
-    pub(crate) fn new(status: esgm_status, message: impl Into<String>) -> Self {
+    pub(crate) fn new(
+        status: esgm_status,
+        message: impl Into<std::borrow::Cow<'static, str>>,
+    ) -> Self {
         Self { status, message: message.into() }
     }
 
     /// A bad argument (a null pointer, a value out of range).
-    pub(crate) fn argument(message: impl Into<String>) -> Self {
+    pub(crate) fn argument(message: impl Into<std::borrow::Cow<'static, str>>) -> Self {
         Self::new(ESGM_INVALID_ARGUMENT, message)
     }
 
@@ -151,11 +155,16 @@ thread_local! {
     static LAST_ERROR: RefCell<CString> = RefCell::new(CString::default());
 }
 
-/// Keeps `message` as this thread's last error (a NUL inside is cut there).
+/// Keeps `message` as this thread's last error (a NUL inside is cut there). The same
+/// message again (a reader polling an empty subscription) allocates nothing.
 pub(crate) fn set_last_error(message: &str) {
     let cut = message.split('\0').next().unwrap_or_default();
-    let c = CString::new(cut).unwrap_or_default();
-    LAST_ERROR.with(|m| *m.borrow_mut() = c);
+    LAST_ERROR.with(|m| {
+        if m.borrow().as_bytes() == cut.as_bytes() {
+            return;
+        }
+        *m.borrow_mut() = CString::new(cut).unwrap_or_default();
+    });
 }
 
 /// Runs an entry point's body: its error becomes the status and this thread's last

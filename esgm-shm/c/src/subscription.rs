@@ -64,6 +64,19 @@ const SLICE: Duration = Duration::from_millis(100);
 
 /// The next item of `s`, waiting at most `timeout_ns` (negative: for ever).
 fn receive<T>(s: &Subscribed<T>, timeout_ns: i64, what: &str) -> Result<T> {
+    if timeout_ns == 0 {
+        // A poll (a spinning reader): what is there, without reading a clock or
+        // formatting a message.
+        s.domain.check_open()?;
+        return match s.subscription.poll() {
+            Ok(Some(item)) => Ok(item),
+            Ok(None) => Err(Error::new(esgm_status::ESGM_TIMEOUT, "nothing to receive now")),
+            Err(e) => Err(Error::new(
+                esgm_status::ESGM_CLOSED,
+                format!("{e} (the trajectory was destroyed)"),
+            )),
+        };
+    }
     let deadline =
         (timeout_ns >= 0).then(|| Instant::now() + Duration::from_nanos(timeout_ns.unsigned_abs()));
     loop {

@@ -342,7 +342,7 @@ static void policies_subscriptions_violations(esgm_t e) {
     OK(esgm_subscription_recv(sub, 5 * ESGM_SECOND, &s));
     CHECK(x_of(s) == 2.0);
     OK(esgm_sample_free(s));
-    FAILS(esgm_subscription_recv(sub, 0, &s), ESGM_TIMEOUT, "no sample");
+    FAILS(esgm_subscription_recv(sub, 0, &s), ESGM_TIMEOUT, "nothing to receive now");
     FAILS(esgm_subscription_recv(sub, 20 * ESGM_MILLISECOND, &s), ESGM_TIMEOUT, "no sample");
     uint64_t overflowed = 1;
     OK(esgm_subscription_overflowed(sub, &overflowed));
