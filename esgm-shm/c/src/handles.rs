@@ -111,6 +111,23 @@ pub(crate) fn get<H: Handle>(h: H) -> Result<Arc<H::Object>> {
     Err(invalid(h, &t))
 }
 
+/// Runs `f` on the object `h` names, with the table held: no reference is counted in
+/// and out, for the short reads and writes that make up most calls (a sample's
+/// attribute, a builder's setter). `f` must not use the table (it would wait for
+/// itself): anything that makes, frees or looks up another handle uses [`get`].
+pub(crate) fn with<H: Handle, R>(h: H, f: impl FnOnce(&H::Object) -> Result<R>) -> Result<R> {
+    let t = TABLE.lock();
+    let (index, generation) = split(h.id());
+    if let Some(Slot { generation: g, object: Some((object, _)) }) = t.slots.get(index) {
+        if *g == generation {
+            if let Some(found) = object.downcast_ref::<H::Object>() {
+                return f(found);
+            }
+        }
+    }
+    Err(invalid(h, &t))
+}
+
 /// Frees `h`, returning its object (which lives on while other calls hold it).
 pub(crate) fn take<H: Handle>(h: H) -> Result<Arc<H::Object>> {
     let mut t = TABLE.lock();
@@ -185,6 +202,9 @@ mod tests {
         let as_b = test_b_t { id: a.id };
         let e = get(as_b).unwrap_err();
         assert!(e.message.contains("is an test_a_t, not an test_b_t"), "{}", e.message);
+        let e = with(as_b, |_| Ok(())).unwrap_err();
+        assert!(e.message.contains("is an test_a_t, not an test_b_t"), "{}", e.message);
+        assert_eq!(with(a, |s| Ok(s.len())).unwrap(), 1);
         free(a).unwrap();
         let e = get(a).unwrap_err();
         assert!(e.message.contains("was freed"), "{}", e.message);

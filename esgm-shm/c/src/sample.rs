@@ -165,16 +165,17 @@ pub(crate) fn give(sample: Sample, out: *mut esgm_sample_t) -> Result<()> {
 #[unsafe(no_mangle)]
 pub extern "C" fn esgm_sample_info(s: esgm_sample_t, out: *mut esgm_sample_info_t) -> esgm_status {
     guard(|| {
-        let v = view(s)?;
-        let (name, attributes) = v.frame();
-        let info = esgm_sample_info_t {
-            name: esgm_str_t::of(name),
-            valid_time: v.sample.structure.valid_time,
-            create_time: v.sample.structure.create_time,
-            add_time: v.sample.add_time,
-            query_time: v.sample.query_time,
-            attribute_count: attributes.len(),
-        };
+        let info = handles::with(s, |v| {
+            let (name, attributes) = v.frame();
+            Ok(esgm_sample_info_t {
+                name: esgm_str_t::of(name),
+                valid_time: v.sample.structure.valid_time,
+                create_time: v.sample.structure.create_time,
+                add_time: v.sample.add_time,
+                query_time: v.sample.query_time,
+                attribute_count: attributes.len(),
+            })
+        })?;
         // The name lives in the sample, which the handle keeps.
         unsafe { put(out, "out", info) }
     })
@@ -188,11 +189,12 @@ pub extern "C" fn esgm_sample_value(
     out: *mut esgm_value_t,
 ) -> esgm_status {
     guard(|| {
-        let v = view(s)?;
-        let name = unsafe { text(attribute, "attribute") }?;
-        let (_, value) = v.find(name)?;
-        let read = esgm_value_t::of(name, value);
-        unsafe { put(out, "out", read) }
+        handles::with(s, |v| {
+            let name = unsafe { text(attribute, "attribute") }?;
+            let (_, value) = v.find(name)?;
+            let read = esgm_value_t::of(name, value);
+            unsafe { put(out, "out", read) }
+        })
     })
 }
 
@@ -205,10 +207,11 @@ pub extern "C" fn esgm_sample_value_at(
     out: *mut esgm_value_t,
 ) -> esgm_status {
     guard(|| {
-        let v = view(s)?;
-        let a = v.at(index)?;
-        let read = esgm_value_t::of(&a.name, &a.value);
-        unsafe { put(out, "out", read) }
+        handles::with(s, |v| {
+            let a = v.at(index)?;
+            let read = esgm_value_t::of(&a.name, &a.value);
+            unsafe { put(out, "out", read) }
+        })
     })
 }
 
@@ -224,52 +227,53 @@ pub extern "C" fn esgm_sample_item(
     out: *mut esgm_value_t,
 ) -> esgm_status {
     guard(|| {
-        let v = view(s)?;
-        let name = unsafe { text(attribute, "attribute") }?;
-        let (_, value) = v.find(name)?;
-        let len = match value {
-            Value::SymbolSeq(x) => x.len(),
-            Value::VecSeq(x) => x.len(),
-            Value::Pos2Seq(x) => x.len(),
-            Value::Agg(x) | Value::Collection(x) => x.len(),
-            Value::LongSeq(x) => x.len(),
-            Value::DoubleSeq(x) => x.len(),
-            Value::EntityFrameSeq(_) => {
+        handles::with(s, |v| {
+            let name = unsafe { text(attribute, "attribute") }?;
+            let (_, value) = v.find(name)?;
+            let len = match value {
+                Value::SymbolSeq(x) => x.len(),
+                Value::VecSeq(x) => x.len(),
+                Value::Pos2Seq(x) => x.len(),
+                Value::Agg(x) | Value::Collection(x) => x.len(),
+                Value::LongSeq(x) => x.len(),
+                Value::DoubleSeq(x) => x.len(),
+                Value::EntityFrameSeq(_) => {
+                    return Err(Error::new(
+                        esgm_status::ESGM_INVALID_TYPE,
+                        format!(
+                            "attribute `{name}` is EntityFrameSeq: read its frames with esgm_sample_frame_at"
+                        ),
+                    ));
+                }
+                other => {
+                    return Err(Error::new(
+                        esgm_status::ESGM_INVALID_TYPE,
+                        format!("attribute `{name}` is {}, not a sequence", other.sort()),
+                    ));
+                }
+            };
+            if index >= len {
                 return Err(Error::new(
-                    esgm_status::ESGM_INVALID_TYPE,
-                    format!(
-                        "attribute `{name}` is EntityFrameSeq: read its frames with esgm_sample_frame_at"
-                    ),
+                    esgm_status::ESGM_OUT_OF_RANGE,
+                    format!("attribute `{name}` has {len} items; there is no index {index}"),
                 ));
             }
-            other => {
-                return Err(Error::new(
-                    esgm_status::ESGM_INVALID_TYPE,
-                    format!("attribute `{name}` is {}, not a sequence", other.sort()),
-                ));
-            }
-        };
-        if index >= len {
-            return Err(Error::new(
-                esgm_status::ESGM_OUT_OF_RANGE,
-                format!("attribute `{name}` has {len} items; there is no index {index}"),
-            ));
-        }
-        let item = match value {
-            Value::SymbolSeq(x) => {
-                let mut read = esgm_value_t::of("", &Value::NoValue);
-                read.sort = sort_to_c(ValueSort::Symbol);
-                read.text = esgm_str_t::of(&x[index]);
-                read
-            }
-            Value::Agg(x) | Value::Collection(x) => esgm_value_t::of("", &x[index]),
-            Value::VecSeq(x) => esgm_value_t::of("", &Value::Vec(x[index])),
-            Value::Pos2Seq(x) => esgm_value_t::of("", &Value::Pos2(x[index])),
-            Value::LongSeq(x) => esgm_value_t::of("", &Value::Long(x[index])),
-            Value::DoubleSeq(x) => esgm_value_t::of("", &Value::Double(x[index])),
-            _ => esgm_value_t::of("", &Value::NoValue),
-        };
-        unsafe { put(out, "out", item) }
+            let item = match value {
+                Value::SymbolSeq(x) => {
+                    let mut read = esgm_value_t::of("", &Value::NoValue);
+                    read.sort = sort_to_c(ValueSort::Symbol);
+                    read.text = esgm_str_t::of(&x[index]);
+                    read
+                }
+                Value::Agg(x) | Value::Collection(x) => esgm_value_t::of("", &x[index]),
+                Value::VecSeq(x) => esgm_value_t::of("", &Value::Vec(x[index])),
+                Value::Pos2Seq(x) => esgm_value_t::of("", &Value::Pos2(x[index])),
+                Value::LongSeq(x) => esgm_value_t::of("", &Value::Long(x[index])),
+                Value::DoubleSeq(x) => esgm_value_t::of("", &Value::Double(x[index])),
+                _ => esgm_value_t::of("", &Value::NoValue),
+            };
+            unsafe { put(out, "out", item) }
+        })
     })
 }
 
@@ -295,9 +299,10 @@ pub extern "C" fn esgm_sample_get_long(
     out: *mut i64,
 ) -> esgm_status {
     guard(|| {
-        let v = view(s)?;
-        let Value::Long(x) = typed(&v, attribute, ValueSort::Long)? else { unreachable_sort() };
-        unsafe { put(out, "out", *x) }
+        handles::with(s, |v| {
+            let Value::Long(x) = typed(&v, attribute, ValueSort::Long)? else { unreachable_sort() };
+            unsafe { put(out, "out", *x) }
+        })
     })
 }
 
@@ -309,9 +314,12 @@ pub extern "C" fn esgm_sample_get_double(
     out: *mut f64,
 ) -> esgm_status {
     guard(|| {
-        let v = view(s)?;
-        let Value::Double(x) = typed(&v, attribute, ValueSort::Double)? else { unreachable_sort() };
-        unsafe { put(out, "out", *x) }
+        handles::with(s, |v| {
+            let Value::Double(x) = typed(&v, attribute, ValueSort::Double)? else {
+                unreachable_sort()
+            };
+            unsafe { put(out, "out", *x) }
+        })
     })
 }
 
@@ -323,9 +331,10 @@ pub extern "C" fn esgm_sample_get_bool(
     out: *mut bool,
 ) -> esgm_status {
     guard(|| {
-        let v = view(s)?;
-        let Value::Bool(x) = typed(&v, attribute, ValueSort::Bool)? else { unreachable_sort() };
-        unsafe { put(out, "out", *x) }
+        handles::with(s, |v| {
+            let Value::Bool(x) = typed(&v, attribute, ValueSort::Bool)? else { unreachable_sort() };
+            unsafe { put(out, "out", *x) }
+        })
     })
 }
 
@@ -337,9 +346,10 @@ pub extern "C" fn esgm_sample_get_time(
     out: *mut i64,
 ) -> esgm_status {
     guard(|| {
-        let v = view(s)?;
-        let Value::Time(x) = typed(&v, attribute, ValueSort::Time)? else { unreachable_sort() };
-        unsafe { put(out, "out", *x) }
+        handles::with(s, |v| {
+            let Value::Time(x) = typed(&v, attribute, ValueSort::Time)? else { unreachable_sort() };
+            unsafe { put(out, "out", *x) }
+        })
     })
 }
 
@@ -351,9 +361,12 @@ pub extern "C" fn esgm_sample_get_string(
     out: *mut esgm_str_t,
 ) -> esgm_status {
     guard(|| {
-        let v = view(s)?;
-        let Value::String(x) = typed(&v, attribute, ValueSort::String)? else { unreachable_sort() };
-        unsafe { put(out, "out", esgm_str_t::of(x)) }
+        handles::with(s, |v| {
+            let Value::String(x) = typed(&v, attribute, ValueSort::String)? else {
+                unreachable_sort()
+            };
+            unsafe { put(out, "out", esgm_str_t::of(x)) }
+        })
     })
 }
 
@@ -369,14 +382,15 @@ pub extern "C" fn esgm_sample_get_octets(
     guard(|| {
         crate::strings::writable(data, "data")?;
         crate::strings::writable(len, "len")?;
-        let v = view(s)?;
-        let Value::OctetSeq(o) = typed(&v, attribute, ValueSort::OctetSeq)? else {
-            unreachable_sort()
-        };
-        unsafe {
-            put(data, "data", o.as_ptr())?;
-            put(len, "len", o.len())
-        }
+        handles::with(s, |v| {
+            let Value::OctetSeq(o) = typed(&v, attribute, ValueSort::OctetSeq)? else {
+                unreachable_sort()
+            };
+            unsafe {
+                put(data, "data", o.as_ptr())?;
+                put(len, "len", o.len())
+            }
+        })
     })
 }
 
@@ -389,11 +403,12 @@ pub extern "C" fn esgm_sample_octets_are_shared(
     out: *mut bool,
 ) -> esgm_status {
     guard(|| {
-        let v = view(s)?;
-        let Value::OctetSeq(o) = typed(&v, attribute, ValueSort::OctetSeq)? else {
-            unreachable_sort()
-        };
-        unsafe { put(out, "out", o.is_held()) }
+        handles::with(s, |v| {
+            let Value::OctetSeq(o) = typed(&v, attribute, ValueSort::OctetSeq)? else {
+                unreachable_sort()
+            };
+            unsafe { put(out, "out", o.is_held()) }
+        })
     })
 }
 
@@ -408,14 +423,15 @@ pub extern "C" fn esgm_sample_get_long_seq(
     guard(|| {
         crate::strings::writable(data, "data")?;
         crate::strings::writable(len, "len")?;
-        let v = view(s)?;
-        let Value::LongSeq(x) = typed(&v, attribute, ValueSort::LongSeq)? else {
-            unreachable_sort()
-        };
-        unsafe {
-            put(data, "data", x.as_ptr())?;
-            put(len, "len", x.len())
-        }
+        handles::with(s, |v| {
+            let Value::LongSeq(x) = typed(&v, attribute, ValueSort::LongSeq)? else {
+                unreachable_sort()
+            };
+            unsafe {
+                put(data, "data", x.as_ptr())?;
+                put(len, "len", x.len())
+            }
+        })
     })
 }
 
@@ -430,14 +446,15 @@ pub extern "C" fn esgm_sample_get_double_seq(
     guard(|| {
         crate::strings::writable(data, "data")?;
         crate::strings::writable(len, "len")?;
-        let v = view(s)?;
-        let Value::DoubleSeq(x) = typed(&v, attribute, ValueSort::DoubleSeq)? else {
-            unreachable_sort()
-        };
-        unsafe {
-            put(data, "data", x.as_ptr())?;
-            put(len, "len", x.len())
-        }
+        handles::with(s, |v| {
+            let Value::DoubleSeq(x) = typed(&v, attribute, ValueSort::DoubleSeq)? else {
+                unreachable_sort()
+            };
+            unsafe {
+                put(data, "data", x.as_ptr())?;
+                put(len, "len", x.len())
+            }
+        })
     })
 }
 
@@ -511,21 +528,22 @@ pub extern "C" fn esgm_sample_to_json(
     len: *mut usize,
 ) -> esgm_status {
     guard(|| {
-        let v = view(s)?;
-        let (name, attributes) = v.frame();
-        let mut fields = serde_json::Map::new();
-        for a in attributes {
-            fields.insert(a.name.clone(), json_value(&a.value));
-        }
-        let text = serde_json::json!({
-            "name": name,
-            "valid_time": v.sample.structure.valid_time,
-            "create_time": v.sample.structure.create_time,
-            "add_time": v.sample.add_time,
-            "attributes": fields,
+        handles::with(s, |v| {
+            let (name, attributes) = v.frame();
+            let mut fields = serde_json::Map::new();
+            for a in attributes {
+                fields.insert(a.name.clone(), json_value(&a.value));
+            }
+            let text = serde_json::json!({
+                "name": name,
+                "valid_time": v.sample.structure.valid_time,
+                "create_time": v.sample.structure.create_time,
+                "add_time": v.sample.add_time,
+                "attributes": fields,
+            })
+            .to_string();
+            unsafe { copy_out(&text, buf, capacity, len) }
         })
-        .to_string();
-        unsafe { copy_out(&text, buf, capacity, len) }
     })
 }
 

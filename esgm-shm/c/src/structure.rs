@@ -221,8 +221,10 @@ fn set(s: esgm_structure_t, attribute: *const c_char, value: Result<Value>) -> e
     guard(|| {
         let name = unsafe { text(attribute, "attribute") }?;
         let value = value?;
-        handles::get(s)?.lock().frame.set(name, value);
-        Ok(())
+        handles::with(s, |b| {
+            b.lock().frame.set(name, value);
+            Ok(())
+        })
     })
 }
 

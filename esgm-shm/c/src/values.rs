@@ -12,7 +12,7 @@ use esgm_shm::prelude::*;
 use crate::add::{esgm_outcome, outcome_of};
 use crate::handles;
 use crate::image::esgm_image_loan_t;
-use crate::sample::{esgm_sample_t, view};
+use crate::sample::esgm_sample_t;
 use crate::status::{Error, Result, esgm_status, guard};
 use crate::strings::{esgm_str_t, put, slice, text};
 use crate::structure::{esgm_pos2_t, esgm_pose_t, esgm_structure_t, esgm_vec3_t};
@@ -373,13 +373,14 @@ pub extern "C" fn esgm_sample_values(
         if capacity > 0 {
             crate::strings::writable(out, "out")?;
         }
-        let v = view(s)?;
-        let (_, attrs) = v.frame();
-        for (i, a) in attrs.iter().take(capacity).enumerate() {
-            // SAFETY: `out` has room for `capacity` values (checked not null and
-            // aligned above), and `i < capacity`.
-            unsafe { out.add(i).write(esgm_value_t::of(&a.name, &a.value)) };
-        }
-        unsafe { put(count, "count", attrs.len()) }
+        crate::handles::with(s, |v| {
+            let (_, attrs) = v.frame();
+            for (i, a) in attrs.iter().take(capacity).enumerate() {
+                // SAFETY: `out` has room for `capacity` values (checked not null and
+                // aligned above), and `i < capacity`.
+                unsafe { out.add(i).write(esgm_value_t::of(&a.name, &a.value)) };
+            }
+            unsafe { put(count, "count", attrs.len()) }
+        })
     })
 }

@@ -28,20 +28,15 @@ fn checkout() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").canonicalize().unwrap()
 }
 
-/// The directory of the `libesgm_c.so` this test run built: this test's own directory
-/// (`deps`) or the profile's, whichever holds the newer one.
+/// The directory of the `libesgm_c.so` this test run built: this test's own
+/// directory (`deps`), where cargo writes the library's every crate type in the one
+/// compilation that made the rlib this test links (the profile directory's copy is
+/// refreshed only by `cargo build`, so it may be older).
 fn library_dir() -> PathBuf {
     let exe = std::env::current_exe().unwrap();
     let deps = exe.parent().unwrap().to_path_buf();
-    let profile = deps.parent().unwrap().to_path_buf();
-    let modified =
-        |dir: &Path| std::fs::metadata(dir.join("libesgm_c.so")).and_then(|m| m.modified()).ok();
-    match (modified(&deps), modified(&profile)) {
-        (Some(a), Some(b)) if b > a => profile,
-        (Some(_), _) => deps,
-        (None, Some(_)) => profile,
-        (None, None) => panic!("no libesgm_c.so in {} or {}", deps.display(), profile.display()),
-    }
+    assert!(deps.join("libesgm_c.so").is_file(), "no libesgm_c.so in {}", deps.display());
+    deps
 }
 
 /// Where the CMake builds go.
@@ -124,8 +119,14 @@ fn finish(mut child: Child, what: &str) -> String {
 
 /// Runs `program args…` to completion (status 0), under the sanitizers' strict options.
 fn run(program: &Path, args: &[&str]) -> String {
+    run_with(program, args, &library_dir())
+}
+
+/// [`run`], loading libesgm_c from `library`.
+fn run_with(program: &Path, args: &[&str], library: &Path) -> String {
     let what = format!("{} {}", program.display(), args.join(" "));
     let child = program_command(program)
+        .env("LD_LIBRARY_PATH", library)
         .args(args)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -136,6 +137,9 @@ fn run(program: &Path, args: &[&str]) -> String {
 
 fn program_command(program: &Path) -> Command {
     let mut c = Command::new(program);
+    // cargo runs tests with LD_LIBRARY_PATH naming the profile directory, whose
+    // libesgm_c.so may be an older build, and it would win over the program's RUNPATH.
+    c.env("LD_LIBRARY_PATH", library_dir());
     // A sanitizer's report fails the program (and so the test); leaks are reported.
     c.env("ASAN_OPTIONS", "abort_on_error=0:detect_leaks=1:halt_on_error=1")
         .env("UBSAN_OPTIONS", "print_stacktrace=1:halt_on_error=1")
@@ -329,7 +333,8 @@ fn the_installed_package_builds_programs() {
         "the examples did not find the installed package"
     );
     run_ok(Command::new("cmake").arg("--build").arg(&dir).arg("-j2"), "cmake --build");
-    let out = run(&dir.join("robot_c"), &["", "3"]);
+    let installed = prefix.join("lib");
+    let out = run_with(&dir.join("robot_c"), &["", "3"], &installed);
     assert!(out.contains("3 states pushed"), "{out}");
 
     // pkg-config: the shared library, then the static one with its private libraries.
@@ -360,7 +365,7 @@ fn the_installed_package_builds_programs() {
             .arg(&shared),
         "cc with pkg-config",
     );
-    let out = run(&shared, &["", "2"]);
+    let out = run_with(&shared, &["", "2"], &installed);
     assert!(out.contains("2 states pushed"), "{out}");
     let statically = dir.join("robot_c_static");
     run_ok(

@@ -26,19 +26,14 @@ fn checkout() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").canonicalize().unwrap()
 }
 
-/// The directory of the newest `libesgm_c.so` beside the `esgm` binary (its profile
-/// directory, or `deps`, where cargo builds it as this package's dev-dependency).
+/// The directory of the `libesgm_c.so` built with this test: `deps` beside the `esgm`
+/// binary, where cargo builds it as this package's dev-dependency, every crate type
+/// in the one compilation (the profile directory's copy is refreshed only by `cargo
+/// build`, so it may be older).
 fn library_dir() -> PathBuf {
-    let profile = Path::new(ESGM).parent().unwrap().to_path_buf();
-    let deps = profile.join("deps");
-    let modified =
-        |d: &Path| std::fs::metadata(d.join("libesgm_c.so")).and_then(|m| m.modified()).ok();
-    match (modified(&profile), modified(&deps)) {
-        (Some(a), Some(b)) if b > a => deps,
-        (Some(_), _) => profile,
-        (None, Some(_)) => deps,
-        (None, None) => panic!("no libesgm_c.so beside {ESGM}: build esgm-c"),
-    }
+    let deps = Path::new(ESGM).parent().unwrap().join("deps");
+    assert!(deps.join("libesgm_c.so").is_file(), "no libesgm_c.so in {}", deps.display());
+    deps
 }
 
 fn run_ok(command: &mut Command, what: &str) {
@@ -83,6 +78,10 @@ fn the_tutorial_runs_with_a_cpp_camera_and_a_cpp_unit() {
         .arg(&file)
         .args(["--seconds", "4"])
         .env("PATH", path)
+        // cargo runs tests with LD_LIBRARY_PATH naming the profile directory, whose
+        // libesgm_c.so may be an older build, and it would win over the programs'
+        // RUNPATH (the demo's workers inherit this environment).
+        .env("LD_LIBRARY_PATH", library_dir())
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())

@@ -58,9 +58,14 @@ struct Detection {
     bool confirmed;
 };
 
+struct NotARobotState {
+    std::int64_t x;
+};
+
 }  // namespace
 
 ESGM_ENTITY(Detection, "Detection", label, score, boxes, best, ids, confirmed)
+ESGM_ENTITY(NotARobotState, "RobotState", x)
 
 namespace {
 
@@ -69,6 +74,8 @@ using namespace std::chrono_literals;
 void typed_structures(esgm::Esgm& e) {
     e.create_type<Detection>();
     e.create_type<Detection>();  // registering it again keeps it
+    e.create_type<tutorial::RobotState>();  // as esgm's library has it
+    THROWS(e.create_type<NotARobotState>(), esgm::EntityStructureTypeAlreadyExists, "RobotState");
     esgm::Type t = e.get_entity_structure_type("Detection");
     CHECK(t.attributes().size() == 6);
     CHECK(t.attributes()[2].sort == esgm::Sort::EntityFrameSeq);

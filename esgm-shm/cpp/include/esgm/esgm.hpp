@@ -25,6 +25,7 @@
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
+#include <algorithm>
 #include <cstdlib>
 #include <functional>
 #include <iterator>
@@ -1194,7 +1195,7 @@ void add_field(Type& type, const char* name) {
     template <>                                                                          \
     struct esgm::Entity<Type_> {                                                         \
         using Self = Type_;                                                              \
-        static constexpr const char* type_name = NAME;                                   \
+        [[maybe_unused]] static constexpr const char* type_name = NAME;                  \
         static ::esgm::Type type() {                                                     \
             ::esgm::Type t(NAME);                                                        \
             ESGM_DETAIL_FOR_EACH(ESGM_DETAIL_TYPE_FIELD, __VA_ARGS__)                    \
@@ -1868,12 +1869,23 @@ public:
         auto t = type.to_c();
         detail::check(esgm_create_type(h_.get(), t.get()));
     }
-    /// Registers a typed struct's type (ESGM_ENTITY); one that exists already is kept.
+    /// Registers a typed struct's type (ESGM_ENTITY). The same type registered already
+    /// (by this program earlier, another process or esgm's library) is fine; another
+    /// definition under its name is EntityStructureTypeAlreadyExists.
     template <class T>
     void create_type() {
+        const Type wanted = Entity<T>::type();
         try {
-            create_type(Entity<T>::type());
+            create_type(wanted);
         } catch (const EntityStructureTypeAlreadyExists&) {
+            const Type there = get_entity_structure_type(wanted.name());
+            const auto& a = wanted.attributes();
+            const auto& b = there.attributes();
+            const bool same = a.size() == b.size() &&
+                std::equal(a.begin(), a.end(), b.begin(), [](const Attribute& x, const Attribute& y) {
+                    return x.name == y.name && x.sort == y.sort && x.element_type == y.element_type;
+                });
+            if (!same) throw;
         }
     }
     void destroy_entity_structure_type(std::string_view type_name) {
