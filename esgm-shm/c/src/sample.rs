@@ -300,7 +300,7 @@ pub extern "C" fn esgm_sample_get_long(
 ) -> esgm_status {
     guard(|| {
         handles::with(s, |v| {
-            let Value::Long(x) = typed(&v, attribute, ValueSort::Long)? else { unreachable_sort() };
+            let Value::Long(x) = typed(v, attribute, ValueSort::Long)? else { unreachable_sort() };
             unsafe { put(out, "out", *x) }
         })
     })
@@ -315,7 +315,7 @@ pub extern "C" fn esgm_sample_get_double(
 ) -> esgm_status {
     guard(|| {
         handles::with(s, |v| {
-            let Value::Double(x) = typed(&v, attribute, ValueSort::Double)? else {
+            let Value::Double(x) = typed(v, attribute, ValueSort::Double)? else {
                 unreachable_sort()
             };
             unsafe { put(out, "out", *x) }
@@ -332,7 +332,7 @@ pub extern "C" fn esgm_sample_get_bool(
 ) -> esgm_status {
     guard(|| {
         handles::with(s, |v| {
-            let Value::Bool(x) = typed(&v, attribute, ValueSort::Bool)? else { unreachable_sort() };
+            let Value::Bool(x) = typed(v, attribute, ValueSort::Bool)? else { unreachable_sort() };
             unsafe { put(out, "out", *x) }
         })
     })
@@ -347,7 +347,7 @@ pub extern "C" fn esgm_sample_get_time(
 ) -> esgm_status {
     guard(|| {
         handles::with(s, |v| {
-            let Value::Time(x) = typed(&v, attribute, ValueSort::Time)? else { unreachable_sort() };
+            let Value::Time(x) = typed(v, attribute, ValueSort::Time)? else { unreachable_sort() };
             unsafe { put(out, "out", *x) }
         })
     })
@@ -362,7 +362,7 @@ pub extern "C" fn esgm_sample_get_string(
 ) -> esgm_status {
     guard(|| {
         handles::with(s, |v| {
-            let Value::String(x) = typed(&v, attribute, ValueSort::String)? else {
+            let Value::String(x) = typed(v, attribute, ValueSort::String)? else {
                 unreachable_sort()
             };
             unsafe { put(out, "out", esgm_str_t::of(x)) }
@@ -383,7 +383,7 @@ pub extern "C" fn esgm_sample_get_octets(
         crate::strings::writable(data, "data")?;
         crate::strings::writable(len, "len")?;
         handles::with(s, |v| {
-            let Value::OctetSeq(o) = typed(&v, attribute, ValueSort::OctetSeq)? else {
+            let Value::OctetSeq(o) = typed(v, attribute, ValueSort::OctetSeq)? else {
                 unreachable_sort()
             };
             unsafe {
@@ -404,7 +404,7 @@ pub extern "C" fn esgm_sample_octets_are_shared(
 ) -> esgm_status {
     guard(|| {
         handles::with(s, |v| {
-            let Value::OctetSeq(o) = typed(&v, attribute, ValueSort::OctetSeq)? else {
+            let Value::OctetSeq(o) = typed(v, attribute, ValueSort::OctetSeq)? else {
                 unreachable_sort()
             };
             unsafe { put(out, "out", o.is_held()) }
@@ -424,7 +424,7 @@ pub extern "C" fn esgm_sample_get_long_seq(
         crate::strings::writable(data, "data")?;
         crate::strings::writable(len, "len")?;
         handles::with(s, |v| {
-            let Value::LongSeq(x) = typed(&v, attribute, ValueSort::LongSeq)? else {
+            let Value::LongSeq(x) = typed(v, attribute, ValueSort::LongSeq)? else {
                 unreachable_sort()
             };
             unsafe {
@@ -447,7 +447,7 @@ pub extern "C" fn esgm_sample_get_double_seq(
         crate::strings::writable(data, "data")?;
         crate::strings::writable(len, "len")?;
         handles::with(s, |v| {
-            let Value::DoubleSeq(x) = typed(&v, attribute, ValueSort::DoubleSeq)? else {
+            let Value::DoubleSeq(x) = typed(v, attribute, ValueSort::DoubleSeq)? else {
                 unreachable_sort()
             };
             unsafe {
