@@ -62,6 +62,7 @@ pub mod peer_role;
 pub mod pin;
 pub mod plots;
 pub mod python_env;
+pub mod refsys;
 pub mod report;
 pub mod runner;
 pub mod scenario;

@@ -1,0 +1,25 @@
+//! The Autoware reference system (ros-realtime/reference-system, package
+//! `autoware_reference_system`): a published robot topology — 24 nodes modelled on
+//! Autoware's lidar pipeline, 23 topics of one 4 KiB message, fixed periods, dummy work
+//! — that esgm and its peers run side by side (SPEC W1). What is the same for every
+//! system lives here, once:
+//! - [`topology`]: the nodes, their kinds, periods, inputs and work, read from upstream's
+//!   `autoware_system_builder.hpp` and `system/timing/default.hpp` (where upstream's
+//!   README and code disagree, the code);
+//! - [`message`]: `Message4kb`, byte for byte (an 8-byte count, 63 per-hop stats of 64
+//!   bytes, 56 bytes of data), and upstream's rules for filling its per-hop trace;
+//! - [`cruncher`]: upstream's number cruncher, the nodes' work;
+//! - [`node`]: what each kind of node does with its inputs, whatever carries them;
+//! - [`report`]: what every node writes when it stops, and [`kpi`]: the reference
+//!   system's own KPIs computed from those reports, for every system alike;
+//! - [`resources`]: the CPU and memory of all of a system's processes;
+//! - [`system`]: what a system that runs the topology gives the `refsys` scenario.
+
+pub mod cruncher;
+pub mod kpi;
+pub mod message;
+pub mod node;
+pub mod report;
+pub mod resources;
+pub mod system;
+pub mod topology;
