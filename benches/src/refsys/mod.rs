@@ -12,13 +12,17 @@
 //! - [`node`]: what each kind of node does with its inputs, whatever carries them;
 //! - [`report`]: what every node writes when it stops, and [`kpi`]: the reference
 //!   system's own KPIs computed from those reports, for every system alike;
+//! - [`esgm`]: the topology in esgm's own terms, in one process or one per node;
 //! - [`resources`]: the CPU and memory of all of a system's processes;
-//! - [`system`]: what a system that runs the topology gives the `refsys` scenario.
+//! - [`system`]: what a system that runs the topology gives the `refsys` scenario, and
+//!   [`processes`]: how its processes are started, run and stopped together.
 
 pub mod cruncher;
+pub mod esgm;
 pub mod kpi;
 pub mod message;
 pub mod node;
+pub mod processes;
 pub mod report;
 pub mod resources;
 pub mod system;

@@ -171,6 +171,25 @@ pub fn node(name: &str) -> Option<&'static Node> {
     NODES.iter().find(|n| n.name == name)
 }
 
+/// The nodes in an order where each node's inputs are published by nodes before it (a
+/// computed trajectory can only be declared once its inputs are).
+pub fn build_order() -> Vec<&'static Node> {
+    let mut done: Vec<&'static Node> = Vec::new();
+    while done.len() < NODES.len() {
+        let published: Vec<&str> = done.iter().flat_map(|n| n.outputs()).collect();
+        let next = NODES.iter().find(|n| {
+            !done.iter().any(|d| d.name == n.name)
+                && n.inputs().iter().all(|i| published.contains(i))
+        });
+        match next {
+            Some(n) => done.push(n),
+            // The graph has no cycle through declarations (tested below).
+            None => break,
+        }
+    }
+    done
+}
+
 /// Every topic, each once.
 pub fn topics() -> Vec<&'static str> {
     NODES.iter().flat_map(|n| n.outputs()).collect()
@@ -199,6 +218,7 @@ mod tests {
                 assert!(all.contains(&i), "{} reads {i}, which nobody publishes", n.name);
             }
         }
+        assert_eq!(build_order().len(), NODES.len(), "every node can be declared in turn");
         for (a, b) in HOT_PATH.iter().zip(HOT_PATH.iter().skip(1)) {
             let reader = NODES.iter().find(|n| n.outputs().contains(b) || n.name == *b).unwrap();
             assert!(reader.inputs().contains(a), "{b} does not read {a}");

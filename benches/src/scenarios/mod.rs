@@ -133,6 +133,7 @@ pub mod program_pair;
 pub mod python_peer;
 pub mod record_image;
 pub mod record_small;
+pub mod refsys;
 pub mod replay_max;
 pub mod ros1_fanout;
 pub mod ros1_peer;
@@ -211,6 +212,7 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(ros1_fanout::Ros1Fanout::THIRTY_TWO),
         Box::new(ros1_fanout::Ros1Fanout::SIXTY_FOUR),
         Box::new(control_churn::ControlChurn),
+        Box::new(refsys::Refsys),
         Box::new(record_small::RecordSmall),
         Box::new(file_write_image::FileWriteImage),
         Box::new(record_image::RecordImage),

@@ -1,0 +1,158 @@
+//! `refsys-*`: the Autoware reference system (ros-realtime/reference-system, SPEC W1),
+//! run by every system in one run — esgm in one process (`refsys-esgm`), esgm with a
+//! process per node (`refsys-esgm-procs`), and its peers, which add themselves to
+//! [`systems`] — and judged by its own KPIs, computed alike for each
+//! ([`crate::refsys::kpi`]).
+//!
+//! Each system's row is the hot path's latency (front lidar → object collision
+//! estimator, from the per-hop trace of the estimator's input, on the host's system
+//! clock); its notes hold every other KPI: what the transforms missed, front-lidar
+//! samples that never reached the estimator, the behavior planner's jitter and drift,
+//! and CPU and memory of all the system's processes. A second row per system is the
+//! planner's jitter. The topology runs 30 s per system (`--quick`: 3 s).
+
+use std::time::Duration;
+
+use anyhow::Context as _;
+
+use crate::peer_role::PeerRole;
+use crate::refsys::cruncher::crunch_time;
+use crate::refsys::esgm::{EsgmInProcess, EsgmProcesses};
+use crate::refsys::kpi::Kpis;
+use crate::refsys::system::{RunSettings, System};
+use crate::refsys::topology::{DEFAULT_CRUNCH, Kind, PLANNER, node};
+use crate::report::{Measurement, Method, Wait};
+use crate::scenario::{Context, Scenario};
+use crate::target::Target;
+
+/// The scenario's name (its peer processes find it by it).
+pub const NAME: &str = "refsys";
+
+/// Every system that runs the topology, esgm's first.
+pub fn systems() -> Vec<Box<dyn System>> {
+    vec![Box::new(EsgmInProcess), Box::new(EsgmProcesses)]
+}
+
+/// The reference system on every system (see the module docs).
+#[derive(Debug, Clone, Copy)]
+pub struct Refsys;
+
+fn mib(bytes: u64) -> String {
+    format!("{:.1} MiB", bytes as f64 / (1024.0 * 1024.0))
+}
+
+fn ms(ns: u64) -> String {
+    format!("{:.2} ms", ns as f64 / 1e6)
+}
+
+impl Scenario for Refsys {
+    fn name(&self) -> &'static str {
+        NAME
+    }
+
+    fn summary(&self) -> &'static str {
+        "the Autoware reference system (24 nodes, 4 KiB messages, upstream's periods and work) \
+         on esgm in one process, esgm with a process per node, and the peers; its KPIs"
+    }
+
+    fn run(&self, ctx: &Context) -> anyhow::Result<Vec<Measurement>> {
+        let duration =
+            if ctx.is_quick() { Duration::from_secs(3) } else { Duration::from_secs(30) };
+        let crunch = DEFAULT_CRUNCH;
+        let crunched = crunch_time(crunch, 21);
+        let root = tempfile::tempdir().context("a directory for the nodes' reports")?;
+        let period = match node(PLANNER).map(|n| n.kind) {
+            Some(Kind::Cyclic { period, .. }) => period,
+            _ => Duration::from_millis(100),
+        };
+        let mut rows = Vec::new();
+        for system in systems() {
+            let name = format!("refsys-{}", system.name());
+            if let Some(why) = system.unavailable() {
+                ctx.skip(&name, why);
+                continue;
+            }
+            let settings = RunSettings {
+                duration,
+                crunch,
+                dir: root.path().join(system.name()),
+                pin: ctx.pinning().is_some(),
+            };
+            let run = system.run(&settings).with_context(|| format!("{name}: the run"))?;
+            let k = Kpis::from_reports(&run.reports, period)
+                .with_context(|| format!("{name}: its reports"))?;
+            let mut row = k
+                .hot_path
+                .measurement(&name, Wait::Event)
+                .payload_bytes(crate::refsys::message::MESSAGE_LEN as u64)
+                .method(Method::SystemClock)
+                .if_empty("no message reached the object collision estimator")
+                .note(format!(
+                    "hot path FrontLidarDriver -> ObjectCollisionEstimator, {} samples over {:?}; \
+                     every node's work: the number cruncher to {crunch} ({} here)",
+                    k.hot_path.len(),
+                    duration,
+                    ms(u64::try_from(crunched.as_nanos()).unwrap_or(u64::MAX))
+                ))
+                .note(format!(
+                    "front lidar: {} published, {} reached the estimator, {} did not",
+                    k.front_published,
+                    k.front_reached_sink,
+                    k.front_not_reaching_sink()
+                ))
+                .note(format!(
+                    "transforms missed {} samples of their inputs (sequence gaps): {}",
+                    k.transforms_missed(),
+                    k.transform_drops
+                        .iter()
+                        .filter(|d| d.3 > 0)
+                        .map(|(n, i, r, m)| format!("{n} <- {i}: {m} of {}", r + m))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ))
+                .note(format!(
+                    "behavior planner: {} ticks, jitter p50 {} p99 {} max {}, drift {:+.2} ms",
+                    k.planner_ticks,
+                    ms(k.planner_jitter.quantile(0.5)),
+                    ms(k.planner_jitter.quantile(0.99)),
+                    ms(k.planner_jitter.quantile(1.0)),
+                    k.planner_drift_ns as f64 / 1e6
+                ))
+                .note(format!(
+                    "{} processes: CPU {:.1} % of a core, private memory {}, shared {}",
+                    run.processes,
+                    run.usage.cpu_percent,
+                    mib(run.usage.private_bytes),
+                    mib(run.usage.shared_bytes)
+                ));
+            for n in &run.notes {
+                row = row.note(n.clone());
+            }
+            rows.push(row);
+            rows.push(
+                k.planner_jitter
+                    .measurement(&format!("{name}-planner"), Wait::Event)
+                    .method(Method::Lateness)
+                    .if_empty("the behavior planner did not tick twice")
+                    .note(format!(
+                        "|interval - {period:?}| between the behavior planner's ticks; drift {:+.2} ms",
+                        k.planner_drift_ns as f64 / 1e6
+                    )),
+            );
+        }
+        Ok(rows)
+    }
+
+    fn targets(&self) -> Vec<Target> {
+        Vec::new()
+    }
+
+    fn run_peer(&self, role: &PeerRole) -> anyhow::Result<Vec<String>> {
+        let arg = role.arg.as_deref().unwrap_or_default();
+        if let Some(done) = crate::refsys::esgm::peer_main(&role.domain, arg) {
+            done?;
+            return Ok(Vec::new());
+        }
+        anyhow::bail!("refsys: no process `{arg}`")
+    }
+}
