@@ -8,7 +8,9 @@
 //!   trajectories in the domain (the `scale-*` rows), log-log;
 //! - `fan_out.png`: the latency until the last of K readers holds a structure against
 //!   K (the `fanout-*` rows, and the ROS 1 peer's `ros1-fanout-*` when it ran), with
-//!   the bound of one wake-up per reader.
+//!   the bound of one wake-up per reader;
+//! - `refsys_hot_path.png`: the Autoware reference system's hot path latency (front
+//!   lidar to object collision estimator), one line per system that ran it.
 //!
 //! The setup (the bundled font, the palette, the legend) is esgm-chart's, shared with
 //! `esgm plot`: no system font library is needed to build or to draw.
@@ -59,7 +61,22 @@ pub fn draw(report: &Report, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
             .with_context(|| format!("drawing {}", path.display()))?;
         written.push(path);
         let path = dir.join(format!("cdf_{}.png", wait.as_str()));
-        cdf(&rows, wait, &path).with_context(|| format!("drawing {}", path.display()))?;
+        let caption =
+            format!("one-way latency CDF, process to process ({} receivers)", wait.as_str());
+        cdf(&rows, &caption, &path).with_context(|| format!("drawing {}", path.display()))?;
+        written.push(path);
+    }
+    let refsys: Vec<&Measurement> = report
+        .scenarios
+        .iter()
+        .filter(|m| {
+            m.name.starts_with("refsys-") && crate::scenarios::refsys::is_hot_path_row(&m.name)
+        })
+        .collect();
+    if !refsys.is_empty() {
+        let path = dir.join("refsys_hot_path.png");
+        let caption = "reference system: hot path latency CDF (front lidar -> collision estimator)";
+        cdf(&refsys, caption, &path).with_context(|| format!("drawing {}", path.display()))?;
         written.push(path);
     }
     let path = dir.join("domain_size.png");
@@ -269,15 +286,12 @@ fn latency_vs_payload(rows: &[&Measurement], wait: Wait, path: &Path) -> anyhow:
     Ok(())
 }
 
-fn cdf(rows: &[&Measurement], wait: Wait, path: &Path) -> anyhow::Result<()> {
+fn cdf(rows: &[&Measurement], caption: &str, path: &Path) -> anyhow::Result<()> {
     let x = log_range(rows.iter().flat_map(|m| m.cdf.iter().map(|&(_, ns)| us(ns))));
     let root = BitMapBackend::new(path, SIZE).into_drawing_area();
     root.fill(&WHITE).map_err(|e| anyhow!("{e}"))?;
     let mut chart = ChartBuilder::on(&root)
-        .caption(
-            format!("one-way latency CDF, process to process ({} receivers)", wait.as_str()),
-            ("sans-serif", 24),
-        )
+        .caption(caption, ("sans-serif", 24))
         .margin(20)
         .x_label_area_size(55)
         .y_label_area_size(75)

@@ -341,3 +341,23 @@ fn a_peer_role_for_no_scenario_is_one_clear_error() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(stderr.contains("names no scenario"), "{stderr}");
 }
+
+/// The reference system runs briefly on esgm in one process and one process per node,
+/// and each reports its KPI rows (no figure is asserted: the rows exist and hold data).
+#[test]
+fn the_reference_system_runs_on_esgm_both_ways() {
+    let (stdout, report) = run_quick("refsys");
+    assert!(report.get("failed").is_none(), "rows failed: {report}");
+    let rows = report["scenarios"].as_array().expect("a `scenarios` array");
+    for system in ["refsys-esgm", "refsys-esgm-procs"] {
+        for row in [system.to_owned(), format!("{system}-cpu"), format!("{system}-planner")] {
+            let found = rows.iter().find(|r| r["name"] == row.as_str() && r["wait"] == "event");
+            let found = found.unwrap_or_else(|| panic!("no row {row} in {report}"));
+            assert!(found["n"].as_u64().is_some_and(|n| n > 0), "{found}");
+        }
+    }
+    for note in ["front lidar:", "transforms missed", "behavior planner:", "% of a core"] {
+        assert!(stdout.contains(note), "no `{note}` note:\n{stdout}");
+    }
+    assert!(stdout.contains("25 processes"), "a coordinator and 24 nodes:\n{stdout}");
+}

@@ -33,6 +33,12 @@ pub fn systems() -> Vec<Box<dyn System>> {
     vec![Box::new(EsgmInProcess), Box::new(EsgmProcesses)]
 }
 
+/// Whether `row` is a system's hot path row (`refsys-<system>`, not its planner or CPU
+/// row).
+pub fn is_hot_path_row(row: &str) -> bool {
+    row.starts_with("refsys-") && !row.ends_with("-planner") && !row.ends_with("-cpu")
+}
+
 /// The reference system on every system (see the module docs).
 #[derive(Debug, Clone, Copy)]
 pub struct Refsys;
@@ -129,6 +135,17 @@ impl Scenario for Refsys {
                 row = row.note(n.clone());
             }
             rows.push(row);
+            let mut cpu = crate::latency::Latency::new()?;
+            // CPU time per second of wall time: 10 ms is 1 % of a core.
+            cpu.record_ns((run.usage.cpu_percent * 1e5).round() as u64);
+            rows.push(
+                cpu.measurement(&format!("{name}-cpu"), Wait::Event)
+                    .method(Method::CpuPerSecond)
+                    .note(format!(
+                        "all {} processes of the system while the topology ran",
+                        run.processes
+                    )),
+            );
             rows.push(
                 k.planner_jitter
                     .measurement(&format!("{name}-planner"), Wait::Event)
@@ -143,8 +160,29 @@ impl Scenario for Refsys {
         Ok(rows)
     }
 
+    /// The targets, as ratios in the same run: esgm's hot path at most ⅓ of the
+    /// better peer's (so of each peer's), its CPU at most the better peer's, its
+    /// planner's jitter at most the better peer's (its p99 ratio is printed beside).
     fn targets(&self) -> Vec<Target> {
-        Vec::new()
+        let mut t = Vec::new();
+        for esgm in ["refsys-esgm", "refsys-esgm-procs"] {
+            for peer in ["refsys-ros1", "refsys-ros2"] {
+                t.push(Target::at_most(esgm, peer, Wait::Event, 1.0 / 3.0));
+                t.push(Target::at_most(
+                    &format!("{esgm}-cpu"),
+                    &format!("{peer}-cpu"),
+                    Wait::Event,
+                    1.0,
+                ));
+                t.push(Target::at_most(
+                    &format!("{esgm}-planner"),
+                    &format!("{peer}-planner"),
+                    Wait::Event,
+                    1.0,
+                ));
+            }
+        }
+        t
     }
 
     fn run_peer(&self, role: &PeerRole) -> anyhow::Result<Vec<String>> {
