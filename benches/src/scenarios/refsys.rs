@@ -1,8 +1,9 @@
 //! `refsys-*`: the Autoware reference system (ros-realtime/reference-system, SPEC W1),
-//! run by every system in one run — esgm in one process (`refsys-esgm`), esgm with a
-//! process per node (`refsys-esgm-procs`), and its peers, which add themselves to
-//! [`systems`] — and judged by its own KPIs, computed alike for each
-//! ([`crate::refsys::kpi`]).
+//! one scenario per system that runs it — esgm in one process (`refsys-esgm`), esgm
+//! with a process per node (`refsys-esgm-procs`), and its peers, which add themselves
+//! to [`systems`] — judged by its own KPIs, computed alike for each
+//! ([`crate::refsys::kpi`]). `--only refsys` runs them all, `--only refsys-esgm` esgm's
+//! two.
 //!
 //! Each system's row is the hot path's latency (front lidar → object collision
 //! estimator, from the per-hop trace of the estimator's input, on the host's system
@@ -25,8 +26,9 @@ use crate::report::{Measurement, Method, Wait};
 use crate::scenario::{Context, Scenario};
 use crate::target::Target;
 
-/// The scenario's name (its peer processes find it by it).
-pub const NAME: &str = "refsys";
+/// The scenario the systems' processes are started as peers of (every `refsys-*`
+/// scenario's peer side runs any of them).
+pub const NAME: &str = "refsys-esgm";
 
 /// Every system that runs the topology, esgm's first.
 pub fn systems() -> Vec<Box<dyn System>> {
@@ -39,9 +41,45 @@ pub fn is_hot_path_row(row: &str) -> bool {
     row.starts_with("refsys-") && !row.ends_with("-planner") && !row.ends_with("-cpu")
 }
 
-/// The reference system on every system (see the module docs).
+/// The reference system on one system (see the module docs).
 #[derive(Debug, Clone, Copy)]
-pub struct Refsys;
+pub struct Refsys {
+    /// The scenario's and its rows' name.
+    name: &'static str,
+    /// The system's name in [`systems`].
+    system: &'static str,
+    summary: &'static str,
+}
+
+impl Refsys {
+    /// esgm in one process.
+    pub const ESGM: Refsys = Refsys {
+        name: "refsys-esgm",
+        system: "esgm",
+        summary: "the Autoware reference system (24 nodes, 4 KiB messages, upstream's periods \
+                  and work) on esgm's in-process runtime, every node in one process; its KPIs",
+    };
+    /// esgm, one process per node.
+    pub const ESGM_PROCS: Refsys = Refsys {
+        name: "refsys-esgm-procs",
+        system: "esgm-procs",
+        summary: "the Autoware reference system on esgm through connect, one process per node \
+                  and a coordinator; its KPIs",
+    };
+    /// ROS 1.
+    pub const ROS1: Refsys = Refsys {
+        name: "refsys-ros1",
+        system: "ros1",
+        summary: "the Autoware reference system on ROS 1 (roscpp), one process per node; its KPIs",
+    };
+    /// ROS 2's wire.
+    pub const ROS2: Refsys = Refsys {
+        name: "refsys-ros2",
+        system: "ros2",
+        summary: "the Autoware reference system over DDS (ros2-client), one process per node, \
+                  in a network namespace; its KPIs",
+    };
+}
 
 fn mib(bytes: u64) -> String {
     format!("{:.1} MiB", bytes as f64 / (1024.0 * 1024.0))
@@ -53,12 +91,11 @@ fn ms(ns: u64) -> String {
 
 impl Scenario for Refsys {
     fn name(&self) -> &'static str {
-        NAME
+        self.name
     }
 
     fn summary(&self) -> &'static str {
-        "the Autoware reference system (24 nodes, 4 KiB messages, upstream's periods and work) \
-         on esgm in one process, esgm with a process per node, and the peers; its KPIs"
+        self.summary
     }
 
     fn run(&self, ctx: &Context) -> anyhow::Result<Vec<Measurement>> {
@@ -72,7 +109,17 @@ impl Scenario for Refsys {
             _ => Duration::from_millis(100),
         };
         let mut rows = Vec::new();
-        for system in systems() {
+        let mine = systems().into_iter().filter(|s| s.name() == self.system).collect::<Vec<_>>();
+        if mine.is_empty() {
+            ctx.skip(
+                self.name,
+                match self.system {
+                    "ros2" => "built without the `ros2` feature (--features ros2)",
+                    _ => "this system is not built into esgm-bench",
+                },
+            );
+        }
+        for system in mine {
             let name = format!("refsys-{}", system.name());
             if let Some(why) = system.unavailable() {
                 ctx.skip(&name, why);
@@ -165,7 +212,10 @@ impl Scenario for Refsys {
     /// planner's jitter at most the better peer's (its p99 ratio is printed beside).
     fn targets(&self) -> Vec<Target> {
         let mut t = Vec::new();
-        for esgm in ["refsys-esgm", "refsys-esgm-procs"] {
+        if !self.system.starts_with("esgm") {
+            return t;
+        }
+        for esgm in [self.name] {
             for peer in ["refsys-ros1", "refsys-ros2"] {
                 t.push(Target::at_most(esgm, peer, Wait::Event, 1.0 / 3.0));
                 t.push(Target::at_most(
