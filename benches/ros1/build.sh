@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
-# Builds esgm-bench's ROS 1 peer (ros1_pingpong) from Debian's ROS 1 packages.
-# esgm-bench runs ros1-small and ros1-image when benches/ros1/build/ros1_pingpong
-# exists (or ESGM_ROS1_PINGPONG names it), and reports them as skipped otherwise.
+# Builds esgm-bench's ROS 1 peers from Debian's ROS 1 packages: ros1_pingpong and
+# refsys_node. esgm-bench runs ros1-small, ros1-image and ros1-fanout-* when
+# benches/ros1/build/ros1_pingpong exists (or ESGM_ROS1_PINGPONG names it), refsys-ros1
+# (the Autoware reference system, a refsys_node process per node) when
+# benches/ros1/build/refsys_node exists (or ESGM_ROS1_REFSYS names it), and reports them
+# as skipped otherwise.
 #
 # Needs Debian 12 (bookworm) or later; installs the packages with apt-get when run as
 # root and they are missing: libroscpp-dev, libstd-msgs-dev (roscpp and the message
@@ -26,6 +29,8 @@ fi
 mkdir -p build
 # roscpp's pkg-config file lists its dependencies (rosconsole, roscpp_serialization,
 # rostime, boost); -O2 as a release build.
-g++ -O2 -std=c++17 -o build/ros1_pingpong ros1_pingpong.cpp \
-    $(pkg-config --cflags --libs roscpp std_msgs 2>/dev/null || echo -lroscpp -lrosconsole -lroscpp_serialization -lrostime -lboost_system)
-echo "built $(pwd)/build/ros1_pingpong"
+flags=$(pkg-config --cflags --libs roscpp std_msgs 2>/dev/null || echo -lroscpp -lrosconsole -lroscpp_serialization -lrostime -lboost_system)
+for program in ros1_pingpong refsys_node; do
+    g++ -O2 -std=c++17 -o "build/$program" "$program.cpp" $flags
+    echo "built $(pwd)/build/$program"
+done

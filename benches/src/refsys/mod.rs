@@ -13,6 +13,7 @@
 //! - [`report`]: what every node writes when it stops, and [`kpi`]: the reference
 //!   system's own KPIs computed from those reports, for every system alike;
 //! - [`esgm`]: the topology in esgm's own terms, in one process or one per node;
+//! - [`ros1`]: the topology on ROS 1 (roscpp), a C++ process per node and a rosmaster;
 //! - [`resources`]: the CPU and memory of all of a system's processes;
 //! - [`system`]: what a system that runs the topology gives the `refsys` scenario, and
 //!   [`processes`]: how its processes are started, run and stopped together.
@@ -25,5 +26,6 @@ pub mod node;
 pub mod processes;
 pub mod report;
 pub mod resources;
+pub mod ros1;
 pub mod system;
 pub mod topology;

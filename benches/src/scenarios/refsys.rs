@@ -32,7 +32,7 @@ pub const NAME: &str = "refsys-esgm";
 
 /// Every system that runs the topology, esgm's first.
 pub fn systems() -> Vec<Box<dyn System>> {
-    vec![Box::new(EsgmInProcess), Box::new(EsgmProcesses)]
+    vec![Box::new(EsgmInProcess), Box::new(EsgmProcesses), Box::new(crate::refsys::ros1::Ros1)]
 }
 
 /// Whether `row` is a system's hot path row (`refsys-<system>`, not its planner or CPU

@@ -50,9 +50,15 @@ impl Ros1 {
 /// The built peer program, if there is one: `ESGM_ROS1_PINGPONG`, else the place
 /// `build.sh` puts it.
 pub fn program() -> Option<PathBuf> {
-    let path = std::env::var_os("ESGM_ROS1_PINGPONG").map(PathBuf::from).unwrap_or_else(|| {
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("ros1/build/ros1_pingpong")
-    });
+    built("ESGM_ROS1_PINGPONG", "ros1_pingpong")
+}
+
+/// A program `build.sh` builds, if it is there: the one the environment variable `var`
+/// names, else `benches/ros1/build/<name>`.
+pub(crate) fn built(var: &str, name: &str) -> Option<PathBuf> {
+    let path = std::env::var_os(var)
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("ros1/build").join(name));
     path.is_file().then_some(path)
 }
 
@@ -108,7 +114,7 @@ impl Scenario for Ros1 {
 
 /// A private `rosmaster` on a free loopback port, with a `ROS_HOME` of its own; killed
 /// and its home removed when dropped.
-pub(super) struct Master {
+pub(crate) struct Master {
     /// Its port on 127.0.0.1.
     pub port: u16,
     home: PathBuf,
@@ -135,6 +141,11 @@ impl Master {
         this.env(&mut master);
         this.process = Guard::new(master.spawn().context("starting rosmaster")?);
         Ok(this)
+    }
+
+    /// Its process id (to measure it with the processes it serves).
+    pub fn pid(&self) -> Option<u32> {
+        self.process.0.as_ref().map(Child::id)
     }
 
     /// Points a ROS 1 process at this master, on loopback.
