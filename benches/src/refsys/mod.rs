@@ -14,6 +14,8 @@
 //!   system's own KPIs computed from those reports, for every system alike;
 //! - [`esgm`]: the topology in esgm's own terms, in one process or one per node;
 //! - [`ros1`]: the topology on ROS 1 (roscpp), a C++ process per node and a rosmaster;
+//! - `ros2` (feature `ros2`): the topology on ROS 2's wire, DDS through ros2-client,
+//!   one process per node in a loopback-only network namespace;
 //! - [`resources`]: the CPU and memory of all of a system's processes;
 //! - [`system`]: what a system that runs the topology gives the `refsys` scenario, and
 //!   [`processes`]: how its processes are started, run and stopped together.
@@ -27,5 +29,7 @@ pub mod processes;
 pub mod report;
 pub mod resources;
 pub mod ros1;
+#[cfg(feature = "ros2")]
+pub mod ros2;
 pub mod system;
 pub mod topology;

@@ -32,7 +32,13 @@ pub const NAME: &str = "refsys-esgm";
 
 /// Every system that runs the topology, esgm's first.
 pub fn systems() -> Vec<Box<dyn System>> {
-    vec![Box::new(EsgmInProcess), Box::new(EsgmProcesses), Box::new(crate::refsys::ros1::Ros1)]
+    vec![
+        Box::new(EsgmInProcess),
+        Box::new(EsgmProcesses),
+        Box::new(crate::refsys::ros1::Ros1),
+        #[cfg(feature = "ros2")]
+        Box::new(crate::refsys::ros2::Ros2),
+    ]
 }
 
 /// Whether `row` is a system's hot path row (`refsys-<system>`, not its planner or CPU
@@ -238,6 +244,11 @@ impl Scenario for Refsys {
     fn run_peer(&self, role: &PeerRole) -> anyhow::Result<Vec<String>> {
         let arg = role.arg.as_deref().unwrap_or_default();
         if let Some(done) = crate::refsys::esgm::peer_main(&role.domain, arg) {
+            done?;
+            return Ok(Vec::new());
+        }
+        #[cfg(feature = "ros2")]
+        if let Some(done) = crate::refsys::ros2::peer_main(arg) {
             done?;
             return Ok(Vec::new());
         }

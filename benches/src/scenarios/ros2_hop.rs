@@ -41,11 +41,20 @@ use crate::wait_mode::WaitMode;
 /// helpers, included rather than copied).
 #[path = "../../../esgm-shm/cli/tests/common/capability.rs"]
 mod capability;
-/// A loopback-only network namespace, removed when dropped (the tests' helper).
+/// A loopback-only network namespace, removed when dropped (the tests' helper); also
+/// where `refsys-ros2`'s nodes run.
 #[path = "../../../esgm-shm/cli/tests/common/netns.rs"]
-mod netns;
+pub(crate) mod netns;
 
 use netns::Namespace;
+
+/// A loopback-only network namespace `esgm-<tag>-<pid>` for DDS, or why there is none,
+/// as a DDS row's reason for not running (not root, no `ip`).
+pub(crate) fn dds_namespace(tag: &str) -> Result<Namespace, String> {
+    Namespace::create(tag).map_err(|e| {
+        format!("no loopback-only network namespace for DDS, where alone it runs: {e}")
+    })
+}
 
 /// What to build to measure the bridge.
 pub const HOW: &str =
@@ -100,13 +109,10 @@ pub fn measure(
     };
     let mut runs = Vec::new();
     for mode in WaitMode::SPIN_AND_BLOCK {
-        let ns = match Namespace::create(&format!("bench-{name}-{}", mode.arg())) {
+        let ns = match dds_namespace(&format!("bench-{name}-{}", mode.arg())) {
             Ok(ns) => ns,
-            Err(e) => {
-                ctx.skip(
-                    name,
-                    format!("no loopback-only network namespace for DDS, where alone it runs: {e}"),
-                );
+            Err(why) => {
+                ctx.skip(name, why);
                 return Ok(None);
             }
         };
