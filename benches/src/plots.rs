@@ -10,7 +10,8 @@
 //!   K (the `fanout-*` rows, and the ROS 1 peer's `ros1-fanout-*` when it ran), with
 //!   the bound of one wake-up per reader;
 //! - `refsys_hot_path.png`: the Autoware reference system's hot path latency (front
-//!   lidar to object collision estimator), one line per system that ran it.
+//!   lidar to object collision estimator), one line per system that ran it, and
+//!   `refsys_hot_path_nowork.png`, the same without the nodes' work.
 //!
 //! The setup (the bundled font, the palette, the legend) is esgm-chart's, shared with
 //! `esgm plot`: no system font library is needed to build or to draw.
@@ -66,18 +67,31 @@ pub fn draw(report: &Report, dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
         cdf(&rows, &caption, &path).with_context(|| format!("drawing {}", path.display()))?;
         written.push(path);
     }
-    let refsys: Vec<&Measurement> = report
-        .scenarios
-        .iter()
-        .filter(|m| {
-            m.name.starts_with("refsys-") && crate::scenarios::refsys::is_hot_path_row(&m.name)
-        })
-        .collect();
-    if !refsys.is_empty() {
-        let path = dir.join("refsys_hot_path.png");
-        let caption = "reference system: hot path latency CDF (front lidar -> collision estimator)";
-        cdf(&refsys, caption, &path).with_context(|| format!("drawing {}", path.display()))?;
-        written.push(path);
+    for (file, nowork, caption) in [
+        (
+            "refsys_hot_path.png",
+            false,
+            "reference system: hot path latency CDF (front lidar -> collision estimator)",
+        ),
+        (
+            "refsys_hot_path_nowork.png",
+            true,
+            "reference system, no work: hot path latency CDF (the middleware alone)",
+        ),
+    ] {
+        let refsys: Vec<&Measurement> = report
+            .scenarios
+            .iter()
+            .filter(|m| {
+                crate::scenarios::refsys::is_hot_path_row(&m.name)
+                    && m.name.ends_with("-nowork") == nowork
+            })
+            .collect();
+        if !refsys.is_empty() {
+            let path = dir.join(file);
+            cdf(&refsys, caption, &path).with_context(|| format!("drawing {}", path.display()))?;
+            written.push(path);
+        }
     }
     let path = dir.join("domain_size.png");
     if domain_size(report, &path).with_context(|| format!("drawing {}", path.display()))? {

@@ -152,7 +152,7 @@ fn targets(report: &Report) -> String {
         .targets
         .iter()
         .map(|t| {
-            let what = format!("{} / {} ({})", t.row, t.baseline, t.wait.as_str());
+            let what = format!("{} ({})", t.label(), t.wait.as_str());
             match t.evaluate(report) {
                 Ok(o) => [
                     what,

@@ -17,7 +17,8 @@ pub enum Bound {
     AtLeast(f64),
 }
 
-/// A goal for `row / baseline` (p50, both rows with the same wait).
+/// A goal for `row / baseline` (p50, both rows with the same wait), or for `row` against
+/// a budget: `baseline` plus multiples of other rows ([`Target::plus`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Target {
     /// The row measured (a scenario's row name, e.g. `esgm-small-default`).
@@ -28,6 +29,20 @@ pub struct Target {
     pub wait: Wait,
     /// The goal.
     pub bound: Bound,
+    /// Terms added to the baseline, each a row (at its own wait) and its multiple: "the
+    /// in-process hot path plus five wake-ups plus the work".
+    pub plus: Vec<Term>,
+}
+
+/// A multiple of a row, added to a target's baseline.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Term {
+    /// The row.
+    pub row: String,
+    /// Its wait.
+    pub wait: Wait,
+    /// How many times it counts.
+    pub times: f64,
 }
 
 /// A target evaluated on a report.
@@ -44,40 +59,84 @@ pub struct Outcome {
 impl Target {
     /// `row / baseline ≤ ratio` with both rows at `wait`.
     pub fn at_most(row: &str, baseline: &str, wait: Wait, ratio: f64) -> Self {
-        Self { row: row.into(), baseline: baseline.into(), wait, bound: Bound::AtMost(ratio) }
+        Self {
+            row: row.into(),
+            baseline: baseline.into(),
+            wait,
+            bound: Bound::AtMost(ratio),
+            plus: Vec::new(),
+        }
     }
 
     /// `row / baseline ≥ ratio` with both rows at `wait`.
     pub fn at_least(row: &str, baseline: &str, wait: Wait, ratio: f64) -> Self {
-        Self { row: row.into(), baseline: baseline.into(), wait, bound: Bound::AtLeast(ratio) }
+        Self {
+            row: row.into(),
+            baseline: baseline.into(),
+            wait,
+            bound: Bound::AtLeast(ratio),
+            plus: Vec::new(),
+        }
+    }
+
+    /// Adds `times` × `row` (at `wait`) to the baseline: the target becomes
+    /// `row / (baseline + Σ times × term)`, at p50 and at p99 alike.
+    #[must_use]
+    pub fn plus(mut self, row: &str, wait: Wait, times: f64) -> Self {
+        self.plus.push(Term { row: row.into(), wait, times });
+        self
+    }
+
+    /// Every row the target reads: its row, its baseline and its terms'.
+    pub fn rows(&self) -> impl Iterator<Item = &str> {
+        [self.row.as_str(), self.baseline.as_str()]
+            .into_iter()
+            .chain(self.plus.iter().map(|t| t.row.as_str()))
+    }
+
+    /// What is compared: `row / baseline`, or `row / baseline + 5×term`.
+    pub fn label(&self) -> String {
+        let mut out = format!("{} / {}", self.row, self.baseline);
+        for t in &self.plus {
+            out.push_str(&format!(" + {}×{}", t.times, t.row));
+        }
+        out
     }
 
     /// The ratio in `report`, or the names of the rows that did not run.
     pub fn evaluate(&self, report: &Report) -> Result<Outcome, Vec<&str>> {
-        let find = |name: &str| -> Option<&Measurement> {
-            report.scenarios.iter().find(|m| m.name == name && m.wait == self.wait)
+        let find = |name: &str, wait: Wait| -> Option<&Measurement> {
+            report.scenarios.iter().find(|m| m.name == name && m.wait == wait)
         };
-        match (find(&self.row), find(&self.baseline)) {
-            (Some(row), Some(base)) => {
-                let ratio = |a: u64, b: u64| a as f64 / (b as f64).max(1.0);
-                let p50_ratio = ratio(row.p50_ns, base.p50_ns);
-                let met = match self.bound {
-                    Bound::AtMost(x) => p50_ratio <= x,
-                    Bound::AtLeast(x) => p50_ratio >= x,
-                };
-                Ok(Outcome { p50_ratio, p99_ratio: ratio(row.p99_ns, base.p99_ns), met })
-            }
-            (row, base) => {
-                let mut missing = Vec::new();
-                if row.is_none() {
-                    missing.push(self.row.as_str());
+        let mut missing = Vec::new();
+        let row = find(&self.row, self.wait);
+        let base = find(&self.baseline, self.wait);
+        if row.is_none() {
+            missing.push(self.row.as_str());
+        }
+        if base.is_none() {
+            missing.push(self.baseline.as_str());
+        }
+        let (mut budget50, mut budget99) =
+            base.map_or((0.0, 0.0), |b| (b.p50_ns as f64, b.p99_ns as f64));
+        for t in &self.plus {
+            match find(&t.row, t.wait) {
+                Some(m) => {
+                    budget50 += t.times * m.p50_ns as f64;
+                    budget99 += t.times * m.p99_ns as f64;
                 }
-                if base.is_none() {
-                    missing.push(self.baseline.as_str());
-                }
-                Err(missing)
+                None => missing.push(t.row.as_str()),
             }
         }
+        let Some(row) = row.filter(|_| missing.is_empty()) else {
+            return Err(missing);
+        };
+        let p50_ratio = row.p50_ns as f64 / budget50.max(1.0);
+        let met = match self.bound {
+            Bound::AtMost(x) => p50_ratio <= x,
+            Bound::AtLeast(x) => p50_ratio >= x,
+        };
+        Ok(Outcome { p50_ratio, p99_ratio: row.p99_ns as f64 / budget99.max(1.0), met })
     }
 
     /// `≤ ×1.50` / `≥ ×10`.
@@ -130,5 +189,27 @@ mod tests {
         let event = Target::at_most("small", "floor", Wait::Event, 1.5);
         assert_eq!(event.evaluate(&report), Err(vec!["floor"]));
         assert_eq!(Target::at_least("a", "b", Wait::Spin, 10.0).bound_label(), "≥ ×10.0");
+    }
+
+    #[test]
+    fn a_budget_adds_multiples_of_other_rows_to_the_baseline() {
+        let report = Report {
+            scenarios: vec![
+                row("inproc", Wait::Event, 1000),
+                row("wake", Wait::Event, 100),
+                row("work", Wait::Spin, 50),
+                row("procs", Wait::Event, 1800),
+            ],
+            ..Report::default()
+        };
+        let t = Target::at_most("procs", "inproc", Wait::Event, 1.0)
+            .plus("wake", Wait::Event, 5.0)
+            .plus("work", Wait::Spin, 2.0);
+        let o = t.evaluate(&report).unwrap();
+        // 1800 / (1000 + 500 + 100)
+        assert!(!o.met && (o.p50_ratio - 1.125).abs() < 1e-9, "{o:?}");
+        assert_eq!(t.label(), "procs / inproc + 5×wake + 2×work");
+        let gone = Target::at_most("procs", "inproc", Wait::Event, 1.0).plus("x", Wait::Event, 1.0);
+        assert_eq!(gone.evaluate(&report), Err(vec!["x"]));
     }
 }

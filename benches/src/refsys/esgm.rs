@@ -1,7 +1,9 @@
 //! The reference system on esgm, in esgm's own terms (README, "The Autoware reference
 //! system"):
-//! - a **sensor** is a sampled trajectory of a sensor interface, every period from START
-//!   to UNTIL (the seed's `from` and `to`);
+//! - a **sensor** is a sampled trajectory of a sensor interface, its sample times on
+//!   multiples of its period (the seed's `from`), so every process's timers tick in
+//!   phase and at START, as upstream's, made together in one process, do; it produces
+//!   from START to UNTIL;
 //! - a **transform** is a computed trajectory: its unit runs on every input;
 //! - a **fusion** is a computed trajectory with two inputs, whose unit makes an output
 //!   once both inputs have a structure it has not used (esgm calls a unit with the
@@ -58,6 +60,16 @@ fn message_of(s: &Sample) -> Option<Message> {
 
 fn now() -> Time {
     SystemClock.now()
+}
+
+/// A sampled trajectory of the sensor `name` every `period`, its sample times on
+/// multiples of the period since the epoch: so timers in different processes tick
+/// together, and at START (a multiple of every period), as upstream's timers, made
+/// together in one process, do.
+fn in_phase(name: &str, period: Duration) -> anyhow::Result<TrajectorySpec> {
+    let period = Time::try_from(period.as_nanos()).unwrap_or(Time::MAX);
+    let first = (now() / period + 1).saturating_mul(period);
+    Ok(TrajectorySpec::sampled(name, name, period)?.between(first, 0))
 }
 
 /// A cache of one: the reference system keeps only the latest message of every topic.
@@ -171,8 +183,7 @@ pub fn build<E: Esgm<Trajectory = InProcessTrajectory>>(
                     Ok(structure(&s.lock().fire(), qtime))
                 };
                 esgm.add_sensor_interface(name, MESSAGE_TYPE, Arc::new(iface))?;
-                let period = Time::try_from(period.as_nanos()).unwrap_or(Time::MAX);
-                let spec = TrajectorySpec::sampled(name, name, period)?;
+                let spec = in_phase(name, period)?;
                 let policy = spec.policy.clone().cache(CacheConstraint::Elements(1));
                 built._trajectories.push(esgm.create_trajectory(spec.policy(policy))?);
                 Logic::Sensor(sensor)
@@ -255,8 +266,7 @@ pub fn build<E: Esgm<Trajectory = InProcessTrajectory>>(
                     Ok(structure(&cyclic.on_timer(), qtime))
                 };
                 esgm.add_sensor_interface(name, MESSAGE_TYPE, Arc::new(iface))?;
-                let period = Time::try_from(period.as_nanos()).unwrap_or(Time::MAX);
-                let spec = TrajectorySpec::sampled(name, name, period)?;
+                let spec = in_phase(name, period)?;
                 let policy = spec.policy.clone().cache(CacheConstraint::Elements(1));
                 built._trajectories.push(esgm.create_trajectory(spec.policy(policy))?);
                 Logic::Cyclic(cyclic)

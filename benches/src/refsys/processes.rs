@@ -6,7 +6,9 @@
 //! 1. The process sets itself up (connects, declares its trajectories or topics,
 //!    subscribes) and prints `ready`.
 //! 2. Once every process is ready, the runner writes `go START UNTIL` (ns on the system
-//!    clock): sensors and timers start at START, everything stops at UNTIL.
+//!    clock): sensors and timers start at START, everything stops at UNTIL. START is a
+//!    multiple of the topology's common period ([`super::topology::common_period`]), so
+//!    a timer that ticks on multiples of its own period ticks at START too.
 //! 3. At UNTIL the process writes its nodes' reports into the run's directory
 //!    (`NODE.txt`) and prints `done`, then waits for `exit` (or the end of its input) and
 //!    leaves. Between `go` and `done` the runner measures the CPU and memory of every
@@ -145,7 +147,9 @@ pub fn run(
     let mut pids: Vec<u32> = running.iter().map(|r| r.child.id()).collect();
     pids.extend_from_slice(others);
     let meter = Meter::start(pids)?;
-    let start = now_ns() + u64::try_from(LEAD.as_nanos()).unwrap_or(0);
+    let earliest = now_ns() + u64::try_from(LEAD.as_nanos()).unwrap_or(0);
+    let common = u64::try_from(super::topology::common_period().as_nanos()).unwrap_or(1).max(1);
+    let start = earliest.div_ceil(common) * common;
     let until = start + u64::try_from(settings.duration.as_nanos()).unwrap_or(u64::MAX);
     for r in &mut running {
         let stdin = r.stdin.as_mut().context("no stdin")?;

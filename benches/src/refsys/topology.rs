@@ -6,10 +6,6 @@
 
 use std::time::Duration;
 
-/// The work every processing node does per message in upstream's default timing: the
-/// number cruncher's limit (primes up to 4096).
-pub const DEFAULT_CRUNCH: u64 = 4096;
-
 /// What a node does.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Kind {
@@ -190,6 +186,24 @@ pub fn build_order() -> Vec<&'static Node> {
     done
 }
 
+/// The shortest time after which every timer of the topology ticks again at once (the
+/// least common multiple of the sensors' and the planner's periods, 600 ms upstream).
+/// Starting a run on a multiple of it puts every process's timers in phase, as
+/// upstream's, made together in one process, are.
+pub fn common_period() -> Duration {
+    fn gcd(a: u128, b: u128) -> u128 {
+        if b == 0 { a } else { gcd(b, a % b) }
+    }
+    let lcm = NODES
+        .iter()
+        .filter_map(|n| match n.kind {
+            Kind::Sensor { period } | Kind::Cyclic { period, .. } => Some(period.as_nanos()),
+            _ => None,
+        })
+        .fold(1u128, |acc, p| acc / gcd(acc, p) * p);
+    Duration::from_nanos(u64::try_from(lcm).unwrap_or(u64::MAX))
+}
+
 /// Every topic, each once.
 pub fn topics() -> Vec<&'static str> {
     NODES.iter().flat_map(|n| n.outputs()).collect()
@@ -219,6 +233,7 @@ mod tests {
             }
         }
         assert_eq!(build_order().len(), NODES.len(), "every node can be declared in turn");
+        assert_eq!(common_period(), Duration::from_millis(600));
         for (a, b) in HOT_PATH.iter().zip(HOT_PATH.iter().skip(1)) {
             let reader = NODES.iter().find(|n| n.outputs().contains(b) || n.name == *b).unwrap();
             assert!(reader.inputs().contains(a), "{b} does not read {a}");
