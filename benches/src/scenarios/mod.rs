@@ -80,6 +80,12 @@
 //! The silent-failures issue (24) adds [`control_churn`]: `control-ping` and
 //! `control-ping-churn`, a client's call to the coordinator while others churn.
 //!
+//! The reference-system issue (38) adds, after `control-*`, [`refsys`]: the Autoware
+//! reference system on `refsys-ros1` and `refsys-ros2` (the peers, first: esgm's targets
+//! compare with them) and then `refsys-esgm` and `refsys-esgm-procs`, each in upstream's
+//! default timing and without work (`-nowork`), with CPU and planner rows, and
+//! `refsys-esgm-work`, one node's calibrated work.
+//!
 //! The recordings issue (14) adds, after `pipeline-*` (before `memory`):
 //! - [`record_small`]: `record-small`, `record-small-none`, `RobotState`s from another
 //!   process recorded by the `Recorder` (zstd, none): structures/s in batches, losses
