@@ -123,10 +123,20 @@ pub(crate) struct Import {
 
 impl Drop for Import {
     /// Wakes the threads of this process asleep on this import's writer (user
-    /// subscriptions and workers, counted in `sleepers` and `workers`): the trajectory
-    /// was destroyed, re-pointed (they follow the new import) or the connection closed
-    /// (they end). They would sleep up to [`WAIT_SLICE`] otherwise.
+    /// subscriptions and workers): the trajectory was destroyed, re-pointed (they follow
+    /// the new import) or the connection closed (they end).
     fn drop(&mut self) {
+        self.wake_sleepers();
+    }
+}
+
+impl Import {
+    /// Wakes the threads of this process asleep on this import's writer (user
+    /// subscriptions and workers, counted in `sleepers` and `workers`), when something
+    /// they wait for happened that the writer did not ring for: the import went, or
+    /// samples held until the registry named the writer's port were entered by the
+    /// location thread. They would sleep up to [`WAIT_SLICE`] otherwise.
+    fn wake_sleepers(&self) {
         let asleep =
             |n: &std::sync::atomic::AtomicUsize| n.load(std::sync::atomic::Ordering::SeqCst);
         if asleep(&self.workers) == 0 && asleep(&self.sleepers) == 0 {
@@ -394,12 +404,24 @@ impl Import {
         self.check.awaits_writer()
     }
 
+    /// True while the registry has not named the writer's port to this import.
+    pub fn writer_unnamed(&self) -> bool {
+        self.check.writer().is_none()
+    }
+
     /// The registry names `port` as the writer's (`None`: not yet): what was held from
     /// it is entered, in order, and what was held from any other port is rejected.
     pub fn set_writer(&mut self, port: Option<WriterPort>) {
         self.writer.set_pid(port.map_or(0, |p| p.pid));
+        let mut entered = false;
         for decided in self.check.set_writer(port.map(|p| p.publisher)) {
+            entered |= matches!(decided, Decided::Enter { .. });
             self.decide(decided);
+        }
+        // The writer rang when it sent them, and the threads woken found them held: they
+        // sleep again, and only this thread knows they are in now.
+        if entered {
+            self.wake_sleepers();
         }
     }
 

@@ -36,6 +36,10 @@ use crate::service::OpenError;
 /// budget of 1 %.
 pub(crate) const TICK: Duration = Duration::from_secs(2);
 
+/// How soon a connection asks again who writes a trajectory it began to read before
+/// the writer had named its port (the step doubles from there, up to [`TICK`]).
+const FIRST_NAMING_ASK: Duration = Duration::from_millis(5);
+
 /// How often a process tells the coordinator its image counters (if they changed).
 pub(crate) const HOLDINGS_REPORT_PERIOD: Duration = Duration::from_secs(1);
 
@@ -138,6 +142,12 @@ pub(crate) struct Location {
     /// ([`Location::verify_writers`]) rather than at its next maintenance tick: the
     /// samples held meanwhile borrow shared memory.
     pub verify: (Sender<()>, Receiver<()>),
+    /// When to ask again who writes the imports made before their writer named its
+    /// port (a reader that came while the writer was still creating the trajectory),
+    /// and the step to the next ask: soon, then less often, up to [`TICK`], until every
+    /// import's writer is named. Without it their first samples would be held for a
+    /// question asked only when they arrive. `None` while every writer is named.
+    pub unnamed: Option<(Instant, Duration)>,
     /// Adders of replicas whose writer is gone ask here to take them over
     /// ([`super::takeover`]).
     pub takeovers: (Sender<TakeOverAsk>, Receiver<TakeOverAsk>),
@@ -160,6 +170,9 @@ impl Location {
             let mut due = next_tick;
             if self.serving {
                 due = due.min(next_assignments);
+            }
+            if let Some((ask, _)) = self.unnamed {
+                due = due.min(ask);
             }
             let timeout = due.saturating_duration_since(Instant::now());
             let verify = self.verify.1.clone();
@@ -185,6 +198,9 @@ impl Location {
                     }
                 }
                 default(timeout) => {}
+            }
+            if self.unnamed.is_some_and(|(ask, _)| Instant::now() >= ask) {
+                self.name_writers();
             }
             if self.serving && Instant::now() >= next_assignments {
                 self.poll_assignments();
@@ -304,6 +320,7 @@ impl Location {
                 // The former stream's end: readers forget it, as the writer's did.
                 let _destroyed = replica.with_store(|s| s.reset());
                 import.pump();
+                self.watch_unnamed(&import);
                 self.mirrors.change(|m| m.insert_import(name.to_owned(), import));
                 tracing::info!(trajectory = %name, generation = record.generation,
                     "following a re-pointed trajectory");
@@ -565,9 +582,43 @@ impl Location {
     /// Asks the registry whose port the samples are that readers here hold unverified
     /// (a writer that just started or restarted), and lets them enter or be rejected.
     fn verify_writers(&mut self) {
+        self.ask_writers(Import::awaits_writer);
+    }
+
+    /// Asks the registry who writes the imports whose writer was not named yet, ahead
+    /// of their first samples; asks again later while some are still not named
+    /// ([`Location::unnamed`]).
+    fn name_writers(&mut self) {
+        self.ask_writers(Import::writer_unnamed);
+        let unnamed = self.mirrors.imports().iter().any(|(_, i)| i.lock().writer_unnamed());
+        self.unnamed = match self.unnamed {
+            Some((_, step)) if unnamed => {
+                let step = (step * 2).min(TICK);
+                Some((Instant::now() + step, step))
+            }
+            _ => None,
+        };
+    }
+
+    /// Asks again soon who writes the imports, if `import` was made before its writer
+    /// named its port.
+    fn watch_unnamed(&mut self, import: &Import) {
+        if !import.writer_unnamed() {
+            return;
+        }
+        let soon = Instant::now() + FIRST_NAMING_ASK;
+        self.unnamed = match self.unnamed {
+            Some((ask, step)) if ask <= soon => Some((ask, step)),
+            _ => Some((soon, FIRST_NAMING_ASK)),
+        };
+    }
+
+    /// Asks the registry who writes the imports `which` selects, and names their
+    /// writers' ports.
+    fn ask_writers(&mut self, which: fn(&Import) -> bool) {
         let waiting: Vec<String> = {
             let imports = self.mirrors.imports();
-            imports.into_iter().filter(|(_, i)| i.lock().awaits_writer()).map(|(n, _)| n).collect()
+            imports.into_iter().filter(|(_, i)| which(&i.lock())).map(|(n, _)| n).collect()
         };
         for name in waiting {
             let record = match self.record(&name) {
@@ -639,6 +690,7 @@ impl Location {
                 let _destroyed = handle.with_store(|s| s.forward_resets(Arc::clone(&self.resets)));
                 // The history the writer already handed over, at once.
                 import.pump();
+                self.watch_unnamed(&import);
                 self.mirrors.change(|m| m.insert_import(name.clone(), import));
                 Ok(handle)
             }

@@ -268,6 +268,7 @@ impl ShmEsgmBuilder {
             reported: (HoldingStats::default(), std::time::Instant::now()),
             resets,
             verify: crossbeam_channel::bounded(1),
+            unnamed: None,
             takeovers: crossbeam_channel::unbounded(),
             tool: self.tool,
             looked,
