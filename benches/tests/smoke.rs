@@ -359,5 +359,8 @@ fn the_reference_system_runs_on_esgm_both_ways() {
     for note in ["front lidar:", "transforms missed", "behavior planner:", "% of a core"] {
         assert!(stdout.contains(note), "no `{note}` note:\n{stdout}");
     }
-    assert!(stdout.contains("25 processes"), "a coordinator and 24 nodes:\n{stdout}");
+    assert!(
+        stdout.contains("26 processes"),
+        "a coordinator and 25 workers (24 nodes, the intersection as two units):\n{stdout}"
+    );
 }

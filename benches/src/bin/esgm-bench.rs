@@ -9,6 +9,10 @@ use esgm_benches::args::Args;
 use esgm_benches::{json, plots, runner, scenarios, table};
 
 fn main() -> ExitCode {
+    // The reference system's node program, under its own name (see its docs).
+    if esgm_benches::refsys::node_program::called_as_node_program() {
+        return esgm_benches::refsys::node_program::main();
+    }
     match run(Args::parse()) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

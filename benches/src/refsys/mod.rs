@@ -12,7 +12,13 @@
 //! - [`node`]: what each kind of node does with its inputs, whatever carries them;
 //! - [`report`]: what every node writes when it stops, and [`kpi`]: the reference
 //!   system's own KPIs computed from those reports, for every system alike;
-//! - [`esgm`]: the topology in esgm's own terms, in one process or one per node;
+//! - [`system_file`]: the topology as an esgm system file (`benches/refsys/refsys.toml`,
+//!   generated from [`topology`]), in esgm's own terms: sensors, units, trajectories;
+//!   [`served`]: the sensors and units its node program serves, on either runtime, and
+//!   [`node_program`]: that program (`esgm-refsys-node`), with [`window`] and
+//!   [`run_dir`]: how its processes take part in a run;
+//! - [`esgm`]: the file run in one process, or one process per sensor and unit started
+//!   by a coordinator;
 //! - [`ros1`]: the topology on ROS 1 (roscpp), a C++ process per node and a rosmaster;
 //! - `ros2` (feature `ros2`): the topology on ROS 2's wire, DDS through ros2-client,
 //!   one process per node in a loopback-only network namespace;
@@ -25,11 +31,16 @@ pub mod esgm;
 pub mod kpi;
 pub mod message;
 pub mod node;
+pub mod node_program;
 pub mod processes;
 pub mod report;
 pub mod resources;
 pub mod ros1;
 #[cfg(feature = "ros2")]
 pub mod ros2;
+pub mod run_dir;
+pub mod served;
 pub mod system;
+pub mod system_file;
 pub mod topology;
+pub mod window;

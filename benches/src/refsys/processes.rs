@@ -4,7 +4,9 @@
 //! them alike.
 //!
 //! 1. The process sets itself up (connects, declares its trajectories or topics,
-//!    subscribes) and prints `ready`.
+//!    subscribes) and prints `ready`. Before it, a process that started others of the
+//!    system (a coordinator, its workers) names each with a line `pid N`: they are
+//!    measured with it.
 //! 2. Once every process is ready, the runner writes `go START UNTIL` (ns on the system
 //!    clock): sensors and timers start at START, everything stops at UNTIL. START is a
 //!    multiple of the topology's common period ([`super::topology::common_period`]), so
@@ -98,15 +100,23 @@ pub fn run(
     drop(lines_tx);
 
     let mut notes = Vec::new();
+    // Returns the pids announced meanwhile (`pid N`).
     let mut wait_for =
-        |word: &str, running: &mut Vec<Running>, deadline: Instant| -> anyhow::Result<()> {
+        |word: &str, running: &mut Vec<Running>, deadline: Instant| -> anyhow::Result<Vec<u32>> {
             let mut said = vec![false; running.len()];
+            let mut announced = Vec::new();
             while said.iter().any(|s| !s) {
                 let left = deadline.saturating_duration_since(Instant::now());
                 match lines.recv_timeout(left.min(Duration::from_millis(200))) {
                     Ok((i, line)) if line.trim() == word => said[i] = true,
                     Ok((i, line)) if line.starts_with("note ") => {
                         notes.push(format!("{}: {}", running[i].name, &line[5..]));
+                    }
+                    Ok((i, line)) if line.starts_with("pid ") => {
+                        let pid = line[4..].trim().parse::<u32>().with_context(|| {
+                            format!("{} announced {line:?}, not `pid N`", running[i].name)
+                        })?;
+                        announced.push(pid);
                     }
                     Ok(_) => {}
                     Err(mpsc::RecvTimeoutError::Timeout) => {}
@@ -140,12 +150,13 @@ pub fn run(
                     );
                 }
             }
-            Ok(())
+            Ok(announced)
         };
 
-    wait_for("ready", &mut running, Instant::now() + SETUP)?;
+    let announced = wait_for("ready", &mut running, Instant::now() + SETUP)?;
     let mut pids: Vec<u32> = running.iter().map(|r| r.child.id()).collect();
     pids.extend_from_slice(others);
+    pids.extend(announced);
     let meter = Meter::start(pids)?;
     let earliest = now_ns() + u64::try_from(LEAD.as_nanos()).unwrap_or(0);
     let common = u64::try_from(super::topology::common_period().as_nanos()).unwrap_or(1).max(1);
@@ -182,7 +193,8 @@ pub fn run(
     Ok((read_reports(dir)?, usage, notes))
 }
 
-/// Every node report in `dir`.
+/// Every node report in `dir`, those of one node folded into one
+/// ([`NodeReport::by_node`]).
 pub fn read_reports(dir: &Path) -> anyhow::Result<Vec<NodeReport>> {
     let mut reports = Vec::new();
     for entry in std::fs::read_dir(dir)? {
@@ -192,7 +204,7 @@ pub fn read_reports(dir: &Path) -> anyhow::Result<Vec<NodeReport>> {
             reports.push(NodeReport::parse(&text).with_context(|| format!("{}", path.display()))?);
         }
     }
-    Ok(reports)
+    Ok(NodeReport::by_node(reports))
 }
 
 /// A node process's side of the protocol (in Rust: esgm's and ROS 2's processes).

@@ -52,6 +52,19 @@ impl NodeReport {
         self.planner_fired.extend(other.planner_fired);
     }
 
+    /// `reports` with those of one node folded into one (a node served by several
+    /// processes: the intersection's two units on esgm), in the order nodes come first.
+    pub fn by_node(reports: impl IntoIterator<Item = NodeReport>) -> Vec<NodeReport> {
+        let mut out: Vec<NodeReport> = Vec::new();
+        for r in reports {
+            match out.iter_mut().find(|o| o.node == r.node) {
+                Some(o) => o.merge(r),
+                None => out.push(r),
+            }
+        }
+        out
+    }
+
     /// The report as text.
     pub fn to_text(&self) -> String {
         let mut s = format!("node {}\n", self.node);
@@ -119,5 +132,21 @@ mod tests {
         assert_eq!(NodeReport::parse(&r.to_text()).unwrap(), r);
         assert!(NodeReport::parse("node X\nbogus 1\n").is_err());
         assert!(NodeReport::parse("published X 1\n").is_err());
+    }
+
+    #[test]
+    fn reports_of_one_node_fold_into_one() {
+        let part = |node: &str, topic: &str| {
+            let mut r = NodeReport::new(node);
+            r.published.push((topic.into(), 1));
+            r
+        };
+        let merged = NodeReport::by_node([
+            part("EuclideanClusterDetector", "EuclideanClusterDetector"),
+            part("Visualizer", "Visualizer"),
+            part("EuclideanClusterDetector", "EuclideanIntersection"),
+        ]);
+        assert_eq!(merged.len(), 2);
+        assert_eq!(merged[0].published.len(), 2);
     }
 }

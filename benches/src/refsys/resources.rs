@@ -52,6 +52,8 @@ pub struct Usage {
     /// Shared memory at the end, all processes together (bytes; a page two processes
     /// share counts in both).
     pub shared_bytes: u64,
+    /// The processes measured.
+    pub processes: usize,
 }
 
 /// Measures processes from the start of a run: [`Meter::finish`] at its end.
@@ -87,6 +89,7 @@ impl Meter {
             cpu_percent: 100.0 * used.as_secs_f64() / wall.as_secs_f64().max(1e-9),
             private_bytes: private,
             shared_bytes: shared,
+            processes: self.pids.len(),
         })
     }
 }

@@ -188,16 +188,20 @@ fn kpi_rows(
             k.front_reached_sink,
             k.front_not_reaching_sink()
         ))
-        .note(format!(
-            "transforms missed {} samples of their inputs (sequence gaps): {}",
-            k.transforms_missed(),
-            k.transform_drops
+        .note({
+            let which: Vec<String> = k
+                .transform_drops
                 .iter()
                 .filter(|d| d.3 > 0)
                 .map(|(n, i, r, m)| format!("{n} <- {i}: {m} of {}", r + m))
-                .collect::<Vec<_>>()
-                .join(", ")
-        ))
+                .collect();
+            let which =
+                if which.is_empty() { String::new() } else { format!(": {}", which.join(", ")) };
+            format!(
+                "transforms missed {} samples of their inputs (sequence gaps){which}",
+                k.transforms_missed()
+            )
+        })
         .note(format!(
             "behavior planner: {} ticks, jitter p50 {} p99 {} max {}, drift {:+.2} ms",
             k.planner_ticks,

@@ -13,7 +13,7 @@ mod session;
 mod show;
 
 // The library's modules keep their paths in the binary (`crate::config`).
-use esgm_cli::{config, external, span_arg, time_arg};
+use esgm_cli::{config, external, span_arg, supervise, time_arg};
 
 use std::process::ExitCode;
 

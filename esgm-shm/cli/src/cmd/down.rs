@@ -14,7 +14,7 @@ use esgm_shm::control::{
     ControlClient, ControlClientError, ProcessRecord, Request, Response, StateDir,
 };
 
-use super::supervise::{alive, is_worker_of};
+use crate::supervise::{alive, is_worker_of};
 
 /// How long the system may take to wind down.
 const WITHIN: Duration = Duration::from_secs(20);

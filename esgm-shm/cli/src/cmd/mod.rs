@@ -24,7 +24,6 @@ pub mod ros2;
 pub mod scale;
 pub mod soak;
 pub mod stats;
-pub mod supervise;
 pub mod top;
 pub mod traj;
 pub mod types;

@@ -478,7 +478,7 @@ pub(super) fn left_behind_of(
 ) -> Vec<String> {
     let mut left = Vec::new();
     for (name, pid) in pids {
-        if super::supervise::alive(pid) {
+        if crate::supervise::alive(pid) {
             left.push(format!("process {name} (pid {pid})"));
         }
     }

@@ -1,6 +1,6 @@
 //! `esgm traj list|show|create|rm`.
 
-use esgm_core::{EntityTrajectoryStructure, Esgm};
+use esgm_core::{Clock as _, EntityTrajectoryStructure, Esgm};
 use serde_json::json;
 
 use anyhow::bail;
@@ -67,7 +67,10 @@ pub fn run(domain: &str, json: bool, c: &TrajCommand) -> anyhow::Result<()> {
             }
         }
         TrajCommand::Create(decl) => {
-            let spec = decl.to_spec()?;
+            let mut spec = decl.to_spec()?;
+            if decl.align {
+                spec = crate::config::decl::aligned(spec, esgm_core::SystemClock.now());
+            }
             // The command line does not stay to write what it creates: primitive, sync
             // and merge trajectories are written by the system's own process (or the
             // named writer); sampled and computed ones where their sensor or unit runs.

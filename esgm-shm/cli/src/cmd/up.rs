@@ -25,17 +25,14 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use esgm_core::TypeRegistry;
-use esgm_shm::ShmEsgm;
+use esgm_cli::serve::Serve;
 use esgm_shm::capacity::{DEFAULT_MAX_PROCESSES, DEFAULT_READERS, DomainLimits};
-use esgm_shm::control::server::{cleanup_dead_nodes, log_cleanup};
-use esgm_shm::control::{ControlClient, Coordinator, Request, Response, StateDir};
-use esgm_shm::process::access::{ACCESS_ENV, ShmAccess, Widener, widen_domain};
+use esgm_shm::control::{ControlClient, Request, StateDir};
+use esgm_shm::process::access::{ACCESS_ENV, ShmAccess};
 use esgm_shm::process::cpu_latency::{self, CPU_LATENCY_ENV, CpuLatency};
 
-use super::supervise::Supervisor;
-use crate::config::apply::SYSTEM_HOST;
 use crate::config::{self, Plan};
+pub use esgm_cli::serve::shutdown;
 
 /// `esgm up` options.
 #[derive(Debug, clap::Args)]
@@ -134,13 +131,6 @@ pub fn state_dir(domain: &str, dir: Option<&Path>) -> anyhow::Result<StateDir> {
 /// How long a detached coordinator may take to serve: taking over from a crashed one
 /// connects every running worker's control client first.
 const START_WITHIN: Duration = Duration::from_secs(30);
-
-/// How often the supervisor looks whether a worker exited.
-const SUPERVISE_EVERY: Duration = Duration::from_millis(250);
-
-/// How often the supervisor asks the coordinator which processes are declared: a
-/// round trip each, which ten times a second was half of an idle robot's coordinator.
-const RECONCILE_EVERY: Duration = Duration::from_secs(1);
 
 /// Runs (or starts) the coordinator of `domain`.
 pub fn run(domain: &str, args: &Args) -> anyhow::Result<()> {
@@ -261,106 +251,17 @@ fn serve(
     limits: DomainLimits,
     state: StateDir,
 ) -> anyhow::Result<()> {
-    let (coordinator, recovered) =
-        Coordinator::spawn_recovering(domain, TypeRegistry::with_library(), state.clone(), limits)
-            .with_context(|| {
-                format!("cannot serve `{domain}`; is a coordinator already running for it?")
-            })?;
-    if recovered > 0 {
-        tracing::warn!(domain, recovered, state = %state.path().display(),
-            "recovered the registry a stopped coordinator left");
-    }
-    let system = ShmEsgm::builder()
-        .domain(domain)
-        .host(SYSTEM_HOST)
-        .connect()
-        .context("cannot start the system's own location")?;
-    system.serve_assignments();
-    // Before anything is applied: a second user's process may come as soon as we serve.
-    // The first pass here, so a domain that cannot be opened does not start.
-    let cannot_open = || format!("cannot open the shared memory of `{domain}` to {access}");
-    widen_domain(domain, access).with_context(cannot_open)?;
-    let sharing = Widener::start(domain, access).with_context(cannot_open)?;
-    if !quiet {
-        eprintln!("coordinator of `{domain}` serving; stop it with `esgm down --domain {domain}`");
-    }
-
-    let applying = plan.map(|plan| {
-        let d = domain.to_owned();
-        std::thread::spawn(move || {
-            let result = super::apply::apply_plan(&d, &plan, false);
-            if let Err(e) = &result {
+    let mut serve = Serve::new(domain, state).access(access).limits(limits).quiet(quiet);
+    if let Some(plan) = plan {
+        serve = serve.config(plan, |domain, plan| {
+            super::apply::apply_plan(domain, plan, false).map_err(|e| {
+                // Said at once, before the workers are waited for.
                 eprintln!("esgm: {e:#}");
-                if let Err(stop) = shutdown(&d) {
-                    tracing::warn!(error = %stop, "cannot stop the coordinator");
-                }
-            }
-            result.is_ok()
-        })
-    });
-
-    let mut supervisor = Supervisor::new(domain, Some(state)).sharing(access);
-    // Failures to reach the own coordinator are logged once per streak.
-    let mut failing = false;
-    let mut next_reconcile = Instant::now();
-    while !coordinator.is_finished() {
-        let reconcile = Instant::now() >= next_reconcile;
-        if reconcile {
-            next_reconcile = Instant::now() + RECONCILE_EVERY;
-        }
-        match reconcile.then(|| system.control(Request::ListProcesses)).transpose() {
-            Ok(None) => {}
-            Ok(Some(Response::Processes(declared))) => {
-                failing = false;
-                supervisor.reconcile(&declared);
-            }
-            Ok(Some(other)) => {
-                tracing::warn!(answer = ?other, "unexpected answer to a process listing");
-            }
-            // Asked while the coordinator stopped: nothing is wrong.
-            Err(_) if coordinator.is_finished() => break,
-            Err(e) if !failing => {
-                failing = true;
-                tracing::warn!(error = %e, "cannot list the declared processes; retrying");
-            }
-            // Still failing: warned once when it started.
-            Err(_) => {}
-        }
-        // Stopping: the workers leave once the coordinator is gone, and must not be
-        // taken for crashed ones (restarted, and logged as such).
-        if coordinator.is_finished() {
-            break;
-        }
-        supervisor.poll();
-        for (name, status) in supervisor.take_changes() {
-            if let Err(e) = system.control(Request::ReportProcess { name: name.clone(), status }) {
-                tracing::warn!(process = %name, error = %e, "cannot report a process's status");
-            }
-        }
-        std::thread::sleep(SUPERVISE_EVERY);
+                anyhow::anyhow!("the configuration could not be applied; stopped")
+            })
+        });
     }
-    drop(sharing);
-    drop(system);
-    supervisor.wait_all(Duration::from_secs(10));
-    drop(supervisor);
-    drop(coordinator);
-    log_cleanup(cleanup_dead_nodes(), esgm_shm::CleanupReporter::Owner);
-    // Every worker is gone: the futex words its killed processes kept go too.
-    esgm_shm::wake_word::remove_domain(domain);
-    tracing::info!("coordinator stopped");
-    match applying.map(std::thread::JoinHandle::join) {
-        Some(Ok(false)) => bail!("the configuration could not be applied; stopped"),
-        Some(Err(_)) => bail!("applying the configuration panicked; stopped"),
-        _ => Ok(()),
-    }
-}
-
-/// Asks the coordinator of `domain` to stop.
-pub fn shutdown(domain: &str) -> anyhow::Result<()> {
-    let c = ControlClient::connect(domain, Duration::from_secs(2))
-        .with_context(|| format!("cannot reach the coordinator of `{domain}`"))?;
-    c.call(&Request::Shutdown).with_context(|| format!("cannot stop `{domain}`"))?;
-    Ok(())
+    serve.run()
 }
 
 /// Starts `esgm up` for `domain` as a background process (its log lines go to

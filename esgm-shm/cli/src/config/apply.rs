@@ -12,10 +12,10 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use esgm_core::EntityStructureType;
 use esgm_core::catalog::{SensorRecord, UnitRecord};
 use esgm_core::esgm::{TrajectoryInfo, TrajectoryKind, TrajectorySource};
 use esgm_core::type_registry::closest_name;
+use esgm_core::{Clock as _, EntityStructureType, SystemClock};
 use esgm_shm::control::{ControlClient, ProcessRecord, Request, Response};
 
 use super::{Item, Plan, PlannedTrajectory, Serves};
@@ -128,8 +128,10 @@ pub fn apply(domain: &str, plan: &Plan, report: &mut dyn FnMut(Outcome)) -> anyh
             return Ok(());
         }
         let host = what.writer.clone().unwrap_or_else(|| SYSTEM_HOST.to_owned());
+        // An aligned trajectory's first sample time is resolved now, as it is created.
+        let spec = what.spec_at(SystemClock.now());
         system
-            .call(&Request::CreateTrajectory { spec: what.spec.clone(), host })
+            .call(&Request::CreateTrajectory { spec, host })
             .map_err(|e| plan.error(*line, format!("trajectory `{name}`: {e:#}")))?;
         let change = if existing.contains_key(name) { "replaced" } else { "created" };
         report(outcome("trajectory", name, change, *line));
@@ -240,10 +242,11 @@ fn check(system: &System, plan: &Plan) -> anyhow::Result<Vec<usize>> {
     }
     let existing: BTreeMap<String, TrajectoryInfo> =
         system.trajectories()?.into_iter().map(|t| (t.name.clone(), t)).collect();
-    let declared: BTreeMap<&str, usize> =
-        plan.trajectories.iter().enumerate().map(|(i, t)| (t.what.spec.name.as_str(), i)).collect();
-    let all: BTreeSet<String> =
-        existing.keys().cloned().chain(declared.keys().map(|s| (*s).to_owned())).collect();
+    let all: BTreeSet<String> = existing
+        .keys()
+        .cloned()
+        .chain(plan.trajectories.iter().map(|t| t.what.spec.name.clone()))
+        .collect();
 
     for Item { line, what } in &plan.trajectories {
         match &what.spec.source {
@@ -276,42 +279,7 @@ fn check(system: &System, plan: &Plan) -> anyhow::Result<Vec<usize>> {
     }
 
     // Inputs declared in the file are created before the trajectories reading them.
-    let mut order = Vec::new();
-    let mut state = vec![0u8; plan.trajectories.len()]; // 0 new, 1 visiting, 2 done
-    fn visit(
-        i: usize,
-        plan: &Plan,
-        declared: &BTreeMap<&str, usize>,
-        state: &mut [u8],
-        order: &mut Vec<usize>,
-    ) -> anyhow::Result<()> {
-        match state[i] {
-            2 => return Ok(()),
-            1 => {
-                let t = &plan.trajectories[i];
-                bail!(
-                    plan.error(
-                        t.line,
-                        format!("trajectory `{}` depends on itself", t.what.spec.name)
-                    )
-                );
-            }
-            _ => {}
-        }
-        state[i] = 1;
-        for input in &plan.trajectories[i].what.inputs {
-            if let Some(&j) = declared.get(input.as_str()) {
-                visit(j, plan, declared, state, order)?;
-            }
-        }
-        state[i] = 2;
-        order.push(i);
-        Ok(())
-    }
-    for i in 0..plan.trajectories.len() {
-        visit(i, plan, &declared, &mut state, &mut order)?;
-    }
-    Ok(order)
+    Ok(plan.creation_order()?)
 }
 
 fn known(

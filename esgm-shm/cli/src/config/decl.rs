@@ -6,7 +6,7 @@
 use std::collections::BTreeMap;
 
 use anyhow::{Context, bail};
-use esgm_core::esgm::TrajectorySpec;
+use esgm_core::esgm::{TrajectorySource, TrajectorySpec};
 use esgm_core::operators::sync::SyncPolicy;
 use esgm_core::value::ValueSort;
 use esgm_core::{Attr, EntityStructureType, Time};
@@ -216,6 +216,13 @@ pub struct TrajectoryDecl {
     #[arg(long = "stop", value_name = "TIME")]
     #[serde(rename = "stop")]
     pub stop: Option<String>,
+    /// Sampled or generate: sample times on multiples of the period since the epoch,
+    /// the first the next one after the trajectory is created (instead of `start`).
+    /// Trajectories sampled in different processes then tick together, as timers made
+    /// together in one process do, and so do periods that divide one another.
+    #[arg(long)]
+    #[serde(default)]
+    pub align: bool,
     /// Sync: match items within this tolerance (ROS ApproximateTime) instead of exactly.
     #[arg(long)]
     pub tolerance: Option<String>,
@@ -295,6 +302,13 @@ impl TrajectoryDecl {
         only_for(!periodic && self.period.is_some(), "period", sampled_or_generate)?;
         only_for(!periodic && self.start.is_some(), "start", sampled_or_generate)?;
         only_for(!periodic && self.stop.is_some(), "stop", sampled_or_generate)?;
+        only_for(!periodic && self.align, "align", sampled_or_generate)?;
+        if self.align && self.start.is_some() {
+            bail!(
+                "trajectory `{}`: give start or align (the next multiple of the period), not both",
+                self.name
+            );
+        }
         only_for(self.generate.is_none() && self.function.is_some(), "function", "generate")?;
         only_for(self.generate.is_none() && self.lag.is_some(), "lag", "generate")?;
         only_for(self.computed.is_none() && self.inputs.is_some(), "inputs", "computed")?;
@@ -363,6 +377,23 @@ impl TrajectoryDecl {
         }
         Ok(spec)
     }
+}
+
+/// `spec` with its first sample time on the next multiple of its sample period after
+/// `now` (`align = true`); a source that is not sampled is returned as it is. It is
+/// resolved when the trajectory is created, not when the file is read: a first sample
+/// time already past would count the sample times in between as missed.
+pub fn aligned(mut spec: TrajectorySpec, now: Time) -> TrajectorySpec {
+    match &mut spec.source {
+        TrajectorySource::Sampled { from, sample_period, .. }
+        | TrajectorySource::SampledGenerators { from, sample_period, .. }
+            if *sample_period > 0 =>
+        {
+            *from = (now.max(0) / *sample_period + 1).saturating_mul(*sample_period);
+        }
+        _ => {}
+    }
+    spec
 }
 
 fn absolute(field: &str, s: &str) -> anyhow::Result<Time> {
@@ -457,6 +488,54 @@ mod tests {
         };
         let e = format!("{:#}", function.to_spec().unwrap_err());
         assert!(e.contains("`function` is only for generate"), "{e}");
+    }
+
+    /// `align = true`: the first sample time is the next multiple of the period after
+    /// the creation time, so every later one is a multiple too.
+    #[test]
+    fn aligned_trajectories_sample_on_multiples_of_their_period() {
+        use esgm_core::esgm::TrajectorySource;
+        let ms = 1_000_000;
+        let decl = TrajectoryDecl {
+            name: "lidar".into(),
+            sampled: Some("lidar".into()),
+            period: Some("25ms".into()),
+            align: true,
+            ..Default::default()
+        };
+        let spec = decl.to_spec().unwrap();
+        let from = |spec: &TrajectorySpec| match &spec.source {
+            TrajectorySource::Sampled { from, .. }
+            | TrajectorySource::SampledGenerators { from, .. } => *from,
+            other => panic!("not sampled: {other:?}"),
+        };
+        assert_eq!(from(&spec), 0, "resolved when created, not when read");
+        assert_eq!(from(&aligned(spec.clone(), 1_000 * ms + 1)), 1_025 * ms);
+        assert_eq!(from(&aligned(spec.clone(), 1_000 * ms)), 1_025 * ms, "strictly after");
+        assert_eq!(from(&aligned(spec, 1_024 * ms)), 1_025 * ms);
+        let generate = TrajectoryDecl {
+            name: "plan".into(),
+            generate: Some(vec!["lidar:closest".into()]),
+            period: Some("100ms".into()),
+            align: true,
+            ..Default::default()
+        };
+        assert_eq!(from(&aligned(generate.to_spec().unwrap(), 1_050 * ms)), 1_100 * ms);
+
+        let with_start = TrajectoryDecl { start: Some("5".into()), ..decl.clone() };
+        let e = format!("{:#}", with_start.to_spec().unwrap_err());
+        assert!(e.contains("start or align"), "{e}");
+        let computed = TrajectoryDecl {
+            name: "c".into(),
+            computed: Some("Unit".into()),
+            inputs: Some(vec!["lidar".into()]),
+            align: true,
+            ..Default::default()
+        };
+        let e = format!("{:#}", computed.to_spec().unwrap_err());
+        assert!(e.contains("`align` is only for sampled and generate"), "{e}");
+        let spec = TrajectorySpec::computed("c", "Unit", ["lidar"]);
+        assert!(matches!(aligned(spec, 7).source, TrajectorySource::Computed { .. }));
     }
 
     #[test]

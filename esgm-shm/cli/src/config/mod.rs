@@ -31,6 +31,7 @@
 //! name = "pose_10hz"
 //! generate = ["robot_state:linear"]   # TRAJ[:APPROXIMATION[:MERGE]], one or more
 //! period = "100ms"               # function = "UNIT": its temporal function of them
+//! align = true                   # samples on multiples of the period (sampled too)
 //! ```
 //!
 //! Every error names the file and line of the declaration it is about. A file is
@@ -132,6 +133,16 @@ pub struct PlannedTrajectory {
     pub inputs: Vec<String>,
     /// Primitive trajectories: the pushing process; `None`: decided by the source.
     pub writer: Option<String>,
+    /// Sampled on multiples of its period (`align = true`): see [`Self::spec_at`].
+    pub align: bool,
+}
+
+impl PlannedTrajectory {
+    /// What to create at `now`: the spec, its first sample time resolved now if it is
+    /// aligned ([`decl::aligned`]).
+    pub fn spec_at(&self, now: esgm_core::Time) -> TrajectorySpec {
+        if self.align { decl::aligned(self.spec.clone(), now) } else { self.spec.clone() }
+    }
 }
 
 /// A checked configuration: everything in it is well-formed; names it uses may still
@@ -170,6 +181,52 @@ impl Plan {
     /// An error about line `line` of this plan's file.
     pub fn error(&self, line: usize, message: impl std::fmt::Display) -> ConfigError {
         ConfigError { file: self.file.clone(), line, message: message.to_string() }
+    }
+
+    /// The order to create the trajectories in (indices into [`Self::trajectories`]):
+    /// each after the ones of the file it reads, otherwise in the file's order; a
+    /// trajectory that reads itself through others is an error naming its line.
+    pub fn creation_order(&self) -> Result<Vec<usize>, ConfigError> {
+        let declared: std::collections::BTreeMap<&str, usize> = self
+            .trajectories
+            .iter()
+            .enumerate()
+            .map(|(i, t)| (t.what.spec.name.as_str(), i))
+            .collect();
+        let mut order = Vec::new();
+        let mut state = vec![0u8; self.trajectories.len()]; // 0 new, 1 visiting, 2 done
+        fn visit(
+            i: usize,
+            plan: &Plan,
+            declared: &std::collections::BTreeMap<&str, usize>,
+            state: &mut [u8],
+            order: &mut Vec<usize>,
+        ) -> Result<(), ConfigError> {
+            match state[i] {
+                2 => return Ok(()),
+                1 => {
+                    let t = &plan.trajectories[i];
+                    return Err(plan.error(
+                        t.line,
+                        format!("trajectory `{}` depends on itself", t.what.spec.name),
+                    ));
+                }
+                _ => {}
+            }
+            state[i] = 1;
+            for input in &plan.trajectories[i].what.inputs {
+                if let Some(&j) = declared.get(input.as_str()) {
+                    visit(j, plan, declared, state, order)?;
+                }
+            }
+            state[i] = 2;
+            order.push(i);
+            Ok(())
+        }
+        for i in 0..self.trajectories.len() {
+            visit(i, self, &declared, &mut state, &mut order)?;
+        }
+        Ok(order)
     }
 
     /// Finds every user's program the plan runs (a bare name on this process's `PATH`,
@@ -280,8 +337,8 @@ pub fn parse(file: &str, text: &str, base: &Path) -> Result<Plan, ConfigError> {
             _ => None,
         });
         let writer = decl.writer.clone().or(if decl.primitive.is_some() { pusher } else { None });
-        plan.trajectories
-            .push(Item { line, what: PlannedTrajectory { spec, inputs: decl.inputs(), writer } });
+        let what = PlannedTrajectory { spec, inputs: decl.inputs(), writer, align: decl.align };
+        plan.trajectories.push(Item { line, what });
     }
     check_duplicates(&plan)?;
     Ok(plan)
