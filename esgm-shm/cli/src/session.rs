@@ -34,10 +34,14 @@ fn connect_with(domain: &str, tool: bool) -> anyhow::Result<ShmEsgm> {
     builder.connect().with_context(|| format!("cannot reach the system `{domain}`"))
 }
 
-/// A handle on `name` with the writer's history received (the CLI is a late reader:
-/// it waits until samples stop arriving, at most [`SETTLE`]).
+/// A handle on `name` with the writer's history received: at once when the writer
+/// handed it over as the CLI began to read (the usual case); otherwise the CLI is a
+/// late reader that waits until samples stop arriving, at most [`SETTLE`].
 pub fn trajectory(esgm: &ShmEsgm, name: &str) -> anyhow::Result<InProcessTrajectory> {
     let t = esgm.get_entity_trajectory_structure(name)?;
+    if esgm.history_received(name) {
+        return Ok(t);
+    }
     let deadline = Instant::now() + SETTLE;
     let mut last = (0, Instant::now());
     while Instant::now() < deadline {

@@ -119,6 +119,9 @@ pub(crate) struct Import {
     verify: crossbeam_channel::Sender<()>,
     /// This process's node, to wake the threads waiting on this import when it goes.
     node: SharedNode,
+    /// The writer answered this import's join: its history was in the queue when the
+    /// import was made ([`join`]), so a query right after sees all of it.
+    history_received: bool,
 }
 
 impl Drop for Import {
@@ -216,10 +219,14 @@ impl Import {
             name: *TrajectoryServiceNames::new(domain, &name)?.wake(),
             capacity: qos.wake_capacity(),
         };
-        if let Err(e) = join(node, domain, &name, &sample_wake, readers) {
-            tracing::debug!(trajectory = %name, error = %e,
-                "the writer did not hand over its history at once; it comes with its next sample or maintenance");
-        }
+        let history_received = match join(node, domain, &name, &sample_wake, readers) {
+            Ok(()) => true,
+            Err(e) => {
+                tracing::debug!(trajectory = %name, error = %e,
+                    "the writer did not hand over its history at once; it comes with its next sample or maintenance");
+                false
+            }
+        };
         let violations_wake = violation_service_name(domain, &name);
         let wakes = vec![
             sample_wake,
@@ -276,7 +283,14 @@ impl Import {
             owner: holdings.owner(qos.max_borrowed_samples.saturating_sub(1)),
             node: node.clone(),
             wakes,
+            history_received,
         })
+    }
+
+    /// Whether the writer handed this import the history when it was made (it answered
+    /// the join); otherwise the history comes with its next sample or maintenance.
+    pub fn history_received(&self) -> bool {
+        self.history_received
     }
 
     /// The wake-up service of this import's samples.

@@ -288,7 +288,6 @@ impl ShmEsgmBuilder {
                 commands,
                 timeout,
                 holdings,
-                #[cfg(feature = "test-seams")]
                 mirrors,
                 thread,
                 admin,
@@ -343,8 +342,8 @@ struct Inner {
     commands: Sender<Command>,
     timeout: Duration,
     holdings: Arc<Holdings>,
-    /// Test support: what asks the receiver thread to panic.
-    #[cfg(feature = "test-seams")]
+    /// The trajectories read here (whether their history was handed over), and for
+    /// the tests, what asks the receiver thread to panic.
     mirrors: Arc<SharedMirrors>,
     thread: parking_lot::Mutex<Option<std::thread::JoinHandle<()>>>,
     admin: Arc<Admin>,
@@ -408,6 +407,20 @@ impl ShmEsgm {
     pub fn serve_assignments(&self) {
         if self.inner.commands.send(Command::Serving).is_err() {
             tracing::warn!("cannot serve assignments: the location thread has stopped");
+        }
+    }
+
+    /// Whether the history of `trajectory` is all here: true for one this process
+    /// writes, and for one it reads whose writer handed this connection its history
+    /// when the connection began to read it (answered its join); false for a
+    /// trajectory not read here yet, or whose writer did not answer in time (its
+    /// history then comes with the writer's next sample or maintenance). A program
+    /// that reads a trajectory once and leaves (`esgm latest`) answers at once when
+    /// it is true, and waits for the history to settle otherwise.
+    pub fn history_received(&self, trajectory: &str) -> bool {
+        match self.inner.mirrors.import(trajectory) {
+            Some(import) => import.lock().history_received(),
+            None => self.inner.local.get_entity_trajectory_structure(trajectory).is_ok(),
         }
     }
 
