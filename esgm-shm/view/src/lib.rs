@@ -17,8 +17,13 @@
 //! - **Nothing flows unwatched.** The first subscriber of a channel opens the
 //!   trajectory and subscribes to it ([`forward`]); the last one leaving stops the
 //!   thread and drops the handle, so an unwatched image stream costs nothing here.
+//! - **Both names of the protocol.** The spec's clients (Lichtblick, older Foxglove
+//!   Studio, `@foxglove/ws-protocol`) ask for `foxglove.websocket.v1`, the SDK's server
+//!   knows the same protocol as `foxglove.sdk.v1`: a front door translates the name in
+//!   the handshake and relays the rest ([`door`]).
 #![deny(missing_docs)]
 
+pub mod door;
 pub mod encoding;
 pub mod forward;
 pub mod server;

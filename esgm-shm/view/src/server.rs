@@ -1,6 +1,7 @@
 //! The server: a Foxglove WebSocket server whose channels are a domain's trajectories.
 
 use std::collections::HashMap;
+use std::net::SocketAddr;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, OnceLock, Weak};
 use std::thread::JoinHandle;
@@ -15,6 +16,7 @@ use foxglove::{
 };
 use parking_lot::Mutex;
 
+use crate::door::Door;
 use crate::encoding::Encoding;
 use crate::forward::{Counters, Forwarder};
 
@@ -62,15 +64,19 @@ impl ViewServerBuilder {
         // Weak: the server holds its listener for its life, and the state holds the
         // server; a strong reference would keep both, and the connection, for ever.
         let listener = Arc::new(Listener(Arc::downgrade(&state)));
+        // The SDK's server listens on loopback, on a port of its own; clients come in
+        // through the door on the address asked for, which accepts both names of the
+        // protocol ([`crate::door`]).
         let handle = WebSocketServer::new()
             .name(format!("esgm {}", self.domain))
-            .bind(self.host.clone(), self.port)
+            .bind("127.0.0.1", 0)
             .capabilities([Capability::Time])
             .context(&context)
             .listener(listener)
             .start_blocking()
-            .with_context(|| format!("cannot listen on {}:{}", self.host, self.port))?;
-        let port = handle.port();
+            .context("cannot start the Foxglove server on loopback")?;
+        let door =
+            Door::open(&self.host, self.port, SocketAddr::from(([127, 0, 0, 1], handle.port())))?;
         // Set once, here: the listener and the discovery thread only read it.
         if state.server.set(handle).is_err() {
             anyhow::bail!("the server of `{}` was started twice", self.domain);
@@ -84,21 +90,22 @@ impl ViewServerBuilder {
                 .context("starting the discovery thread")?
         };
         state.follow();
-        Ok(ViewServer { state, port, stop, discovery: Some(discovery) })
+        Ok(ViewServer { door, state, stop, discovery: Some(discovery) })
     }
 }
 
 /// A running server; dropping it stops it.
 pub struct ViewServer {
+    /// First: dropped first, so the public port closes before the rest stops.
+    door: Door,
     state: Arc<State>,
-    port: u16,
     stop: Arc<AtomicBool>,
     discovery: Option<JoinHandle<()>>,
 }
 
 impl std::fmt::Debug for ViewServer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("ViewServer").field("port", &self.port).finish()
+        f.debug_struct("ViewServer").field("port", &self.door.port()).finish()
     }
 }
 
@@ -110,7 +117,7 @@ impl ViewServer {
 
     /// The port it listens on.
     pub fn port(&self) -> u16 {
-        self.port
+        self.door.port()
     }
 
     /// The trajectories with a channel now, by name.
