@@ -103,7 +103,8 @@ mod tests {
         };
         let s = generated_schema(&Schema::new("BlobSeq", lookup).unwrap());
         assert!(s.starts_with("# esgm entity structure"), "{s}");
-        assert_eq!(s.matches("MSG: esgm_msgs/Blob\n").count(), 1, "{s}");
+        assert_eq!(s.matches("MSG: esgm_msgs/BlobFrame\n").count(), 1, "{s}");
+        assert_eq!(s.matches("MSG: esgm_msgs/Blob\n").count(), 0, "{s}");
         assert!(
             s.contains("MSG: std_msgs/Header\n") && s.contains("MSG: builtin_interfaces/Time\n")
         );

@@ -3,8 +3,12 @@
 //! `esgm ros2 msg <Type>` prints (with one for every nested frame type), so a ROS
 //! workspace can build it and its nodes read esgm's topics with their own types.
 //!
-//! A message starts with the structure's `std_msgs/Header` (valid time, name); a nested
-//! frame's message with its `string name`. Then each attribute, in declaration order:
+//! A message starts with the structure's `std_msgs/Header` (valid time, name). A type
+//! nested as a frame (an `EntityFrame<T>` attribute) is another message with the same
+//! attributes after a `string name` instead of the header, so it has a name of its own,
+//! `esgm_msgs/msg/<T>Frame` ([`frame_message`]): one ROS 2 type name, one definition,
+//! whichever of a type's forms a workspace, a recording or a bag carries. Then each
+//! attribute, in declaration order:
 //!
 //! | esgm sort | field |
 //! |---|---|
@@ -37,11 +41,22 @@ use crate::mapping::{MappingError, ros_time};
 /// The ROS 2 package of generated messages.
 pub const PACKAGE: &str = "esgm_msgs";
 
+/// What a type's frame message is named after it: `Blob` nested in `BlobSeq` is
+/// `esgm_msgs/msg/BlobFrame`, while a `Blob` structure is `esgm_msgs/msg/Blob`.
+pub const FRAME_SUFFIX: &str = "Frame";
+
+/// The message name (without package) of `ty`'s frame form.
+pub fn frame_message(ty: &str) -> String {
+    format!("{ty}{FRAME_SUFFIX}")
+}
+
 /// A type and every type it nests, checked to map.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Schema {
     root: String,
     types: BTreeMap<String, EntityStructureType>,
+    /// The types nested as frames (the root too, if it nests itself).
+    frames: std::collections::BTreeSet<String>,
 }
 
 fn refused(field: &'static str, value: impl std::fmt::Display, why: &'static str) -> MappingError {
@@ -68,6 +83,7 @@ impl Schema {
         mut lookup: impl FnMut(&str) -> Option<EntityStructureType>,
     ) -> Result<Self, MappingError> {
         let mut types = BTreeMap::new();
+        let mut frames = std::collections::BTreeSet::new();
         let mut todo = vec![root.to_owned()];
         while let Some(name) = todo.pop() {
             if types.contains_key(&name) {
@@ -92,12 +108,20 @@ impl Schema {
                 }
                 field_type(a)?;
                 if let Some(element) = &a.element_type {
+                    frames.insert(element.clone());
                     todo.push(element.clone());
                 }
             }
             types.insert(name, t);
         }
-        Ok(Self { root: root.to_owned(), types })
+        if let Some(nested) = frames.iter().find(|f| frame_message(f) == root) {
+            return Err(refused(
+                "type",
+                format!("{root} (also the frame message of `{nested}`, which it nests)"),
+                "a type must not be named like the frame message (<Type>Frame) of a type it nests; rename one",
+            ));
+        }
+        Ok(Self { root: root.to_owned(), types, frames })
     }
 
     /// The root type's name.
@@ -110,7 +134,9 @@ impl Schema {
         self.types.get(name)
     }
 
-    /// Each message definition, `(Type, .msg text)`, the root's first.
+    /// Each message definition, `(Message, .msg text)`: the root's first, under the
+    /// root's name, then each type nested as a frame under its frame name
+    /// ([`frame_message`]).
     pub fn msg_files(&self) -> Vec<(String, String)> {
         let text = |t: &EntityStructureType, top: bool| {
             let mut out = String::new();
@@ -130,9 +156,9 @@ impl Schema {
         if let Some(t) = self.types.get(&self.root) {
             files.push((self.root.clone(), text(t, true)));
         }
-        for (name, t) in &self.types {
-            if *name != self.root {
-                files.push((name.clone(), text(t, false)));
+        for name in &self.frames {
+            if let Some(t) = self.types.get(name) {
+                files.push((frame_message(name), text(t, false)));
             }
         }
         files
@@ -163,8 +189,8 @@ fn field_type(a: &Attr) -> Result<String, MappingError> {
         }
         ValueSort::Pos2Seq => "geometry_msgs/Point[]".into(),
         ValueSort::PositionAltitudeRotation => "geometry_msgs/Pose".into(),
-        ValueSort::EntityFrame => format!("{PACKAGE}/{}", element()?),
-        ValueSort::EntityFrameSeq => format!("{PACKAGE}/{}[]", element()?),
+        ValueSort::EntityFrame => format!("{PACKAGE}/{}", frame_message(&element()?)),
+        ValueSort::EntityFrameSeq => format!("{PACKAGE}/{}[]", frame_message(&element()?)),
         other => {
             return Err(MappingError::Unconvertible {
                 field: "attribute",
@@ -406,16 +432,42 @@ mod tests {
         let files = schema.msg_files();
         assert_eq!(files[0].0, "BlobSeq");
         assert!(
-            files[0].1.contains("std_msgs/Header header\nesgm_msgs/Blob[] items\n"),
+            files[0].1.contains("std_msgs/Header header\nesgm_msgs/BlobFrame[] items\n"),
             "{}",
             files[0].1
         );
-        assert_eq!(files[1].0, "Blob");
+        assert_eq!(files[1].0, "BlobFrame");
         assert!(
             files[1].1.contains("string name\nint64 x\nint64 y\nint64 size\n"),
             "{}",
             files[1].1
         );
+    }
+
+    /// A structure type and the frame form of the same type never share a name: the
+    /// two definitions of `Blob` (`esgm ros2 msg Blob`, `esgm ros2 msg BlobSeq`) are two
+    /// messages.
+    #[test]
+    fn a_type_and_its_frame_form_are_two_message_names() {
+        let blob = Schema::new("Blob", library).unwrap().msg_files();
+        let seq = Schema::new("BlobSeq", library).unwrap().msg_files();
+        assert_eq!(blob.len(), 1);
+        let mut names: Vec<&str> = blob.iter().chain(&seq).map(|(n, _)| n.as_str()).collect();
+        names.sort_unstable();
+        assert_eq!(names, ["Blob", "BlobFrame", "BlobSeq"]);
+        assert!(blob[0].1.starts_with("# esgm entity structure"));
+        // A type nesting itself has both forms; one named like a nested frame is refused.
+        let tree = EntityStructureType::new("Tree").frame_seq("children", "Tree");
+        let files = Schema::new("Tree", |_| Some(tree.clone())).unwrap().msg_files();
+        let names: Vec<&str> = files.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names, ["Tree", "TreeFrame"]);
+        assert!(files[0].1.contains("esgm_msgs/TreeFrame[] children"), "{}", files[0].1);
+        let clash = EntityStructureType::new("BlobFrame").frame("inner", "Blob");
+        let e = Schema::new("BlobFrame", |n| {
+            if n == "BlobFrame" { Some(clash.clone()) } else { library(n) }
+        })
+        .unwrap_err();
+        assert!(e.to_string().contains("BlobFrame"), "{e}");
     }
 
     #[test]

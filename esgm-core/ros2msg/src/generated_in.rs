@@ -201,7 +201,12 @@ impl<'de> Visitor<'de> for FrameSeed<'_> {
     type Value = EntityFrame;
 
     fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "an {}/{} frame", crate::generated::PACKAGE, self.ty.name)
+        write!(
+            f,
+            "an {}/{} frame",
+            crate::generated::PACKAGE,
+            crate::generated::frame_message(&self.ty.name)
+        )
     }
 
     fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<EntityFrame, A::Error> {
@@ -222,7 +227,12 @@ impl<'de> Visitor<'de> for Frames<'_> {
     type Value = Vec<EntityFrame>;
 
     fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "a sequence of {}/{} frames", crate::generated::PACKAGE, self.ty.name)
+        write!(
+            f,
+            "a sequence of {}/{} frames",
+            crate::generated::PACKAGE,
+            crate::generated::frame_message(&self.ty.name)
+        )
     }
 
     fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Vec<EntityFrame>, A::Error> {

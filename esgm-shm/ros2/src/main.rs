@@ -1,6 +1,7 @@
 //! `esgm-ros2`: esgm beside ROS 2 (see the crate docs of `esgm_ros2`). Usually run as
 //! `esgm ros2 …`.
 
+use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -15,6 +16,9 @@ use esgm_ros2::node::{self, TopicQos};
 use esgm_ros2::stats::Stats;
 use esgm_ros2::watch::Watch;
 use esgm_shm::ShmEsgm;
+use interfaces::{Types, print_msg, write_package};
+
+mod interfaces;
 
 /// esgm-ros2 — ROS 2 topics in as trajectories, trajectories out as ROS 2 topics.
 #[derive(Debug, Parser)]
@@ -57,12 +61,28 @@ struct Cli {
 
 #[derive(Debug, clap::Subcommand)]
 enum Command {
-    /// Print the ROS 2 message definitions (`.msg`) a type of the system is exported
-    /// as: its own `esgm_msgs/msg/<Type>` and one for each nested frame type, so a ROS
-    /// workspace can build them (a library type with a standard message says which).
+    /// Print the ROS 2 message definitions (`.msg`) a type is exported as: its own
+    /// `esgm_msgs/msg/<Type>` and `esgm_msgs/msg/<T>Frame` for each type it nests as a
+    /// frame, so a ROS workspace can build them (a type with a standard message says
+    /// which). A library type needs no running system; a system file's with --config.
     Msg {
         /// The entity structure type.
         type_name: String,
+        /// A system file whose `[[type]]`s are looked up before the domain's.
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
+    },
+    /// Write the ROS 2 interface package `esgm_msgs` (package.xml, CMakeLists.txt,
+    /// msg/) into DIR, for the types named, or every type of the system file
+    /// (--config), or of the running domain: a ROS 2 workspace builds it with colcon.
+    Pkg {
+        /// The directory to write `esgm_msgs/` into (a workspace's `src`).
+        dir: PathBuf,
+        /// The types; none: every type of --config, or of the domain.
+        types: Vec<String>,
+        /// A system file whose `[[type]]`s are looked up before the domain's.
+        #[arg(long, value_name = "FILE")]
+        config: Option<PathBuf>,
     },
 }
 
@@ -80,8 +100,18 @@ fn main() -> ExitCode {
 }
 
 fn run(cli: &Cli) -> anyhow::Result<()> {
-    if let Some(Command::Msg { type_name }) = &cli.command {
-        return print_msg(&cli.domain, type_name);
+    match &cli.command {
+        Some(Command::Msg { type_name, config }) => {
+            let mut types = Types::new(&cli.domain, config.as_deref())?;
+            return print_msg(&mut types, type_name);
+        }
+        Some(Command::Pkg { dir, types: names, config }) => {
+            let mut types = Types::new(&cli.domain, config.as_deref())?;
+            let package = write_package(&mut types, dir, names)?;
+            println!("wrote {}", package.display());
+            return Ok(());
+        }
+        None => {}
     }
     let imports: Vec<ImportSpec> =
         cli.import.iter().map(|s| ImportSpec::parse(s)).collect::<Result<_, _>>()?;
@@ -171,26 +201,6 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         }
     }
     report(&stats);
-    Ok(())
-}
-
-/// `esgm-ros2 msg TYPE`.
-fn print_msg(domain: &str, type_name: &str) -> anyhow::Result<()> {
-    if let Ok(standard) = esgm_ros2::mapping::RosType::for_esgm_type(type_name) {
-        println!("# {type_name} is exported as the standard message {}", standard.name());
-        return Ok(());
-    }
-    let esgm = ShmEsgm::builder()
-        .domain(domain)
-        .tool()
-        .connect()
-        .with_context(|| format!("cannot reach the esgm system `{domain}`"))?;
-    let schema = esgm_ros2::generated::Schema::new(type_name, |t| {
-        esgm_core::Esgm::get_entity_structure_type(&esgm, t).ok()
-    })?;
-    for (name, text) in schema.msg_files() {
-        println!("# {}/msg/{name}.msg\n{text}", esgm_ros2::generated::PACKAGE);
-    }
     Ok(())
 }
 

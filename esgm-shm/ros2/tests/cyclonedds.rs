@@ -236,7 +236,8 @@ fn a_type_without_a_standard_message_is_read_as_its_generated_one() {
     assert!(msg.status.success(), "{}", String::from_utf8_lossy(&msg.stderr));
     assert!(
         printed.contains("# esgm_msgs/msg/BlobSeq.msg\n")
-            && printed.contains("std_msgs/Header header\nesgm_msgs/Blob[] items\n")
+            && printed.contains("std_msgs/Header header\nesgm_msgs/BlobFrame[] items\n")
+            && printed.contains("# esgm_msgs/msg/BlobFrame.msg\n")
             && printed.contains("string name\nint64 x\nint64 y\nint64 size\n"),
         "{printed}"
     );

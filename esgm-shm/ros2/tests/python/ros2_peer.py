@@ -70,7 +70,7 @@ class Pose2D(IdlStruct, typename="geometry_msgs::msg::dds_::Pose2D_"):
 
 
 @dataclass
-class Blob(IdlStruct, typename="esgm_msgs::msg::dds_::Blob_"):
+class BlobFrame(IdlStruct, typename="esgm_msgs::msg::dds_::BlobFrame_"):
     name: str
     x: int64
     y: int64
@@ -80,7 +80,7 @@ class Blob(IdlStruct, typename="esgm_msgs::msg::dds_::Blob_"):
 @dataclass
 class BlobSeq(IdlStruct, typename="esgm_msgs::msg::dds_::BlobSeq_"):
     header: Header
-    items: sequence[Blob]
+    items: sequence[BlobFrame]
 
 
 # ROS 2's default QoS: reliable, keep last 10, volatile.
@@ -130,7 +130,7 @@ def publish_blob_seqs(topic, count):
     writer = DataWriter(dp, Topic(dp, dds_topic(topic), BlobSeq), qos=QOS)
     wait_for(lambda: len(writer.get_matched_subscriptions()) > 0, 20, "no reader matched")
     for i in range(count):
-        items = [Blob(f"b{k}", k, -k, 10 * i + k) for k in (1, 2)]
+        items = [BlobFrame(f"b{k}", k, -k, 10 * i + k) for k in (1, 2)]
         writer.write(BlobSeq(Header(Time(sec=2000, nanosec=i * 1_000_000), "camera"), items))
         time.sleep(0.01)
     writer.wait_for_acks(duration(seconds=10))
