@@ -122,6 +122,10 @@ pub(crate) struct Import {
     /// The writer answered this import's join: its history was in the queue when the
     /// import was made ([`join`]), so a query right after sees all of it.
     history_received: bool,
+    /// Set when the import goes (the trajectory destroyed, re-pointed, the connection
+    /// closed): its waiters look the trajectory's import up again only then, not on
+    /// every wait ([`ImportWaiter::listen`]).
+    retired: Arc<std::sync::atomic::AtomicBool>,
 }
 
 impl Drop for Import {
@@ -129,6 +133,7 @@ impl Drop for Import {
     /// subscriptions and workers): the trajectory was destroyed, re-pointed (they follow
     /// the new import) or the connection closed (they end).
     fn drop(&mut self) {
+        self.retired.store(true, std::sync::atomic::Ordering::SeqCst);
         self.wake_sleepers();
     }
 }
@@ -284,6 +289,7 @@ impl Import {
             node: node.clone(),
             wakes,
             history_received,
+            retired: Arc::default(),
         })
     }
 
@@ -510,6 +516,7 @@ impl ReplicaFeed for ImportFeed {
             sleepers: None,
             coverage: None,
             worker: None,
+            retired: None,
         }))
     }
 
@@ -524,6 +531,7 @@ impl ReplicaFeed for ImportFeed {
             sleepers: None,
             coverage: None,
             worker: Some(None),
+            retired: None,
         }))
     }
 }
@@ -560,6 +568,9 @@ struct ImportWaiter {
     /// A worker's waiter: the import's count of waiting workers it is counted in (see
     /// [`Import::receiver_wakes`]); `None` for a user's subscription.
     worker: Option<Option<Arc<std::sync::atomic::AtomicUsize>>>,
+    /// The listened import's flag, set when it goes: until then a wait listens as it
+    /// did, without looking the import up under the set's lock.
+    retired: Option<Arc<std::sync::atomic::AtomicBool>>,
 }
 
 impl Drop for ImportWaiter {
@@ -572,23 +583,31 @@ impl ImportWaiter {
     /// Listens to the current import's wake-up service (again, if its generation
     /// changed); false if there is no import to listen to.
     fn listen(&mut self) -> bool {
+        // Still listening to an import that has not gone: nothing to look up.
+        let current =
+            self.retired.as_ref().is_some_and(|r| !r.load(std::sync::atomic::Ordering::SeqCst));
+        if current && self.listening.is_some() && self.import.strong_count() > 0 {
+            return true;
+        }
         let Some(mirrors) = self.mirrors.upgrade() else { return false };
         let import = mirrors.import(&self.trajectory);
         let current = import.as_ref().and_then(|i| {
             let i = i.lock();
             i.sample_wake().map(|w| {
                 let counts = (Arc::clone(&i.sleepers), i.coverage.clone());
-                (i.generation, w, Arc::clone(&i.workers), counts)
+                (i.generation, w, Arc::clone(&i.workers), counts, Arc::clone(&i.retired))
             })
         });
-        let (Some(import), Some((generation, wake, workers, (sleepers, coverage)))) =
+        let (Some(import), Some((generation, wake, workers, (sleepers, coverage), retired))) =
             (import, current)
         else {
             self.import = Weak::new();
+            self.retired = None;
             self.stand_down();
             return false;
         };
         self.import = Arc::downgrade(&import);
+        self.retired = Some(retired);
         self.sleepers = Some(sleepers);
         self.coverage = coverage;
         if self.listening.as_ref().is_some_and(|(g, _)| *g == generation) {
