@@ -4,6 +4,8 @@
 //! ([`cdr`]). Shared by `esgm ros2` (which sends them over DDS) and recordings in the
 //! ROS 2 profile (`esgm record --ros2`), so both write the same bytes.
 
+#![deny(missing_docs)]
+
 pub mod cdr;
 pub mod definitions;
 pub mod generated;

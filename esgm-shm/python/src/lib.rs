@@ -4,6 +4,8 @@
 //! directions ([`values::octets_array`], [`images`]), and the IDL's exceptions
 //! ([`errors`]). Built with maturin (`pip install ./esgm-shm/python`).
 
+#![deny(missing_docs)]
+
 mod errors;
 mod images;
 mod policy;

@@ -5,6 +5,8 @@
 //! messages and every other type to a generated one (crate `esgm_ros2msg`, shared with
 //! recordings in the ROS 2 profile), every message counted ([`stats`]).
 
+#![deny(missing_docs)]
+
 pub use esgm_ros2msg::{generated, mapping, msgs};
 
 pub mod export;
