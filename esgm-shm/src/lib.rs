@@ -158,5 +158,6 @@ pub use wait::WaitStrategy;
 pub use writer_check::{Decided, WriterCheck};
 
 pub use client::{
-    ConnectError, DOMAIN_ENV, ShmEsgm, ShmEsgmBuilder, WORKER_ENV, connect, trajectory_qos,
+    ConnectError, CoordinatorWatch, DOMAIN_ENV, ShmEsgm, ShmEsgmBuilder, WORKER_ENV, connect,
+    trajectory_qos,
 };

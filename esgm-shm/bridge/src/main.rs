@@ -16,7 +16,7 @@ use esgm_bridge::serve::{self, ServeSite};
 use esgm_bridge::session::ZenohArgs;
 use esgm_bridge::stats::Stats;
 use esgm_core::Esgm;
-use esgm_shm::ShmEsgm;
+use esgm_shm::{CoordinatorWatch, ShmEsgm};
 
 /// esgm-bridge — trajectories across hosts through Zenoh.
 #[derive(Debug, Parser)]
@@ -192,11 +192,13 @@ fn run(domain: &str, a: &RunArgs) -> anyhow::Result<()> {
         format_args!("{imports:?}"),
     );
     let mut reported = Instant::now();
-    let mut pinged = Instant::now();
-    let mut coordinator_gone = None::<Instant>;
+    let mut last_listing = Instant::now();
+    // It leaves with its system: 3 s without the coordinator's answer.
+    let mut coordinator = CoordinatorWatch::new(Duration::from_secs(3));
     while !stop.load(Ordering::Relaxed) {
         std::thread::sleep(Duration::from_millis(50));
-        if a.all && pinged.elapsed() >= Duration::from_millis(500) {
+        if a.all && last_listing.elapsed() >= Duration::from_millis(500) {
+            last_listing = Instant::now();
             // A listing the coordinator did not give is tried again at the next round.
             let listed = esgm.trajectories().unwrap_or_else(|e| {
                 tracing::debug!(error = %e, "cannot list the trajectories to export now");
@@ -221,16 +223,9 @@ fn run(domain: &str, a: &RunArgs) -> anyhow::Result<()> {
                 threads.push(export::spawn(export_site.clone(), export_options(a, &info.name)?)?);
             }
         }
-        if pinged.elapsed() >= Duration::from_millis(500) {
-            pinged = Instant::now();
-            if esgm.ping() {
-                coordinator_gone = None;
-            } else if coordinator_gone.get_or_insert_with(Instant::now).elapsed()
-                > Duration::from_secs(3)
-            {
-                stop.store(true, Ordering::Relaxed);
-                eprintln!("esgm-bridge: the coordinator of `{domain}` is gone; stopping");
-            }
+        if coordinator.gone(&esgm) {
+            stop.store(true, Ordering::Relaxed);
+            eprintln!("esgm-bridge: the coordinator of `{domain}` is gone; stopping");
         }
         if let Some(every) = a.report_every {
             if reported.elapsed() >= every {

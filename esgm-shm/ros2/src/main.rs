@@ -9,13 +9,12 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
 use clap::Parser;
-use esgm_core::Esgm as _;
 use esgm_ros2::export::{self, ExportSpec};
 use esgm_ros2::import::{self, ImportSpec};
 use esgm_ros2::node::{self, TopicQos};
 use esgm_ros2::stats::Stats;
 use esgm_ros2::watch::Watch;
-use esgm_shm::ShmEsgm;
+use esgm_shm::{CoordinatorWatch, ShmEsgm};
 use interfaces::{Types, print_msg, write_package};
 
 mod interfaces;
@@ -170,20 +169,13 @@ fn run(cli: &Cli) -> anyhow::Result<()> {
         exports.iter().map(|s| format!("{} -> {}", s.trajectory, s.topic)).collect::<Vec<_>>(),
     );
     let mut reported = Instant::now();
-    let mut pinged = Instant::now();
-    let mut coordinator_gone = None::<Instant>;
+    // It leaves with its system: 3 s without the coordinator's answer.
+    let mut coordinator = CoordinatorWatch::new(Duration::from_secs(3));
     while !stop.load(Ordering::Relaxed) {
         std::thread::sleep(Duration::from_millis(50));
-        if pinged.elapsed() >= Duration::from_millis(500) {
-            pinged = Instant::now();
-            if esgm.ping() {
-                coordinator_gone = None;
-            } else if coordinator_gone.get_or_insert_with(Instant::now).elapsed()
-                > Duration::from_secs(3)
-            {
-                stop.store(true, Ordering::Relaxed);
-                eprintln!("esgm-ros2: the coordinator of `{domain}` is gone; stopping");
-            }
+        if coordinator.gone(&esgm) {
+            stop.store(true, Ordering::Relaxed);
+            eprintln!("esgm-ros2: the coordinator of `{domain}` is gone; stopping");
         }
         // A peer discovery finds that cannot match is named at once, not at the report.
         if watched.elapsed() >= Duration::from_millis(250) {

@@ -61,6 +61,7 @@
 
 pub(crate) mod admin;
 mod blocking_add;
+mod coordinator_watch;
 mod coverage;
 mod export;
 pub mod holdings;
@@ -99,6 +100,7 @@ pub use admin::{AdminRead, AdminReader};
 pub use blocking_add::{
     read_answer as read_blocking_add_answer, serve_request as serve_blocking_add,
 };
+pub use coordinator_watch::CoordinatorWatch;
 use location::{Command, Location, install};
 use mirrors::SharedMirrors;
 use receiver::Receiver as SampleReceiver;
@@ -458,15 +460,13 @@ impl ShmEsgm {
     /// went, false if `go_on` stopped it.
     pub fn serve_while(&self, patience: Duration, mut go_on: impl FnMut() -> bool) -> bool {
         const PING_EVERY: Duration = Duration::from_millis(250);
-        let mut gone_since = None;
+        let mut watch = CoordinatorWatch::new(patience).every(Duration::ZERO);
         loop {
             std::thread::sleep(PING_EVERY);
             if !go_on() {
                 return false;
             }
-            if self.ping() {
-                gone_since = None;
-            } else if gone_since.get_or_insert_with(std::time::Instant::now).elapsed() >= patience {
+            if watch.gone(self) {
                 return true;
             }
         }
