@@ -129,10 +129,30 @@ enum Command {
     /// Run one of the system's processes (started by `esgm demo`; also by hand).
     #[command(subcommand, hide = true)]
     Worker(cmd::worker::Role),
+    /// Print the shell completion script (bash, zsh, fish, elvish, powershell).
+    Completions(cmd::docs::CompletionArgs),
+    /// Print the manual page, or write one per subcommand into a directory (--out).
+    Man(cmd::docs::ManArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    // Generated from the command's own definition; no system, no logging.
+    let generated = match &cli.command {
+        Command::Completions(a) => {
+            Some(cmd::docs::completions(<Cli as clap::CommandFactory>::command(), a))
+        }
+        Command::Man(a) => Some(cmd::docs::man(<Cli as clap::CommandFactory>::command(), a)),
+        _ => None,
+    };
+    match generated {
+        Some(Ok(())) => return ExitCode::SUCCESS,
+        Some(Err(e)) => {
+            eprintln!("esgm: {}", esgm_shm::process::one_line(e.chain()));
+            return ExitCode::FAILURE;
+        }
+        None => {}
+    }
     esgm_shm::process::init_logging();
     let process = cmd::process_name(&cli.command);
     let span = tracing::info_span!("esgm", process = %process);

@@ -4,6 +4,7 @@ pub mod apply;
 pub mod bridge;
 pub mod compare;
 pub mod demo;
+pub mod docs;
 pub mod down;
 pub mod echo;
 pub mod graph;
@@ -92,6 +93,8 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Scale(a) => scale::run(domain, a),
         Command::ScaleWorker(a) => scale::worker::run(domain, a),
         Command::Worker(role) => worker::run(domain, role),
+        // Answered in main, before anything connects.
+        Command::Completions(_) | Command::Man(_) => Ok(()),
     }
 }
 
