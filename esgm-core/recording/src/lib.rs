@@ -34,6 +34,7 @@ pub mod recorder;
 pub mod replay;
 pub mod rerun;
 pub mod ros2_bag;
+pub mod rosbag2;
 pub mod type_diff;
 pub mod value_diff;
 pub mod view;

@@ -203,7 +203,9 @@ impl Recording {
     /// Opens `path` and reads it through once, to learn its trajectories and find
     /// any damage.
     pub fn open(path: impl AsRef<Path>) -> Result<Self, ReadError> {
-        let path = path.as_ref().to_path_buf();
+        // A bag's directory (`esgm record --ros2`, rosbag2's) reads as its file.
+        let path = crate::rosbag2::resolve(path.as_ref())
+            .map_err(|source| ReadError::Io { path: path.as_ref().to_path_buf(), source })?;
         let mut walker = Walker::open(&path)?;
         let mut rec = Recording {
             path: path.clone(),

@@ -74,6 +74,14 @@ pub struct RecordOptions {
     /// type as its generated `esgm_msgs` message. An image's pixels are then stored
     /// twice, in its view and in the lossless channel.
     pub ros2: bool,
+    /// Write a rosbag2 directory instead of a file ([`crate::rosbag2`]): the path is
+    /// the bag's directory, its files `<dir>_0.mcap`, `<dir>_1.mcap`… hold only the ROS 2
+    /// profile's channels (as [`RecordOptions::ros2`] writes them, on topics
+    /// `/<trajectory>`), and `metadata.yaml` says what is in them, as rosbag2 writes it.
+    /// No lossless channel, no events channel: a bag is what ROS 2 tools read; record
+    /// a second, lossless recording beside it to keep esgm's own (`esgm record --ros2
+    /// --lossless`). A trajectory whose type has no ROS 2 message is left out (said).
+    pub bag: bool,
     /// Free-form metadata of the recording (domain, host, command line…).
     pub metadata: BTreeMap<String, String>,
 }
@@ -88,6 +96,7 @@ impl Default for RecordOptions {
             split_duration: None,
             views: true,
             ros2: false,
+            bag: false,
             metadata: BTreeMap::new(),
         }
     }
@@ -128,6 +137,15 @@ impl RecordOptions {
     #[must_use]
     pub fn ros2(mut self, on: bool) -> Self {
         self.ros2 = on;
+        self
+    }
+
+    /// Writes a rosbag2 directory ([`RecordOptions::bag`]); implies
+    /// [`RecordOptions::ros2`].
+    #[must_use]
+    pub fn bag(mut self, on: bool) -> Self {
+        self.bag = on;
+        self.ros2 |= on;
         self
     }
 
@@ -196,6 +214,34 @@ pub struct WriteSummary {
     pub view_bytes: BTreeMap<String, u64>,
     /// Events (violations and losses) written.
     pub events: u64,
+    /// Per file, in order: the messages it holds and their first and last log time
+    /// (valid time, ns), what a bag's `metadata.yaml` says of each file.
+    pub file_messages: Vec<FileMessages>,
+    /// A bag's topics ([`RecordOptions::bag`]), by trajectory: topic, message type,
+    /// messages written.
+    pub bag_topics: BTreeMap<String, BagTopic>,
+    /// Trajectories left out of a bag: their type has no ROS 2 message.
+    pub left_out: Vec<String>,
+}
+
+/// What one file of a recording holds.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct FileMessages {
+    /// Messages written into it.
+    pub messages: u64,
+    /// The first and last log time (ns), if any message.
+    pub log_range: Option<(Time, Time)>,
+}
+
+/// One topic of a bag.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct BagTopic {
+    /// The ROS 2 topic, `/<trajectory>`.
+    pub topic: String,
+    /// Its message type, e.g. `sensor_msgs/msg/Image`.
+    pub message_type: String,
+    /// Messages written.
+    pub messages: u64,
 }
 
 /// How a trajectory is shown in Foxglove.
@@ -228,6 +274,8 @@ struct Recorded {
     lossless_channel: u16,
     view_channel: u16,
     sequence: u64,
+    /// False for a trajectory a bag leaves out (no ROS 2 message for its type).
+    in_bag: bool,
 }
 
 /// The MCAP writer of the current file.
@@ -309,7 +357,27 @@ impl RecordingWriter {
         } else {
             None
         };
-        let view_topic = view.as_ref().map(|_| info.name.clone());
+        let in_bag = matches!(view, Some((ViewKind::Ros2(_), _)));
+        let view_topic = view
+            .as_ref()
+            .map(|_| if self.options.bag { format!("/{}", info.name) } else { info.name.clone() });
+        if self.options.bag {
+            if in_bag {
+                if let (Some(topic), Some((_, schema))) = (&view_topic, &view) {
+                    self.summary.bag_topics.insert(
+                        info.name.clone(),
+                        BagTopic {
+                            topic: topic.clone(),
+                            message_type: schema.name.clone(),
+                            messages: 0,
+                        },
+                    );
+                }
+            } else {
+                tracing::warn!(trajectory = %info.name, "left out of the bag: its type `{}` has no ROS 2 message", info.type_name);
+                self.summary.left_out.push(info.name.clone());
+            }
+        }
         let mut recorded = Recorded {
             meta: TrajectoryMeta { info, view_topic },
             schema: types,
@@ -317,9 +385,10 @@ impl RecordingWriter {
             lossless_channel: 0,
             view_channel: 0,
             sequence: 0,
+            in_bag,
         };
         let file = self.file.as_mut().ok_or_else(|| closed(&self.file_path))?;
-        declare(file, &self.file_path, &mut recorded)?;
+        declare(file, &self.file_path, &mut recorded, self.options.bag)?;
         self.trajectories.push(recorded);
         Ok(TrajectoryId(self.trajectories.len() - 1))
     }
@@ -334,7 +403,11 @@ impl RecordingWriter {
         recorded_time: Time,
     ) -> Result<(), RecordError> {
         self.rotate_if_due()?;
+        let bag = self.options.bag;
         let t = &mut self.trajectories[id.0];
+        if bag && !t.in_bag {
+            return Ok(());
+        }
         let name = &t.meta.info.name;
         let sequence = t.sequence;
         t.sequence += 1;
@@ -404,7 +477,21 @@ impl RecordingWriter {
                 let n = self.view_scratch.len() as u64;
                 add_to(&mut self.summary.view_bytes, name, n);
                 self.file_bytes += n;
+                if let Some(f) = self.summary.file_messages.last_mut() {
+                    f.messages += 1;
+                    let v = es.valid_time;
+                    f.log_range =
+                        Some(f.log_range.map_or((v, v), |(lo, hi)| (lo.min(v), hi.max(v))));
+                }
+                if let Some(topic) = self.summary.bag_topics.get_mut(name.as_str()) {
+                    topic.messages += 1;
+                }
             }
+        }
+        if bag {
+            // A bag holds the ROS 2 messages only.
+            add_to(&mut self.summary.structures, name, 1);
+            return self.flush_if_due();
         }
 
         let archive = if pixels_in_view {
@@ -442,6 +529,10 @@ impl RecordingWriter {
 
     /// Writes a violation or a loss into the events channel.
     pub fn write_event(&mut self, event: &RecordedEvent) -> Result<(), RecordError> {
+        if self.options.bag {
+            // A bag has no esgm channel; the lossless recording beside it keeps events.
+            return Ok(());
+        }
         let data = serde_json::to_vec(event).map_err(|e| RecordError::Io {
             path: self.file_path.clone(),
             source: std::io::Error::other(e),
@@ -492,7 +583,7 @@ impl RecordingWriter {
             self.open_file()?;
             let file = self.file.as_mut().ok_or_else(|| closed(&self.file_path))?;
             for t in &mut self.trajectories {
-                declare(file, &self.file_path, t)?;
+                declare(file, &self.file_path, t, self.options.bag)?;
             }
         }
         Ok(())
@@ -507,13 +598,28 @@ impl RecordingWriter {
                 path: self.file_path.clone(),
                 source: e.into_error(),
             })?;
+            if self.options.bag {
+                // Each closed file is in it: a bag cut short by a crash still opens up
+                // to its last complete file.
+                crate::rosbag2::write_metadata(&self.path, &self.summary).map_err(|source| {
+                    RecordError::Io { path: self.path.join(crate::rosbag2::METADATA), source }
+                })?;
+            }
         }
         Ok(())
     }
 
     fn open_file(&mut self) -> Result<(), RecordError> {
         let index = self.summary.files.len();
-        self.file_path = split_path(&self.path, index);
+        self.file_path = if self.options.bag {
+            if index == 0 {
+                crate::rosbag2::create_dir(&self.path)
+                    .map_err(|source| RecordError::Io { path: self.path.clone(), source })?;
+            }
+            crate::rosbag2::file_path(&self.path, index)
+        } else {
+            split_path(&self.path, index)
+        };
         let path = self.file_path.clone();
         let f =
             File::create(&path).map_err(|source| RecordError::Io { path: path.clone(), source })?;
@@ -524,7 +630,7 @@ impl RecordingWriter {
         };
         let mcap_err = |source| RecordError::Mcap { path: path.clone(), source };
         let mut file = mcap::WriteOptions::new()
-            .profile(PROFILE)
+            .profile(if self.options.bag { crate::rosbag2::PROFILE } else { PROFILE })
             .library(format!("esgm {}", env!("CARGO_PKG_VERSION")))
             .compression(compression)
             .chunk_size(Some(self.options.chunk_size))
@@ -542,14 +648,17 @@ impl RecordingWriter {
             metadata: meta,
         })
         .map_err(mcap_err)?;
-        let events_schema = file
-            .add_schema("esgm.Event", "jsonschema", &layout::events_json_schema())
-            .map_err(mcap_err)?;
-        self.events_channel = file
-            .add_channel(events_schema, EVENTS_TOPIC, "json", &BTreeMap::new())
-            .map_err(mcap_err)?;
+        if !self.options.bag {
+            let events_schema = file
+                .add_schema("esgm.Event", "jsonschema", &layout::events_json_schema())
+                .map_err(mcap_err)?;
+            self.events_channel = file
+                .add_channel(events_schema, EVENTS_TOPIC, "json", &BTreeMap::new())
+                .map_err(mcap_err)?;
+        }
         self.file = Some(file);
         self.summary.files.push(path);
+        self.summary.file_messages.push(FileMessages::default());
         self.file_opened = Instant::now();
         self.file_bytes = 0;
         Ok(())
@@ -567,19 +676,34 @@ impl Drop for RecordingWriter {
 }
 
 /// Schema and channels of one trajectory in the current file.
-fn declare(file: &mut McapFile, path: &Path, t: &mut Recorded) -> Result<(), RecordError> {
+fn declare(
+    file: &mut McapFile,
+    path: &Path,
+    t: &mut Recorded,
+    bag: bool,
+) -> Result<(), RecordError> {
     let mcap_err = |source| RecordError::Mcap { path: path.to_path_buf(), source };
+    if bag && !t.in_bag {
+        return Ok(());
+    }
+    if let (Some((_, v)), Some(topic)) = (&t.view, &t.meta.view_topic) {
+        let view_schema = file.add_schema(&v.name, v.encoding, &v.data).map_err(mcap_err)?;
+        // A bag's channel is rosbag2's: no esgm key, so readers take it as a bag's
+        // topic (there is no lossless channel it would be the view of).
+        let meta = if bag {
+            BTreeMap::from([("offered_qos_profiles".to_owned(), String::new())])
+        } else {
+            BTreeMap::from([(layout::keys::TRAJECTORY.to_owned(), t.meta.info.name.clone())])
+        };
+        t.view_channel =
+            file.add_channel(view_schema, topic, v.message_encoding, &meta).map_err(mcap_err)?;
+    }
+    if bag {
+        return Ok(());
+    }
     let schema = file
         .add_schema(&t.meta.info.type_name, TYPES_ENCODING, &t.schema.to_bytes())
         .map_err(mcap_err)?;
-    if let Some((_, v)) = &t.view {
-        let view_schema = file.add_schema(&v.name, v.encoding, &v.data).map_err(mcap_err)?;
-        let meta =
-            BTreeMap::from([(layout::keys::TRAJECTORY.to_owned(), t.meta.info.name.clone())]);
-        t.view_channel = file
-            .add_channel(view_schema, &t.meta.info.name, v.message_encoding, &meta)
-            .map_err(mcap_err)?;
-    }
     t.lossless_channel = file
         .add_channel(
             schema,

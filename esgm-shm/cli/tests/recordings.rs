@@ -273,3 +273,104 @@ fn record_info_kill_rerun_replay_and_compare_the_tutorial() {
     assert_eq!(code, Some(1));
     assert!(err.contains("/nonexistent/recording.mcap"), "{err}");
 }
+
+/// `esgm record --ros2` writes a rosbag2 directory that ROS 2's own libraries read as
+/// theirs (rosbags' rosbag2 reader and deserializer, the ROS 2 MCAP decoder with no
+/// topic filtered out), with only ROS 2 channels; `--lossless` keeps esgm's recording
+/// beside it, which `esgm info` prefers; without it, `esgm info` reads the bag itself.
+#[test]
+fn a_ros2_recording_is_a_rosbag2_directory_ros2_libraries_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let long = Duration::from_secs(120);
+    let d = esgm_shm::unique_domain("rec-bag");
+    ok(&["--domain", &d, "up", "--detach"], long);
+    let _down = Down(d.clone());
+    ok(&["--domain", &d, "apply", TUTORIAL], long);
+    ok(&["--domain", &d, "echo", "driving_direction", "--count", "3", "--seconds", "60"], long);
+
+    let bag = dir.path().join("run");
+    let bag_s = bag.to_str().unwrap();
+    let out = ok(
+        &[
+            "--domain",
+            &d,
+            "record",
+            "--all",
+            "--ros2",
+            "--lossless",
+            "-o",
+            bag_s,
+            "--duration",
+            "3s",
+        ],
+        long,
+    );
+    assert!(out.contains("nothing missed"), "{out}");
+    assert!(bag.join("metadata.yaml").is_file() && bag.join("run_0.mcap").is_file());
+    assert!(bag.join("lossless/run.mcap").is_file());
+
+    let checked = Command::new(python::venv_python())
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/check_bag.py"))
+        .arg(&bag)
+        .output()
+        .unwrap();
+    assert!(checked.status.success(), "{}", String::from_utf8_lossy(&checked.stderr));
+    let c: serde_json::Value = serde_json::from_slice(&checked.stdout).unwrap();
+    let topics = c["topics"].as_object().unwrap();
+    let types: Vec<(&str, &str)> =
+        topics.iter().map(|(t, v)| (t.as_str(), v["type"].as_str().unwrap())).collect();
+    assert_eq!(
+        types,
+        [
+            ("/blobs", "esgm_msgs/msg/BlobSeq"),
+            ("/current_blob", "esgm_msgs/msg/Blob"),
+            ("/driving_direction", "geometry_msgs/msg/Vector3"),
+            ("/images", "sensor_msgs/msg/Image"),
+            ("/robot_state", "geometry_msgs/msg/Pose2D"),
+        ]
+    );
+    let total: u64 = topics.values().map(|v| v["count"].as_u64().unwrap()).sum();
+    assert_eq!(c["message_count"], total, "metadata.yaml counts every message");
+    for (topic, v) in topics {
+        assert_eq!(c["decoded"][topic], v["count"], "{topic}: every message deserializes");
+    }
+    assert_eq!(c["mcap_ros2"], total, "the ROS 2 MCAP decoder reads every channel");
+    assert!(c["decoded"]["/images"].as_u64().unwrap() >= 6, "{c}");
+    let image = &c["first"]["/images"];
+    assert_eq!((image["width"].as_u64(), image["encoding"].as_str()), (Some(640), Some("rgb8")));
+    assert!(c["first"]["/blobs"]["items_len"].as_u64().is_some(), "{c}");
+
+    // esgm's readers take the directory: its lossless recording, every trajectory.
+    let lossless = info(&bag);
+    assert_eq!(lossless["complete"], true, "{lossless:#}");
+    assert!(count(&lossless, "blobs") >= 6, "{lossless:#}");
+    // Without --lossless, the bag alone: its standard messages read as trajectories,
+    // the generated ones named as other topics.
+    let plain = dir.path().join("plain");
+    ok(
+        &[
+            "--domain",
+            &d,
+            "record",
+            "--all",
+            "--ros2",
+            "-o",
+            plain.to_str().unwrap(),
+            "--duration",
+            "2s",
+        ],
+        long,
+    );
+    assert!(!plain.join("lossless").exists());
+    let bag_only = info(&plain);
+    assert!(count(&bag_only, "images") >= 4, "{bag_only:#}");
+    assert!(count(&bag_only, "robot_state") >= 10, "{bag_only:#}");
+    let foreign = bag_only["foreign_topics"].as_array().unwrap();
+    assert!(foreign.iter().any(|t| t == "/blobs"), "{bag_only:#}");
+
+    // A bag is a new directory: one that holds something is refused, naming why.
+    let (code, _, err) =
+        run(&["--domain", &d, "record", "--all", "--ros2", "-o", bag_s, "--duration", "1s"], long);
+    assert_eq!(code, Some(1));
+    assert!(err.contains("not empty"), "{err}");
+}

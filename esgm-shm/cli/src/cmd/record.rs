@@ -21,7 +21,7 @@ use crate::session::connect;
 /// `esgm record` options.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The file to write (`.mcap`).
+    /// The file to write (`.mcap`); with --ros2, the bag's directory (new, or empty).
     #[arg(short, long, value_name = "FILE")]
     pub output: PathBuf,
     /// Trajectories to record, by name; `*` and `?` match any characters.
@@ -52,11 +52,18 @@ pub struct Args {
     /// only images; the file is smaller).
     #[arg(long)]
     pub no_views: bool,
-    /// Write the views in the ROS 2 MCAP profile (`ros2msg` schemas, CDR messages:
-    /// rosbag2 and Foxglove read them as a bag); images as `sensor_msgs/msg/Image`,
-    /// other types as their `esgm_msgs` messages (`esgm ros2 msg TYPE`).
+    /// Write a rosbag2 directory: `OUTPUT/OUTPUT_0.mcap` with only ROS 2 profile
+    /// channels (`ros2msg` schemas, CDR messages, topics `/<trajectory>`) and the
+    /// `metadata.yaml` rosbag2 writes, so `ros2 bag`, rosbags and Foxglove read it as
+    /// theirs; images as `sensor_msgs/msg/Image`, other types as their `esgm_msgs`
+    /// messages (`esgm ros2 msg TYPE`).
     #[arg(long)]
     pub ros2: bool,
+    /// With --ros2: also keep esgm's lossless recording (every structure exactly, the
+    /// events) beside the bag's files, in `OUTPUT/lossless/`, which rosbag2 ignores and
+    /// esgm's info, replay, load and compare prefer.
+    #[arg(long, requires = "ros2")]
+    pub lossless: bool,
     /// Wait for the named trajectories to exist (a replay or a system starting up)
     /// instead of refusing names that do not exist yet, and record what each holds
     /// already (the structures written before the recorder subscribed, up to
@@ -92,17 +99,34 @@ pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
         .split_bytes(a.split_size.map(|m| m.saturating_mul(1 << 20)))
         .split_duration(a.split_duration)
         .views(!a.no_views)
-        .ros2(a.ros2)
+        .bag(a.ros2)
         .meta("domain", domain)
         .meta("started_unix_ns", SystemClock.now().to_string());
-    let writer = RecordingWriter::create(&a.output, options)
-        .with_context(|| format!("cannot record into {}", a.output.display()))?;
-    // Waited for: what was written between a trajectory's creation and this
-    // subscription is in its cache, and belongs to the recording.
-    let recorder = if a.wait {
-        Recorder::start_with_held(&esgm, &names, writer, a.buffer)?
+    let start = |path: &std::path::Path, options: RecordOptions| -> anyhow::Result<Recorder> {
+        let writer = RecordingWriter::create(path, options)
+            .with_context(|| format!("cannot record into {}", path.display()))?;
+        // Waited for: what was written between a trajectory's creation and this
+        // subscription is in its cache, and belongs to the recording.
+        Ok(if a.wait {
+            Recorder::start_with_held(&esgm, &names, writer, a.buffer)?
+        } else {
+            Recorder::start(&esgm, &names, writer, a.buffer)?
+        })
+    };
+    let recorder = start(&a.output, options.clone())?;
+    // The lossless recording beside the bag: a recorder of its own, reading the same
+    // structures (images in place, not copied).
+    let lossless = if a.lossless {
+        let dir = a.output.join(esgm_recording::rosbag2::LOSSLESS_DIR);
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("cannot create {}", dir.display()))?;
+        let name = a
+            .output
+            .file_name()
+            .map_or_else(|| "recording".into(), |n| n.to_string_lossy().into_owned());
+        Some(start(&dir.join(format!("{name}.mcap")), options.bag(false).ros2(false))?)
     } else {
-        Recorder::start(&esgm, &names, writer, a.buffer)?
+        None
     };
     if !json {
         eprintln!(
@@ -130,7 +154,7 @@ pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
         if until.is_some_and(|u| Instant::now() >= u) {
             break "duration reached";
         }
-        if recorder.failed() {
+        if recorder.failed() || lossless.as_ref().is_some_and(Recorder::failed) {
             break "writing failed";
         }
         if last_ping.elapsed() > Duration::from_secs(1) {
@@ -142,16 +166,29 @@ pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
     };
     progress.finish();
     let (summary, stats) = recorder.stop()?;
+    let lossless = lossless.map(Recorder::stop).transpose()?;
+    for name in &summary.left_out {
+        eprintln!(
+            "esgm: `{name}` is not in the bag: its type has no ROS 2 message{}",
+            if lossless.is_some() { " (it is in the lossless recording)" } else { "" }
+        );
+    }
     let seconds = started.elapsed().as_secs_f64();
     if json {
         println!(
             "{}",
             serde_json::json!({ "stopped": why, "seconds": seconds, "files": summary.files,
                 "trajectories": stats.trajectories, "view_bytes": summary.view_bytes,
-                "lossless_bytes": summary.lossless_bytes })
+                "lossless_bytes": summary.lossless_bytes, "left_out": summary.left_out,
+                "lossless_files": lossless.as_ref().map(|(s, _)| &s.files) })
         );
     } else {
         print_summary(why, seconds, &summary.files, &stats, &summary);
+        if let Some((s, _)) = &lossless {
+            for f in &s.files {
+                println!("lossless: {}", f.display());
+            }
+        }
     }
     Ok(())
 }
