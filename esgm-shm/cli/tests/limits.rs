@@ -115,6 +115,13 @@ fn readers_and_processes_past_their_limits_are_refused_and_the_domain_serves_on(
     refused(&d, "odom", "max-processes = 6", "--max-processes N");
     served(&d, "odom", "4.5");
     served(&d, "tf", "5.5");
+    // The operator is not locked out of the full domain: the short-lived commands look.
+    let ps = ok(&["--domain", &d, "ps"]);
+    assert!(ps.contains("process"), "{ps}");
+    let stats = ok(&["--domain", &d, "stats"]);
+    assert!(stats.contains("odom") && stats.contains("tf"), "{stats}");
+    let traj = ok(&["--domain", &d, "traj", "list"]);
+    assert!(traj.contains("odom"), "{traj}");
 
     // Processes leaving (killed: whoever needs their room cleans up after them) make
     // room for another.
