@@ -374,3 +374,38 @@ fn a_ros2_recording_is_a_rosbag2_directory_ros2_libraries_read() {
     assert_eq!(code, Some(1));
     assert!(err.contains("not empty"), "{err}");
 }
+
+/// The other way: a bag that rosbags (an independent ROS 2 library) writes, as a
+/// robot's `ros2 bag record -s mcap` would, is a recording to esgm: `info` reads the
+/// directory, `load` makes its standard topics queryable trajectories (named as
+/// `esgm ros2 --import` names them), and a topic esgm does not map is named, not read.
+#[test]
+fn a_bag_rosbags_writes_loads_into_esgm() {
+    let dir = tempfile::tempdir().unwrap();
+    let bag = dir.path().join("robot_bag");
+    let written = Command::new(python::venv_python())
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/write_bag.py"))
+        .arg(&bag)
+        .arg("10")
+        .output()
+        .unwrap();
+    assert!(written.status.success(), "{}", String::from_utf8_lossy(&written.stderr));
+    assert!(bag.join("metadata.yaml").is_file());
+
+    let read = info(&bag);
+    assert_eq!(count(&read, "camera_image_raw"), 10, "{read:#}");
+    assert_eq!(count(&read, "odom_pose"), 10, "{read:#}");
+    assert_eq!(read["foreign_topics"], serde_json::json!(["/chatter"]), "{read:#}");
+
+    let long = Duration::from_secs(120);
+    let d = esgm_shm::unique_domain("rec-rosbags");
+    ok(&["--domain", &d, "up", "--detach"], long);
+    let _down = Down(d.clone());
+    ok(&["--domain", &d, "load", bag.to_str().unwrap()], long);
+    let pose = ok(&["--domain", &d, "--json", "latest", "odom_pose"], long);
+    let pose: serde_json::Value = serde_json::from_str(pose.trim()).unwrap();
+    assert_eq!(pose["valid_time"], 1_700_000_000_900_000_000_i64, "{pose}");
+    assert_eq!(pose["attributes"]["x"], 9.0, "{pose}");
+    let image = ok(&["--domain", &d, "--json", "latest", "camera_image_raw"], long);
+    assert!(image.contains("\"width\":4") && image.contains("\"height\":2"), "{image}");
+}
