@@ -77,6 +77,9 @@
 //! `ros2-export-*` and `ros2-import-*` through the `esgm-ros2` bridge, against them
 //! (cargo feature `ros2`; DDS only inside a loopback-only network namespace).
 //!
+//! The ROS user's first hour (issue 40) adds [`cli_query`]: every CLI query verb as a
+//! whole `esgm` process, in a domain of 10 and of 1,000 trajectories.
+//!
 //! The silent-failures issue (24) adds [`control_churn`]: `control-ping` and
 //! `control-ping-churn`, a client's call to the coordinator while others churn.
 //!
@@ -100,6 +103,7 @@
 //! `BENCHMARKS.md` at the repository root has a run's results and what they mean.
 
 pub mod bridge;
+pub mod cli_query;
 pub mod control_churn;
 pub mod cpp_program;
 pub mod dora_peer;
@@ -218,6 +222,7 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(ros1_fanout::Ros1Fanout::THIRTY_TWO),
         Box::new(ros1_fanout::Ros1Fanout::SIXTY_FOUR),
         Box::new(control_churn::ControlChurn),
+        Box::new(cli_query::CliQuery),
         Box::new(refsys::Refsys::ROS1),
         Box::new(refsys::Refsys::ROS2),
         Box::new(refsys::Refsys::ESGM),

@@ -1,0 +1,197 @@
+//! `cli-*` (issue 40): what an operator waits for a CLI query, as whole processes. The
+//! `esgm` executable built beside esgm-bench is run again and again against a domain
+//! whose coordinator runs on a thread of this process and whose trajectories this
+//! process writes: every query verb (`latest`, `nth`, `between`, `at`, `closest`,
+//! `approx`, `echo --last`, `traj list`, `stats`), each timed from spawn to exit, in a
+//! domain of 10 trajectories and one of 1,000 (`cli-<verb>-10`, `cli-<verb>-1000`).
+//! `cli-version` (`esgm --version`) is the floor: starting the executable.
+//!
+//! Targets, as ratios of the same run: each verb within ×1.5 between the two domains
+//! (nothing an operator waits for grows with the domain). The issue's absolute goal, p50
+//! ≤ 15 ms on an idle machine, is said in each row's note and in BENCHMARKS.md, since
+//! targets here are ratios. Without the `esgm` executable the rows are reported as not
+//! run, saying how to build it.
+
+use std::path::PathBuf;
+use std::process::{Command, Stdio};
+use std::time::Instant;
+
+use anyhow::{Context as _, bail};
+use esgm_core::esgm::TrajectorySpec;
+use esgm_core::library::RobotState;
+use esgm_core::{Entity, EntityTrajectoryStructure, Esgm, TypeRegistry};
+use esgm_shm::control::{Coordinator, Registry};
+use esgm_shm::{ShmEsgm, unique_domain};
+
+use crate::latency::Latency;
+use crate::report::{Measurement, Method, Wait};
+use crate::scenario::{Context, Scenario};
+use crate::target::Target;
+
+/// The scenario's name (and its rows' prefix).
+pub const NAME: &str = "cli";
+/// The floor: starting the executable.
+const VERSION: &str = "cli-version";
+/// The two domain sizes, in trajectories.
+const SIZES: [usize; 2] = [10, 1_000];
+/// Structures in each trajectory.
+const HISTORY: i64 = 5;
+
+/// The verbs measured: row name and the arguments after `esgm --domain D`, `{t}` the
+/// trajectory queried.
+const VERBS: [(&str, &[&str]); 9] = [
+    ("latest", &["latest", "{t}"]),
+    ("nth", &["nth", "{t}", "2"]),
+    ("between", &["between", "{t}", "1000000000", "4000000000"]),
+    ("at", &["at", "{t}", "3000000000"]),
+    ("closest", &["closest", "{t}", "3500000000"]),
+    ("approx", &["approx", "{t}", "3500000000"]),
+    ("echo-last", &["echo", "{t}", "--last", "1", "--count", "1"]),
+    ("traj-list", &["traj", "list"]),
+    ("stats", &["stats"]),
+];
+
+/// The CLI's queries as whole processes (see the module docs).
+#[derive(Debug, Clone, Copy)]
+pub struct CliQuery;
+
+fn row_name(verb: &str, size: usize) -> String {
+    format!("cli-{verb}-{size}")
+}
+
+/// The `esgm` executable beside this one (cargo builds them into one directory).
+fn esgm_executable() -> anyhow::Result<Option<PathBuf>> {
+    let exe = std::env::current_exe().context("cannot find esgm-bench itself")?;
+    let esgm = exe.with_file_name("esgm");
+    Ok(esgm.is_file().then_some(esgm))
+}
+
+/// `samples` timed runs of `esgm args` after `warmup` untimed ones; each must succeed.
+fn time_runs(
+    esgm: &PathBuf,
+    args: &[String],
+    samples: u64,
+    warmup: u64,
+) -> anyhow::Result<Latency> {
+    let mut latency = Latency::new()?;
+    for i in 0..warmup + samples {
+        let started = Instant::now();
+        let out = Command::new(esgm)
+            .args(args)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .output()
+            .with_context(|| format!("cannot run {}", esgm.display()))?;
+        let took = started.elapsed();
+        if !out.status.success() {
+            bail!(
+                "`esgm {}` failed: {}",
+                args.join(" "),
+                String::from_utf8_lossy(&out.stderr).trim()
+            );
+        }
+        if i >= warmup {
+            latency.record(took);
+        }
+    }
+    Ok(latency)
+}
+
+impl Scenario for CliQuery {
+    fn name(&self) -> &'static str {
+        NAME
+    }
+
+    fn summary(&self) -> &'static str {
+        "rows cli-<verb>-10 and -1000: every CLI query verb as a whole esgm process, spawn to exit, in a domain of 10 and of 1,000 trajectories; cli-version the floor"
+    }
+
+    fn run(&self, ctx: &Context) -> anyhow::Result<Vec<Measurement>> {
+        let Some(esgm) = esgm_executable()? else {
+            ctx.skip(
+                NAME,
+                "the esgm executable is not beside esgm-bench: build it with the same profile \
+                 (cargo build --release -p esgm-cli)",
+            );
+            return Ok(Vec::new());
+        };
+        iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
+        let samples = ctx.samples(20, 3);
+        let warmup = 2;
+        let mut rows = Vec::new();
+        let version = time_runs(&esgm, &["--version".to_owned()], samples, warmup)?;
+        rows.push(
+            version
+                .measurement(VERSION, Wait::Event)
+                .method(Method::Call)
+                .wait_strategy("process")
+                .note("esgm --version: starting the executable, spawn to exit"),
+        );
+        for size in SIZES {
+            let domain = unique_domain("esgm-bench-cli");
+            let _end = crate::domain_end::DomainEnd::new(&domain);
+            let coordinator =
+                Coordinator::spawn(&domain, Registry::new(TypeRegistry::with_library()))
+                    .with_context(|| format!("could not start a coordinator for {domain}"))?;
+            let writer = ShmEsgm::builder()
+                .domain(coordinator.domain())
+                .host("cli-writer")
+                .connect()
+                .context("the writer's connection")?;
+            let mut trajectories = Vec::with_capacity(size);
+            for i in 0..size {
+                let t = writer
+                    .create_trajectory(TrajectorySpec::primitive(format!("t{i}"), "RobotState"))
+                    .with_context(|| format!("trajectory t{i}"))?;
+                for k in 1..=HISTORY {
+                    let vt = k * 1_000_000_000;
+                    t.add(RobotState { x: k as f64, y: 0.0, dir: 0.0 }.to_structure("r", vt, vt))?;
+                }
+                trajectories.push(t);
+            }
+            let queried = format!("t{}", size / 2);
+            for (verb, args) in VERBS {
+                let mut full = vec!["--domain".to_owned(), coordinator.domain().to_owned()];
+                full.extend(args.iter().map(|a| a.replace("{t}", &queried)));
+                let latency = time_runs(&esgm, &full, samples, warmup)
+                    .with_context(|| format!("{verb} in a domain of {size}"))?;
+                let mut row = latency
+                    .measurement(&row_name(verb, size), Wait::Event)
+                    .method(Method::Call)
+                    .wait_strategy("process")
+                    .baseline(VERSION)
+                    .note(format!(
+                        "esgm {}: spawn to exit, in a domain of {size} trajectories of \
+                         {HISTORY} RobotStates each written by the measuring process; the \
+                         issue's goal is p50 <= 15 ms on an idle machine",
+                        full[2..].join(" ")
+                    ));
+                if size == SIZES[0] {
+                    row = row.note("compared with the same verb in a domain of 1,000");
+                }
+                rows.push(row);
+            }
+            drop(trajectories);
+            drop(writer);
+            drop(coordinator);
+        }
+        Ok(rows)
+    }
+
+    /// Nothing an operator waits for grows with the domain: each verb within ×1.5
+    /// between 10 and 1,000 trajectories.
+    fn targets(&self) -> Vec<Target> {
+        VERBS
+            .iter()
+            .map(|(verb, _)| {
+                Target::at_most(
+                    &row_name(verb, SIZES[1]),
+                    &row_name(verb, SIZES[0]),
+                    Wait::Event,
+                    1.5,
+                )
+            })
+            .collect()
+    }
+}
