@@ -117,8 +117,10 @@ impl Scenario for CliQuery {
             return Ok(Vec::new());
         };
         iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
-        let samples = ctx.samples(20, 3);
-        let warmup = 2;
+        // Whole processes are slow to sample: at most 20 a row, 3 under --quick, even
+        // when a run asks for more (the CI smoke's --samples 100 on a debug build).
+        let samples = ctx.samples(20, 3).min(if ctx.is_quick() { 3 } else { 20 });
+        let warmup = if ctx.is_quick() { 1 } else { 2 };
         let mut rows = Vec::new();
         let version = time_runs(&esgm, &["--version".to_owned()], samples, warmup)?;
         rows.push(
