@@ -6,6 +6,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 use std::io::Read;
+use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
@@ -363,4 +364,29 @@ fn the_reference_system_runs_on_esgm_both_ways() {
         stdout.contains("26 processes"),
         "a coordinator and 25 workers (24 nodes, the intersection as two units):\n{stdout}"
     );
+}
+
+/// The CLI rows run the `esgm` executable beside esgm-bench (the workspace's tests build
+/// it), or say how to build it; no figure is asserted.
+#[test]
+fn cli_rows_run_the_esgm_executable_or_say_how_to_build_it() {
+    let (stdout, report) = run_quick("cli");
+    let skipped = report["skipped"].as_array().cloned().unwrap_or_default();
+    let beside = Path::new(env!("CARGO_BIN_EXE_esgm-bench")).with_file_name("esgm").is_file();
+    if beside {
+        assert!(skipped.is_empty(), "{report}");
+        // Whole processes: fewer samples than other rows (at most 3 under --quick).
+        let measured: Vec<&serde_json::Value> =
+            report["scenarios"].as_array().unwrap().iter().collect();
+        for row in ["cli-version", "cli-latest-10", "cli-latest-1000", "cli-stats-1000"] {
+            let found = measured.iter().find(|r| r["name"] == row && r["wait"] == "event");
+            let found = found.unwrap_or_else(|| panic!("no {row} in {report}"));
+            assert!(found["n"].as_u64().is_some_and(|n| n > 0), "{found}");
+        }
+        assert!(stdout.contains("cli-latest-1000 / cli-latest-10"), "the target: {stdout}");
+    } else {
+        assert!(report["scenarios"].as_array().is_none_or(Vec::is_empty), "{report}");
+        let reason = skipped[0]["reason"].as_str().unwrap_or_default();
+        assert!(reason.contains("cargo build --release -p esgm-cli"), "{report}");
+    }
 }
