@@ -46,13 +46,19 @@ for external in esgm-view esgm-ros2 esgm-bridge; do
     fi
 done
 # The C library: esgm-shm/cpp's CMake installs it as `cmake --install` would into /usr.
-if [ -f "$bindir/libesgm_c.so" ] && [ -f "$bindir/libesgm_c.a" ]; then
+# A `cargo build -p esgm-c` puts it in the profile's directory; a workspace's tests,
+# which build it as a dependency, in its `deps`.
+libdir=$bindir
+if [ ! -f "$libdir/libesgm_c.so" ] && [ -f "$bindir/deps/libesgm_c.so" ]; then
+    libdir=$bindir/deps
+fi
+if [ -f "$libdir/libesgm_c.so" ] && [ -f "$libdir/libesgm_c.a" ]; then
     multiarch=$(dpkg-architecture -qDEB_HOST_MULTIARCH 2>/dev/null || gcc -print-multiarch)
-    cmake -S esgm-shm/cpp -B "$stage/cmake" -DESGM_LIBRARY_DIR="$(cd "$bindir" && pwd)" \
+    cmake -S esgm-shm/cpp -B "$stage/cmake" -DESGM_LIBRARY_DIR="$(cd "$libdir" && pwd)" \
         -DCMAKE_INSTALL_PREFIX=/usr -DCMAKE_INSTALL_LIBDIR="lib/$multiarch" >/dev/null
     DESTDIR=$root cmake --install "$stage/cmake" >/dev/null
 else
-    missing+=("the C library (libesgm_c.so, libesgm_c.a)")
+    missing+=("the C library (libesgm_c.so, libesgm_c.a, also looked for in deps/)")
 fi
 if [ ${#missing[@]} -gt 0 ]; then
     if [ "${ESGM_PARTIAL:-0}" = 1 ]; then
