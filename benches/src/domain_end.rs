@@ -19,6 +19,6 @@ impl DomainEnd {
 
 impl Drop for DomainEnd {
     fn drop(&mut self) {
-        esgm_shm::wake_word::remove_domain(&self.0);
+        esgm_shm::process::remove_domain_files(&self.0);
     }
 }

@@ -226,8 +226,8 @@ fn sampling_runs_where_the_sensor_is_and_units_where_they_are() {
 /// A trajectory whose writer exited without destroying it is taken over by the next
 /// process that adds to it (issue 24: such adds were acknowledged as forwarded and
 /// lost). Its writer here is a short setup program, another process that exits before
-/// anyone read it, so its sample left with it; a third process reads the stream from
-/// the new writer. (The history a replica holds is kept: the next test.)
+/// anyone read it; its sample stays, from the trajectory's kept history (issue 39,
+/// `kept_history.rs`), and a third process reads the stream from the new writer.
 #[test]
 fn a_trajectory_whose_writer_exited_is_taken_over_by_the_next_adder() {
     let c = coordinator("loc-orphan");
@@ -239,7 +239,7 @@ fn a_trajectory_whose_writer_exited_is_taken_over_by_the_next_adder() {
     assert_eq!(made.add(state(2, 2.0)).unwrap(), AddOutcome::Added, "served here now");
     assert_eq!(made.add_blocking(state(3, 3.0)).unwrap(), AddOutcome::Added);
     let xs: Vec<f64> = made.get_between(0, 10).unwrap().iter().map(x).collect();
-    assert_eq!(xs, [2.0, 3.0]);
+    assert_eq!(xs, [1.0, 2.0, 3.0]);
     // The registry names this process as the writer, and readers elsewhere follow.
     use esgm_shm::control::protocol::{Request, Response};
     let Ok(Response::Placements(placements)) = app.control(Request::ListPlacements) else {
@@ -252,10 +252,10 @@ fn a_trajectory_whose_writer_exited_is_taken_over_by_the_next_adder() {
     let all = |t: &esgm_core::InProcessTrajectory| -> Vec<f64> {
         t.get_between(0, 10).map(|s| s.iter().map(x).collect()).unwrap_or_default()
     };
-    assert!(wait_for(|| all(&there) == [2.0, 3.0]), "the reader holds {:?}", all(&there));
+    assert!(wait_for(|| all(&there) == [1.0, 2.0, 3.0]), "the reader holds {:?}", all(&there));
     // And its adds reach the new writer.
     assert_eq!(there.add(state(4, 4.0)).unwrap(), AddOutcome::Forwarded);
-    assert!(wait_for(|| all(&made) == [2.0, 3.0, 4.0]), "the writer holds {:?}", all(&made));
+    assert!(wait_for(|| all(&made) == [1.0, 2.0, 3.0, 4.0]), "the writer holds {:?}", all(&made));
 }
 
 /// The same when the writer closes its connection while its process lives on (it

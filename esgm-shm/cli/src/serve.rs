@@ -201,7 +201,7 @@ impl Serve {
         drop(coordinator);
         log_cleanup(cleanup_dead_nodes(), esgm_shm::CleanupReporter::Owner);
         // Every worker is gone: the futex words its killed processes kept go too.
-        esgm_shm::wake_word::remove_domain(domain);
+        esgm_shm::process::remove_domain_files(domain);
         tracing::info!("coordinator stopped");
         match applying.map(std::thread::JoinHandle::join) {
             Some(Ok(Err(e))) => Err(e),

@@ -113,7 +113,7 @@ struct WordsGone(String);
 
 impl Drop for WordsGone {
     fn drop(&mut self) {
-        esgm_shm::wake_word::remove_domain(&self.0);
+        esgm_shm::process::remove_domain_files(&self.0);
     }
 }
 

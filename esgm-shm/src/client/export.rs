@@ -34,6 +34,7 @@ use super::settings::{
 use super::shared_node::SharedNode;
 use crate::capacity::{EventCapacity, Readers};
 use crate::control::protocol::TrajectoryRecord;
+use crate::data_plane::kept_history::{KeptHistory, Retention};
 use crate::holdings::{HoldingOwner, Holdings};
 use crate::image_loan::ImageChunk;
 use crate::publisher::{PublishError, SampleSizing, TrajectoryPublisher};
@@ -86,6 +87,12 @@ pub(crate) struct Outlet {
     failures: u64,
     /// Entries not published since the store last asked ([`esgm_core::StoreTap`]).
     unpublished: u64,
+    /// A primitive trajectory's kept history: every structure that enters is kept
+    /// there before it is published, so that it outlives this process (SPEC D1).
+    kept: Option<KeptHistory>,
+    /// Structures that entered but could not be kept (logged at the 1st, 10th,
+    /// 100th…): readers have them, the file does not.
+    unkept: u64,
 }
 
 impl Outlet {
@@ -129,9 +136,13 @@ impl Outlet {
             self.encode(sample);
             return None;
         }
+        let kept = self.keep(sample);
         let sent = chunk
             .complete(&self.publisher, &es.name, es.valid_time, es.create_time)
-            .and_then(|loan| loan.send_added(sample.add_time));
+            .and_then(|loan| match kept {
+                Some(index) => loan.send_kept(sample.add_time, index),
+                None => loan.send_added(sample.add_time),
+            });
         let published = match sent {
             Ok(p) => p,
             Err(e) => {
@@ -234,20 +245,84 @@ impl Outlet {
         })
     }
 
+    /// Keeps an entering structure in the kept history (a primitive trajectory's)
+    /// before it is published: what `add` acknowledges is in the file by then.
+    /// Returns its index; one that could not be kept still uses an index up (readers
+    /// keep the writer's order), and is counted.
+    fn keep(&mut self, sample: &Sample) -> Option<u64> {
+        let kept = self.kept.as_mut()?;
+        match kept.append(&sample.structure, sample.add_time) {
+            Ok(index) => Some(index),
+            Err(e) => {
+                self.unkept += 1;
+                if is_power_of_ten(self.unkept) {
+                    tracing::warn!(trajectory = %self.publisher.trajectory(), error = %e,
+                        not_kept = self.unkept,
+                        "a structure is not kept: it will not outlive this process (counted; \
+                         the log says the 1st, 10th, 100th… only)");
+                }
+                Some(kept.skip())
+            }
+        }
+    }
+
+    /// Publishes a structure kept at `kept` (or not kept: `None`).
+    fn publish_entry(&mut self, sample: &Sample, kept: Option<u64>) {
+        let sent = match kept {
+            Some(index) => self.publisher.publish_kept(&sample.structure, sample.add_time, index),
+            None => self.publisher.publish_added(&sample.structure, sample.add_time),
+        };
+        if let Err(e) = sent {
+            self.entry_failed(&e);
+        }
+    }
+
     fn publish(&mut self, event: &StoreEvent) {
         let result = match event {
             StoreEvent::Entered(s) => {
-                if let Err(e) = self.publisher.publish_added(&s.structure, s.add_time) {
-                    self.entry_failed(&e);
-                }
+                let kept = self.keep(s);
+                self.publish_entry(s, kept);
                 return;
             }
             StoreEvent::Violation(v) => self.violation_publisher().and_then(|p| p.publish(v)),
-            StoreEvent::Reset => self.publisher.publish_reset().map(|_| ()),
+            StoreEvent::Reset => {
+                if let Some(kept) = &mut self.kept {
+                    kept.reset();
+                }
+                self.publisher.publish_reset().map(|_| ())
+            }
             _ => Ok(()),
         };
         if let Err(e) = result {
             self.failed(&e);
+        }
+    }
+}
+
+/// How an export begins the stream it publishes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum ExportStart {
+    /// A trajectory made here, or a writer that restarted: its store holds nothing yet
+    /// (what the trajectory kept enters it).
+    New,
+    /// A name re-pointed here (E5): a reset marker first, so readers elsewhere forget
+    /// the stream the name denoted before.
+    Repointed,
+    /// A replica taken over from a writer that is gone: its store holds the history
+    /// up to the kept index `known` (`None`: nothing kept), and the rest enters from
+    /// the kept history.
+    TakenOver {
+        /// The highest kept index the replica entered.
+        known: Option<u64>,
+    },
+}
+
+impl ExportStart {
+    /// The highest kept index the store holds already.
+    fn known(self) -> Option<u64> {
+        match self {
+            ExportStart::TakenOver { known } => known,
+            ExportStart::New | ExportStart::Repointed => None,
         }
     }
 }
@@ -287,16 +362,20 @@ impl Export {
     }
 
     /// Publishes `handle`'s stream (the trajectory of `record`) from now on (and its current content, so readers
-    /// that connect later receive the history). A `repointed` name starts with a reset
-    /// marker: readers elsewhere forget the stream the name denoted before. `register`
+    /// that connect later receive the history), as `start` says. `register`
     /// is given the publisher port's id once it is open and before anything is
     /// published on it (the writer names it to the registry there).
+    ///
+    /// A primitive trajectory's kept history is opened (made if new): what a former
+    /// writer kept there and the store does not hold yet enters the store first, so a
+    /// writer that restarted, or took over, continues the same history with no gap,
+    /// and readers receive it again numbered as before (they skip what they hold).
     pub fn start(
         node: &SharedNode,
         domain: &str,
         handle: &InProcessTrajectory,
         record: &TrajectoryRecord,
-        repointed: bool,
+        start: ExportStart,
         holdings: &Arc<Holdings>,
         register: &mut dyn FnMut(u128),
     ) -> Result<Self, ExportError> {
@@ -360,6 +439,10 @@ impl Export {
             trajectory: name.clone(),
             readers,
         };
+        let kept = match primitive {
+            true => open_kept(domain, &name, type_name, policy),
+            false => None,
+        };
         let outlet = Arc::new(Mutex::new(Outlet {
             publisher,
             violations: None,
@@ -367,6 +450,8 @@ impl Export {
             own,
             failures: 0,
             unpublished: 0,
+            kept,
+            unkept: 0,
         }));
         let owner = Arc::as_ptr(&outlet) as *const () as usize;
         // Content and tap under one lock: nothing falls between the two, and the
@@ -374,6 +459,15 @@ impl Export {
         let tap = Arc::clone(&outlet);
         let tap = handle
             .with_store(|s| {
+                let former = outlet.lock().kept.as_ref().map(KeptHistory::entries);
+                let former = former.filter(|f| !f.entries.is_empty());
+                if let Some(former) = &former {
+                    for entry in &former.entries {
+                        if start.known().is_none_or(|k| entry.index > k) {
+                            s.replicate(Arc::new(entry.structure.clone()), entry.add_time);
+                        }
+                    }
+                }
                 let (id, backlog) = s.set_tap(Box::new(OutletTap { outlet: tap, owner }));
                 if images {
                     s.set_octets_allocator(Arc::new(LoanAllocator::new(
@@ -382,11 +476,26 @@ impl Export {
                     )));
                 }
                 let mut out = outlet.lock();
-                if repointed {
+                if matches!(start, ExportStart::Repointed) {
                     out.publish(&StoreEvent::Reset);
                 }
-                for sample in backlog {
-                    out.publish(&StoreEvent::Entered(sample));
+                match former {
+                    // Handed on as kept, with the indices readers know it by.
+                    Some(former) => {
+                        for entry in former.entries {
+                            let sample = Sample::new(
+                                Arc::new(entry.structure),
+                                entry.add_time,
+                                entry.add_time,
+                            );
+                            out.publish_entry(&sample, Some(entry.index));
+                        }
+                    }
+                    None => {
+                        for sample in backlog {
+                            out.publish(&StoreEvent::Entered(sample));
+                        }
+                    }
                 }
                 id
             })
@@ -579,6 +688,24 @@ impl esgm_core::StoreTap for OutletTap {
     fn take_unpublished(&mut self) -> u64 {
         std::mem::take(&mut self.outlet.lock().unpublished)
     }
+}
+
+/// Opens the kept history of a primitive trajectory this process writes; `None`
+/// (logged) if it cannot: the trajectory works, but its history lives only in this
+/// process and its readers.
+fn open_kept(
+    domain: &str,
+    trajectory: &str,
+    type_name: &str,
+    policy: &esgm_core::FluentStreamPolicy,
+) -> Option<KeptHistory> {
+    let retention = Retention::of(&policy.cache);
+    KeptHistory::open_or_create(domain, trajectory, crate::type_id(type_name), retention)
+        .map_err(|e| {
+            tracing::warn!(trajectory, error = %e,
+                "no kept history: the trajectory's history will not outlive this process")
+        })
+        .ok()
 }
 
 /// True if the trajectory's type has octet sequences (images).

@@ -45,6 +45,7 @@ use super::shared_node::SharedNode;
 use super::takeover::{TakeOverAsk, WriterLiveness};
 use crate::capacity::{EventCapacity, Readers};
 use crate::control::protocol::{TrajectoryRecord, WriterPort};
+use crate::data_plane::kept_history::KeptHistory;
 use crate::holdings::{HoldingOwner, Holdings};
 use crate::publisher::{SampleSizing, TrajectoryPublisher};
 use crate::service::{EventSpec, OpenError, ShmService, open_event_service};
@@ -126,6 +127,11 @@ pub(crate) struct Import {
     /// closed): its waiters look the trajectory's import up again only then, not on
     /// every wait ([`ImportWaiter::listen`]).
     retired: Arc<std::sync::atomic::AtomicBool>,
+    /// The highest kept-history index entered into the replica (a primitive
+    /// trajectory's; [`crate::SampleHeader::kept`]): a structure at or below it is
+    /// one this replica holds already (the history handed over again by a writer
+    /// that restarted or took over), and is skipped.
+    last_kept: Option<u64>,
 }
 
 impl Drop for Import {
@@ -170,8 +176,9 @@ impl Import {
 /// decides about it.
 #[derive(Debug)]
 enum Arrival {
-    /// A structure, decoded (its images stay in shared memory, held).
-    Entry { es: EntityStructure, add_time: i64 },
+    /// A structure, decoded (its images stay in shared memory, held), with its index
+    /// in the kept history (`None`: not kept).
+    Entry { es: EntityStructure, add_time: i64, kept: Option<u64> },
     /// A reset marker.
     Reset,
 }
@@ -290,7 +297,50 @@ impl Import {
             wakes,
             history_received,
             retired: Arc::default(),
+            last_kept: None,
         })
+    }
+
+    /// The highest kept-history index this replica entered (`None`: none).
+    pub fn last_kept(&self) -> Option<u64> {
+        self.last_kept
+    }
+
+    /// Enters the trajectory's kept history into the replica: the writer did not hand
+    /// its history over (it is gone, or not serving yet), and the file holds what it
+    /// acknowledged. What the writer sends later and this replica holds is skipped
+    /// by its index. Returns how many entered.
+    pub fn enter_kept(&mut self, domain: &str) -> usize {
+        let domain = generation_domain(domain, self.generation);
+        let kept = match KeptHistory::open(&domain, self.replica.name()) {
+            Ok(Some(kept)) => kept.entries(),
+            Ok(None) => return 0,
+            Err(e) => {
+                tracing::warn!(trajectory = %self.replica.name(), error = %e,
+                    "the kept history cannot be read; only what the writer sends is");
+                return 0;
+            }
+        };
+        if kept.skipped > 0 {
+            tracing::warn!(trajectory = %self.replica.name(), skipped = kept.skipped,
+                "entries of the kept history could not be read (counted as rejected)");
+            for _ in 0..kept.skipped {
+                let _destroyed =
+                    self.replica.with_store(|s| s.replicate_rejection(Rejection::Malformed));
+            }
+        }
+        let mut n = 0;
+        for entry in kept.entries {
+            let arrival = Arrival::Entry {
+                es: entry.structure,
+                add_time: entry.add_time,
+                kept: Some(entry.index),
+            };
+            let before = self.last_kept;
+            self.enter(arrival);
+            n += usize::from(self.last_kept != before);
+        }
+        n
     }
 
     /// Whether the writer handed this import the history when it was made (it answered
@@ -330,9 +380,13 @@ impl Import {
                 Ok(Some(sample)) => {
                     n += 1;
                     let publisher = sample.publisher_id();
-                    let (sequence, add_time) = (sample.header().sequence, sample.header().add_time);
+                    let header = sample.header();
+                    let (sequence, add_time) = (header.sequence, header.add_time);
+                    let kept = header.kept.checked_sub(1);
                     match self.owner.decode(sample) {
-                        Ok(es) => self.arrive(publisher, sequence, Arrival::Entry { es, add_time }),
+                        Ok(es) => {
+                            self.arrive(publisher, sequence, Arrival::Entry { es, add_time, kept })
+                        }
                         Err(e) => self.reject(&ReceiveError::Malformed(e)),
                     }
                 }
@@ -395,9 +449,18 @@ impl Import {
     /// match the trajectory's type.
     fn enter(&mut self, arrival: Arrival) {
         match arrival {
-            Arrival::Entry { es, add_time } => {
+            Arrival::Entry { es, add_time, kept } => {
+                if let Some(index) = kept {
+                    if self.last_kept.is_some_and(|last| index <= last) {
+                        // Held already: the history handed over again.
+                        return;
+                    }
+                }
                 if let Some(Err(e)) = self.checker.as_ref().map(|c| c.check(&es.attributes)) {
                     return self.count_rejection(Rejection::WrongLayout, &e);
+                }
+                if kept.is_some() {
+                    self.last_kept = kept;
                 }
                 // A replica destroyed meanwhile needs nothing more.
                 let _destroyed = self.replica.with_store(|s| s.replicate(Arc::new(es), add_time));

@@ -13,10 +13,12 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use crossbeam_channel::{Receiver, Sender};
-use esgm_core::esgm::{CreateError, Esgm, LookupError, Peer, TrajectorySpec, Unreachable};
+use esgm_core::esgm::{
+    CreateError, Esgm, LookupError, Peer, TrajectoryKind, TrajectorySpec, Unreachable,
+};
 use esgm_core::{AddError, EntityStructureType, InProcessEsgm, InProcessTrajectory};
 
-use super::export::Export;
+use super::export::{Export, ExportStart};
 use super::import::{Import, ImportSite};
 use super::mirrors::SharedMirrors;
 use super::receiver::Receiver as SampleReceiver;
@@ -475,10 +477,11 @@ impl Location {
             // elsewhere follow it to its new generation's services.
             let repointed =
                 spec.replace && mirrors.change(|m| m.exports.remove(&spec.name)).is_some();
+            let start = if repointed { ExportStart::Repointed } else { ExportStart::New };
             // Registered before its first sample goes out, so readers find the port.
             let mut register = |port| report_writer(control, &spec.name, record.generation, port);
             let started =
-                Export::start(node, domain, handle, record, repointed, holdings, &mut register)
+                Export::start(node, domain, handle, record, start, holdings, &mut register)
                     .map_err(|e| CreateError::Unavailable {
                         reason: Unreachable::transport(Peer::Processes, e),
                     })?;
@@ -499,8 +502,8 @@ impl Location {
 
     /// Takes `name` over, its writer being gone ([`super::takeover`]): the registry
     /// places it here, the replica's store becomes the writer's with the history it
-    /// holds, and an export publishes it (a reset, then that history, so readers
-    /// elsewhere hold what this process holds). `Ok` also when the registry names a
+    /// holds and what the kept history has beyond it, and an export publishes it,
+    /// numbered as kept: readers elsewhere skip what they hold, and see no reset. `Ok` also when the registry names a
     /// live writer elsewhere (another process took it over first): the add goes there.
     fn take_over(&mut self, name: &str, generation: u64) -> Result<(), AddError> {
         let unavailable =
@@ -537,6 +540,8 @@ impl Location {
             return Ok(());
         }
         let replica = self.local.get_entity_trajectory_structure(name).map_err(|_| gone(pid))?;
+        // What the replica entered of the kept history: the rest enters from the file.
+        let known = self.mirrors.import(name).and_then(|i| i.lock().last_kept());
         drop(self.mirrors.change(|m| m.imports.remove(name)));
         replica.with_store(|s| s.adopt_adds()).map_err(|_| gone(pid))?;
         let control = &self.control;
@@ -546,7 +551,7 @@ impl Location {
             &self.domain,
             &replica,
             &record,
-            true,
+            ExportStart::TakenOver { known },
             &self.holdings,
             &mut register,
         )
@@ -688,6 +693,12 @@ impl Location {
             Ok(mut import) => {
                 // A replica destroyed meanwhile needs no resets.
                 let _destroyed = handle.with_store(|s| s.forward_resets(Arc::clone(&self.resets)));
+                // The writer did not hand its history over (gone, or not serving yet):
+                // what it acknowledged is in the kept history (SPEC D1). First, so
+                // that what it sends later and the file held is skipped.
+                if !import.history_received() && record.info.kind == TrajectoryKind::Primitive {
+                    import.enter_kept(&self.domain);
+                }
                 // The history the writer already handed over, at once.
                 import.pump();
                 self.watch_unnamed(&import);

@@ -125,18 +125,7 @@ pub(crate) fn handle_qos(
     qos
 }
 
-/// The domain of the services of one generation of a mirrored trajectory:
-/// `<domain>.g<generation>`.
-///
-/// Why per generation: an iceoryx2 service lives while any port of it does, and a
-/// value that still reads an image owns a share of its subscriber port (see
-/// [`crate::holdings`]). A name destroyed and created again — possibly with another
-/// cache, so other service settings — must not have to open the former trajectory's
-/// services, which may linger for as long as such a value; and the former's chunks
-/// are never the new one's.
-pub(crate) fn generation_domain(domain: &str, generation: u64) -> String {
-    format!("{domain}.g{generation}")
-}
+pub(crate) use crate::data_plane::service_name::generation_domain;
 
 /// The domain of inbox services: other processes' adds to a primitive trajectory.
 pub(crate) fn inbox_domain(domain: &str) -> String {

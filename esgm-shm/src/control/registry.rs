@@ -268,6 +268,11 @@ impl Registry {
         Ok(r)
     }
 
+    /// The generation of trajectory `name`, if it exists.
+    pub fn generation_of(&self, name: &str) -> Option<u64> {
+        self.placement.get(name).map(|p| p.generation)
+    }
+
     fn record(&self, name: &str) -> Result<TrajectoryRecord, ControlError> {
         let info = self.catalog.trajectory(name)?.clone();
         let checker = TypeChecker::new(self.catalog.types(), &info.type_name);

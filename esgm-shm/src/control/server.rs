@@ -1,6 +1,8 @@
 //! The coordinator: serves the [`Registry`] on `esgm/<domain>/control`, and cleans up
 //! after processes that died.
 
+use crate::data_plane::kept_history::KeptHistory;
+use crate::data_plane::service_name::generation_domain;
 use crate::service::ShmService;
 use iceoryx2::port::listener::Listener;
 use std::sync::Arc;
@@ -208,6 +210,10 @@ pub struct Coordinator {
     shutdown_requested: bool,
     /// A supervised process changed: clean up after dead processes now.
     cleanup_soon: bool,
+    /// Trajectory generations the batch being served ends (destroyed, or re-pointed
+    /// to a new generation): their kept histories are removed once the change is
+    /// saved, never before (a change the save undoes keeps its history).
+    ended: Vec<(String, u64)>,
     /// Where the registry is kept after each change (`None`: in memory only).
     state: Option<Persistence>,
     /// The domain's coordinator lock, held while serving.
@@ -252,6 +258,9 @@ impl Coordinator {
     /// Starts a coordinator for `domain` with `registry`, kept in memory only. Dead
     /// nodes left by crashed processes are cleaned first.
     pub fn create(domain: &str, registry: Registry) -> Result<Self, CoordinatorError> {
+        // A new registry: kept histories a former one left would be taken for its
+        // trajectories' (generations start again).
+        KeptHistory::remove_domain(domain);
         Self::serve_registry(domain, registry, None, None)
     }
 
@@ -276,7 +285,12 @@ impl Coordinator {
                     source: Box::new(source),
                 }
             })?,
-            None => Registry::new(types.clone()),
+            None => {
+                // A new registry: kept histories a former one left would be taken for
+                // its trajectories' (generations start again).
+                KeptHistory::remove_domain(domain);
+                Registry::new(types.clone())
+            }
         }
         .with_limits(limits);
         let recovered = registry.catalog().trajectories().count();
@@ -376,6 +390,7 @@ impl Coordinator {
             failures: 0,
             shutdown_requested: false,
             cleanup_soon: false,
+            ended: Vec::new(),
             state,
             _lock: lock,
             _admin: admin,
@@ -467,11 +482,15 @@ impl Coordinator {
                 return Ok(n);
             }
             if changed {
-                if let Err(refusal) = self.save_state() {
-                    // Undone: no change of the batch stands, and each is told so.
-                    for (_, response, changes) in &mut batch {
-                        if *changes {
-                            *response = Response::Error(refusal.clone());
+                match self.save_state() {
+                    Ok(()) => self.remove_ended(),
+                    Err(refusal) => {
+                        // Undone: no change of the batch stands, and each is told so.
+                        self.ended.clear();
+                        for (_, response, changes) in &mut batch {
+                            if *changes {
+                                *response = Response::Error(refusal.clone());
+                            }
                         }
                     }
                 }
@@ -482,6 +501,26 @@ impl Coordinator {
                 }
             }
         }
+    }
+
+    /// Removes the kept histories of the generations the last saved batch ended.
+    fn remove_ended(&mut self) {
+        for (trajectory, generation) in self.ended.drain(..) {
+            let domain = generation_domain(&self.domain, generation);
+            KeptHistory::remove(&domain, &trajectory);
+        }
+    }
+
+    /// The generation `request` ends if it succeeds: a destroyed trajectory's, or the
+    /// former one of a name re-pointed.
+    fn ending(&self, request: &Request) -> Option<(String, u64)> {
+        let name = match request {
+            Request::DestroyEntityTrajectoryStructure { name } => name,
+            Request::CreateTrajectory { spec, .. } if spec.replace => &spec.name,
+            _ => return None,
+        };
+        let generation = self.registry.generation_of(name)?;
+        Some((name.clone(), generation))
     }
 
     /// The answer to one request, and whether it changed the registry.
@@ -518,11 +557,15 @@ impl Coordinator {
                 if matches!(request, Request::ReportProcess { .. }) {
                     self.cleanup_soon = true;
                 }
+                let ending = self.ending(&request);
                 let mut response = self.registry.handle_from(request, origin);
                 if let (Response::Pong { saves, .. }, Some(state)) = (&mut response, &self.state) {
                     *saves = state.health().clone();
                 }
                 let changed = persist && !matches!(response, Response::Error(_));
+                if let Some(ended) = ending.filter(|_| changed) {
+                    self.ended.push(ended);
+                }
                 (response, changed)
             }
             Err(e) => {
@@ -704,8 +747,11 @@ impl Coordinator {
         }
         if self.shutdown_requested {
             // The domain is going down: the words its crashed processes kept mapped
-            // (counted as users for ever) go with it.
-            crate::wake_word::remove_domain(&self.domain);
+            // (counted as users for ever) go with it, and the kept histories.
+            crate::process::remove_domain_files(&self.domain);
+        } else if self.state.is_none() {
+            // Nothing remembers this registry: its trajectories' histories end with it.
+            KeptHistory::remove_domain(&self.domain);
         }
         Ok(())
     }

@@ -10,6 +10,7 @@
 pub mod capacity;
 pub mod image_layout;
 pub mod image_loan;
+pub mod kept_history;
 pub mod payload;
 pub mod publisher;
 pub mod qos;

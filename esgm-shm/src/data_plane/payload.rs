@@ -25,7 +25,7 @@
 //! |     40 | `sequence`    | u64  | per-publisher counter, +1 per sent sample            |
 //! |     48 | `kind`        | u32  | what the payload is ([`SampleHeader::KIND_STRUCTURE`]) |
 //! |     52 | `flags`       | u32  | properties of the payload ([`SampleHeader::FLAG_IMAGE_IN_PLACE`]) |
-//! |     56 | `reserved`    | u64  | zero; room to grow without changing the size        |
+//! |     56 | `kept`        | u64  | the structure's index in its kept history + 1; 0: not kept |
 //!
 //! Times and the type id sit in the header so that filters, time lookups and type
 //! checks never touch the payload. The archive length is there because a loaned slice
@@ -129,8 +129,13 @@ pub struct SampleHeader {
     pub kind: u32,
     /// Properties of the payload; see the `FLAG_*` constants. Unknown bits are ignored.
     pub flags: u32,
-    /// Zero; reserved for a later version of the header.
-    pub reserved: u64,
+    /// The structure's index in its trajectory's kept history, plus one
+    /// ([`crate::data_plane::kept_history`]; 0: not kept). A primitive trajectory's
+    /// writer keeps each structure it admits and numbers it there; a reader that
+    /// already holds an index (its history came from the kept file, or from the
+    /// writer before it restarted) skips it, so a history handed over again is never
+    /// entered twice.
+    pub kept: u64,
 }
 
 const _: () = assert!(std::mem::size_of::<SampleHeader>() == 64);
@@ -169,7 +174,7 @@ mod tests {
         assert_eq!(offset_of!(SampleHeader, sequence), 40);
         assert_eq!(offset_of!(SampleHeader, kind), 48);
         assert_eq!(offset_of!(SampleHeader, flags), 52);
-        assert_eq!(offset_of!(SampleHeader, reserved), 56);
+        assert_eq!(offset_of!(SampleHeader, kept), 56);
     }
 
     #[test]

@@ -450,6 +450,21 @@ impl TrajectoryPublisher {
         self.publish_inner(es, Some(add_time))
     }
 
+    /// [`Self::publish_added`] for a structure kept at index `kept` of its
+    /// trajectory's kept history (the header's [`SampleHeader::kept`]).
+    pub fn publish_kept(
+        &self,
+        es: &EntityStructure,
+        add_time: Time,
+        kept: u64,
+    ) -> Result<Published, PublishError> {
+        let loan = self.loan_structure(es)?;
+        let blocks = loan.blocks();
+        let sent = loan.send_kept(add_time, kept);
+        self.loan_spare(blocks);
+        sent
+    }
+
     fn publish_inner(
         &self,
         es: &EntityStructure,
@@ -569,8 +584,10 @@ impl TrajectoryPublisher {
         times: (Time, Time),
         flags: u32,
         add_time: Option<Time>,
+        kept: Option<u64>,
     ) -> Result<Published, PublishError> {
-        self.send_kind(sample, archive_len, times, (flags, SampleHeader::KIND_STRUCTURE), add_time)
+        let kind = (flags, SampleHeader::KIND_STRUCTURE);
+        self.send_kind(sample, archive_len, times, kind, add_time, kept)
     }
 
     /// Tells every reader that the trajectory was reset (T5): a marker sample
@@ -583,7 +600,7 @@ impl TrajectoryPublisher {
         // SAFETY: `zero_fill` initialised the whole payload.
         let sample = unsafe { sample.assume_init() };
         let now = self.clock.now();
-        self.send_kind(sample, 0, (now, now), (0, SampleHeader::KIND_RESET), None)
+        self.send_kind(sample, 0, (now, now), (0, SampleHeader::KIND_RESET), None, None)
     }
 
     fn send_kind(
@@ -593,6 +610,7 @@ impl TrajectoryPublisher {
         (valid_time, create_time): (Time, Time),
         (flags, kind): (u32, u32),
         add_time: Option<Time>,
+        kept: Option<u64>,
     ) -> Result<Published, PublishError> {
         let sequence = self.sequence.get();
         *sample.user_header_mut() = SampleHeader {
@@ -604,7 +622,7 @@ impl TrajectoryPublisher {
             sequence,
             kind,
             flags,
-            reserved: 0,
+            kept: kept.map_or(0, |index| index + 1),
         };
         let sent = sample.send();
         if matches!(sent, Ok(_) | Err(SendError::UnableToDeliver)) {

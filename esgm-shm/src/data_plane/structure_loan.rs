@@ -102,13 +102,28 @@ impl<'p> StructureLoan<'p> {
         self.send_added_at(Some(add_time))
     }
 
+    /// [`Self::send_added`] for a structure kept at index `kept` of its trajectory's
+    /// kept history ([`crate::SampleHeader::kept`]).
+    pub fn send_kept(self, add_time: Time, kept: u64) -> Result<Published, PublishError> {
+        self.send_with(Some(add_time), Some(kept))
+    }
+
     fn send_added_at(self, add_time: Option<Time>) -> Result<Published, PublishError> {
+        self.send_with(add_time, None)
+    }
+
+    fn send_with(
+        self,
+        add_time: Option<Time>,
+        kept: Option<u64>,
+    ) -> Result<Published, PublishError> {
         self.publisher.send(
             self.sample,
             self.archive_len,
             (self.valid_time, self.create_time),
             self.flags,
             add_time,
+            kept,
         )
     }
 }

@@ -59,7 +59,7 @@ impl Drop for Domain {
         self.esgm.take();
         // The domain ends here: the words a killed bridge kept counted go with it, as
         // at `esgm down`.
-        esgm_shm::wake_word::remove_domain(&self.name);
+        esgm_shm::process::remove_domain_files(&self.name);
     }
 }
 

@@ -193,7 +193,7 @@ pub fn stop(
         println!("cleaned up after {} processes that did not leave", cleaned.removed);
     }
     cleaned.log(esgm_shm::CleanupReporter::Owner);
-    esgm_shm::wake_word::remove_domain(domain);
+    esgm_shm::process::remove_domain_files(domain);
     if let Err(e) = std::fs::remove_dir_all(state.path()) {
         eprintln!("esgm: cannot remove {}: {e}", state.path().display());
     }

@@ -78,7 +78,7 @@ fn finish(domain: &str) -> anyhow::Result<()> {
         .context("cannot list nodes to clean up after dead processes")?
         .log(esgm_shm::CleanupReporter::Owner);
     stop_attached(domain)?;
-    esgm_shm::wake_word::remove_domain(domain);
+    esgm_shm::process::remove_domain_files(domain);
     println!("stopped `{domain}`");
     Ok(())
 }
@@ -137,7 +137,7 @@ fn stop_without_coordinator(domain: &str, unreachable: ControlClientError) -> an
         // Nothing runs: what its killed processes left of the domain's futex words
         // goes all the same, unless a process is still attached to it.
         if esgm_shm::processes_of(domain).is_ok_and(|p| p.is_empty()) {
-            esgm_shm::wake_word::remove_domain(domain);
+            esgm_shm::process::remove_domain_files(domain);
         }
         return Err(anyhow::Error::new(unreachable).context(format!("cannot stop `{domain}`")));
     };

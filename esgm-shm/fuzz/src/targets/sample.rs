@@ -53,7 +53,7 @@ impl Sample {
                 sequence: sequence as u64,
                 kind: SampleHeader::KIND_STRUCTURE,
                 flags: 0,
-                reserved: 0,
+                kept: 0,
             };
             seeds.push(sample(&header, &bytes));
         }
@@ -100,7 +100,7 @@ fn mutate_header(rng: &mut Rng, header: &mut SampleHeader, payload_len: usize) {
         3 => header.type_id = *rng.pick(&[0, expected() ^ 1, u64::MAX, type_id("RobotState")]),
         4 => header.kind = *rng.pick(&[0, 1, 2, 3, u32::MAX]),
         5 => header.flags = rng.next_u64() as u32,
-        6 => header.reserved = rng.next_u64(),
+        6 => header.kept = rng.next_u64(),
         _ => header.sequence = rng.next_u64(),
     }
 }
