@@ -152,6 +152,32 @@ fn a_restarted_writer_continues_its_history() {
     assert_eq!(all(&later.get_entity_trajectory_structure("kept").unwrap()), expected);
 }
 
+/// Images written into loans (never copied on their way to readers) are kept too: a
+/// command started after their writer was killed reads their pixels.
+#[test]
+fn images_outlive_their_killed_writer() {
+    let c = coordinator("kept-images");
+    let mut child = spawn_child("child_program", (ROLE, "camera"), (DOMAIN, c.domain()));
+    let early = location(&c, "early");
+    let found = wait_for(|| {
+        early.get_entity_trajectory_structure("done").is_ok_and(|d| d.get_latest().is_ok())
+    });
+    child.kill().unwrap();
+    let (_, output) = reap(child, TIMEOUT);
+    assert!(found, "the camera never said done:\n{output}");
+    let later = tool(c.domain());
+    let frames = later.get_entity_trajectory_structure("frames").unwrap();
+    let kept = frames.get_between(i64::MIN, i64::MAX).unwrap();
+    assert_eq!(kept.iter().map(|s| s.structure.valid_time).collect::<Vec<_>>(), [7, 8, 9]);
+    for s in &kept {
+        let Some(esgm_core::value::Value::OctetSeq(pixels)) = s.structure.get("image_data") else {
+            panic!("no pixels in {s:?}")
+        };
+        assert_eq!(pixels.len(), 64 * 48 * 3);
+        common::check_pattern(pixels, s.structure.valid_time as u64);
+    }
+}
+
 /// Destroying a trajectory removes its kept history: a name created again starts
 /// empty, in every process.
 #[test]
@@ -221,6 +247,28 @@ fn child_program() {
                 .add(state(1, 1.0))
                 .unwrap();
             // Killed here by the parent.
+            std::thread::sleep(TIMEOUT * 6);
+            panic!("not killed");
+        }
+        "camera" => {
+            let esgm = ShmEsgm::builder().domain(&domain).host("camera").connect().unwrap();
+            let policy = FluentStreamPolicy::default().cache(CacheConstraint::Elements(3));
+            let spec = TrajectorySpec::primitive("frames", "Image").policy(policy);
+            let frames = esgm.create_trajectory(spec).unwrap();
+            for vt in 0..10 {
+                let mut buffer = frames.image_buffer(64, 48, 0).expect("a loan");
+                common::fill(buffer.pixels_mut(), vt as u64);
+                let image = esgm_core::EntityStructure::new("cam", vt, vt)
+                    .with("width", 64i64)
+                    .with("height", 48i64)
+                    .with("format", 0i64)
+                    .with("image_data", buffer.into_octets());
+                assert_eq!(frames.add(image).unwrap(), AddOutcome::Added);
+            }
+            esgm.create_primitive_entity_trajectory_structure("done", "RobotState")
+                .unwrap()
+                .add(state(1, 1.0))
+                .unwrap();
             std::thread::sleep(TIMEOUT * 6);
             panic!("not killed");
         }

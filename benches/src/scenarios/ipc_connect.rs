@@ -26,7 +26,7 @@
 //! starts and, in the measuring process, the coordinator's — runs on that process's
 //! core: what a user's pinned process would get.
 
-use super::ipc_connect_echo::{CACHE, ConnectRun, echo, ping_pong};
+use super::ipc_connect_echo::{CACHE, ConnectRun, History, echo, ping_pong};
 use super::ipc_esgm_small;
 use super::ipc_payload::Kind;
 use super::{ros1_peer, zenoh_peer};
@@ -42,6 +42,10 @@ pub const SMALL_NAME: &str = "connect-small";
 pub const IMAGE_NAME: &str = "connect-image";
 /// The name of the small structure's scenario paced as the image's.
 pub const SMALL_PACED_NAME: &str = "connect-small-paced";
+/// `connect-small` on volatile trajectories: what keeping the history costs a hop.
+pub const SMALL_VOLATILE_NAME: &str = "connect-small-volatile";
+/// `connect-image` on volatile trajectories.
+pub const IMAGE_VOLATILE_NAME: &str = "connect-image-volatile";
 
 /// One payload through `connect` (see the module docs).
 #[derive(Debug, Clone, Copy)]
@@ -51,23 +55,44 @@ pub struct Connect {
     /// Each hop after the `ready`/`done` exchange, as a camera's frames
     /// ([`super::ipc_connect_echo`]).
     paced: bool,
+    /// Whether the trajectories keep their history beyond their writer.
+    history: History,
 }
 
 impl Connect {
     /// The small structure, back to back.
-    pub const SMALL: Connect = Connect { name: SMALL_NAME, kind: Kind::Small, paced: false };
+    pub const SMALL: Connect =
+        Connect { name: SMALL_NAME, kind: Kind::Small, paced: false, history: History::Kept };
     /// The small structure, paced as the image.
     pub const SMALL_PACED: Connect =
-        Connect { name: SMALL_PACED_NAME, kind: Kind::Small, paced: true };
+        Connect { name: SMALL_PACED_NAME, kind: Kind::Small, paced: true, history: History::Kept };
     /// The image.
-    pub const IMAGE: Connect = Connect { name: IMAGE_NAME, kind: Kind::Image, paced: true };
+    pub const IMAGE: Connect =
+        Connect { name: IMAGE_NAME, kind: Kind::Image, paced: true, history: History::Kept };
+    /// The small structure, back to back, on volatile trajectories.
+    pub const SMALL_VOLATILE: Connect = Connect {
+        name: SMALL_VOLATILE_NAME,
+        kind: Kind::Small,
+        paced: false,
+        history: History::Volatile,
+    };
+    /// The image on volatile trajectories.
+    pub const IMAGE_VOLATILE: Connect = Connect {
+        name: IMAGE_VOLATILE_NAME,
+        kind: Kind::Image,
+        paced: true,
+        history: History::Volatile,
+    };
 
     /// The scenario each row is compared with (same wait).
     fn baseline(&self) -> &'static str {
-        match (self.kind, self.paced) {
-            (Kind::Small, false) => ipc_esgm_small::NAME,
-            (Kind::Small, true) => SMALL_NAME,
-            (Kind::Image, _) => SMALL_PACED_NAME,
+        match (self.kind, self.paced, self.history) {
+            // The kept row, which the targets hold to its volatile one.
+            (Kind::Small, _, History::Volatile) => SMALL_NAME,
+            (Kind::Image, _, History::Volatile) => IMAGE_NAME,
+            (Kind::Small, false, History::Kept) => ipc_esgm_small::NAME,
+            (Kind::Small, true, History::Kept) => SMALL_NAME,
+            (Kind::Image, _, History::Kept) => SMALL_PACED_NAME,
         }
     }
 
@@ -94,8 +119,12 @@ impl Connect {
             .if_empty("no reply was measured")
             .note(format!(
                 "each leg: add in one connected process -> the Sample held by a subscriber in \
-                 the other; {how}; primitive trajectories with a cache of {CACHE}; coordinator \
-                 on a thread of the measuring process"
+                 the other; {how}; primitive trajectories with a cache of {CACHE}, {}; \
+                 coordinator on a thread of the measuring process",
+                match self.history {
+                    History::Kept => "their history kept beyond their writer (the default)",
+                    History::Volatile => "volatile (their history is not kept beyond the writer)",
+                }
             ));
         if self.kind == Kind::Image {
             row = row.note(format!(
@@ -125,6 +154,18 @@ impl Scenario for Connect {
     }
 
     fn summary(&self) -> &'static str {
+        if self.history == History::Volatile {
+            return match self.kind {
+                Kind::Small => {
+                    "connect-small on volatile trajectories: the history is not kept beyond the \
+                     writer, so the pair says what keeping costs a hop"
+                }
+                Kind::Image => {
+                    "connect-image on volatile trajectories: the pair says what keeping an \
+                     image costs a hop (the pixels are encoded into the kept history)"
+                }
+            };
+        }
         match (self.kind, self.paced) {
             (Kind::Small, false) => {
                 "~120-byte RobotState, add in one connected process -> subscriber in another \
@@ -145,13 +186,24 @@ impl Scenario for Connect {
         let payload_bytes = esgm_core::codec::encoded_len(&self.kind.make(0))? as u64;
         let mut rows = Vec::new();
         for mode in WaitMode::SPIN_AND_BLOCK {
-            let run = ping_pong(ctx, self.name, self.kind, self.paced, mode)?;
+            let run = ping_pong(ctx, self.name, (self.kind, self.history), self.paced, mode)?;
             rows.push(self.row(mode, &run, payload_bytes));
         }
         Ok(rows)
     }
 
     fn targets(&self) -> Vec<Target> {
+        if self.history == History::Volatile {
+            // Keeping the history costs a small hop at most a tenth, an image's a fifth.
+            let (kept, limit) = match self.kind {
+                Kind::Small => (SMALL_NAME, 1.1),
+                Kind::Image => (IMAGE_NAME, 1.2),
+            };
+            return Wait::BOTH
+                .iter()
+                .map(|&w| Target::at_most(kept, self.name, w, limit))
+                .collect();
+        }
         match (self.kind, self.paced) {
             // Shown beside its back-to-back row; the image's row is held to it.
             (Kind::Small, true) => Vec::new(),
@@ -173,6 +225,6 @@ impl Scenario for Connect {
     }
 
     fn run_peer(&self, role: &PeerRole) -> anyhow::Result<Vec<String>> {
-        echo(role, self.kind, self.paced)
+        echo(role, (self.kind, self.history), self.paced)
     }
 }

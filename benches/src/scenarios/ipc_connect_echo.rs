@@ -102,7 +102,7 @@ pub struct ConnectRun {
 pub fn ping_pong(
     ctx: &Context,
     scenario: &str,
-    kind: Kind,
+    (kind, history): (Kind, History),
     paced: bool,
     mode: WaitMode,
 ) -> anyhow::Result<ConnectRun> {
@@ -120,9 +120,9 @@ pub fn ping_pong(
     let coordinator = Coordinator::spawn(&domain, Registry::new(TypeRegistry::with_library()))
         .with_context(|| format!("could not start a coordinator for {domain}"))?;
     let esgm = connect(coordinator.domain(), "bench-measuring")?;
-    let ping = create(&esgm, PING, kind)?;
+    let ping = create_as(&esgm, PING, kind, history)?;
     // Images only (see the module docs).
-    let done = if paced { Some(create(&esgm, DONE, Kind::Small)?) } else { None };
+    let done = if paced { Some(create_as(&esgm, DONE, Kind::Small, history)?) } else { None };
     let mut peer = ctx.spawn_peer_process(scenario, mode, &domain)?;
     let mut patience = Patience::for_peer(&mut peer);
     // The peer subscribes to ours before it creates its own: once its trajectories
@@ -217,14 +217,18 @@ pub fn ping_pong(
 }
 
 /// The peer side: echoes every ping until the stop (`paced` as the measuring side's).
-pub fn echo(role: &PeerRole, kind: Kind, paced: bool) -> anyhow::Result<Vec<String>> {
+pub fn echo(
+    role: &PeerRole,
+    (kind, history): (Kind, History),
+    paced: bool,
+) -> anyhow::Result<Vec<String>> {
     iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Error);
     let esgm = connect(&role.domain, "bench-peer")?;
     // Subscribed before ours are created: see `ping_pong`.
     let ping = subscribe(&esgm, PING)?;
     let done = if paced { Some(subscribe(&esgm, DONE)?) } else { None };
-    let pong = create(&esgm, PONG, kind)?;
-    let ready = if paced { Some(create(&esgm, READY, Kind::Small)?) } else { None };
+    let pong = create_as(&esgm, PONG, kind, history)?;
+    let ready = if paced { Some(create_as(&esgm, READY, Kind::Small, history)?) } else { None };
 
     let mut patience = Patience::alone();
     let (mut pings, mut early, mut held, mut last) = (0u64, 0u64, 0u64, HELLO);
@@ -293,11 +297,36 @@ pub fn connect(domain: &str, host: &str) -> anyhow::Result<ShmEsgm> {
         .with_context(|| format!("{host}: could not connect to the coordinator of {domain}"))
 }
 
-/// Creates primitive trajectory `name` of `kind`, written by this process.
+/// Whether a row's primitive trajectories keep what they acknowledged beyond their
+/// writer (the default, SPEC D1) or are volatile: the two rows of a scenario say what
+/// keeping costs a hop.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum History {
+    /// Kept (the default).
+    Kept,
+    /// [`TrajectorySpec::volatile`].
+    Volatile,
+}
+
+/// Creates primitive trajectory `name` of `kind`, written by this process, its history
+/// kept.
 pub fn create(esgm: &ShmEsgm, name: &str, kind: Kind) -> anyhow::Result<InProcessTrajectory> {
+    create_as(esgm, name, kind, History::Kept)
+}
+
+/// [`create`], its history kept or volatile.
+pub fn create_as(
+    esgm: &ShmEsgm,
+    name: &str,
+    kind: Kind,
+    history: History,
+) -> anyhow::Result<InProcessTrajectory> {
     let policy = FluentStreamPolicy::default().cache(CacheConstraint::Elements(CACHE));
-    esgm.create_trajectory(TrajectorySpec::primitive(name, kind.type_name()).policy(policy))
-        .with_context(|| format!("could not create trajectory {name}"))
+    let mut spec = TrajectorySpec::primitive(name, kind.type_name()).policy(policy);
+    if history == History::Volatile {
+        spec = spec.volatile();
+    }
+    esgm.create_trajectory(spec).with_context(|| format!("could not create trajectory {name}"))
 }
 
 /// Subscribes to trajectory `name`, which exists.

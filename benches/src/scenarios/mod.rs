@@ -187,6 +187,8 @@ pub fn all() -> Vec<Box<dyn Scenario>> {
         Box::new(ipc_connect::Connect::SMALL),
         Box::new(ipc_connect::Connect::SMALL_PACED),
         Box::new(ipc_connect::Connect::IMAGE),
+        Box::new(ipc_connect::Connect::SMALL_VOLATILE),
+        Box::new(ipc_connect::Connect::IMAGE_VOLATILE),
         Box::new(ipc_cpp::Cpp::SMALL),
         Box::new(ipc_cpp::Cpp::IMAGE),
         Box::new(iceoryx_c_peer::IceoryxC::SMALL),

@@ -198,6 +198,7 @@ pub trait Esgm: Send + Sync {
             policy,
             replace: false,
             readers: None,
+            volatile: false,
         };
         self.create_trajectory(spec)
     }

@@ -90,6 +90,14 @@ pub struct TrajectorySpec {
     /// no such limit and ignores it.
     #[serde(default)]
     pub readers: Option<usize>,
+    /// Its history lives only in the process that writes it and its readers (ROS 2's
+    /// "volatile" durability): a primitive trajectory's acknowledged structures are
+    /// otherwise kept where they outlive every process while the domain runs (SPEC
+    /// D1), which costs one encode per add into that memory, a copy for images. For a
+    /// camera's frames, whose history nobody asks for after the camera died. The
+    /// in-process runtime has no process to outlive and ignores it.
+    #[serde(default)]
+    pub volatile: bool,
 }
 
 impl TrajectorySpec {
@@ -100,7 +108,16 @@ impl TrajectorySpec {
             policy: FluentStreamPolicy::default(),
             replace: false,
             readers: None,
+            volatile: false,
         }
+    }
+
+    /// A trajectory whose history is not kept beyond the process that writes it (see
+    /// the field `volatile`).
+    #[must_use]
+    pub fn volatile(mut self) -> Self {
+        self.volatile = true;
+        self
     }
 
     /// Room for `readers` processes reading it at once (see the field `readers`).

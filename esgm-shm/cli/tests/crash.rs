@@ -298,6 +298,52 @@ fn a_killed_coordinator_leaves_data_flowing_and_comes_back_whole() {
     nothing_left(&sys.domain, after.iter().map(|(n, p, _)| (n.as_str(), p.unwrap())));
 }
 
+/// Issue 39's done criteria from the command line: structures `esgm push` acknowledged
+/// stay queryable after `kill -9` of their writer, here the coordinator's own process
+/// (it writes what the command line creates); the next coordinator writes the
+/// trajectory again with that history, and an orderly `esgm down` leaves no kept
+/// history in shared memory.
+#[test]
+fn pushed_structures_outlive_kill_9_of_their_writer_and_the_coordinator() {
+    let _one = ONE_SYSTEM.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let sys = System::new("crash-kept");
+    sys.ok(&["up", "--detach"]);
+    sys.ok(&["traj", "create", "odo", "--primitive", "RobotState", "--cache", "2"]);
+    for (vt, x) in [("1000", "1"), ("2000", "2"), ("3000", "3")] {
+        sys.ok(&["push", "odo", &format!("x={x}"), "y=0", "dir=0", "--valid-time", vt]);
+    }
+    let xs = |sys: &System| -> Vec<f64> {
+        sys.ok(&["--json", "between", "odo", "0", "10000"])
+            .lines()
+            .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+            .map(|v| v["attributes"]["x"].as_f64().unwrap())
+            .collect()
+    };
+    assert_eq!(xs(&sys), [2.0, 3.0], "what cache 2 keeps");
+
+    let coordinator = coordinator_pid(&sys.domain);
+    kill9(coordinator);
+    let killed_at = Instant::now();
+    while alive(coordinator) {
+        assert!(killed_at.elapsed() < Duration::from_secs(10), "the coordinator did not die");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    sys.ok(&["up", "--detach"]);
+    assert_eq!(sys.latest_valid_time("odo", Duration::from_secs(30)), 3000);
+    assert_eq!(xs(&sys), [2.0, 3.0], "the history the killed writer kept");
+    sys.ok(&["push", "odo", "x=4", "y=0", "dir=0", "--valid-time", "4000"]);
+    assert_eq!(xs(&sys), [3.0, 4.0], "continued by the new writer");
+
+    sys.ok(&["down"]);
+    let kept: Vec<String> = std::fs::read_dir("/dev/shm")
+        .unwrap()
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(&format!("esgm_keep@{}.", sys.domain)))
+        .collect();
+    assert!(kept.is_empty(), "kept histories left after `esgm down`: {kept:?}");
+}
+
 /// `kill -9` of each worker kind in turn — the camera, each unit, the robot — and of a
 /// CLI subscriber: the killed worker is restarted, its trajectory resumes, every other
 /// process keeps its pid, the subscriber and a recorder keep running, and `esgm down`

@@ -136,10 +136,10 @@ impl Outlet {
             self.encode(sample);
             return None;
         }
-        let kept = self.keep(sample);
+        let index = self.reserve();
         let sent = chunk
             .complete(&self.publisher, &es.name, es.valid_time, es.create_time)
-            .and_then(|loan| match kept {
+            .and_then(|loan| match index {
                 Some(index) => loan.send_kept(sample.add_time, index),
                 None => loan.send_added(sample.add_time),
             });
@@ -147,17 +147,25 @@ impl Outlet {
             Ok(p) => p,
             Err(e) => {
                 self.entry_failed(&e);
+                self.not_kept(index, &e);
                 return None;
             }
         };
         if let Some((_, owner)) = &self.own {
             owner.count_sent(true);
         }
-        let received = self.receive_own(published.sequence)?;
+        let Some(received) = self.receive_own(published.sequence) else {
+            self.not_kept(index, &"the image sent did not come back to be kept");
+            return None;
+        };
         if let Some(Value::OctetSeq(pixels)) = received.get("image_data") {
             loan.sent(pixels.clone());
         }
-        Some(Arc::new(received))
+        // Kept from the structure as this process received it (its pixels held in the
+        // sent chunk), after the readers were woken.
+        let received = Arc::new(received);
+        self.keep(index, &Sample::new(Arc::clone(&received), sample.add_time, sample.add_time));
+        Some(received)
     }
 
     /// Publishes an entering structure by encoding it; an image's pixels are copied
@@ -245,24 +253,34 @@ impl Outlet {
         })
     }
 
-    /// Keeps an entering structure in the kept history (a primitive trajectory's)
-    /// before it is published: what `add` acknowledges is in the file by then.
-    /// Returns its index; one that could not be kept still uses an index up (readers
-    /// keep the writer's order), and is counted.
-    fn keep(&mut self, sample: &Sample) -> Option<u64> {
-        let kept = self.kept.as_mut()?;
-        match kept.append(&sample.structure, sample.add_time) {
-            Ok(index) => Some(index),
-            Err(e) => {
-                self.unkept += 1;
-                if is_power_of_ten(self.unkept) {
-                    tracing::warn!(trajectory = %self.publisher.trajectory(), error = %e,
-                        not_kept = self.unkept,
-                        "a structure is not kept: it will not outlive this process (counted; \
-                         the log says the 1st, 10th, 100th… only)");
-                }
-                Some(kept.skip())
-            }
+    /// The index an entering structure of a primitive trajectory will be kept at,
+    /// reserved before it is published ([`KeptHistory::reserve`]); `None` if the
+    /// trajectory keeps nothing.
+    fn reserve(&mut self) -> Option<u64> {
+        self.kept.as_mut().map(KeptHistory::reserve)
+    }
+
+    /// Keeps a structure just published under `index` (reserved): readers were woken
+    /// first, and `add` returns once it is kept. One that could not be kept is logged
+    /// and counted; its index is never given again.
+    fn keep(&mut self, index: Option<u64>, sample: &Sample) {
+        let (Some(index), Some(kept)) = (index, self.kept.as_mut()) else { return };
+        if let Err(e) = kept.write(index, &sample.structure, sample.add_time) {
+            self.not_kept(Some(index), &e);
+        }
+    }
+
+    /// The structure reserved at `index` was not kept, for `why`: logged and counted.
+    fn not_kept(&mut self, index: Option<u64>, why: &dyn std::fmt::Display) {
+        if index.is_none() {
+            return;
+        }
+        self.unkept += 1;
+        if is_power_of_ten(self.unkept) {
+            tracing::warn!(trajectory = %self.publisher.trajectory(), error = %why,
+                not_kept = self.unkept,
+                "a structure is not kept: it will not outlive this process (counted; \
+                 the log says the 1st, 10th, 100th… only)");
         }
     }
 
@@ -280,8 +298,9 @@ impl Outlet {
     fn publish(&mut self, event: &StoreEvent) {
         let result = match event {
             StoreEvent::Entered(s) => {
-                let kept = self.keep(s);
-                self.publish_entry(s, kept);
+                let index = self.reserve();
+                self.publish_entry(s, index);
+                self.keep(index, s);
                 return;
             }
             StoreEvent::Violation(v) => self.violation_publisher().and_then(|p| p.publish(v)),
@@ -439,7 +458,7 @@ impl Export {
             trajectory: name.clone(),
             readers,
         };
-        let kept = match primitive {
+        let kept = match primitive && !record.volatile {
             true => open_kept(domain, &name, type_name, policy),
             false => None,
         };

@@ -240,6 +240,9 @@ pub struct TrajectoryRecord {
     /// default.
     #[serde(default)]
     pub readers: crate::capacity::Readers,
+    /// Its history is not kept beyond its writer ([`TrajectorySpec::volatile`]).
+    #[serde(default)]
+    pub volatile: bool,
 }
 
 /// Where one trajectory is written ([`Request::ListPlacements`]).

@@ -283,17 +283,20 @@ impl Registry {
             // process needs to check the states it receives.
             Err(_) => self.state_definitions(&info),
         };
-        let (writer, generation, port, asked, released) = self
+        let (writer, generation, port, asked, released, volatile) = self
             .placement
             .get(name)
-            .map(|p| (p.writer.clone(), p.generation, p.port, p.spec.readers, p.released))
+            .map(|p| {
+                let spec = &p.spec;
+                (p.writer.clone(), p.generation, p.port, spec.readers, p.released, spec.volatile)
+            })
             .unwrap_or_default();
         // Checked when it was created; a saved spec whose readers exceed a domain
         // restarted with fewer processes is served with the most it may have.
         let readers = self.limits.readers_of(asked).unwrap_or(Readers(
             asked.unwrap_or(self.limits.readers).min(self.limits.max_processes),
         ));
-        Ok(TrajectoryRecord { info, types, writer, generation, port, readers, released })
+        Ok(TrajectoryRecord { info, types, writer, generation, port, readers, released, volatile })
     }
 
     /// The pid a process reported for `name`, if any.

@@ -452,23 +452,50 @@ impl KeptHistory {
         self.shape.file_len()
     }
 
-    /// Keeps `es`, added at `add_time`, and returns its index. Entries the retention
-    /// lets go make room first; the file grows (doubling) when the policy keeps more
-    /// than it holds. Called by the writer alone (the store's tap, under the store's
-    /// lock).
+    /// Keeps `es`, added at `add_time`, and returns its index: [`Self::reserve`] then
+    /// [`Self::write`].
     pub fn append(&mut self, es: &EntityStructure, add_time: Time) -> Result<u64, KeepError> {
+        let index = self.reserve();
+        self.write(index, es, add_time)?;
+        Ok(index)
+    }
+
+    /// Takes the next index for a structure about to be written with [`Self::write`]:
+    /// the writer publishes the structure under it first (readers are woken before
+    /// the copy), then keeps it, and `add` returns after both. An index reserved and
+    /// never written (the writer died between the two, or the write failed) is skipped
+    /// by readers and never given again.
+    pub fn reserve(&mut self) -> u64 {
+        let index = self.next_index();
+        self.map.write_u64(OFF_NEXT, index + 1);
+        index
+    }
+
+    /// Keeps `es`, added at `add_time`, at `index`, the index [`Self::reserve`] gave
+    /// last. Entries the retention lets go make room first; the file grows (doubling)
+    /// when the policy keeps more than it holds. Called by the writer alone (the
+    /// store's tap, under the store's lock).
+    pub fn write(
+        &mut self,
+        index: u64,
+        es: &EntityStructure,
+        add_time: Time,
+    ) -> Result<(), KeepError> {
+        debug_assert_eq!(index + 1, self.next_index(), "the index reserved last");
         let len = codec::encoded_len(es)?;
         let padded = align_up(len, ARCHIVE_ALIGNMENT) as u64;
-        self.let_go(es.valid_time);
+        self.let_go(index, es.valid_time);
         let start = loop {
-            if let Some(start) = self.room_for(padded) {
+            if let Some(start) = self.room_for(index, padded) {
                 break start;
             }
-            self.grow(padded)?;
+            self.grow(index, padded)?;
         };
         let at = self.shape.area_at() + (start % self.shape.area) as usize;
         let written = codec::encode_into(es, self.map.bytes_mut(at, padded as usize))?;
-        let index = self.next_index();
+        self.map.write_u64(OFF_HEAD, start + padded);
+        // The slot last: a reader (or a writer after a crash) sees the entry whole or
+        // not at all (a slot that names another index).
         self.write_slot(Slot {
             index,
             start,
@@ -476,10 +503,7 @@ impl KeptHistory {
             add_time,
             valid_time: es.valid_time,
         });
-        self.map.write_u64(OFF_HEAD, start + padded);
-        // Published last: a reader (or a writer after a crash) sees the entry whole.
-        self.map.write_u64(OFF_NEXT, index + 1);
-        Ok(index)
+        Ok(())
     }
 
     /// Lets every kept entry go (the trajectory was reset, T5); indices go on.
@@ -487,69 +511,58 @@ impl KeptHistory {
         self.map.write_u64(OFF_FIRST, self.next_index());
     }
 
-    /// Uses up an index without keeping anything at it (a structure that could not be
-    /// kept), so that indices stay the writer's add order.
-    pub fn skip(&mut self) -> u64 {
-        let index = self.next_index();
+    /// Where the entry at `index` (reserved), of `len` bytes, goes now, if it fits
+    /// beside the kept ones: its start (a position that only grows), skipping the
+    /// area's tail if it would wrap.
+    fn room_for(&self, index: u64, len: u64) -> Option<u64> {
         let first = self.map.read_u64(OFF_FIRST);
-        self.map.write_u64(OFF_NEXT, index + 1);
-        if first == index {
-            self.map.write_u64(OFF_FIRST, index + 1);
-        }
-        index
-    }
-
-    /// Where an entry of `len` bytes goes now, if it fits beside the kept ones: its
-    /// start (a position that only grows), skipping the area's tail if it would wrap.
-    fn room_for(&self, len: u64) -> Option<u64> {
-        let (next, first) = (self.next_index(), self.map.read_u64(OFF_FIRST));
-        if next - first >= self.shape.slots || len > self.shape.area {
+        if index - first >= self.shape.slots || len > self.shape.area {
             return None;
         }
         let head = self.map.read_u64(OFF_HEAD);
         let offset = head % self.shape.area;
         let start =
             if offset + len > self.shape.area { head + (self.shape.area - offset) } else { head };
-        let oldest = if first < next { self.slot(first)?.start } else { start };
+        let oldest = if first < index { self.slot(first)?.start } else { start };
         (start + len - oldest <= self.shape.area).then_some(start)
     }
 
-    /// Lets go what the retention no longer keeps once an entry valid at `valid_time`
-    /// is added.
-    fn let_go(&mut self, valid_time: Time) {
-        let next = self.next_index();
-        let mut first = self.map.read_u64(OFF_FIRST);
+    /// Lets go what the retention no longer keeps once the entry at `index`, valid at
+    /// `valid_time`, is added, and indices reserved and never written at the front.
+    fn let_go(&mut self, index: u64, valid_time: Time) {
+        let mut first = self.map.read_u64(OFF_FIRST).min(index);
+        let newest = match first < index {
+            true => (self.map.read_u64(OFF_NEWEST) as Time).max(valid_time),
+            false => valid_time,
+        };
         match self.retention {
             Retention::All => {}
-            Retention::Count(n) => first = first.max((next + 1).saturating_sub(n)),
+            Retention::Count(n) => first = first.max((index + 1).saturating_sub(n)),
             Retention::Window(t) => {
-                let newest = match first < next {
-                    true => (self.map.read_u64(OFF_NEWEST) as Time).max(valid_time),
-                    false => valid_time,
-                };
                 let oldest_kept = newest.saturating_sub(t).saturating_add(1);
-                while first < next && self.slot(first).is_some_and(|s| s.valid_time < oldest_kept) {
+                while first < index && self.slot(first).is_some_and(|s| s.valid_time < oldest_kept)
+                {
                     first += 1;
                 }
             }
         }
-        self.map.write_u64(OFF_FIRST, first.min(next));
-        let newest = match first < next {
-            true => (self.map.read_u64(OFF_NEWEST) as Time).max(valid_time),
-            false => valid_time,
-        };
+        while first < index && self.slot(first).is_none() {
+            first += 1;
+        }
+        self.map.write_u64(OFF_FIRST, first);
         self.map.write_u64(OFF_NEWEST, newest as u64);
     }
 
-    /// Rewrites the file with room for `len` more bytes and one more entry: each of
-    /// slots and area doubled until it fits.
-    fn grow(&mut self, len: u64) -> Result<(), KeepError> {
-        let (next, first) = (self.next_index(), self.map.read_u64(OFF_FIRST));
-        let live: Vec<Slot> = (first..next).filter_map(|i| self.slot(i)).collect();
+    /// Rewrites the file with room for the entry at `index` (reserved), of `len`
+    /// bytes: each of slots and area doubled until it fits.
+    fn grow(&mut self, index: u64, len: u64) -> Result<(), KeepError> {
+        let first = self.map.read_u64(OFF_FIRST);
+        let live: Vec<Slot> = (first..index).filter_map(|i| self.slot(i)).collect();
+        let first = live.first().map_or(index, |s| s.index);
         let used: u64 =
             live.iter().map(|s| align_up(s.len as usize, ARCHIVE_ALIGNMENT) as u64).sum();
         let mut shape = self.shape;
-        let slots_needed = (live.len() as u64 + 1).next_power_of_two();
+        let slots_needed = (index - first + 1).next_power_of_two();
         shape.slots = shape.slots.max(slots_needed);
         while shape.area < used + len {
             shape.area = shape.area.saturating_mul(2);
@@ -561,7 +574,7 @@ impl KeptHistory {
                 max: MAX_AREA,
             });
         }
-        let grown = Self::build(&self.path, shape, first, self.retention)?;
+        let grown = Self::build(&self.path, shape, index + 1, self.retention)?;
         let Some(new) = grown.kept.as_ref() else { unreachable!("built, not yet renamed") };
         let mut head = 0u64;
         for slot in &live {
@@ -579,7 +592,6 @@ impl KeptHistory {
         new.map.write_u64(OFF_HEAD, head);
         new.map.write_u64(OFF_NEWEST, self.map.read_u64(OFF_NEWEST));
         new.map.write_u64(OFF_FIRST, first);
-        new.map.write_u64(OFF_NEXT, next);
         let grown = grown.commit()?;
         tracing::debug!(path = %self.path.display(), slots = shape.slots, area = shape.area,
             "kept history grown");
@@ -864,6 +876,33 @@ mod tests {
         let read = w.entries();
         assert_eq!(read.entries.iter().map(|e| e.index).collect::<Vec<_>>(), [197, 198, 199]);
         assert_eq!(read.skipped, 0);
+    }
+
+    #[test]
+    fn an_index_reserved_and_never_written_is_skipped_and_never_given_again() {
+        let d = domain("reserved");
+        let _end = Removed(d.clone());
+        let mut w = KeptHistory::open_or_create(&d, "x", 1, Retention::All).unwrap();
+        // A writer that died between publishing and keeping.
+        assert_eq!(w.reserve(), 0);
+        drop(w);
+        let mut w = KeptHistory::open_or_create(&d, "x", 1, Retention::All).unwrap();
+        let big = "z".repeat(30_000);
+        for i in 1..10 {
+            assert_eq!(w.append(&es(i, &big), i).unwrap(), i as u64);
+        }
+        let read = w.entries();
+        assert_eq!(
+            read.entries.iter().map(|e| e.index).collect::<Vec<_>>(),
+            (1..10).collect::<Vec<_>>()
+        );
+        assert_eq!(read.skipped, 0, "let go at the front once the next was written");
+        // One in the middle is skipped and counted by a reader.
+        let hole = w.reserve();
+        w.append(&es(20, "a"), 20).unwrap();
+        let read = w.entries();
+        assert!(read.entries.iter().all(|e| e.index != hole));
+        assert_eq!((read.entries.len(), read.skipped), (10, 1));
     }
 
     #[test]

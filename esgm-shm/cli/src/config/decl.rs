@@ -248,6 +248,12 @@ pub struct TrajectoryDecl {
     /// `tf`-like one); each reader costs its writer about 3 KiB of private memory.
     #[arg(long, value_name = "N")]
     pub readers: Option<usize>,
+    /// Keep its history only in its writer and readers, as ROS 2's volatile
+    /// durability (a camera's frames): a primitive trajectory's acknowledged
+    /// structures otherwise outlive every process while the domain runs.
+    #[arg(long)]
+    #[serde(default)]
+    pub volatile: bool,
     /// The policy (C1–C6).
     #[command(flatten)]
     #[serde(default)]
@@ -374,6 +380,9 @@ impl TrajectoryDecl {
                 );
             }
             spec = spec.readers(readers);
+        }
+        if self.volatile {
+            spec = spec.volatile();
         }
         Ok(spec)
     }
