@@ -62,6 +62,14 @@ enum Command {
     /// One process of `esgm scale`'s synthetic robot (started by `esgm scale`).
     #[command(hide = true)]
     ScaleWorker(cmd::scale::WorkerArgs),
+    /// `esgm scale`'s robot while random processes (the coordinator too) are killed
+    /// with SIGKILL and restarted: checks that nothing acknowledged was lost, that
+    /// every loss has a cause and that memory and /dev/shm come back; writes
+    /// chaos.json.
+    Chaos(cmd::chaos::Args),
+    /// One process of `esgm chaos`'s robot (declared by `esgm chaos`).
+    #[command(hide = true)]
+    ChaosWorker(cmd::chaos::WorkerArgs),
     /// Entity structure types.
     #[command(subcommand)]
     Type(cmd::types::TypeCommand),

@@ -283,7 +283,12 @@ impl Import {
             violations,
             replica,
             rejected: 0,
-            check: WriterCheck::new(record.port.map(|p| p.publisher)),
+            check: WriterCheck::new(record.port.map(|p| p.publisher)).holding(
+                match own_subscriber(&entity_type) {
+                    0 => crate::writer_check::MAX_HELD,
+                    _ => crate::writer_check::MAX_HELD_IMAGES,
+                },
+            ),
             writer,
             workers: Arc::default(),
             sleepers: Arc::default(),

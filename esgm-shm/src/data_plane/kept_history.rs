@@ -75,6 +75,10 @@ const FIRST_AREA: u64 = 64 * 1024;
 /// The most a file's area may grow to (a policy that keeps everything of a camera
 /// stops here, and what is added past it is counted, not kept).
 pub const MAX_AREA: u64 = 16 << 30;
+/// The highest index a file may have reached: far beyond any writer's count (a
+/// replaced file starts at the clock's nanoseconds, about 2^61 in this century), far
+/// enough below `u64::MAX` that a writer never overflows it.
+const MAX_INDEX: u64 = 1 << 62;
 /// The most slots a file may have.
 const MAX_SLOTS: u64 = 1 << 28;
 
@@ -159,6 +163,9 @@ pub struct KeptEntries {
     pub next: u64,
     /// Entries that could not be read (bad slot, bad bytes, overwritten meanwhile).
     pub skipped: u64,
+    /// Indices reserved and never written: published, then their writer died (or
+    /// failed to keep them) before `add` returned, so never acknowledged.
+    pub unwritten: u64,
 }
 
 /// A mapping of a whole file.
@@ -280,6 +287,21 @@ struct Slot {
     valid_time: Time,
 }
 
+/// The counters the writer moves, as it keeps them in its own memory: another process
+/// may write the file's header, so the writer never reads its own counters back from
+/// it, and publishes them after each change.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+struct Counters {
+    /// The index the next entry gets.
+    next: u64,
+    /// The oldest index kept.
+    first: u64,
+    /// Where the next entry's bytes go (a position that only grows).
+    head: u64,
+    /// The newest valid time kept (while something is).
+    newest: Time,
+}
+
 /// A trajectory's kept history, mapped.
 #[derive(Debug)]
 pub struct KeptHistory {
@@ -287,6 +309,8 @@ pub struct KeptHistory {
     map: Mapping,
     shape: Shape,
     retention: Retention,
+    /// The writer's counters (a reader reads the header's).
+    counters: Counters,
 }
 
 impl KeptHistory {
@@ -313,8 +337,16 @@ impl KeptHistory {
         retention: Retention,
     ) -> Result<Self, KeepError> {
         let path = Self::path_for(domain, trajectory);
+        let mut above = 0;
         match Self::open_path(&path, retention) {
-            Ok(Some(kept)) if kept.shape.type_id == type_id => return Ok(kept),
+            Ok(Some(mut kept)) if kept.shape.type_id == type_id => match kept.continued() {
+                Ok(()) => return Ok(kept),
+                Err(why) => {
+                    above = kept.map.read_u64(OFF_NEXT).saturating_add(1).min(MAX_INDEX);
+                    tracing::warn!(path = %path.display(), trajectory, why,
+                        "a kept history whose counters contradict it is replaced");
+                }
+            },
             Ok(Some(_)) => {
                 tracing::warn!(path = %path.display(), trajectory,
                     "a kept history of another type is replaced");
@@ -326,10 +358,45 @@ impl KeptHistory {
             Err(e) => tracing::warn!(error = %e, trajectory, "a kept history is replaced"),
         }
         let shape = Shape { slots: first_slots(retention), area: FIRST_AREA, type_id };
-        let above = std::time::SystemTime::now()
+        let clock = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(1 << 62, |d| d.as_nanos() as u64);
-        Self::create_at(&path, shape, above, retention)
+        Self::create_at(&path, shape, clock.max(above).min(MAX_INDEX), retention)
+    }
+
+    /// Takes the header's counters as this writer's, if they agree with the file: the
+    /// kept entries lie below `next` and at most a file's slots back (one more while an
+    /// index is reserved), each slot that
+    /// names its entry within the area's last `area` bytes before `head`. Else why not.
+    fn continued(&mut self) -> Result<(), String> {
+        let c = Counters {
+            next: self.map.read_u64(OFF_NEXT),
+            first: self.map.read_u64(OFF_FIRST),
+            head: self.map.read_u64(OFF_HEAD),
+            newest: self.map.read_u64(OFF_NEWEST) as Time,
+        };
+        if c.head % ARCHIVE_ALIGNMENT as u64 != 0 {
+            return Err(format!("head {} is not {ARCHIVE_ALIGNMENT}-aligned", c.head));
+        }
+        // One more than the slots: a writer killed between reserving an index and
+        // letting the oldest go.
+        if c.first > c.next || c.next - c.first > self.shape.slots + 1 || c.next > MAX_INDEX {
+            return Err(format!(
+                "first {} and next {} with {} slots",
+                c.first, c.next, self.shape.slots
+            ));
+        }
+        for index in c.first..c.next {
+            let Some(slot) = self.slot(index) else { continue };
+            let end = slot.start.checked_add(slot.len);
+            if end.is_none_or(|end| {
+                end > c.head || slot.start.saturating_add(self.shape.area) < c.head
+            }) {
+                return Err(format!("entry {index} lies outside the area before head {}", c.head));
+            }
+        }
+        self.counters = c;
+        Ok(())
     }
 
     /// Opens the kept history of `trajectory` to read it; `None` if there is none.
@@ -375,7 +442,13 @@ impl KeptHistory {
             ));
         }
         let map = Mapping::map(&file, shape.file_len(), path)?;
-        Ok(Some(Self { path: path.to_owned(), map, shape, retention }))
+        Ok(Some(Self {
+            path: path.to_owned(),
+            map,
+            shape,
+            retention,
+            counters: Counters::default(),
+        }))
     }
 
     /// Writes a new file of `shape` at `path`, its next index `next`, with nothing
@@ -401,11 +474,10 @@ impl KeptHistory {
         let made = (|| {
             file.set_len(shape.file_len() as u64).map_err(|e| io(path, e))?;
             let map = Mapping::map(&file, shape.file_len(), path)?;
-            let kept = Self { path: path.to_owned(), map, shape, retention };
+            let counters = Counters { next, first: next, head: 0, newest: 0 };
+            let kept = Self { path: path.to_owned(), map, shape, retention, counters };
             kept.write_shape();
-            kept.map.write_u64(OFF_NEXT, next);
-            kept.map.write_u64(OFF_FIRST, next);
-            kept.map.write_u64(OFF_HEAD, 0);
+            kept.publish();
             Ok(kept)
         })();
         match made {
@@ -446,6 +518,12 @@ impl KeptHistory {
         self.len() == 0
     }
 
+    /// How many entries the file has room for now (it grows when its policy keeps
+    /// more).
+    pub fn capacity(&self) -> u64 {
+        self.shape.slots
+    }
+
     /// The file's length in bytes (what it costs in `/dev/shm` at most: tmpfs
     /// commits only the pages written).
     pub fn file_len(&self) -> usize {
@@ -466,9 +544,20 @@ impl KeptHistory {
     /// never written (the writer died between the two, or the write failed) is skipped
     /// by readers and never given again.
     pub fn reserve(&mut self) -> u64 {
-        let index = self.next_index();
-        self.map.write_u64(OFF_NEXT, index + 1);
+        let index = self.counters.next;
+        self.counters.next = index + 1;
+        self.map.write_u64(OFF_NEXT, self.counters.next);
         index
+    }
+
+    /// Writes the writer's counters into the header, `next` last (a reader that sees
+    /// an index sees what comes before it).
+    fn publish(&self) {
+        let c = self.counters;
+        self.map.write_u64(OFF_HEAD, c.head);
+        self.map.write_u64(OFF_NEWEST, c.newest as u64);
+        self.map.write_u64(OFF_FIRST, c.first);
+        self.map.write_u64(OFF_NEXT, c.next);
     }
 
     /// Keeps `es`, added at `add_time`, at `index`, the index [`Self::reserve`] gave
@@ -481,19 +570,27 @@ impl KeptHistory {
         es: &EntityStructure,
         add_time: Time,
     ) -> Result<(), KeepError> {
-        debug_assert_eq!(index + 1, self.next_index(), "the index reserved last");
+        debug_assert_eq!(index + 1, self.counters.next, "the index reserved last");
         let len = codec::encoded_len(es)?;
         let padded = align_up(len, ARCHIVE_ALIGNMENT) as u64;
         self.let_go(index, es.valid_time);
+        let mut grown = 0;
         let start = loop {
             if let Some(start) = self.room_for(index, padded) {
                 break start;
             }
+            // Twice is always enough for this writer's own file: a third is a file
+            // another process scribbles on while it is written.
+            if grown == 2 {
+                return Err(corrupt(&self.path, "changed by another process while kept"));
+            }
             self.grow(index, padded)?;
+            grown += 1;
         };
         let at = self.shape.area_at() + (start % self.shape.area) as usize;
         let written = codec::encode_into(es, self.map.bytes_mut(at, padded as usize))?;
-        self.map.write_u64(OFF_HEAD, start + padded);
+        self.counters.head = start + padded;
+        self.map.write_u64(OFF_HEAD, self.counters.head);
         // The slot last: a reader (or a writer after a crash) sees the entry whole or
         // not at all (a slot that names another index).
         self.write_slot(Slot {
@@ -508,31 +605,32 @@ impl KeptHistory {
 
     /// Lets every kept entry go (the trajectory was reset, T5); indices go on.
     pub fn reset(&mut self) {
-        self.map.write_u64(OFF_FIRST, self.next_index());
+        self.counters.first = self.counters.next;
+        self.map.write_u64(OFF_FIRST, self.counters.first);
     }
 
     /// Where the entry at `index` (reserved), of `len` bytes, goes now, if it fits
     /// beside the kept ones: its start (a position that only grows), skipping the
     /// area's tail if it would wrap.
     fn room_for(&self, index: u64, len: u64) -> Option<u64> {
-        let first = self.map.read_u64(OFF_FIRST);
-        if index - first >= self.shape.slots || len > self.shape.area {
+        let first = self.counters.first;
+        if index.checked_sub(first)? >= self.shape.slots || len > self.shape.area {
             return None;
         }
-        let head = self.map.read_u64(OFF_HEAD);
+        let head = self.counters.head;
         let offset = head % self.shape.area;
         let start =
             if offset + len > self.shape.area { head + (self.shape.area - offset) } else { head };
         let oldest = if first < index { self.slot(first)?.start } else { start };
-        (start + len - oldest <= self.shape.area).then_some(start)
+        (start.checked_add(len)?.checked_sub(oldest)? <= self.shape.area).then_some(start)
     }
 
     /// Lets go what the retention no longer keeps once the entry at `index`, valid at
     /// `valid_time`, is added, and indices reserved and never written at the front.
     fn let_go(&mut self, index: u64, valid_time: Time) {
-        let mut first = self.map.read_u64(OFF_FIRST).min(index);
+        let mut first = self.counters.first.min(index);
         let newest = match first < index {
-            true => (self.map.read_u64(OFF_NEWEST) as Time).max(valid_time),
+            true => self.counters.newest.max(valid_time),
             false => valid_time,
         };
         match self.retention {
@@ -549,6 +647,8 @@ impl KeptHistory {
         while first < index && self.slot(first).is_none() {
             first += 1;
         }
+        self.counters.first = first;
+        self.counters.newest = newest;
         self.map.write_u64(OFF_FIRST, first);
         self.map.write_u64(OFF_NEWEST, newest as u64);
     }
@@ -556,13 +656,13 @@ impl KeptHistory {
     /// Rewrites the file with room for the entry at `index` (reserved), of `len`
     /// bytes: each of slots and area doubled until it fits.
     fn grow(&mut self, index: u64, len: u64) -> Result<(), KeepError> {
-        let first = self.map.read_u64(OFF_FIRST);
+        let first = self.counters.first;
         let live: Vec<Slot> = (first..index).filter_map(|i| self.slot(i)).collect();
         let first = live.first().map_or(index, |s| s.index);
         let used: u64 =
             live.iter().map(|s| align_up(s.len as usize, ARCHIVE_ALIGNMENT) as u64).sum();
         let mut shape = self.shape;
-        let slots_needed = (index - first + 1).next_power_of_two();
+        let slots_needed = (index.saturating_sub(first) + 1).next_power_of_two();
         shape.slots = shape.slots.max(slots_needed);
         while shape.area < used + len {
             shape.area = shape.area.saturating_mul(2);
@@ -574,7 +674,7 @@ impl KeptHistory {
                 max: MAX_AREA,
             });
         }
-        let grown = Self::build(&self.path, shape, index + 1, self.retention)?;
+        let mut grown = Self::build(&self.path, shape, index + 1, self.retention)?;
         let Some(new) = grown.kept.as_ref() else { unreachable!("built, not yet renamed") };
         let mut head = 0u64;
         for slot in &live {
@@ -589,9 +689,8 @@ impl KeptHistory {
             new.write_slot(Slot { start: head, ..*slot });
             head += padded as u64;
         }
-        new.map.write_u64(OFF_HEAD, head);
-        new.map.write_u64(OFF_NEWEST, self.map.read_u64(OFF_NEWEST));
-        new.map.write_u64(OFF_FIRST, first);
+        let counters = Counters { next: index + 1, first, head, newest: self.counters.newest };
+        grown.set_counters(counters);
         let grown = grown.commit()?;
         tracing::debug!(path = %self.path.display(), slots = shape.slots, area = shape.area,
             "kept history grown");
@@ -618,17 +717,7 @@ impl KeptHistory {
     /// Entry `index`'s slot, if it describes that entry and its bytes lie where a kept
     /// entry's may.
     fn slot(&self, index: u64) -> Option<Slot> {
-        let mut bytes = [0u8; SLOT_LEN];
-        self.map.copy_out(self.slot_at(index), &mut bytes);
-        let field =
-            |i: usize| u64::from_ne_bytes(bytes[i * 8..i * 8 + 8].try_into().unwrap_or([0; 8]));
-        let slot = Slot {
-            index: field(0),
-            start: field(1),
-            len: field(2),
-            add_time: field(3) as Time,
-            valid_time: field(4) as Time,
-        };
+        let slot = self.raw_slot(index);
         let area = self.shape.area;
         let fits = slot.index == index
             && (ENVELOPE_LEN as u64..=area).contains(&slot.len)
@@ -637,8 +726,25 @@ impl KeptHistory {
         fits.then_some(slot)
     }
 
-    /// Reads every kept entry, oldest first. Entries whose slot or bytes do not check,
-    /// or that the writer let go while they were read, are skipped and counted.
+    /// The slot where entry `index` is described, as it is (it may describe another).
+    fn raw_slot(&self, index: u64) -> Slot {
+        let mut bytes = [0u8; SLOT_LEN];
+        self.map.copy_out(self.slot_at(index), &mut bytes);
+        let field =
+            |i: usize| u64::from_ne_bytes(bytes[i * 8..i * 8 + 8].try_into().unwrap_or([0; 8]));
+        Slot {
+            index: field(0),
+            start: field(1),
+            len: field(2),
+            add_time: field(3) as Time,
+            valid_time: field(4) as Time,
+        }
+    }
+
+    /// Reads every kept entry, oldest first. Indices reserved and never written (their
+    /// writer died between publishing and keeping: not acknowledged) are counted apart;
+    /// entries whose slot or bytes do not check, or that the writer let go while they
+    /// were read, are skipped and counted.
     pub fn entries(&self) -> KeptEntries {
         let next = self.next_index();
         let first = self.map.read_u64(OFF_FIRST).min(next);
@@ -648,6 +754,7 @@ impl KeptHistory {
         for index in first..next {
             match self.read(index) {
                 Some(entry) => out.entries.push(entry),
+                None if self.raw_slot(index).index != index => out.unwritten += 1,
                 None => out.skipped += 1,
             }
         }
@@ -721,6 +828,14 @@ struct Unrenamed {
 }
 
 impl Unrenamed {
+    /// Gives the file the writer's counters (and the header).
+    fn set_counters(&mut self, counters: Counters) {
+        if let Some(kept) = &mut self.kept {
+            kept.counters = counters;
+            kept.publish();
+        }
+    }
+
     /// Renames the file over its place: readers that open it from now on read it.
     fn commit(mut self) -> Result<KeptHistory, KeepError> {
         let Some(kept) = self.kept.take() else { unreachable!("committed once") };
@@ -896,13 +1011,32 @@ mod tests {
             read.entries.iter().map(|e| e.index).collect::<Vec<_>>(),
             (1..10).collect::<Vec<_>>()
         );
-        assert_eq!(read.skipped, 0, "let go at the front once the next was written");
+        assert_eq!((read.skipped, read.unwritten), (0, 0), "let go once the next was written");
         // One in the middle is skipped and counted by a reader.
         let hole = w.reserve();
         w.append(&es(20, "a"), 20).unwrap();
         let read = w.entries();
         assert!(read.entries.iter().all(|e| e.index != hole));
-        assert_eq!((read.entries.len(), read.skipped), (10, 1));
+        assert_eq!((read.entries.len(), read.skipped, read.unwritten), (10, 0, 1));
+    }
+
+    #[test]
+    fn a_writer_killed_after_reserving_at_a_full_count_is_continued() {
+        let d = domain("full");
+        let _end = Removed(d.clone());
+        let mut w = KeptHistory::open_or_create(&d, "x", 1, Retention::Count(4)).unwrap();
+        for i in 0..10 {
+            w.append(&es(i, "a"), i).unwrap();
+        }
+        // Killed after publishing index 10, before keeping it.
+        assert_eq!(w.reserve(), 10);
+        drop(w);
+        let mut w = KeptHistory::open_or_create(&d, "x", 1, Retention::Count(4)).unwrap();
+        let kept: Vec<u64> = w.entries().entries.iter().map(|e| e.index).collect();
+        assert_eq!(kept, [7, 8, 9], "continued, not replaced");
+        assert_eq!(w.append(&es(11, "b"), 11).unwrap(), 11);
+        let kept: Vec<u64> = w.entries().entries.iter().map(|e| e.index).collect();
+        assert_eq!(kept, [8, 9, 11]);
     }
 
     #[test]

@@ -26,6 +26,12 @@ use crate::sequence_gaps::SequenceGaps;
 /// process that is not the writer can make a reader hold.
 pub const MAX_HELD: usize = 1024;
 
+/// The most arrivals of a trajectory of images held ([`WriterCheck::holding`]): a
+/// camera's frames held while a restarted writer waits to be named (its coordinator
+/// restarting too) would otherwise be 1,024 frames, copied onto the heap past the
+/// reader's borrow budget (a gigabyte of 640×480 frames).
+pub const MAX_HELD_IMAGES: usize = 32;
+
 /// What the check decided about an arrival (or a held one, once the writer is named).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum Decided<T> {
@@ -51,6 +57,7 @@ pub enum Decided<T> {
 #[derive(Debug)]
 pub struct WriterCheck<T> {
     writer: Option<u128>,
+    max_held: usize,
     held: VecDeque<(u128, u64, T)>,
     gaps: SequenceGaps<u128>,
     asked: bool,
@@ -64,12 +71,21 @@ impl<T> WriterCheck<T> {
     pub fn new(writer: Option<u128>) -> Self {
         Self {
             writer,
+            max_held: MAX_HELD,
             held: VecDeque::new(),
             gaps: SequenceGaps::default(),
             asked: false,
             not_writer: 0,
             lost: 0,
         }
+    }
+
+    /// This check holding at most `max_held` arrivals (at least one) instead of
+    /// [`MAX_HELD`]: [`MAX_HELD_IMAGES`] for a trajectory of images.
+    #[must_use]
+    pub fn holding(mut self, max_held: usize) -> Self {
+        self.max_held = max_held.max(1);
+        self
     }
 
     /// The port the registry names as the writer's.
@@ -84,7 +100,7 @@ impl<T> WriterCheck<T> {
         if self.writer == Some(port) {
             return Some(self.enter(port, sequence, item));
         }
-        let evicted = if self.held.len() >= MAX_HELD {
+        let evicted = if self.held.len() >= self.max_held {
             self.held.pop_front().map(|(port, _, item)| self.refuse(port, item))
         } else {
             None
@@ -219,6 +235,17 @@ mod tests {
         // The former port is no longer the writer's.
         assert!(check.arrive(WRITER, 10, "stale").is_none());
         assert_eq!(check.lost(), 0);
+    }
+
+    #[test]
+    fn a_trajectory_of_images_holds_fewer() {
+        let mut check = WriterCheck::new(None).holding(MAX_HELD_IMAGES);
+        for s in 0..MAX_HELD_IMAGES as u64 {
+            assert_eq!(check.arrive(OTHER, s, s), None);
+        }
+        assert_eq!(check.arrive(OTHER, 99, 99), Some(Decided::NotWriter { port: OTHER, item: 0 }));
+        let entered = check.set_writer(Some(OTHER));
+        assert_eq!(entered.len(), MAX_HELD_IMAGES);
     }
 
     #[test]

@@ -50,9 +50,14 @@ pub fn run(domain: &str) -> anyhow::Result<()> {
         }
     }
     let deadline = Instant::now() + WITHIN;
-    while ControlClient::connect(domain, Duration::from_millis(200)).is_ok()
-        || pids.iter().any(|p| alive(*p))
-    {
+    // A coordinator still serves, or a process of the system still runs. (The control
+    // service itself may outlive them: a killed process's port holds it until the
+    // cleanup below.)
+    let serving = || {
+        ControlClient::connect(domain, Duration::from_millis(200))
+            .is_ok_and(|c| c.call(&Request::Ping).is_ok())
+    };
+    while serving() || pids.iter().any(|p| alive(*p)) {
         if Instant::now() > deadline {
             let left: Vec<String> =
                 pids.iter().filter(|p| alive(**p)).map(u32::to_string).collect();

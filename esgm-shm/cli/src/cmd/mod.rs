@@ -2,6 +2,7 @@
 
 pub mod apply;
 pub mod bridge;
+pub mod chaos;
 pub mod compare;
 pub mod demo;
 pub mod docs;
@@ -43,6 +44,8 @@ pub fn process_name(c: &Command) -> String {
         Command::Soak(_) => "soak".into(),
         Command::Scale(_) => "scale".into(),
         Command::ScaleWorker(a) => format!("scale-worker-{}", a.index),
+        Command::Chaos(_) => "chaos".into(),
+        Command::ChaosWorker(a) => chaos::worker::name(a.index),
         Command::Worker(role) => role.process_name(),
         _ => "cli".into(),
     }
@@ -92,6 +95,8 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Soak(a) => soak::run(domain, a),
         Command::Scale(a) => scale::run(domain, a),
         Command::ScaleWorker(a) => scale::worker::run(domain, a),
+        Command::Chaos(a) => chaos::run(domain, a),
+        Command::ChaosWorker(a) => chaos::worker::run(domain, a),
         Command::Worker(role) => worker::run(domain, role),
         // Answered in main, before anything connects.
         Command::Completions(_) | Command::Man(_) => Ok(()),

@@ -491,7 +491,7 @@ pub(super) fn left_behind_of(
 }
 
 /// Copies the files of `from` into `to` (created).
-fn copy_dir(from: &Path, to: &Path) -> anyhow::Result<()> {
+pub(super) fn copy_dir(from: &Path, to: &Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(to).with_context(|| format!("cannot create {}", to.display()))?;
     for entry in
         std::fs::read_dir(from).with_context(|| format!("cannot list {}", from.display()))?

@@ -5,6 +5,7 @@ pub mod blocking_add;
 pub mod codec;
 pub mod configuration;
 pub mod control;
+pub mod kept;
 pub mod recording;
 pub mod sample;
 pub mod wire;
@@ -12,7 +13,7 @@ pub mod wire;
 use crate::target::{Broken, Target};
 
 /// The names `--target` takes, in the order a run visits them.
-pub const NAMES: [&str; 9] = [
+pub const NAMES: [&str; 10] = [
     "codec",
     "sample",
     "request",
@@ -22,6 +23,7 @@ pub const NAMES: [&str; 9] = [
     "wire",
     "recording",
     "config",
+    "kept",
 ];
 
 /// The target called `name`, with its seeds made; `None` for an unknown name.
@@ -39,6 +41,7 @@ pub fn by_name(name: &str) -> Option<Result<Box<dyn Target>, Broken>> {
         "wire" => boxed(wire::Wire::new()),
         "recording" => boxed(recording::RecordingTarget::new()),
         "config" => boxed(Ok(configuration::Configuration::new())),
+        "kept" => boxed(kept::Kept::new()),
         _ => return None,
     })
 }

@@ -73,14 +73,14 @@ pub struct Report {
 }
 
 /// Cache of each trajectory: enough history for late readers, bounded memory.
-const CACHE: usize = 10;
+pub(crate) const CACHE: usize = 10;
 /// Images of a camera trajectory kept.
-const IMAGE_CACHE: usize = 4;
+pub(crate) const IMAGE_CACHE: usize = 4;
 const WIDTH: i64 = 640;
 const HEIGHT: i64 = 480;
 /// Readers a trajectory admits beyond the profile's: the processes `esgm scale`
 /// starts later to time a new process's connect and first add.
-const JOINING: usize = 1;
+pub(crate) const JOINING: usize = 1;
 /// How long a worker waits for the trajectories it reads to be created by others.
 const PATIENCE: Duration = Duration::from_secs(120);
 
@@ -168,7 +168,10 @@ pub fn run(domain: &str, a: &WorkerArgs) -> anyhow::Result<()> {
 }
 
 /// A handle on `name` once its writer created it.
-fn wait_for_trajectory(esgm: &ShmEsgm, name: &str) -> anyhow::Result<InProcessTrajectory> {
+pub(crate) fn wait_for_trajectory(
+    esgm: &ShmEsgm,
+    name: &str,
+) -> anyhow::Result<InProcessTrajectory> {
     let deadline = Instant::now() + PATIENCE;
     loop {
         match esgm.get_entity_trajectory_structure(name) {
@@ -267,8 +270,20 @@ fn robot_state(now: i64) -> EntityStructure {
 /// trajectory's own buffer.
 fn make(handle: &InProcessTrajectory, class: Class, n: u64) -> EntityStructure {
     let now = SystemClock.now();
+    make_at(handle, class, n, (now, now))
+}
+
+/// The `n`th structure of `handle` of `class`, valid and created at `times`: a
+/// `RobotState`, or an image whose pixels are rendered into the trajectory's own
+/// buffer, as a camera does (`esgm chaos` writes the same robot).
+pub(crate) fn make_at(
+    handle: &InProcessTrajectory,
+    class: Class,
+    n: u64,
+    (valid, created): (i64, i64),
+) -> EntityStructure {
     if class != Class::Image {
-        return robot_state(now);
+        return RobotState { x: n as f64, y: 2.0, dir: 3.0 }.to_structure("robot", valid, created);
     }
     let octets = match handle.image_buffer(WIDTH, HEIGHT, Image::FORMAT_RGB8) {
         Some(mut buffer) => {
@@ -279,7 +294,14 @@ fn make(handle: &InProcessTrajectory, class: Class, n: u64) -> EntityStructure {
         None => vec![0u8; (WIDTH * HEIGHT * 3) as usize].into(),
     };
     Image { width: WIDTH, height: HEIGHT, format: Image::FORMAT_RGB8, image_data: octets }
-        .to_structure("camera", now, now)
+        .to_structure("camera", valid, created)
+}
+
+/// A frame of the profile's cameras (on the heap), to size their caches.
+pub(crate) fn image_of_profile() -> EntityStructure {
+    let pixels = vec![0u8; (WIDTH * HEIGHT * 3) as usize];
+    Image { width: WIDTH, height: HEIGHT, format: Image::FORMAT_RGB8, image_data: pixels.into() }
+        .to_structure("camera", 0, 0)
 }
 
 /// Adds to every written trajectory at its rate until the harness says `stop`.
