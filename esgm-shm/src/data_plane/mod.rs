@@ -25,5 +25,6 @@ pub mod subscriber;
 pub mod type_id;
 pub mod violations;
 pub mod wait;
+pub(crate) mod wake_protocol;
 pub mod wake_word;
 pub mod writer_check;

@@ -102,6 +102,7 @@ use std::sync::OnceLock;
 use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
+use super::wake_protocol as protocol;
 use crate::process::access::ShmAccess;
 
 /// The environment variable that chooses how readers sleep: `futex` (the default) or
@@ -127,15 +128,7 @@ const SLEEPERS: usize = 64;
 /// (the high 32), so that the writer sees whether either changed while it looked at
 /// the event's listeners.
 const COUNTS: usize = 72;
-const FIELD: u64 = 0xFFFF;
-const COVERED_SHIFT: u32 = 16;
-const CHANGE: u64 = 1 << 32;
 const USERS: usize = 128;
-/// A slot's flags: its mapping is counted among the receivers, and among the covered.
-/// The bits below count its sleepers.
-const RECEIVER_FLAG: u32 = 1 << 31;
-const COVERED_FLAG: u32 = 1 << 30;
-const SLEEPER_BITS: u32 = COVERED_FLAG - 1;
 /// Where the mappings' slots begin, and how many there are: a 32-bit count each.
 const SLOTS: usize = 192;
 const SLOT_COUNT: usize = (LEN - SLOTS) / 4;
@@ -323,8 +316,8 @@ impl WakeWord {
         for slot in (0..SLOT_COUNT).map(|i| (start + i) % SLOT_COUNT) {
             match slot_lock(file, slot, libc::F_WRLCK as libc::c_short) {
                 Ok(()) => {
-                    // SAFETY: mapped by the caller, LEN long.
-                    unsafe { count_out(base, slot) };
+                    let page = PageAt { base, slot: None };
+                    protocol::count_out(&page, page.slot_cell(slot));
                     return Some(slot);
                 }
                 Err(e) if matches!(e.raw_os_error(), Some(libc::EAGAIN | libc::EACCES)) => {}
@@ -362,33 +355,16 @@ impl WakeWord {
     /// Everything is read before the wake-up: a thread woken counts itself out of
     /// `covered` at once, often before this thread is back from the system call.
     pub(crate) fn ring_counting(&self, listeners: impl FnOnce() -> usize) -> Ring {
-        self.counter(SEQUENCE).fetch_add(1, Ordering::SeqCst);
-        let sleepers = self.counter(SLEEPERS).load(Ordering::SeqCst);
-        // Receivers and covered at once, after the add: a connection covered after
-        // this load looks at the word after the add, and feeds.
-        let snapshot = self.counts().load(Ordering::SeqCst);
-        let (receivers, covered) = decode(snapshot);
-        let mut listening = 0;
-        let mut steady = false;
-        if receivers > 0 {
-            listening = listeners();
-            // Unchanged meanwhile: the listeners counted are those receivers'.
-            steady = self.counts().load(Ordering::SeqCst) == snapshot;
+        let rang = protocol::ring(&self.page(), listeners);
+        if rang.fruitless {
+            self.due(&self.fruitless);
         }
-        let mut woken = 0;
-        if sleepers != 0 {
-            woken = futex_wake(self.counter(SEQUENCE));
-            // A sleeper between its count and its sleep, woken by an earlier ring, or
-            // dead: after enough of these, look for the dead.
-            if woken < libc::c_long::from(sleepers) {
-                self.due(&self.fruitless);
-            }
-        }
-        // A sleeper counted but not woken, or a covered connection whose thread this
-        // ring did not wake (before its sleep, or dead): notify, to be sure.
-        let woke_all = woken >= libc::c_long::from(sleepers.max(covered));
-        let covered = steady && covered == receivers && listening == receivers as usize && woke_all;
-        Ring { receivers, listeners: listening, covered }
+        Ring { receivers: rang.receivers, listeners: rang.listeners, covered: rang.covered }
+    }
+
+    /// This mapping's page, as the protocol's steps take it.
+    fn page(&self) -> PageAt {
+        PageAt { base: self.base, slot: self.slot }
     }
 
     /// The writer saw fewer listeners on the trajectory's event than receivers counted
@@ -452,8 +428,8 @@ impl WakeWord {
             }
             // A lock this description can take is held by no live mapping.
             if slot_lock(&self.file, slot, libc::F_WRLCK as libc::c_short).is_ok() {
-                // SAFETY: the page lives as long as `self`.
-                counted_out += unsafe { count_out(self.base, slot) };
+                let page = self.page();
+                counted_out += protocol::count_out(&page, page.slot_cell(slot));
                 let _ = slot_lock(&self.file, slot, libc::F_UNLCK as libc::c_short);
             }
         }
@@ -470,7 +446,7 @@ impl WakeWord {
     /// how many of them as covered by a sleeper (see the module docs): for diagnostics
     /// and tests.
     pub fn receivers(&self) -> (u32, u32) {
-        decode(self.counts().load(Ordering::SeqCst))
+        protocol::decode(self.counts().load(Ordering::SeqCst))
     }
 
     /// True if `other` maps the same file: a connection covers only a word its
@@ -484,49 +460,33 @@ impl WakeWord {
         unsafe { counts_at(self.base) }
     }
 
-    /// Counts this mapping's connection among the receivers: the total first, then the
-    /// slot, so that a death between the two leaves the total too high (a notify sent
-    /// for nothing, never one skipped). False, and nothing counted, for a mapping
-    /// without a slot: nothing could count it out if its process died.
+    /// Counts this mapping's connection among the receivers
+    /// ([`protocol::receiver_in`]). False, and nothing counted, for a mapping without a
+    /// slot: nothing could count it out if its process died.
     pub(crate) fn count_receiver_in(&self) -> bool {
-        let Some(slot) = self.slot else { return false };
-        adjust(self.counts(), 1, 0);
-        self.counter(SLOTS + 4 * slot).fetch_or(RECEIVER_FLAG, Ordering::SeqCst);
-        true
+        protocol::receiver_in(&self.page())
     }
 
-    /// Counts this mapping's connection out of the receivers: the slot first, then the
-    /// total.
+    /// Counts this mapping's connection out of the receivers.
     pub(crate) fn count_receiver_out(&self) {
-        let Some(slot) = self.slot else { return };
-        self.counter(SLOTS + 4 * slot).fetch_and(!RECEIVER_FLAG, Ordering::SeqCst);
-        adjust(self.counts(), -1, 0);
+        protocol::receiver_out(&self.page());
     }
 
-    /// Counts this mapping's connection as covered: the slot first, then the total, so
-    /// that a death between the two leaves the total too low (a notify sent for
-    /// nothing). Only for a mapping counted among the receivers.
+    /// Counts this mapping's connection as covered ([`protocol::covered_in`]). Only for
+    /// a mapping counted among the receivers.
     pub(crate) fn count_covered_in(&self) {
-        let Some(slot) = self.slot else { return };
-        self.counter(SLOTS + 4 * slot).fetch_or(COVERED_FLAG, Ordering::SeqCst);
-        adjust(self.counts(), 0, 1);
+        protocol::covered_in(&self.page());
     }
 
-    /// Counts this mapping's connection out of the covered: the total first, then the
-    /// slot.
+    /// Counts this mapping's connection out of the covered.
     pub(crate) fn count_covered_out(&self) {
-        let Some(slot) = self.slot else { return };
-        adjust(self.counts(), 0, -1);
-        self.counter(SLOTS + 4 * slot).fetch_and(!COVERED_FLAG, Ordering::SeqCst);
+        protocol::covered_out(&self.page());
     }
 
-    /// Counts the calling thread asleep until the result is dropped: in the total,
-    /// then in this mapping's slot (see the module docs for why in that order).
+    /// Counts the calling thread asleep until the result is dropped
+    /// ([`protocol::asleep_in`]).
     fn count_in(&self) -> CountedAsleep<'_> {
-        self.counter(SLEEPERS).fetch_add(1, Ordering::SeqCst);
-        if let Some(slot) = self.slot {
-            self.counter(SLOTS + 4 * slot).fetch_add(1, Ordering::SeqCst);
-        }
+        protocol::asleep_in(&self.page());
         CountedAsleep(self)
     }
 
@@ -534,8 +494,7 @@ impl WakeWord {
     /// once if it already changed. A wake-up is not a promise of a sample (a signal,
     /// a ring for another reason): look, then sleep again.
     pub fn sleep(&self, seen: u32, timeout: Duration) {
-        let _asleep = self.count_in();
-        futex_wait(self.counter(SEQUENCE), seen, timeout);
+        protocol::sleep(&self.page(), seen, timeout);
     }
 
     /// True if this word's file is no longer the one its path names (removed while
@@ -553,10 +512,56 @@ struct CountedAsleep<'a>(&'a WakeWord);
 
 impl Drop for CountedAsleep<'_> {
     fn drop(&mut self) {
-        if let Some(slot) = self.0.slot {
-            self.0.counter(SLOTS + 4 * slot).fetch_sub(1, Ordering::SeqCst);
-        }
-        self.0.counter(SLEEPERS).fetch_sub(1, Ordering::SeqCst);
+        protocol::asleep_out(&self.0.page());
+    }
+}
+
+/// The page of one mapping as the protocol's steps take it ([`protocol::Page`]): the
+/// mapped page's cells, the mapping's slot, and the kernel's futex.
+#[derive(Debug, Clone, Copy)]
+struct PageAt {
+    base: NonNull<u8>,
+    slot: Option<usize>,
+}
+
+impl PageAt {
+    /// Slot `slot`'s cell.
+    fn slot_cell(&self, slot: usize) -> &AtomicU32 {
+        // SAFETY: a `PageAt` is made from a live mapping of [`LEN`] bytes and used
+        // while it lives; every slot lies within the page.
+        unsafe { counter_at(self.base, SLOTS + 4 * slot) }
+    }
+}
+
+impl protocol::Page for PageAt {
+    type C32 = AtomicU32;
+    type C64 = AtomicU64;
+
+    fn sequence(&self) -> &AtomicU32 {
+        // SAFETY: as in `slot_cell`.
+        unsafe { counter_at(self.base, SEQUENCE) }
+    }
+
+    fn sleepers(&self) -> &AtomicU32 {
+        // SAFETY: as in `slot_cell`.
+        unsafe { counter_at(self.base, SLEEPERS) }
+    }
+
+    fn counts(&self) -> &AtomicU64 {
+        // SAFETY: as in `slot_cell`.
+        unsafe { counts_at(self.base) }
+    }
+
+    fn own_slot(&self) -> Option<&AtomicU32> {
+        self.slot.map(|slot| self.slot_cell(slot))
+    }
+
+    fn wake_all(&self) -> i64 {
+        futex_wake(self.sequence())
+    }
+
+    fn wait(&self, seen: u32, timeout: Duration) {
+        futex_wait(self.sequence(), seen, timeout);
     }
 }
 
@@ -586,37 +591,6 @@ unsafe fn counter_at<'a>(base: NonNull<u8>, offset: usize) -> &'a AtomicU32 {
     unsafe { AtomicU32::from_ptr(base.as_ptr().add(offset).cast::<u32>()) }
 }
 
-/// Empties `slot` of the page at `base` and counts what it held out of the totals:
-/// its sleepers, and its connection as covered and as a receiver; returns how many
-/// sleepers and receivers it held. The caller holds the slot's record lock, so nobody
-/// else changes the slot; each step is taken in its owner's order (see the module
-/// docs), so that a look that dies midway leaves the totals erring the same way.
-///
-/// # Safety
-/// `base` is a live mapping of [`LEN`] bytes.
-unsafe fn count_out(base: NonNull<u8>, slot: usize) -> u32 {
-    // SAFETY: forwarded to the caller.
-    let (slot, counts) = unsafe { (counter_at(base, SLOTS + 4 * slot), counts_at(base)) };
-    let held = slot.load(Ordering::SeqCst);
-    if held & COVERED_FLAG != 0 {
-        adjust(counts, 0, -1);
-        slot.fetch_and(!COVERED_FLAG, Ordering::SeqCst);
-    }
-    let receiver = held & RECEIVER_FLAG != 0;
-    if receiver {
-        slot.fetch_and(!RECEIVER_FLAG, Ordering::SeqCst);
-        adjust(counts, -1, 0);
-    }
-    let sleepers = held & SLEEPER_BITS;
-    if sleepers != 0 {
-        slot.fetch_sub(sleepers, Ordering::SeqCst);
-        // SAFETY: as above. The total is at least every slot's count (counted in
-        // first, out last), so this does not wrap.
-        unsafe { counter_at(base, SLEEPERS) }.fetch_sub(sleepers, Ordering::SeqCst);
-    }
-    sleepers + u32::from(receiver)
-}
-
 /// The 64-bit word of receivers and covered of the page at `base` (see [`COUNTS`]).
 ///
 /// # Safety
@@ -625,23 +599,6 @@ unsafe fn counts_at<'a>(base: NonNull<u8>) -> &'a AtomicU64 {
     // SAFETY: within the page, 8-aligned (the page is page-aligned); other processes
     // use it atomically too.
     unsafe { AtomicU64::from_ptr(base.as_ptr().add(COUNTS).cast::<u64>()) }
-}
-
-/// Adds `receivers` and `covered` (each -1, 0 or 1) to the counts, and one to their
-/// changes. A field already at 0 stays there (a count a death left too low is not
-/// made to wrap, which would read as too high).
-fn adjust(counts: &AtomicU64, receivers: i64, covered: i64) {
-    let step = |field: u64, by: i64| field.saturating_add_signed(by).min(FIELD);
-    let _always = counts.fetch_update(Ordering::SeqCst, Ordering::SeqCst, |c| {
-        let r = step(c & FIELD, receivers);
-        let v = step((c >> COVERED_SHIFT) & FIELD, covered);
-        Some(((c & !(CHANGE - 1)).wrapping_add(CHANGE)) | (v << COVERED_SHIFT) | r)
-    });
-}
-
-/// The receivers and the covered of a counts word.
-fn decode(counts: u64) -> (u32, u32) {
-    ((counts & FIELD) as u32, ((counts >> COVERED_SHIFT) & FIELD) as u32)
 }
 
 /// What a ring tells the writer about the connections that listen to the
