@@ -156,6 +156,9 @@ pub fn measure(
             rows.push(row);
         }
     }
+    // A peer stopped by a signal leaves its Zenoh segments in /dev/shm: removed now
+    // that every peer of the scenario is gone.
+    zenoh::shm::cleanup_orphaned_shm_segments();
     Ok(rows)
 }
 

@@ -68,8 +68,10 @@ impl ZenohArgs {
         Ok(config)
     }
 
-    /// Opens a session.
+    /// Opens a session. Zenoh's shared-memory segments that a bridge killed before it
+    /// could remove them left in `/dev/shm` are removed first (their creator is dead).
     pub fn open(&self) -> Result<zenoh::Session, ZenohError> {
+        zenoh::shm::cleanup_orphaned_shm_segments();
         zenoh::open(self.config()?).wait().map_err(ZenohError::from)
     }
 }

@@ -60,6 +60,8 @@ impl Drop for Domain {
         // The domain ends here: the words a killed bridge kept counted go with it, as
         // at `esgm down`.
         esgm_shm::process::remove_domain_files(&self.name);
+        // And the Zenoh segments of the bridges the test killed.
+        zenoh::shm::cleanup_orphaned_shm_segments();
     }
 }
 

@@ -178,8 +178,16 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
     };
     let state = StateDir::at(std::env::temp_dir().join(format!("esgm-{domain}")));
     let setup = super::up::Setup { limits, supervise: true, ..super::up::Setup::default() };
-    let mut coordinator =
-        super::up::spawn_detached_with(&domain, Some(state.path()), &setup, Stdio::null(), true)?;
+    // The coordinator's log (and its successors', which inherit it) stays with the run.
+    let log = std::fs::File::create(run_dir.join("coordinator.log"))
+        .context("cannot create the coordinator's log")?;
+    let mut coordinator = super::up::spawn_detached_with(
+        &domain,
+        Some(state.path()),
+        &setup,
+        Stdio::from(log),
+        true,
+    )?;
     let mut report = Report {
         domain: domain.clone(),
         seed,

@@ -82,7 +82,12 @@ fn finish(domain: &str) -> anyhow::Result<()> {
     cleanup_dead_nodes()
         .context("cannot list nodes to clean up after dead processes")?
         .log(esgm_shm::CleanupReporter::Owner);
-    stop_attached(domain)?;
+    let stopped = stop_attached(domain);
+    // What those it stopped left (a process ended by a signal leaves its node).
+    cleanup_dead_nodes()
+        .context("cannot list nodes to clean up after the processes it stopped")?
+        .log(esgm_shm::CleanupReporter::Owner);
+    stopped?;
     esgm_shm::process::remove_domain_files(domain);
     println!("stopped `{domain}`");
     Ok(())

@@ -225,6 +225,13 @@ fn supervise_coordinator(
         if status.success() {
             return Ok(());
         }
+        // An orderly stop (`esgm down`) forgets the registry before the coordinator
+        // leaves, and each coordinator saves it first thing: one that ran and left none
+        // was stopped, whatever its exit status said (a worker slow to leave, say).
+        if started.elapsed() >= FAST_EXIT && !state.registry_file().exists() {
+            tracing::info!(domain, %status, "the coordinator was stopped; not restarting it");
+            return Ok(());
+        }
         if started.elapsed() < FAST_EXIT {
             fast_exits += 1;
             if fast_exits >= FAST_EXITS {

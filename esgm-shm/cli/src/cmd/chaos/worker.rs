@@ -12,8 +12,8 @@
 //! was killed before its line was written is not in the log: the check allows it.
 //!
 //! It writes `ready-<index>` (its pid) once set up, stops adding when the harness
-//! makes the file `stop`, writes `stopped-<index>`, and stays connected until it is
-//! stopped (`esgm down`).
+//! makes the file `stop`, writes `stopped-<index>`, and serves until the system is
+//! stopped (`esgm down`), as every worker does.
 
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -118,10 +118,11 @@ pub fn run(domain: &str, a: &WorkerArgs) -> anyhow::Result<()> {
     write(&mut written, &a.run, &mut acks)?;
     std::fs::write(stopped_file(&a.run, a.index), std::process::id().to_string())
         .context("cannot say stopped")?;
-    // Connected until `esgm down` stops it.
-    loop {
-        std::thread::sleep(Duration::from_secs(3600));
-    }
+    // Serving until the system is stopped (`esgm down`), as every worker: through a
+    // coordinator's restart, and not after.
+    esgm_shm::control::attach::serve_while_system_lives(&esgm, None, Duration::from_millis(500));
+    drop(subscriptions);
+    Ok(())
 }
 
 /// Connects as worker `index`, waiting out a coordinator being restarted.
