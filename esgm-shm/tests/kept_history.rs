@@ -219,6 +219,16 @@ fn a_destroyed_trajectory_takes_its_kept_history_with_it() {
     );
 }
 
+/// Says `done` (a trajectory the parent waits for), then waits to be killed by it.
+fn done_then_wait_to_be_killed(esgm: &ShmEsgm) {
+    esgm.create_primitive_entity_trajectory_structure("done", "RobotState")
+        .unwrap()
+        .add(state(1, 1.0))
+        .unwrap();
+    std::thread::sleep(TIMEOUT * 6);
+    panic!("not killed");
+}
+
 #[test]
 fn child_program() {
     let Ok(role) = std::env::var(ROLE) else { return };
@@ -242,13 +252,7 @@ fn child_program() {
             for i in 0..ADDED {
                 assert_eq!(kept.add(state(i, i as f64)).unwrap(), AddOutcome::Added);
             }
-            esgm.create_primitive_entity_trajectory_structure("done", "RobotState")
-                .unwrap()
-                .add(state(1, 1.0))
-                .unwrap();
-            // Killed here by the parent.
-            std::thread::sleep(TIMEOUT * 6);
-            panic!("not killed");
+            done_then_wait_to_be_killed(&esgm);
         }
         "camera" => {
             let esgm = ShmEsgm::builder().domain(&domain).host("camera").connect().unwrap();
@@ -265,12 +269,7 @@ fn child_program() {
                     .with("image_data", buffer.into_octets());
                 assert_eq!(frames.add(image).unwrap(), AddOutcome::Added);
             }
-            esgm.create_primitive_entity_trajectory_structure("done", "RobotState")
-                .unwrap()
-                .add(state(1, 1.0))
-                .unwrap();
-            std::thread::sleep(TIMEOUT * 6);
-            panic!("not killed");
+            done_then_wait_to_be_killed(&esgm);
         }
         "restarted" => {
             let esgm = ShmEsgm::builder().domain(&domain).host("robot").connect().unwrap();

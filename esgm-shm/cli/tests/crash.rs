@@ -178,6 +178,16 @@ fn kill9(pid: u32) {
     assert!(Command::new("kill").args(["-9", &pid.to_string()]).status().unwrap().success());
 }
 
+/// `kill -9 pid`, then waits (at most 10 s) until it is gone.
+fn kill9_and_wait(pid: u32, what: &str) {
+    kill9(pid);
+    let killed_at = Instant::now();
+    while alive(pid) {
+        assert!(killed_at.elapsed() < Duration::from_secs(10), "{what} did not die");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
 /// Every one of `pids` has exited and the domain has no iceoryx2 node left (a listing
 /// that fails, fails the test).
 fn nothing_left<'a>(domain: &str, pids: impl IntoIterator<Item = (&'a str, u32)>) {
@@ -226,12 +236,7 @@ fn a_killed_coordinator_leaves_data_flowing_and_comes_back_whole() {
     let (mut echo, lines) = sys.subscriber("robot_state");
 
     let coordinator = coordinator_pid(&sys.domain);
-    kill9(coordinator);
-    let killed_at = Instant::now();
-    while alive(coordinator) {
-        assert!(killed_at.elapsed() < Duration::from_secs(10), "the coordinator did not die");
-        std::thread::sleep(Duration::from_millis(10));
-    }
+    kill9_and_wait(coordinator, "the coordinator");
 
     // Data keeps flowing between the existing processes: the subscriber receives the
     // robot's states (the robot steers by the driving direction the units compute).
@@ -322,12 +327,7 @@ fn pushed_structures_outlive_kill_9_of_their_writer_and_the_coordinator() {
     assert_eq!(xs(&sys), [2.0, 3.0], "what cache 2 keeps");
 
     let coordinator = coordinator_pid(&sys.domain);
-    kill9(coordinator);
-    let killed_at = Instant::now();
-    while alive(coordinator) {
-        assert!(killed_at.elapsed() < Duration::from_secs(10), "the coordinator did not die");
-        std::thread::sleep(Duration::from_millis(10));
-    }
+    kill9_and_wait(coordinator, "the coordinator");
     sys.ok(&["up", "--detach"]);
     assert_eq!(sys.latest_valid_time("odo", Duration::from_secs(30)), 3000);
     assert_eq!(xs(&sys), [2.0, 3.0], "the history the killed writer kept");

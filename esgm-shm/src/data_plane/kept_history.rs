@@ -796,27 +796,7 @@ impl KeptHistory {
     /// Removes every kept history of `domain` and of its generations, at the domain's
     /// end (`esgm down`, the end of `esgm up`). Returns how many were removed.
     pub fn remove_domain(domain: &str) -> usize {
-        let Ok(entries) = std::fs::read_dir(SHM_DIR) else { return 0 };
-        let mut removed = 0;
-        for entry in entries.flatten() {
-            let name = entry.file_name();
-            let Some(namespace) = name
-                .to_str()
-                .and_then(|n| n.strip_prefix(FILE_PREFIX))
-                .and_then(|n| n.split_once(SEPARATOR))
-                .map(|(namespace, _)| namespace)
-            else {
-                continue;
-            };
-            // The domain's rule for services, applied to the file's namespace.
-            let service = format!("{}/{namespace}/keep", crate::service_name::SERVICE_PREFIX);
-            if crate::process::access::belongs_to(domain, &service)
-                && std::fs::remove_file(entry.path()).is_ok()
-            {
-                removed += 1;
-            }
-        }
-        removed
+        crate::process::access::remove_files_of(Path::new(SHM_DIR), FILE_PREFIX, domain)
     }
 }
 

@@ -171,30 +171,7 @@ fn domain_prefix(domain: &str) -> String {
 /// process still in the domain keeps its mapping; one that joins later makes the word
 /// anew. Returns how many were removed.
 pub fn remove_domain(domain: &str) -> usize {
-    let Ok(entries) = std::fs::read_dir(SHM_DIR) else { return 0 };
-    let mut removed = 0;
-    for entry in entries.flatten() {
-        let name = entry.file_name();
-        let Some(namespace) = name
-            .to_str()
-            .and_then(|n| n.strip_prefix(FILE_PREFIX))
-            .and_then(|n| n.split_once(SEPARATOR))
-            .map(|(namespace, _)| namespace)
-        else {
-            continue;
-        };
-        // The domain's rule for services, applied to the word's namespace.
-        let service = format!("{}/{namespace}/wake", crate::service_name::SERVICE_PREFIX);
-        if !crate::process::access::belongs_to(domain, &service) {
-            continue;
-        }
-        match std::fs::remove_file(entry.path()) {
-            Ok(()) => removed += 1,
-            Err(e) => tracing::debug!(path = %entry.path().display(), error = %e,
-                "cannot remove a wake-up word"),
-        }
-    }
-    removed
+    crate::process::access::remove_files_of(Path::new(SHM_DIR), FILE_PREFIX, domain)
 }
 
 /// One trajectory's futex word, mapped (see the module docs). Unmapped, and its file

@@ -476,6 +476,36 @@ impl DomainIds {
     }
 }
 
+/// Removes the files of `dir` named `<prefix><namespace>@<rest>` whose namespace is
+/// `domain` or one of its derived namespaces ([`belongs_to`]): the files esgm keeps in
+/// `/dev/shm` beside iceoryx2's (wake words, kept histories), at the domain's end.
+/// Returns how many were removed.
+pub(crate) fn remove_files_of(dir: &std::path::Path, prefix: &str, domain: &str) -> usize {
+    let Ok(entries) = std::fs::read_dir(dir) else { return 0 };
+    let mut removed = 0;
+    for entry in entries.flatten() {
+        let name = entry.file_name();
+        let Some(namespace) = name
+            .to_str()
+            .and_then(|n| n.strip_prefix(prefix))
+            .and_then(|n| n.split_once('@'))
+            .map(|(namespace, _)| namespace)
+        else {
+            continue;
+        };
+        // The domain's rule for services, applied to the file's namespace.
+        if !belongs_to(domain, &format!("{SERVICE_PREFIX}/{namespace}/file")) {
+            continue;
+        }
+        match std::fs::remove_file(entry.path()) {
+            Ok(()) => removed += 1,
+            Err(e) => tracing::debug!(path = %entry.path().display(), error = %e,
+                "cannot remove a file of the domain"),
+        }
+    }
+    removed
+}
+
 /// True if the service or node `name` is one of `domain`'s: `esgm/<domain>/…`, or one
 /// of the domain's derived namespaces, `esgm/<domain>.g<generation>/…` (a mirrored
 /// trajectory's generation) and `esgm/<domain>:<kind>/…` (inboxes, joins).

@@ -40,12 +40,9 @@ pub use worker::WorkerArgs;
 /// `esgm chaos` options.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Trajectories of the robot (`esgm scale`'s profile).
-    #[arg(long, default_value_t = 300)]
-    pub trajectories: usize,
-    /// Processes of the robot.
-    #[arg(long, default_value_t = 60)]
-    pub processes: usize,
+    /// The robot's size (`esgm scale`'s profile).
+    #[command(flatten)]
+    pub size: super::scale::profile::Size,
     /// Seconds of killing.
     #[arg(long, default_value_t = 600.0, value_parser = crate::span_arg::seconds)]
     pub seconds: f64,
@@ -143,7 +140,8 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
             bail!("{flag} must be a positive number of seconds, got {v}");
         }
     }
-    let profile = Profile::new(a.trajectories, a.processes, a.processes.saturating_sub(1))?;
+    let (trajectories, processes) = (a.size.trajectories, a.size.processes);
+    let profile = Profile::new(trajectories, processes, processes.saturating_sub(1))?;
     let seed = a.seed.unwrap_or_else(|| {
         std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
@@ -291,10 +289,7 @@ fn campaign(
             .with_context(|| format!("cannot declare worker {i}"))?;
     }
     drop(control);
-    let pids = all_back(domain, profile.processes, run, SETUP)?;
-    pids_seen.extend(pids.iter().map(|(n, p)| (n.clone(), *p)));
-    std::thread::sleep(SETTLE);
-    report.before = footprint(&pids, files_seen)?;
+    report.before = settled_footprint(domain, profile.processes, run, pids_seen, files_seen)?;
 
     let mut rng = seed | 1;
     let deadline = Instant::now() + Duration::from_secs_f64(a.seconds);
@@ -317,10 +312,7 @@ fn campaign(
         }
     }
     println!("  killing stopped; waiting for every process to be back");
-    let pids = all_back(domain, profile.processes, run, SETUP)?;
-    pids_seen.extend(pids.iter().map(|(n, p)| (n.clone(), *p)));
-    std::thread::sleep(SETTLE);
-    report.after = footprint(&pids, files_seen)?;
+    report.after = settled_footprint(domain, profile.processes, run, pids_seen, files_seen)?;
     std::fs::write(worker::stop_file(run), b"stop").context("cannot stop the workers")?;
     let stopped_by = Instant::now() + Duration::from_secs(60);
     for i in 0..profile.processes {
@@ -430,6 +422,31 @@ fn all_back(
             bail!("the processes were not all back within {within:?}: {}", missing.join("; "));
         }
         std::thread::sleep(Duration::from_millis(200));
+    }
+}
+
+/// Once every process is back and the domain settled, its footprint; measured again if
+/// a process was restarted meanwhile (one that failed to set up after a kill).
+fn settled_footprint(
+    domain: &str,
+    workers: usize,
+    run: &Path,
+    pids_seen: &mut BTreeSet<(String, u32)>,
+    files_seen: &mut BTreeSet<PathBuf>,
+) -> anyhow::Result<Footprint> {
+    let mut attempts = 0;
+    loop {
+        let pids = all_back(domain, workers, run, SETUP)?;
+        pids_seen.extend(pids.iter().map(|(n, p)| (n.clone(), *p)));
+        std::thread::sleep(SETTLE);
+        match footprint(&pids, files_seen) {
+            Ok(f) => return Ok(f),
+            Err(e) if attempts < 3 => {
+                attempts += 1;
+                println!("  a process went while measured ({e:#}); measuring again");
+            }
+            Err(e) => return Err(e),
+        }
     }
 }
 

@@ -46,12 +46,9 @@ pub use worker::WorkerArgs;
 /// `esgm scale` options.
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// Trajectories of the synthetic robot.
-    #[arg(long, default_value_t = 300)]
-    pub trajectories: usize,
-    /// Processes of the synthetic robot.
-    #[arg(long, default_value_t = 60)]
-    pub processes: usize,
+    /// The robot's size.
+    #[command(flatten)]
+    pub size: profile::Size,
     /// Processes reading `tf` (default: every other process).
     #[arg(long)]
     pub readers: Option<usize>,
@@ -150,8 +147,9 @@ pub struct Measured {
 
 /// Runs `esgm scale`.
 pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
-    let tf_readers = a.readers.unwrap_or(a.processes.saturating_sub(1));
-    let profile = Profile::new(a.trajectories, a.processes, tf_readers)?;
+    let (trajectories, processes) = (a.size.trajectories, a.size.processes);
+    let tf_readers = a.readers.unwrap_or(processes.saturating_sub(1));
+    let profile = Profile::new(trajectories, processes, tf_readers)?;
     for (flag, v) in [("--idle-seconds", a.idle_seconds), ("--seconds", a.seconds)] {
         if !v.is_finite() || v <= 0.0 {
             bail!("{flag} must be a positive number of seconds, got {v}");

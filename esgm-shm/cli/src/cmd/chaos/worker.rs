@@ -18,7 +18,7 @@
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
@@ -31,18 +31,9 @@ use esgm_core::{
 use esgm_shm::ShmEsgm;
 
 use crate::cmd::scale::profile::{Class, Planned, Profile};
-use crate::cmd::scale::worker::{CACHE, IMAGE_CACHE, JOINING, make_at, wait_for_trajectory};
+use crate::cmd::scale::worker::{CACHE, IMAGE_CACHE, JOINING, Pacer, make_at, wait_for_trajectory};
 
-/// `esgm chaos-worker` options.
-#[derive(Debug, clap::Args)]
-pub struct WorkerArgs {
-    /// The run directory (the profile as `profile.json`).
-    #[arg(long, value_name = "DIR")]
-    pub run: PathBuf,
-    /// This process's number in the profile.
-    #[arg(long)]
-    pub index: usize,
-}
+pub use crate::cmd::scale::worker::WorkerArgs;
 
 /// How long a worker waits for a coordinator that is being restarted.
 const CONNECT_PATIENCE: Duration = Duration::from_secs(120);
@@ -100,7 +91,8 @@ pub fn run(domain: &str, a: &WorkerArgs) -> anyhow::Result<()> {
     let received = Arc::new(AtomicU64::new(0));
     let mut subscriptions = Vec::new();
     for t in profile.read_by(a.index) {
-        let handle = wait_for_trajectory(&esgm, &t.name)?;
+        let handle =
+            retrying(&format!("read `{}`", t.name), || wait_for_trajectory(&esgm, &t.name))?;
         let subscription = handle
             .subscribe(SubscribeOptions::default())
             .with_context(|| format!("cannot subscribe to `{}`", t.name))?;
@@ -115,41 +107,51 @@ pub fn run(domain: &str, a: &WorkerArgs) -> anyhow::Result<()> {
     }
     std::fs::write(ready_file(&a.run, a.index), std::process::id().to_string())
         .context("cannot say ready")?;
-    write(&mut written, &a.run, &mut acks)?;
-    std::fs::write(stopped_file(&a.run, a.index), std::process::id().to_string())
-        .context("cannot say stopped")?;
-    // Serving until the system is stopped (`esgm down`), as every worker: through a
-    // coordinator's restart, and not after.
+    // Writing on a thread of its own, while this one serves until the system is
+    // stopped (`esgm down`), as every worker does: through a coordinator's restart, and
+    // not after, whether or not the harness stopped the adds first.
+    let leaving = Arc::new(AtomicBool::new(false));
+    let (run, index, left) = (a.run.clone(), a.index, Arc::clone(&leaving));
+    let writer = std::thread::spawn(move || -> anyhow::Result<()> {
+        write(&mut written, &run, &mut acks, &left)?;
+        std::fs::write(stopped_file(&run, index), std::process::id().to_string())
+            .context("cannot say stopped")
+    });
     esgm_shm::control::attach::serve_while_system_lives(&esgm, None, Duration::from_millis(500));
+    leaving.store(true, Ordering::Release);
+    let written = writer.join().map_err(|_| anyhow::anyhow!("the writing thread panicked"))?;
     drop(subscriptions);
-    Ok(())
+    written
 }
 
 /// Connects as worker `index`, waiting out a coordinator being restarted.
 fn connect(domain: &str, index: usize) -> anyhow::Result<ShmEsgm> {
+    retrying("connect", || {
+        let builder = ShmEsgm::builder().domain(domain).host(name(index));
+        builder.timeout(Duration::from_secs(10)).connect().map_err(anyhow::Error::from)
+    })
+}
+
+/// `f`, tried again until it succeeds or [`CONNECT_PATIENCE`] passes: a coordinator
+/// being restarted, on a machine this loaded, may not answer at once.
+fn retrying<T>(what: &str, mut f: impl FnMut() -> anyhow::Result<T>) -> anyhow::Result<T> {
     let deadline = Instant::now() + CONNECT_PATIENCE;
     loop {
-        let connected = ShmEsgm::builder()
-            .domain(domain)
-            .host(name(index))
-            .timeout(Duration::from_secs(10))
-            .connect();
-        match connected {
-            Ok(esgm) => return Ok(esgm),
+        match f() {
+            Ok(v) => return Ok(v),
             Err(e) if Instant::now() < deadline => {
-                tracing::info!(error = %e, "cannot connect yet; trying again");
+                tracing::info!(error = %e, "cannot {what} yet; trying again");
                 std::thread::sleep(Duration::from_millis(200));
             }
-            Err(e) => return Err(e).context("cannot connect"),
+            Err(e) => return Err(e).with_context(|| format!("cannot {what}")),
         }
     }
 }
 
 /// The trajectory `t` this worker writes: its own again after a restart, else made.
 fn take(esgm: &ShmEsgm, t: &Planned) -> anyhow::Result<InProcessTrajectory> {
-    let deadline = Instant::now() + CONNECT_PATIENCE;
-    loop {
-        let got = match esgm.get_entity_trajectory_structure(&t.name) {
+    retrying(&format!("take `{}`", t.name), || {
+        match esgm.get_entity_trajectory_structure(&t.name) {
             Err(LookupError::NoSuchEntityStructure { .. }) => {
                 let policy = FluentStreamPolicy::default()
                     .cache(CacheConstraint::Elements(cache_of(t.class)));
@@ -159,52 +161,30 @@ fn take(esgm: &ShmEsgm, t: &Planned) -> anyhow::Result<InProcessTrajectory> {
                 esgm.create_trajectory(spec).map_err(anyhow::Error::from)
             }
             other => other.map_err(anyhow::Error::from),
-        };
-        match got {
-            Ok(handle) => return Ok(handle),
-            Err(e) if Instant::now() < deadline => {
-                tracing::info!(trajectory = %t.name, error = %e, "cannot take it yet; trying again");
-                std::thread::sleep(Duration::from_millis(200));
-            }
-            Err(e) => return Err(e).with_context(|| format!("cannot take `{}`", t.name)),
         }
-    }
+    })
 }
 
 /// Adds to every written trajectory at its rate until the harness makes the stop
-/// file, logging each acknowledged structure.
+/// file (or the process is `leaving`), logging each acknowledged structure.
 fn write(
     written: &mut [(InProcessTrajectory, Class, f64, i64)],
     run: &Path,
     acks: &mut std::fs::File,
+    leaving: &AtomicBool,
 ) -> anyhow::Result<()> {
-    let start = Instant::now();
-    let mut due: Vec<(Instant, Duration)> = written
-        .iter()
-        .enumerate()
-        .map(|(i, (_, _, hz, _))| {
-            let period = Duration::from_secs_f64(1.0 / hz);
-            (start + period.mul_f64((i % 16) as f64 / 16.0), period)
-        })
-        .collect();
-    let mut next_look = Instant::now();
-    loop {
-        let now = Instant::now();
-        if now >= next_look {
-            if stop_file(run).exists() {
-                return Ok(());
-            }
-            next_look = now + Duration::from_millis(100);
+    let mut pacer = Pacer::new(written.iter().map(|(_, _, hz, _)| *hz));
+    let mut last_look = Instant::now();
+    let mut stopped = false;
+    let mut stop = || {
+        // The stop file, looked at every 100 ms at most.
+        if last_look.elapsed() >= Duration::from_millis(100) {
+            last_look = Instant::now();
+            stopped = stop_file(run).exists();
         }
-        let Some((i, when)) = due.iter().enumerate().map(|(i, d)| (i, d.0)).min_by_key(|d| d.1)
-        else {
-            std::thread::sleep(Duration::from_millis(100));
-            continue;
-        };
-        if when > now {
-            std::thread::sleep((when - now).min(Duration::from_millis(100)));
-            continue;
-        }
+        stopped || leaving.load(Ordering::Acquire)
+    };
+    while let Some(i) = pacer.next(&mut stop) {
         let (handle, class, _, next) = &mut written[i];
         let es = make_at(handle, *class, *next as u64, (*next, SystemClock.now()));
         match handle.add(es) {
@@ -216,13 +196,9 @@ fn write(
             }
             Ok(other) => tracing::warn!(trajectory = %handle.name(), ?other, "not added here"),
             Err(e) => {
-                tracing::info!(trajectory = %handle.name(), error = %e, "add refused; trying again")
+                tracing::info!(trajectory = %handle.name(), error = %e, "add refused; trying again");
             }
         }
-        let (at, period) = &mut due[i];
-        *at += *period;
-        if *at + *period < now {
-            *at = now + *period;
-        }
     }
+    Ok(())
 }

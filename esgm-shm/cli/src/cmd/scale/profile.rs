@@ -43,6 +43,17 @@ impl Class {
     }
 }
 
+/// The size of the synthetic robot (`esgm scale`, `esgm chaos`).
+#[derive(Debug, Clone, clap::Args)]
+pub struct Size {
+    /// Trajectories of the synthetic robot.
+    #[arg(long, default_value_t = 300)]
+    pub trajectories: usize,
+    /// Processes of the synthetic robot.
+    #[arg(long, default_value_t = 60)]
+    pub processes: usize,
+}
+
 /// One trajectory of the profile.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Planned {

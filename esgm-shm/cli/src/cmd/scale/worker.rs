@@ -33,7 +33,8 @@ use serde::{Deserialize, Serialize};
 
 use super::profile::{Class, Profile};
 
-/// `esgm scale-worker` options.
+/// The options of one process of a synthetic robot (`esgm scale-worker`,
+/// `esgm chaos-worker`).
 #[derive(Debug, clap::Args)]
 pub struct WorkerArgs {
     /// The run directory (the profile as `profile.json`).
@@ -306,35 +307,9 @@ pub(crate) fn image_of_profile() -> EntityStructure {
 
 /// Adds to every written trajectory at its rate until the harness says `stop`.
 fn publish(written: &[(InProcessTrajectory, Class, f64)], phase: &Phases, report: &mut Report) {
-    let start = Instant::now();
-    let mut due: Vec<(Instant, Duration)> = written
-        .iter()
-        .enumerate()
-        .map(|(i, (_, _, hz))| {
-            let period = Duration::from_secs_f64(1.0 / hz);
-            // Spread the first adds over a period, as independent sensors would be.
-            (start + period.mul_f64((i % 16) as f64 / 16.0), period)
-        })
-        .collect();
-    let mut next_look = Instant::now();
+    let mut pacer = Pacer::new(written.iter().map(|(_, _, hz)| *hz));
     let mut n = 0u64;
-    loop {
-        let now = Instant::now();
-        if now >= next_look {
-            if phase.reached(Phase::Stop) {
-                return;
-            }
-            next_look = now + Duration::from_millis(50);
-        }
-        let Some((i, when)) = due.iter().enumerate().map(|(i, d)| (i, d.0)).min_by_key(|d| d.1)
-        else {
-            std::thread::sleep(Duration::from_millis(20));
-            continue;
-        };
-        if when > now {
-            std::thread::sleep((when - now).min(Duration::from_millis(50)));
-            continue;
-        }
+    while let Some(i) = pacer.next(|| phase.reached(Phase::Stop)) {
         let (handle, class, _) = &written[i];
         n += 1;
         match handle.add(make(handle, *class, n)) {
@@ -345,11 +320,58 @@ fn publish(written: &[(InProcessTrajectory, Class, f64)], phase: &Phases, report
                 }
             }
         }
-        let (at, period) = &mut due[i];
-        *at += *period;
-        // Behind by more than a period (a stalled machine): skip, do not burst.
-        if *at + *period < now {
-            *at = now + *period;
+    }
+}
+
+/// When each of several trajectories is next due, each at its own rate, the first
+/// adds spread over a period as independent sensors' would be; a trajectory behind by
+/// more than a period (a stalled machine) skips, it does not burst.
+pub(crate) struct Pacer {
+    due: Vec<(Instant, Duration)>,
+    next_look: Instant,
+}
+
+impl Pacer {
+    /// A pacer of trajectories at `hz`, due from now.
+    pub(crate) fn new(hz: impl Iterator<Item = f64>) -> Self {
+        let start = Instant::now();
+        let due = hz
+            .enumerate()
+            .map(|(i, hz)| {
+                let period = Duration::from_secs_f64(1.0 / hz);
+                (start + period.mul_f64((i % 16) as f64 / 16.0), period)
+            })
+            .collect();
+        Self { due, next_look: start }
+    }
+
+    /// Waits until a trajectory is due and returns it, then due again a period later;
+    /// `None` once `stop` (asked at most every 50 ms) says so.
+    pub(crate) fn next(&mut self, mut stop: impl FnMut() -> bool) -> Option<usize> {
+        loop {
+            let now = Instant::now();
+            if now >= self.next_look {
+                if stop() {
+                    return None;
+                }
+                self.next_look = now + Duration::from_millis(50);
+            }
+            let Some((i, when)) =
+                self.due.iter().enumerate().map(|(i, d)| (i, d.0)).min_by_key(|d| d.1)
+            else {
+                std::thread::sleep(Duration::from_millis(20));
+                continue;
+            };
+            if when > now {
+                std::thread::sleep((when - now).min(Duration::from_millis(50)));
+                continue;
+            }
+            let (at, period) = &mut self.due[i];
+            *at += *period;
+            if *at + *period < now {
+                *at = now + *period;
+            }
+            return Some(i);
         }
     }
 }
