@@ -83,6 +83,10 @@ impl Supervisor {
             }
             keep
         });
+        // Workers a crashed coordinator started whose pid it had not saved yet (a
+        // restart just before the crash): found by their environment, adopted rather
+        // than started a second time (two writers of one trajectory).
+        let mut unrecorded = None;
         for d in declared {
             match self.processes.get_mut(&d.spec.name) {
                 Some(p) if p.spec == d.spec => {}
@@ -104,8 +108,15 @@ impl Supervisor {
                         restart_at: None,
                         reported: None,
                     };
-                    match d.status.pid.filter(|pid| is_worker_of(*pid, &self.domain, &d.spec.name))
-                    {
+                    let recorded =
+                        d.status.pid.filter(|pid| is_worker_of(*pid, &self.domain, &d.spec.name));
+                    let running = recorded.or_else(|| {
+                        unrecorded
+                            .get_or_insert_with(|| workers_of(&self.domain))
+                            .get(&d.spec.name)
+                            .copied()
+                    });
+                    match running {
                         Some(pid) => {
                             tracing::info!(worker = %d.spec.name, pid, "adopted a running worker");
                             p.adopted = Some(pid);
@@ -317,6 +328,30 @@ pub fn is_worker_of(pid: u32, domain: &str, name: &str) -> bool {
     );
     let vars: Vec<&[u8]> = environ.split(|b| *b == 0).collect();
     vars.contains(&want_domain.as_slice()) && vars.contains(&want_name.as_slice())
+}
+
+/// Every live worker of `domain` by name, found by its environment in `/proc` (one
+/// scan, when a coordinator starts after a crash).
+fn workers_of(domain: &str) -> BTreeMap<String, u32> {
+    let mut found = BTreeMap::new();
+    let Ok(entries) = std::fs::read_dir("/proc") else { return found };
+    let want_domain = format!("{DOMAIN_ENV}={domain}").into_bytes();
+    let prefix = format!("{WORKER_ENV}=").into_bytes();
+    for entry in entries.flatten() {
+        let Some(pid) = entry.file_name().to_str().and_then(|n| n.parse::<u32>().ok()) else {
+            continue;
+        };
+        let Ok(environ) = std::fs::read(entry.path().join("environ")) else { continue };
+        let vars: Vec<&[u8]> = environ.split(|b| *b == 0).collect();
+        if !vars.contains(&want_domain.as_slice()) || !alive(pid) {
+            continue;
+        }
+        let name = vars.iter().find_map(|v| v.strip_prefix(prefix.as_slice()));
+        if let Some(name) = name.and_then(|n| std::str::from_utf8(n).ok()) {
+            found.insert(name.to_owned(), pid);
+        }
+    }
+    found
 }
 
 /// The log file of process `name` in `state`'s log directory.
