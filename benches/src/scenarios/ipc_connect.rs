@@ -194,14 +194,15 @@ impl Scenario for Connect {
 
     fn targets(&self) -> Vec<Target> {
         if self.history == History::Volatile {
-            // Keeping the history costs a small hop at most a tenth, an image's a fifth.
+            // Keeping the history costs a small hop at most a tenth, an image's a fifth:
+            // said of this row, which runs after the kept one, as volatile / kept.
             let (kept, limit) = match self.kind {
                 Kind::Small => (SMALL_NAME, 1.1),
                 Kind::Image => (IMAGE_NAME, 1.2),
             };
             return Wait::BOTH
                 .iter()
-                .map(|&w| Target::at_most(kept, self.name, w, limit))
+                .map(|&w| Target::at_least(self.name, kept, w, 1.0 / limit))
                 .collect();
         }
         match (self.kind, self.paced) {
