@@ -156,7 +156,8 @@ fn quick_esgm_small_reports_three_waits_idle_cpu_and_the_encode() {
 
 #[test]
 fn quick_connect_small_measures_the_api_both_ways() {
-    // Back to back, and paced as the image's hops (`connect-small-paced`).
+    // Back to back, paced as the image's hops (`connect-small-paced`), and on volatile
+    // trajectories (what keeping the history costs).
     let (stdout, report) = run_quick("connect-small");
     assert_eq!(
         rows(&report),
@@ -165,11 +166,15 @@ fn quick_connect_small_measures_the_api_both_ways() {
             key("connect-small", "spin"),
             key("connect-small-paced", "event"),
             key("connect-small-paced", "spin"),
+            key("connect-small-volatile", "event"),
+            key("connect-small-volatile", "spin"),
         ]
     );
     for row in report["scenarios"].as_array().unwrap() {
-        let baseline =
-            if row["name"] == "connect-small-paced" { "connect-small" } else { "esgm-small" };
+        let baseline = match row["name"].as_str() {
+            Some("connect-small") => "esgm-small",
+            _ => "connect-small",
+        };
         assert_eq!(row["baseline"], baseline, "{row}");
         assert!(row["p50_ns"].as_u64().is_some_and(|ns| ns > 0), "{row}");
     }
@@ -185,12 +190,22 @@ fn quick_connect_image_reads_the_pixels_in_shared_memory() {
     let (stdout, report) = run_quick_with("connect-image", 20);
     assert_eq!(
         rows_with(&report, 20),
-        [key("connect-image", "event"), key("connect-image", "spin")]
+        [
+            key("connect-image", "event"),
+            key("connect-image", "spin"),
+            key("connect-image-volatile", "event"),
+            key("connect-image-volatile", "spin"),
+        ]
     );
     for row in report["scenarios"].as_array().unwrap() {
         assert!(row["payload_bytes"].as_u64().is_some_and(|b| b > 921_600), "{row}");
-        // Compared with a small structure paced as the frames are.
-        assert_eq!(row["baseline"], "connect-small-paced", "{row}");
+        // Compared with a small structure paced as the frames are; the volatile rows
+        // with the kept ones.
+        let baseline = match row["name"].as_str() {
+            Some("connect-image") => "connect-small-paced",
+            _ => "connect-image",
+        };
+        assert_eq!(row["baseline"], baseline, "{row}");
     }
     assert!(stdout.contains("20 of 20 replies' pixels read in place"), "{stdout}");
 }
