@@ -200,8 +200,12 @@ fn a_ros2_node_on_cyclonedds_feeds_an_image_trajectory_and_reads_an_exported_pos
 
     // Its report counts every message through, and the one it could not convert;
     // so do the trajectory's statistics, as `esgm stats` shows them.
+    // Reports are cumulative: the one that has counted all six (a report may come
+    // between the last message passed and the unconvertible one counted).
     let import = bridge.line("the import's report", |l| {
-        l.contains("\"direction\":\"import\"") && l.contains("\"passed\":5")
+        l.contains("\"direction\":\"import\"")
+            && l.contains("\"passed\":5")
+            && l.contains("unconvertible")
     });
     assert!(import.contains("\"lost\":[[\"unconvertible\",1]]"), "{import}");
     let counted =
