@@ -80,9 +80,7 @@ fn a_killed_writer_keeps_what_it_acknowledged_and_the_next_writer_continues_it()
     let c = coordinator("kept-kill");
     let mut child = spawn_child("child_program", (ROLE, "writer"), (DOMAIN, c.domain()));
     let early = location(&c, "early");
-    let found = wait_for(|| {
-        early.get_entity_trajectory_structure("done").is_ok_and(|d| d.get_latest().is_ok())
-    });
+    let found = said_done(&early);
     if !found {
         let _ = child.kill();
         let (_, output) = reap(child, TIMEOUT);
@@ -135,9 +133,7 @@ fn a_restarted_writer_continues_its_history() {
     let c = coordinator("kept-restart");
     let mut first = spawn_child("child_program", (ROLE, "writer"), (DOMAIN, c.domain()));
     let reader = location(&c, "reader");
-    assert!(wait_for(|| reader
-        .get_entity_trajectory_structure("done")
-        .is_ok_and(|d| d.get_latest().is_ok())));
+    assert!(said_done(&reader), "the writer never said done");
     let kept = reader.get_entity_trajectory_structure("kept").unwrap();
     first.kill().unwrap();
     let _ = first.wait();
@@ -159,9 +155,7 @@ fn images_outlive_their_killed_writer() {
     let c = coordinator("kept-images");
     let mut child = spawn_child("child_program", (ROLE, "camera"), (DOMAIN, c.domain()));
     let early = location(&c, "early");
-    let found = wait_for(|| {
-        early.get_entity_trajectory_structure("done").is_ok_and(|d| d.get_latest().is_ok())
-    });
+    let found = said_done(&early);
     child.kill().unwrap();
     let (_, output) = reap(child, TIMEOUT);
     assert!(found, "the camera never said done:\n{output}");
@@ -217,6 +211,12 @@ fn a_destroyed_trajectory_takes_its_kept_history_with_it() {
         0,
         "nothing kept after the domain's end"
     );
+}
+
+/// Waits until a child said `done` ([`done_then_wait_to_be_killed`]), at most
+/// [`TIMEOUT`]; whether it did.
+fn said_done(esgm: &ShmEsgm) -> bool {
+    wait_for(|| esgm.get_entity_trajectory_structure("done").is_ok_and(|d| d.get_latest().is_ok()))
 }
 
 /// Says `done` (a trajectory the parent waits for), then waits to be killed by it.
