@@ -120,7 +120,9 @@ impl Supervisor {
                         Some(pid) => {
                             tracing::info!(worker = %d.spec.name, pid, "adopted a running worker");
                             p.adopted = Some(pid);
-                            p.status = d.status.clone();
+                            // The saved status may predate the start of `pid` (the crash
+                            // came between a restart and its save): it names `pid` now.
+                            p.status = ProcessStatus { pid: Some(pid), ..d.status.clone() };
                         }
                         None => self.start(&mut p, false),
                     }
@@ -131,6 +133,16 @@ impl Supervisor {
     }
 
     fn start(&self, p: &mut Supervised, restart: bool) {
+        // A crashed coordinator's last start may show up only now (it had forked but
+        // not yet executed the worker when this one scanned `/proc`): adopt it rather
+        // than start a second writer of its trajectories, which could never register.
+        if restart && let Some(pid) = workers_of(&self.domain).get(&p.spec.name).copied() {
+            tracing::warn!(worker = %p.spec.name, pid, "found the worker running; adopted it");
+            p.adopted = Some(pid);
+            p.status.pid = Some(pid);
+            p.restart_at = None;
+            return;
+        }
         match spawn(&p.spec, &self.domain, self.access, self.state.as_ref()) {
             Ok(child) => {
                 p.status.pid = Some(child.id());
@@ -385,4 +397,89 @@ fn spawn(
         command.stdout(log.try_clone()?).stderr(log);
     }
     command.spawn()
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used, clippy::expect_used)] // a failure is a failed test
+
+    use super::*;
+
+    /// `sleep 60` as worker `name` of `domain`, as a former coordinator would have
+    /// started it (not this supervisor's child).
+    fn orphan(domain: &str, name: &str) -> Child {
+        Command::new("sleep")
+            .arg("60")
+            .env(DOMAIN_ENV, domain)
+            .env(WORKER_ENV, name)
+            .spawn()
+            .expect("sleep runs")
+    }
+
+    fn record(name: &str, pid: Option<u32>) -> ProcessRecord {
+        ProcessRecord {
+            spec: ProcessSpec {
+                name: name.to_owned(),
+                program: "sleep".to_owned(),
+                args: vec!["60".to_owned()],
+                env: Vec::new(),
+            },
+            status: ProcessStatus { pid, restarts: 2, last_exit: None },
+        }
+    }
+
+    /// Waits until `pid`'s environment is the one `orphan` set (after its exec).
+    fn wait_exec(pid: u32, domain: &str, name: &str) {
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while !is_worker_of(pid, domain, name) {
+            assert!(Instant::now() < deadline, "the orphan never ran");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+
+    #[test]
+    fn a_worker_started_after_the_last_save_is_adopted_with_its_pid() {
+        let domain = format!("supervise-adopt-{}", std::process::id());
+        let mut running = orphan(&domain, "w");
+        wait_exec(running.id(), &domain, "w");
+        let mut s = Supervisor::new(&domain, None);
+        // The saved table says the worker had exited (no pid): the crash came before
+        // the restart's save.
+        s.reconcile(&[record("w", None)]);
+        let changes = s.take_changes();
+        let (_, status) = changes.iter().find(|(n, _)| n == "w").expect("reported");
+        assert_eq!(status.pid, Some(running.id()), "the adopted pid is reported: {status:?}");
+        assert_eq!(status.restarts, 2);
+        assert_eq!(s.processes["w"].adopted, Some(running.id()));
+        assert!(s.processes["w"].child.is_none(), "no second worker was started");
+        s.processes.get_mut("w").unwrap().adopted = None; // not stopped by the drop
+        running.kill().unwrap();
+        running.wait().unwrap();
+    }
+
+    #[test]
+    fn a_restart_adopts_a_worker_that_appeared_meanwhile() {
+        let domain = format!("supervise-late-{}", std::process::id());
+        let mut s = Supervisor::new(&domain, None);
+        let mut p = Supervised {
+            spec: record("w", None).spec,
+            child: None,
+            adopted: None,
+            started: Instant::now(),
+            status: ProcessStatus::default(),
+            backoff: FIRST_BACKOFF,
+            restart_at: Some(Instant::now()),
+            reported: None,
+        };
+        // A former coordinator's last start, seen only after the scan at reconcile.
+        let mut late = orphan(&domain, "w");
+        wait_exec(late.id(), &domain, "w");
+        s.start(&mut p, true);
+        assert_eq!((p.adopted, p.status.pid), (Some(late.id()), Some(late.id())));
+        assert!(p.child.is_none(), "no second worker was started");
+        assert_eq!(p.status.restarts, 0, "an adoption is not a restart");
+        late.kill().unwrap();
+        late.wait().unwrap();
+        s.processes.clear();
+    }
 }
