@@ -19,7 +19,7 @@
 //! use iceoryx2::prelude::NodeBuilder;
 //!
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
-//! let node = NodeBuilder::new().create::<ShmService>()?;
+//! let node = NodeBuilder::new().config(esgm_shm::iceoryx2_config()).create::<ShmService>()?;
 //! let publisher = TrajectoryPublisher::builder("robot_state", "RobotState")
 //!     .domain("lab")
 //!     .create(&node)?;
@@ -144,8 +144,9 @@ pub use qos::{DEFAULT_MAX_HISTORY, Delivery, TrajectoryQos, history_bound, histo
 pub use received::ReceivedSample;
 pub use sample_check::{SampleVerdict, check_sample};
 pub use service::{
-    Cleanup, CleanupFailure, CleanupReporter, DeadNodeCleanup, OpenError, ShmNode, ShmService,
-    cleanup_dead_nodes, node_config,
+    Cleanup, CleanupFailure, CleanupReporter, DEFAULT_ICEORYX2_ROOT, DeadNodeCleanup,
+    ICEORYX2_ROOT_ENV, OpenError, ShmNode, ShmService, cleanup_dead_nodes, iceoryx2_config,
+    node_config,
 };
 pub use service_name::{
     NameError, TrajectoryServiceNames, node_name, nodes_of, processes_of, unique_domain,

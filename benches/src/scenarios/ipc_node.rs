@@ -3,7 +3,7 @@
 use anyhow::Context as _;
 use esgm_shm::ShmNode;
 use iceoryx2::prelude::{
-    CallbackProgression, Config, LogLevel, Node, NodeBuilder, NodeState, SignalHandlingMode,
+    CallbackProgression, LogLevel, Node, NodeBuilder, NodeState, SignalHandlingMode,
     set_log_level,
 };
 
@@ -16,6 +16,7 @@ use iceoryx2::prelude::{
 pub fn ipc_node() -> anyhow::Result<ShmNode> {
     set_log_level(LogLevel::Error);
     NodeBuilder::new()
+        .config(esgm_shm::iceoryx2_config())
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<esgm_shm::ShmService>()
         .context("could not create an iceoryx2 node")
@@ -27,7 +28,7 @@ pub fn ipc_node() -> anyhow::Result<ShmNode> {
 /// Best effort: a failure leaves the files to that next cleanup.
 pub fn remove_dead_nodes() {
     set_log_level(LogLevel::Error);
-    let _ = Node::<esgm_shm::ShmService>::list(Config::global_config(), |state| {
+    let _ = Node::<esgm_shm::ShmService>::list(esgm_shm::iceoryx2_config(), |state| {
         if let NodeState::Dead(node) = state {
             let _ = node.try_remove_stale_resources();
         }

@@ -359,7 +359,9 @@ fn the_exporter_sends_the_writers_samples_alone() {
             Ok(Response::Trajectory(r)) => r.generation + 1,
             other => panic!("no record of the probe: {other:?}"),
         };
-    let node = iceoryx2::prelude::NodeBuilder::new().create::<esgm_shm::ShmService>().unwrap();
+    let node = iceoryx2::prelude::NodeBuilder::new()
+        .config(esgm_shm::iceoryx2_config())
+        .create::<esgm_shm::ShmService>().unwrap();
     let roomy = esgm_shm::TrajectoryQos {
         history_size: 128,
         subscriber_buffer_size: 128,

@@ -447,9 +447,11 @@ fn down_stops_a_system_whose_coordinator_crashed() {
     nothing_left(&sys.domain, workers.iter().map(|(n, p, _)| (n.as_str(), p.unwrap())));
 }
 
-/// The demo in a private `/dev/shm` and `/tmp/iceoryx2` (a user namespace; the rest of
-/// `/tmp` stays visible, where a checkout and its binaries may live): afterwards only
-/// iceoryx2's own global counter file may remain, nothing of the demo.
+/// The demo in a private `/dev/shm` (segments, and iceoryx2's small files in
+/// `/dev/shm/iceoryx2`) and `/tmp/iceoryx2` (iceoryx2's own default root), in a user
+/// namespace; the rest of `/tmp` stays visible, where a checkout and its binaries may
+/// live: afterwards only iceoryx2's own global counter file may remain, nothing of the
+/// demo.
 #[test]
 fn the_demo_leaves_no_file_in_shared_memory() {
     let _one = ONE_SYSTEM.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
@@ -463,7 +465,7 @@ fn the_demo_leaves_no_file_in_shared_memory() {
          mount -t tmpfs tmpfs /tmp/iceoryx2 && out=$(mktemp) && \
          {ESGM} demo --seconds 6 >$out 2>&1; rc=$?; \
          if [ $rc -ne 0 ]; then cat $out; rm -f $out; exit $rc; fi; rm -f $out; \
-         echo LEFT; ls -A /dev/shm; find /tmp/iceoryx2 -type f 2>/dev/null; true"
+         echo LEFT; find /dev/shm /tmp/iceoryx2 -type f 2>/dev/null; true"
     );
     let mut child = Command::new("unshare")
         .args(["-rm", "sh", "-c", &script])

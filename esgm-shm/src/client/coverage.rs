@@ -271,7 +271,9 @@ mod tests {
     #[test]
     fn a_dead_receivers_count_is_counted_out_once_iceoryx2_has_no_listener_for_it() {
         let domain = crate::service_name::unique_domain("coverage-unheard");
-        let node = iceoryx2::prelude::NodeBuilder::new().create::<crate::ShmService>().unwrap();
+        let node = iceoryx2::prelude::NodeBuilder::new()
+            .config(crate::service::iceoryx2_config())
+            .create::<crate::ShmService>().unwrap();
         let publisher = crate::publisher::TrajectoryPublisher::builder("t", "RobotState")
             .domain(&domain)
             .create(&node)

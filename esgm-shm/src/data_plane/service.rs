@@ -118,7 +118,7 @@ impl DeadNodeCleanup {
 pub fn cleanup_dead_nodes() -> Result<DeadNodeCleanup, iceoryx2::node::NodeListFailure> {
     use iceoryx2::node::{NodeCleanupFailure, NodeState, NodeView};
     let mut outcome = DeadNodeCleanup::default();
-    Node::<ShmService>::list(iceoryx2::config::Config::global_config(), |state| {
+    Node::<ShmService>::list(iceoryx2_config(), |state| {
         if let NodeState::Dead(view) = state {
             let node = format!("{:?}", view.id());
             let name = view.details().as_ref().map(|d| d.name().as_str().to_owned());
@@ -187,13 +187,58 @@ pub fn with_room<T, E>(
     }
 }
 
-/// The iceoryx2 configuration of every esgm node: iceoryx2's global one (its paths
-/// and prefix, so that every process meets on the same files), with a subscriber's
+/// The environment variable that moves iceoryx2's small files (static service
+/// configurations, node details) to another directory. Every process of a domain must
+/// see the same value.
+pub const ICEORYX2_ROOT_ENV: &str = "ESGM_ICEORYX2_ROOT";
+
+/// Where esgm keeps iceoryx2's small files unless told otherwise: on tmpfs, beside the
+/// segments. iceoryx2's own default, `/tmp/iceoryx2/`, is on disk on many robots (an
+/// eMMC or SD card): every node a process makes writes and syncs files there, about
+/// 10 ms of a 20 ms CLI query on this project's machine, and wears the flash.
+pub const DEFAULT_ICEORYX2_ROOT: &str = "/dev/shm/iceoryx2/";
+
+/// iceoryx2's configuration as every esgm process uses it, for listing nodes and
+/// services as well as making nodes: iceoryx2's global one (from its config file if
+/// there is one, so its prefix and a root chosen there hold), with the root in
+/// [`ICEORYX2_ROOT_ENV`], else in [`DEFAULT_ICEORYX2_ROOT`] where iceoryx2's config
+/// kept its own default.
+pub fn iceoryx2_config() -> &'static iceoryx2::config::Config {
+    static CONFIG: std::sync::LazyLock<iceoryx2::config::Config> = std::sync::LazyLock::new(|| {
+        let mut config = iceoryx2::config::Config::global_config().clone();
+        let default = iceoryx2::config::Global::default();
+        let wanted = match std::env::var(ICEORYX2_ROOT_ENV) {
+            Ok(root) => Some(root),
+            Err(_) if config.global.root_path() == default.root_path() => {
+                Some(DEFAULT_ICEORYX2_ROOT.to_owned())
+            }
+            // Set in iceoryx2's config file: the user's choice.
+            Err(_) => None,
+        };
+        if let Some(mut root) = wanted {
+            if !root.ends_with('/') {
+                root.push('/');
+            }
+            match iceoryx2::prelude::Path::try_from(root.as_str()) {
+                Ok(path) => config.global.set_root_path(&path),
+                // Every process would disagree on where the domain is: said loudly,
+                // and iceoryx2's default is kept (as by a process without the variable).
+                Err(e) => tracing::error!(variable = ICEORYX2_ROOT_ENV, value = %root, error = ?e,
+                    "not a usable directory for iceoryx2's files; using iceoryx2's default"),
+            }
+        }
+        config
+    });
+    &CONFIG
+}
+
+/// The iceoryx2 configuration of every esgm node: [`iceoryx2_config`] (its paths and
+/// prefix, so that every process meets on the same files), with a subscriber's
 /// room for expired connections cut to [`EXPIRED_CONNECTIONS`] (128 per subscriber
 /// made a process reading 300 trajectories hold 140 MiB), dead-node cleanup when the
 /// node is made as `cleanup` says, and none when a service is opened.
 pub fn node_config(cleanup: Cleanup) -> iceoryx2::config::Config {
-    let mut config = iceoryx2::config::Config::global_config().clone();
+    let mut config = iceoryx2_config().clone();
     config.defaults.publish_subscribe.subscriber_expired_connection_buffer = EXPIRED_CONNECTIONS;
     config.global.node.cleanup_dead_nodes_on_creation = cleanup == Cleanup::OnCreation;
     config.global.node.cleanup_dead_nodes_on_destruction = false;

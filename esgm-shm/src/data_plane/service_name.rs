@@ -179,7 +179,7 @@ pub fn nodes_of(domain: &str) -> Result<Vec<(String, bool)>, iceoryx2::node::Nod
     use iceoryx2::node::{Node, NodeState, NodeView};
     let prefix = format!("{SERVICE_PREFIX}/{domain}/");
     let mut out = Vec::new();
-    Node::<ShmService>::list(iceoryx2::config::Config::global_config(), |state| {
+    Node::<ShmService>::list(crate::service::iceoryx2_config(), |state| {
         let (details, alive) = match &state {
             NodeState::Alive(v) => (v.details().clone(), true),
             NodeState::Dead(v) => (v.details().clone(), false),
@@ -204,7 +204,7 @@ pub fn processes_of(
     use iceoryx2::node::{Node, NodeState, NodeView};
     let prefix = format!("{SERVICE_PREFIX}/{domain}/");
     let mut out: std::collections::BTreeMap<u32, Vec<String>> = Default::default();
-    Node::<ShmService>::list(iceoryx2::config::Config::global_config(), |state| {
+    Node::<ShmService>::list(crate::service::iceoryx2_config(), |state| {
         if let NodeState::Alive(v) = &state {
             let name = v.details().as_ref().map(|d| d.name().as_str().to_owned());
             // A node of the domain without a readable process id is warned about below.
