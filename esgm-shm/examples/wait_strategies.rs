@@ -58,7 +58,8 @@ fn main() -> Result<()> {
 
 /// The peer: echoes every ping back, for each strategy in turn, then over the socket.
 fn echo(domain: &str, socket: &str, spin: Duration) -> Result<()> {
-    let node = NodeBuilder::new().config(esgm_shm::iceoryx2_config()).create::<esgm_shm::ShmService>()?;
+    let node =
+        NodeBuilder::new().config(esgm_shm::iceoryx2_config()).create::<esgm_shm::ShmService>()?;
     for (k, (_, strategy)) in strategies(spin).into_iter().enumerate() {
         let ping = TrajectorySubscriber::builder(format!("ping{k}"), "Small")
             .domain(domain)
@@ -118,7 +119,8 @@ fn probe(n: usize, spin: Duration) -> Result<()> {
     let domain = unique_domain("wait_strategies");
     let socket = std::env::temp_dir().join(format!("{domain}.sock"));
     let listener = UnixListener::bind(&socket)?;
-    let node = NodeBuilder::new().config(esgm_shm::iceoryx2_config()).create::<esgm_shm::ShmService>()?;
+    let node =
+        NodeBuilder::new().config(esgm_shm::iceoryx2_config()).create::<esgm_shm::ShmService>()?;
     let mut child = spawn_echo(&domain, socket.to_str().context("socket path")?, spin)?;
 
     println!("one-way latency of a small structure, {n} round trips, spin {spin:?} (ns)");
@@ -209,7 +211,8 @@ fn image_round_trips(node: &ShmNode, domain: &str, n: usize) -> Result<()> {
 
 /// CPU used by a spin-then-block subscriber: idle, and reading a 1 kHz stream.
 fn idle_cpu(domain: &str, spin: Duration) -> Result<()> {
-    let node = NodeBuilder::new().config(esgm_shm::iceoryx2_config()).create::<esgm_shm::ShmService>()?;
+    let node =
+        NodeBuilder::new().config(esgm_shm::iceoryx2_config()).create::<esgm_shm::ShmService>()?;
     let sub = TrajectorySubscriber::builder("idle", "Small")
         .domain(domain)
         .wait_strategy(WaitStrategy::SpinThenBlock { spin })
@@ -222,7 +225,9 @@ fn idle_cpu(domain: &str, spin: Duration) -> Result<()> {
 
     let stream_domain = domain.to_owned();
     let producer = std::thread::spawn(move || -> Result<()> {
-        let node = NodeBuilder::new().config(esgm_shm::iceoryx2_config()).create::<esgm_shm::ShmService>()?;
+        let node = NodeBuilder::new()
+            .config(esgm_shm::iceoryx2_config())
+            .create::<esgm_shm::ShmService>()?;
         let p =
             TrajectoryPublisher::builder("idle", "Small").domain(&stream_domain).create(&node)?;
         let end = Instant::now() + Duration::from_secs(3);

@@ -186,7 +186,10 @@ fn a_huge_unknown_name_is_refused_while_others_are_served() {
 fn a_request_in_another_protocol_is_named_a_protocol_mismatch() {
     let d = unique_domain("probe-protocol");
     let _c = coordinator(&d);
-    let node = NodeBuilder::new().config(esgm_shm::iceoryx2_config()).create::<esgm_shm::ShmService>().unwrap();
+    let node = NodeBuilder::new()
+        .config(esgm_shm::iceoryx2_config())
+        .create::<esgm_shm::ShmService>()
+        .unwrap();
     let service = node
         .service_builder(&esgm_shm::service_name::control_service(&d).unwrap())
         .request_response::<[u8], [u8]>()

@@ -3,8 +3,7 @@
 use anyhow::Context as _;
 use esgm_shm::ShmNode;
 use iceoryx2::prelude::{
-    CallbackProgression, LogLevel, Node, NodeBuilder, NodeState, SignalHandlingMode,
-    set_log_level,
+    CallbackProgression, LogLevel, Node, NodeBuilder, NodeState, SignalHandlingMode, set_log_level,
 };
 
 /// A node for this process's services.

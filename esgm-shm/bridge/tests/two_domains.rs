@@ -361,7 +361,8 @@ fn the_exporter_sends_the_writers_samples_alone() {
         };
     let node = iceoryx2::prelude::NodeBuilder::new()
         .config(esgm_shm::iceoryx2_config())
-        .create::<esgm_shm::ShmService>().unwrap();
+        .create::<esgm_shm::ShmService>()
+        .unwrap();
     let roomy = esgm_shm::TrajectoryQos {
         history_size: 128,
         subscriber_buffer_size: 128,

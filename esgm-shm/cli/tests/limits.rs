@@ -1,6 +1,6 @@
 //! P6 from the command line: a reader or process past a domain's limits is refused with
-//! one line naming the limit and its setting, and `esgm push` and `esgm latest` keep
-//! working on the same domain.
+//! one line naming the limit and its setting, while `esgm push`, `latest`, `ps`,
+//! `stats`, `traj list` and `down` keep working on the full domain.
 
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)] // a failure is a failed test
 
@@ -135,6 +135,17 @@ fn readers_and_processes_past_their_limits_are_refused_and_the_domain_serves_on(
         assert!(Instant::now() < deadline, "no room after processes left: {}", o.stderr);
         std::thread::sleep(Duration::from_millis(500));
     }
-    drop(readers);
+    // Full again, `esgm down` still stops the domain.
+    let full: Vec<Echo> = (0..3).map(|_| Echo::start(&d, "odom")).collect();
+    refused(&d, "odom", "max-processes = 6", "--max-processes N");
     ok(&["--domain", &d, "down"]);
+    let gone = esgm(&["--domain", &d, "ps"], PATIENCE);
+    assert!(
+        gone.code != Some(0) && gone.stderr.contains("no coordinator"),
+        "the domain still answers after `esgm down`: {} {}",
+        gone.stdout,
+        gone.stderr
+    );
+    drop(full);
+    drop(readers);
 }

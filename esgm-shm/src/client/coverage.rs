@@ -273,7 +273,8 @@ mod tests {
         let domain = crate::service_name::unique_domain("coverage-unheard");
         let node = iceoryx2::prelude::NodeBuilder::new()
             .config(crate::service::iceoryx2_config())
-            .create::<crate::ShmService>().unwrap();
+            .create::<crate::ShmService>()
+            .unwrap();
         let publisher = crate::publisher::TrajectoryPublisher::builder("t", "RobotState")
             .domain(&domain)
             .create(&node)

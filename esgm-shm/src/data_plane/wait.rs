@@ -335,7 +335,10 @@ mod tests {
     #[allow(clippy::unwrap_used, reason = "a failure is a failed test")]
     fn wait_any_wakes_on_whichever_listener_is_notified_and_consumes_it() {
         use iceoryx2::prelude::{NodeBuilder, ServiceName};
-        let node = NodeBuilder::new().config(crate::service::iceoryx2_config()).create::<ShmService>().unwrap();
+        let node = NodeBuilder::new()
+            .config(crate::service::iceoryx2_config())
+            .create::<ShmService>()
+            .unwrap();
         let domain = crate::service_name::unique_domain("wait-any");
         let events: Vec<_> = ["a", "b"]
             .iter()

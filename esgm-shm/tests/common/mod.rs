@@ -40,7 +40,10 @@ pub fn wait_for(mut cond: impl FnMut() -> bool) -> bool {
 pub fn node() -> ShmNode {
     // iceoryx2 warns that no config file exists; the defaults are what the tests want.
     set_log_level(LogLevel::Error);
-    NodeBuilder::new().config(esgm_shm::iceoryx2_config()).create::<esgm_shm::ShmService>().expect("iceoryx2 node")
+    NodeBuilder::new()
+        .config(esgm_shm::iceoryx2_config())
+        .create::<esgm_shm::ShmService>()
+        .expect("iceoryx2 node")
 }
 
 pub fn robot(i: i64) -> EntityStructure {
