@@ -197,6 +197,16 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         // `esgm compare` found differences: its report said so, no error line.
         Err(e) if e.is::<cmd::compare::Differ>() => ExitCode::FAILURE,
+        // A buffered table written into a closed pipe (`esgm stats | head`): as quiet
+        // as println!'s panic above.
+        Err(e)
+            if e.chain().any(|c| {
+                c.downcast_ref::<std::io::Error>()
+                    .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+            }) =>
+        {
+            ExitCode::SUCCESS
+        }
         Err(e) => {
             // One line: the error and its causes, never a backtrace.
             eprintln!("esgm: {}", esgm_shm::process::one_line(e.chain()));

@@ -698,26 +698,13 @@ impl Coordinator {
         Ok(CoordinatorThread { domain: domain.to_owned(), stop, thread: Some(thread) })
     }
 
-    /// Sleeps up to `timeout` on the control wake-up (or, without it, polls).
-    fn sleep(&self, timeout: Duration) {
-        let Some(wake) = &self.wake else {
-            return std::thread::sleep(timeout.min(Duration::from_millis(1)));
-        };
-        if let Err(e) = crate::wait::timed_wait(wake, timeout) {
-            tracing::warn!(error = ?e, "cannot wait for requests; polling");
-            std::thread::sleep(timeout.min(Duration::from_millis(1)));
-        }
-    }
-
-    /// Serves until `stop` is set — asleep while nobody asks: clients ring the
-    /// coordinator's wake-up after each request — and cleans up dead processes'
-    /// resources every `cleanup_every`.
-    pub fn run(
+    /// The serving loop of [`Coordinator::run`]: asks `janitor` for a cleanup when a
+    /// supervised process changed.
+    fn serve_until(
         &mut self,
         stop: &AtomicBool,
-        cleanup_every: Duration,
+        janitor: &crossbeam_channel::Sender<()>,
     ) -> Result<(), CoordinatorError> {
-        let mut next_cleanup = Instant::now() + cleanup_every;
         let mut leaving: Option<Instant> = None;
         while !stop.load(Ordering::Relaxed) {
             // After a shutdown request, answer for a moment longer: the answer lives in
@@ -733,18 +720,54 @@ impl Coordinator {
             if let Some(out) = &mut self.version {
                 out.announce(version);
             }
-            if served == 0 {
-                // Asleep until a client rings (after sending), the next cleanup, or a
-                // look at `stop`.
-                let until_cleanup = next_cleanup.saturating_duration_since(Instant::now());
-                let idle = if self.shutdown_requested { LEAVING_WAIT } else { IDLE_WAIT };
-                self.sleep(until_cleanup.min(idle));
+            if std::mem::take(&mut self.cleanup_soon) {
+                // One asked for is enough: a cleanup sees every dead node at once.
+                let _ = janitor.try_send(());
             }
-            if Instant::now() >= next_cleanup || std::mem::take(&mut self.cleanup_soon) {
-                log_cleanup(cleanup_dead_nodes(), crate::service::CleanupReporter::Owner);
-                next_cleanup = Instant::now() + cleanup_every;
+            if served == 0 {
+                // Asleep until a client rings (after sending), or a look at `stop`.
+                let idle = if self.shutdown_requested { LEAVING_WAIT } else { IDLE_WAIT };
+                self.sleep(idle);
             }
         }
+        Ok(())
+    }
+
+    /// Sleeps up to `timeout` on the control wake-up (or, without it, polls).
+    fn sleep(&self, timeout: Duration) {
+        let Some(wake) = &self.wake else {
+            return std::thread::sleep(timeout.min(Duration::from_millis(1)));
+        };
+        if let Err(e) = crate::wait::timed_wait(wake, timeout) {
+            tracing::warn!(error = ?e, "cannot wait for requests; polling");
+            std::thread::sleep(timeout.min(Duration::from_millis(1)));
+        }
+    }
+
+    /// Serves until `stop` is set — asleep while nobody asks: clients ring the
+    /// coordinator's wake-up after each request — while a janitor thread cleans up dead
+    /// processes' resources every `cleanup_every`, and soon after a supervised process
+    /// changed. A cleanup reads every node of the host and takes from milliseconds to
+    /// seconds (a debug build, a loaded machine): done inline, it kept requests waiting
+    /// that long, and a supervisor's reports timed out while workers were being killed.
+    pub fn run(
+        &mut self,
+        stop: &AtomicBool,
+        cleanup_every: Duration,
+    ) -> Result<(), CoordinatorError> {
+        let (soon, asked) = crossbeam_channel::bounded::<()>(1);
+        std::thread::scope(|scope| {
+            let thread = std::thread::Builder::new()
+                .name("esgm-janitor".into())
+                .spawn_scoped(scope, || janitor(&asked, stop, cleanup_every));
+            if let Err(e) = &thread {
+                tracing::warn!(error = %e, "no janitor thread; dead processes are cleaned up by whoever needs their room");
+            }
+            let served = self.serve_until(stop, &soon);
+            // The janitor ends with the channel (after a cleanup it is in, if any).
+            drop(soon);
+            served
+        })?;
         if self.shutdown_requested {
             // The domain is going down: the words its crashed processes kept mapped
             // (counted as users for ever) go with it, and the kept histories.
@@ -754,6 +777,21 @@ impl Coordinator {
             KeptHistory::remove_domain(&self.domain);
         }
         Ok(())
+    }
+}
+
+/// The coordinator's janitor: cleans up dead processes' resources every `every`, and
+/// when `asked`, until the coordinator drops its end or `stop` is set.
+fn janitor(asked: &crossbeam_channel::Receiver<()>, stop: &AtomicBool, every: Duration) {
+    loop {
+        match asked.recv_timeout(every) {
+            Ok(()) | Err(crossbeam_channel::RecvTimeoutError::Timeout) => {}
+            Err(crossbeam_channel::RecvTimeoutError::Disconnected) => return,
+        }
+        if stop.load(Ordering::Relaxed) {
+            return;
+        }
+        log_cleanup(cleanup_dead_nodes(), crate::service::CleanupReporter::Owner);
     }
 }
 

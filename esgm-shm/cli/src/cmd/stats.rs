@@ -4,6 +4,8 @@
 
 use esgm_core::esgm::TrajectoryKind;
 use esgm_core::{EntityTrajectoryStructure, Esgm};
+use std::io::Write as _;
+
 use serde_json::json;
 
 use crate::session::{connect_tool as connect, trajectory};
@@ -26,8 +28,12 @@ pub fn run(domain: &str, json: bool) -> anyhow::Result<()> {
             None
         }
     };
+    // One write for the whole table, not one per line (a domain may hold thousands of
+    // trajectories).
+    let mut out = std::io::BufWriter::new(std::io::stdout().lock());
     if !json {
-        println!(
+        writeln!(
+            out,
             "{:<20} {:<10} {:>7} {:>7} {:>7} {:>8} {:>11} {:>11}",
             "trajectory",
             "kind",
@@ -37,7 +43,7 @@ pub fn run(domain: &str, json: bool) -> anyhow::Result<()> {
             "rate Hz",
             "p50 lag ms",
             "p99 lag ms"
-        );
+        )?;
     }
     let mut drops = Vec::new();
     for info in list {
@@ -46,12 +52,14 @@ pub fn run(domain: &str, json: bool) -> anyhow::Result<()> {
             None => (trajectory(&esgm, &info.name)?.stats()?, None),
         };
         if json {
-            println!(
+            writeln!(
+                out,
                 "{}",
                 json!({ "trajectory": info.name, "kind": info.kind.name(), "stats": s, "worker": worker })
-            );
+            )?;
         } else {
-            println!(
+            writeln!(
+                out,
                 "{:<20} {:<10} {:>7} {:>7} {:>7} {:>8.2} {:>11} {:>11}",
                 info.name,
                 info.kind.name(),
@@ -61,7 +69,7 @@ pub fn run(domain: &str, json: bool) -> anyhow::Result<()> {
                 s.rate_hz,
                 ms(s.add_delay_p50),
                 ms(s.add_delay_p99)
-            );
+            )?;
             for (cause, n) in &s.dropped {
                 drops.push(format!("{}: {n} dropped: {cause}", info.name));
             }
@@ -82,11 +90,13 @@ pub fn run(domain: &str, json: bool) -> anyhow::Result<()> {
         }
     }
     if !drops.is_empty() {
-        println!();
+        writeln!(out)?;
         for line in drops {
-            println!("{line}");
+            writeln!(out, "{line}")?;
         }
     }
+    out.flush()?;
+    drop(out);
     let processes = super::ps::listed(&esgm)?;
     if !processes.is_empty() && !json {
         println!();

@@ -2,6 +2,7 @@
 
 use esgm_core::{Clock as _, EntityTrajectoryStructure, Esgm};
 use serde_json::json;
+use std::io::Write as _;
 
 use anyhow::bail;
 use esgm_shm::control::{Request, Response};
@@ -36,12 +37,15 @@ pub fn run(domain: &str, json: bool, c: &TrajCommand) -> anyhow::Result<()> {
     match c {
         TrajCommand::List => {
             let list = esgm.trajectories()?;
+            // One write for the whole table, not one per line (a domain may hold
+            // thousands of trajectories).
+            let mut out = std::io::BufWriter::new(std::io::stdout().lock());
             if !json {
-                println!("{:<20} {:<10} {:<18} source", "trajectory", "kind", "type");
+                writeln!(out, "{:<20} {:<10} {:<18} source", "trajectory", "kind", "type")?;
             }
             for i in list {
                 if json {
-                    println!("{}", serde_json::to_string(&i)?);
+                    writeln!(out, "{}", serde_json::to_string(&i)?)?;
                     continue;
                 }
                 let source = match (&i.source, i.inputs.as_slice()) {
@@ -50,8 +54,9 @@ pub fn run(domain: &str, json: bool, c: &TrajCommand) -> anyhow::Result<()> {
                     (None, []) => "pushed".to_owned(),
                     (None, inputs) => inputs.join(", "),
                 };
-                println!("{:<20} {:<10} {:<18} {source}", i.name, i.kind.name(), i.type_name);
+                writeln!(out, "{:<20} {:<10} {:<18} {source}", i.name, i.kind.name(), i.type_name)?;
             }
+            out.flush()?;
         }
         TrajCommand::Show { name } => {
             let t = trajectory(&esgm, name)?;
