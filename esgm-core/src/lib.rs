@@ -35,6 +35,7 @@ pub mod codec;
 pub mod entity;
 pub mod entity_view;
 pub mod esgm;
+mod failures;
 pub mod filter;
 pub mod frame;
 pub mod generator;

@@ -15,17 +15,14 @@
 
 mod errors;
 mod interfaces;
-mod limit;
 mod report;
 mod spec;
-mod unreachable;
 
+pub use crate::failures::{Limit, LimitReached, Peer, Unreachable};
 pub use errors::{CreateError, FlushError, InputType, LookupError, RegistrationError, SystemError};
 pub use interfaces::{CompUnit, ComputeError, SensorError, SensorInterface};
-pub use limit::{Limit, LimitReached};
 pub use report::{EsgmStats, LogLevel, MemoryStats, TrajectoryInfo, TrajectoryReport, WorkerStats};
 pub use spec::{TrajectoryKind, TrajectorySource, TrajectorySpec};
-pub use unreachable::{Peer, Unreachable};
 
 use std::sync::Arc;
 

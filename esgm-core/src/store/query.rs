@@ -48,7 +48,7 @@ pub enum QueryError {
         /// The trajectory.
         trajectory: String,
         /// Why.
-        reason: crate::esgm::Unreachable,
+        reason: crate::failures::Unreachable,
     },
 }
 

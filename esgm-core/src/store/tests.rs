@@ -575,8 +575,9 @@ fn stats_rate_and_delay_percentiles() {
     }
     let st = f.store.stats();
     assert!((st.rate_hz - 10.0).abs() < 1e-6, "{}", st.rate_hz);
+    // Within 1 %: the delay histogram keeps two significant digits.
     let p50 = st.add_delay_p50.unwrap();
-    assert!((4_990_000..=5_010_000).contains(&p50), "{p50}");
+    assert!((4_950_000..=5_050_000).contains(&p50), "{p50}");
 }
 
 #[test]

@@ -209,7 +209,7 @@ pub enum AddError {
     /// the processes adding to it: a limit of the transport was reached (the error
     /// names the setting that raises it). Nothing was added.
     #[error(transparent)]
-    LimitReached(#[from] crate::esgm::LimitReached),
+    LimitReached(#[from] crate::failures::LimitReached),
     /// The trajectory's writer was another process, which has exited (or let it go)
     /// without destroying it, and this process could not take it over: its writer is
     /// supervised and is being restarted, or it went while this add was on its way.
@@ -229,7 +229,7 @@ pub enum AddError {
         /// The trajectory.
         trajectory: String,
         /// Why.
-        reason: crate::esgm::Unreachable,
+        reason: crate::failures::Unreachable,
     },
 }
 
