@@ -17,5 +17,6 @@ pub mod external;
 pub mod policy_args;
 pub mod serve;
 pub mod span_arg;
+pub mod stop_args;
 pub mod supervise;
 pub mod time_arg;

@@ -1,23 +1,21 @@
 //! `esgm violations`: a trajectory's policy violations as they happen (C7).
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use esgm_core::EntityTrajectoryStructure;
 use serde_json::json;
 
 use crate::session::connect;
+use esgm_cli::stop_args::StopArgs;
 
 /// `esgm violations` options.
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Trajectory name.
     pub trajectory: String,
-    /// Stop after this many.
-    #[arg(long)]
-    pub count: Option<usize>,
-    /// Stop after this many seconds.
-    #[arg(long, value_parser = crate::span_arg::seconds)]
-    pub seconds: Option<f64>,
+    /// When to stop (violations printed, or seconds).
+    #[command(flatten)]
+    pub stop: StopArgs,
 }
 
 /// Prints each violation as it is reported by the trajectory's writer.
@@ -25,12 +23,8 @@ pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
     let esgm = connect(domain)?;
     let t = crate::session::trajectory(&esgm, &a.trajectory)?;
     let sub = t.subscribe_violations(1024)?;
-    let until = a.seconds.map(|s| Instant::now() + Duration::from_secs_f64(s.max(0.0)));
-    let mut printed = 0;
-    while a.count.is_none_or(|c| printed < c) {
-        if until.is_some_and(|u| Instant::now() >= u) {
-            break;
-        }
+    let mut stop = a.stop.start();
+    while !stop.done() {
         if let Ok(v) = sub.recv_timeout(Duration::from_millis(200)) {
             if json {
                 println!(
@@ -44,7 +38,7 @@ pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
                     v.trajectory, v.constraint, v.valid_time, v.detail
                 );
             }
-            printed += 1;
+            stop.seen_one();
         }
     }
     Ok(())
