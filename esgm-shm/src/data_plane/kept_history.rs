@@ -43,7 +43,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use esgm_core::codec::{self, ARCHIVE_ALIGNMENT, CodecError, ENVELOPE_LEN};
 use esgm_core::{CacheConstraint, EntityStructure, Time};
 
-use crate::process::access::ShmAccess;
+use crate::data_plane::shm_access::ShmAccess;
 
 /// Where the files live: POSIX shared memory, as iceoryx2's segments.
 const SHM_DIR: &str = "/dev/shm";
@@ -796,7 +796,7 @@ impl KeptHistory {
     /// Removes every kept history of `domain` and of its generations, at the domain's
     /// end (`esgm down`, the end of `esgm up`). Returns how many were removed.
     pub fn remove_domain(domain: &str) -> usize {
-        crate::process::access::remove_files_of(Path::new(SHM_DIR), FILE_PREFIX, domain)
+        crate::data_plane::shm_access::remove_files_of(Path::new(SHM_DIR), FILE_PREFIX, domain)
     }
 }
 

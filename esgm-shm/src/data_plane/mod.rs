@@ -19,6 +19,7 @@ pub mod sample_check;
 pub(crate) mod sequence_gaps;
 pub mod service;
 pub mod service_name;
+pub(crate) mod shm_access;
 pub mod size_hint;
 pub mod structure_loan;
 pub mod subscriber;

@@ -103,7 +103,7 @@ use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use super::wake_protocol as protocol;
-use crate::process::access::ShmAccess;
+use crate::data_plane::shm_access::ShmAccess;
 
 /// The environment variable that chooses how readers sleep: `futex` (the default) or
 /// `event` (iceoryx2's event only), to measure one against the other or to rule the
@@ -171,7 +171,7 @@ fn domain_prefix(domain: &str) -> String {
 /// process still in the domain keeps its mapping; one that joins later makes the word
 /// anew. Returns how many were removed.
 pub fn remove_domain(domain: &str) -> usize {
-    crate::process::access::remove_files_of(Path::new(SHM_DIR), FILE_PREFIX, domain)
+    crate::data_plane::shm_access::remove_files_of(Path::new(SHM_DIR), FILE_PREFIX, domain)
 }
 
 /// One trajectory's futex word, mapped (see the module docs). Unmapped, and its file
