@@ -30,33 +30,7 @@ use crate::received::ReceivedSample;
 /// (of a limited budget), which only pays off for large octet sequences such as images.
 pub(crate) const HOLD_MIN_BYTES: usize = 16 * 1024;
 
-/// What a process holds in shared memory on behalf of its values, and what it had to
-/// copy: how to check that images from other processes reach this one without a copy.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub struct HoldingStats {
-    /// Received samples borrowed now, because values in this process read their
-    /// octets (images) in place.
-    pub held_now: usize,
-    /// Received samples whose octets were kept in shared memory, since the start.
-    pub held_total: u64,
-    /// Received samples with large octets that were copied instead, because their
-    /// subscriber's borrow budget was spent (values kept too many older ones).
-    pub copied_over_budget: u64,
-    /// Images this process published from loans: pixels written in place by their
-    /// producer, never copied ([`esgm_core::OctetsAllocator`]).
-    pub sent_in_place: u64,
-    /// Images this process published by encoding them: their pixels were copied from
-    /// this process's heap into shared memory once.
-    pub sent_copied: u64,
-}
-
-impl HoldingStats {
-    /// Image copies this process made: received images copied onto its heap, and
-    /// images it copied into shared memory to send.
-    pub fn copies(&self) -> u64 {
-        self.copied_over_budget + self.sent_copied
-    }
-}
+pub use crate::control::holding_stats::HoldingStats;
 
 /// The process-wide counters behind [`HoldingStats`], shared by every owner.
 #[derive(Debug, Default)]

@@ -14,6 +14,7 @@
 
 pub mod attach;
 pub mod client;
+pub(crate) mod holding_stats;
 pub mod limits;
 pub mod persistence;
 pub mod processes;

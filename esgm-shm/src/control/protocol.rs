@@ -12,7 +12,7 @@ use esgm_core::esgm::{
 use esgm_core::{EntityStructureType, TypeRegistryError};
 use serde::{Deserialize, Serialize};
 
-use crate::holdings::HoldingStats;
+use crate::control::holding_stats::HoldingStats;
 
 use super::processes::{ProcessError, ProcessRecord, ProcessSpec, ProcessStatus};
 

@@ -17,7 +17,7 @@ use super::protocol::{
 use super::refusal::Refusal;
 use super::state::{SNAPSHOT_VERSION, SavedTrajectory, Snapshot};
 use crate::capacity::{DomainLimits, Readers};
-use crate::holdings::HoldingStats;
+use crate::control::holding_stats::HoldingStats;
 
 #[derive(Debug, Clone)]
 struct Placement {
