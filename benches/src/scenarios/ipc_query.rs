@@ -20,7 +20,7 @@
 //! says, while the writer's shared-memory history for replicas made later stays at
 //! [`esgm_shm::DEFAULT_MAX_HISTORY`] (an `Elements(10^6)` cache would size the service
 //! for a million samples per reader). So the replica is made before the first add, and
-//! the writer adds in batches of [`BATCH`] — fewer than the replica's queue holds —
+//! the writer adds in batches of `BATCH` — fewer than the replica's queue holds —
 //! waiting after each until the replica has them all: a replica a whole queue behind
 //! would lose the oldest.
 //!

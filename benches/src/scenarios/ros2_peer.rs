@@ -24,7 +24,7 @@
 //! `recv_timeout`. RustDDS's own threads (its event loop, which receives the UDP
 //! datagrams) block on sockets in every row: DDS offers no busy-wait of its own.
 //!
-//! **Timing.** One way, on the host's system clock ([`Method::SystemClock`]): stamped
+//! **Timing.** One way, on the host's system clock ([`crate::report::Method::SystemClock`]): stamped
 //! where the hop starts and where it ends, in two processes; the next message is sent
 //! once the last one was read. Under `--pin` the sending and the receiving end are on
 //! the two cores, the bridge free to run on both.

@@ -18,11 +18,11 @@
 //! - [`recorder`]: [`Recorder`], subscriptions to a running system into a writer,
 //!   never blocking the system's writers;
 //! - [`replay`]: publishing a recording into a running ESGM again, in add order;
-//! - [`rerun`]: a configuration's units run on recorded inputs in one process,
+//! - [`rerun()`]: a configuration's units run on recorded inputs in one process,
 //!   deterministically, under the simulated clock.
-//! - [`compare`]: two recordings aligned by valid time, trajectory by trajectory
+//! - [`compare()`]: two recordings aligned by valid time, trajectory by trajectory
 //!   ([`value_diff`] names the attribute that differs, [`type_diff`] the type);
-//! - [`load`]: recorded trajectories made queryable in an ESGM, with their policies.
+//! - [`load()`]: recorded trajectories made queryable in an ESGM, with their policies.
 #![deny(missing_docs)]
 
 pub mod compare;

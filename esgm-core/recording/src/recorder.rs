@@ -3,7 +3,7 @@
 //! Each recorded trajectory gets a subscription with a large buffer and a thread that
 //! drains it into the writer. The system's writers never wait for the recorder: a
 //! subscription that is full drops its oldest structure and counts it
-//! ([`Subscription::overflowed`](esgm_core::store::subscription::Subscription::overflowed)),
+//! ([`Subscription::overflowed`](esgm_core::Subscription::overflowed)),
 //! and the recorder writes each such loss into the file's events channel, with the
 //! cause `recorder_overflow`. Structures lost before they reached this process (a
 //! replica's `lost` drops) are written as losses with the cause `lost`, and policy

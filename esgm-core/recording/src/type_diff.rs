@@ -1,8 +1,8 @@
 //! How two definitions of one type differ: the first attribute that does, in words.
 //!
 //! One implementation for everyone who must refuse or report a type mismatch between
-//! a recording and something else ([`crate::compare`] between two recordings,
-//! [`crate::load`] between a recording and an ESGM), so a mismatch is named the same
+//! a recording and something else ([`crate::compare()`] between two recordings,
+//! [`crate::load()`] between a recording and an ESGM), so a mismatch is named the same
 //! way everywhere.
 
 use esgm_core::EntityStructureType;

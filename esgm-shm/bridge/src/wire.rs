@@ -226,7 +226,7 @@ pub fn decode(bytes: &[u8]) -> Result<(Header, Option<EntityStructure>), WireErr
 }
 
 /// A stable hash of a type's definition and those of the element types it names
-/// (FNV-1a over their JSON form, as [`esgm_shm::type_id`] hashes names): equal on both
+/// (FNV-1a over their JSON form, as [`esgm_shm::type_id()`] hashes names): equal on both
 /// hosts exactly when the definitions are.
 pub fn type_hash(definitions: &[(String, EntityStructureType)]) -> u64 {
     let mut sorted: Vec<&(String, EntityStructureType)> = definitions.iter().collect();

@@ -4,7 +4,7 @@
 //! One mapping from esgm's Rust errors to statuses, by the variant's name (every error
 //! enum serialises, since errors cross processes, and its variants carry the IDL's
 //! names), so a new error variant with an IDL name gets its status without a change
-//! here. Every entry point runs inside [`guard`]: a panic is caught and becomes
+//! here. Every entry point runs inside `guard`: a panic is caught and becomes
 //! `ESGM_INTERNAL`, never an unwind into C.
 
 use std::cell::RefCell;

@@ -1,8 +1,8 @@
 //! `esgm` for Python: the ESGM's operations with the seed's names on both runtimes
-//! ([`runtime`]), samples as read-only mappings ([`sample`]), attributes converted by the
-//! trajectory's type ([`values`]), images as numpy arrays over esgm's own memory in both
-//! directions ([`values::octets_array`], [`images`]), and the IDL's exceptions
-//! ([`errors`]). Built with maturin (`pip install ./esgm-shm/python`).
+//! (`runtime`), samples as read-only mappings (`sample`), attributes converted by the
+//! trajectory's type (`values`), images as numpy arrays over esgm's own memory in both
+//! directions (`values::octets_array`, `images`), and the IDL's exceptions
+//! (`errors`). Built with maturin (`pip install ./esgm-shm/python`).
 
 #![deny(missing_docs)]
 

@@ -28,9 +28,9 @@ pub(crate) const HOLD_SLACK: usize = 8;
 /// and readers alike (iceoryx2 refuses an opener that asks for more than the creator
 /// set, and any of them may come first): the publisher keeps the cache's bound of
 /// samples, so a replica made late starts with the writer's view, and a replica may
-/// borrow that many plus [`HOLD_SLACK`], so the images it holds stay in shared memory.
+/// borrow that many plus `HOLD_SLACK`, so the images it holds stay in shared memory.
 /// A trajectory of `entity_type` with octets and no element bound keeps
-/// [`MAX_OCTET_HISTORY`]. Public for readers outside a connection (esgm-bridge's
+/// `MAX_OCTET_HISTORY`. Public for readers outside a connection (esgm-bridge's
 /// exporter), which must ask for the same.
 ///
 /// One publisher: the writer's. Every other process adds through the writer's inbox

@@ -112,7 +112,7 @@ pub const WAKE_ENV: &str = "ESGM_WAKE";
 
 /// Where the words live: POSIX shared memory, as iceoryx2's segments.
 const SHM_DIR: &str = "/dev/shm";
-/// The words' file names begin with this, then the domain and [`SEPARATOR`]:
+/// The words' file names begin with this, then the domain and `SEPARATOR`:
 /// `esgm_wake@<domain>@<hash>`, so that a domain's words can be found by name.
 pub const FILE_PREFIX: &str = "esgm_wake@";
 /// What ends the domain in a word's file name: a character no domain name has.
@@ -135,7 +135,7 @@ const SLOT_COUNT: usize = (LEN - SLOTS) / 4;
 /// Rings that woke fewer threads than sleepers were counted (or sends that saw fewer
 /// listeners than receivers, or notifies skipped) before the writer looks for the
 /// counts of dead processes; doubled after each look that found none, up to
-/// [`MAX_FRUITLESS_RINGS`], so that a count nobody can mend costs the look rarely.
+/// `MAX_FRUITLESS_RINGS`, so that a count nobody can mend costs the look rarely.
 pub const FRUITLESS_RINGS: u32 = 64;
 const MAX_FRUITLESS_RINGS: u32 = 1 << 16;
 /// How often an open retries a file its last user removed meanwhile.
@@ -586,7 +586,7 @@ pub struct Ring {
     pub receivers: u32,
     /// The event's listeners the writer counted (0 if no receiver was counted):
     /// fewer than `receivers` means one of them died
-    /// ([`WakeWord::receivers_unheard`]).
+    /// (`WakeWord::receivers_unheard`).
     pub listeners: usize,
     /// The notify is needed by nobody: every listener is a receiver's, every
     /// receiver was counted as covered, the counts did not change while the listeners
