@@ -30,6 +30,31 @@ pub enum SensorError {
 /// that stamps its own acquisition time instead must keep consecutive valid times at
 /// least a period apart, or the sampled trajectory's "sample every period" constraint
 /// drops the early ones (counted as change violations).
+///
+/// A closure is a sensor:
+///
+/// ```
+/// use std::sync::Arc;
+/// use esgm_core::prelude::*;
+///
+/// let esgm = InProcessEsgm::default();
+/// esgm.create_type(EntityStructureType::new("Battery").attr("volts", ValueSort::Double)).unwrap();
+/// let battery = |qtime: Time| -> Result<EntityStructure, SensorError> {
+///     Ok(EntityStructure::named("battery").at(qtime).with("volts", 24.1))
+/// };
+/// esgm.add_sensor_interface("battery", "Battery", Arc::new(battery)).unwrap();
+/// // Sampled every 10 ms from now, for ever, any delay, the last 100 kept.
+/// let volts =
+///     esgm.create_entity_trajectory_structure("volts", "battery", 0, 0, millis(10), 0, 100)
+///         .unwrap();
+/// let samples = volts.subscribe(SubscribeOptions::default()).unwrap();
+/// let first = samples.recv_timeout(std::time::Duration::from_secs(5)).unwrap();
+/// let next = samples.recv_timeout(std::time::Duration::from_secs(5)).unwrap();
+/// assert_eq!(first.get("volts"), Some(&Value::Double(24.1)));
+/// // Stamped at their sample times, whole periods apart.
+/// let apart = next.valid_time - first.valid_time;
+/// assert!(apart > 0 && apart % millis(10) == 0, "{apart} ns apart");
+/// ```
 pub trait SensorInterface: Send + Sync {
     /// The current value, as asked at `qtime`.
     fn get_current_value(&self, qtime: Time) -> Result<EntityStructure, SensorError>;
@@ -78,6 +103,33 @@ pub enum ComputeError {
 
 /// A computation on entity structures (seed 2.3, 3.3.2): esgm calls it with the
 /// latest sample of each input, in input order, whenever an input is updated.
+///
+/// A closure is a unit. The same code runs on a system of processes
+/// (`esgm_shm::connect`), where the unit runs in the process that registered it.
+///
+/// ```
+/// use std::sync::Arc;
+/// use std::time::{Duration, Instant};
+/// use esgm_core::prelude::*;
+///
+/// let esgm = InProcessEsgm::default();
+/// esgm.create_type(EntityStructureType::new("Reading").attr("x", ValueSort::Double)).unwrap();
+/// // Doubles its one input's `x`; no output while `x` is missing.
+/// let double = |inputs: &[Sample], _qtime: Time| -> Result<EntityStructure, ComputeError> {
+///     let x = inputs[0].get("x").and_then(Value::as_double);
+///     let x = x.ok_or(ComputeError::ValueNotAvailable)?;
+///     Ok(EntityStructure::named("doubled").at(inputs[0].valid_time).with("x", 2.0 * x))
+/// };
+/// let reading = vec![InputType::Type("Reading".into())];
+/// esgm.add_comp_unit("double", "Reading", reading, Arc::new(double)).unwrap();
+/// let raw = esgm.create_primitive_entity_trajectory_structure("raw", "Reading").unwrap();
+/// let doubled =
+///     esgm.create_computed_entity_trajectory_structure("doubled", "double", &["raw"]).unwrap();
+/// raw.add(EntityStructure::named("r").at(secs(1)).with("x", 1.5)).unwrap();
+/// esgm.flush(Instant::now() + Duration::from_secs(5)).unwrap();
+/// let out = doubled.get_latest().unwrap();
+/// assert_eq!((out.valid_time, out.get("x")), (secs(1), Some(&Value::Double(3.0))));
+/// ```
 pub trait CompUnit: Send + Sync {
     /// Computes an output from `inputs` (one per input trajectory), asked at `qtime`.
     fn compute(&self, inputs: &[Sample], qtime: Time) -> Result<EntityStructure, ComputeError>;

@@ -19,11 +19,15 @@
 //! Bindings (the C ABI in `esgm-shm/c`, Python in `esgm-shm/python`) bind this and
 //! nothing under it.
 //!
-//! ```no_run
+//! ```
 //! use esgm_shm::prelude::*;
 //!
 //! # fn main() -> Result<(), Box<dyn std::error::Error>> {
-//! let esgm = connect("lab")?; // or InProcessEsgm::default(), with the same code below
+//! # let lab = esgm_shm::unique_domain("prelude");
+//! # let registry = esgm_shm::control::Registry::new(esgm_core::TypeRegistry::with_library());
+//! # let _coordinator = esgm_shm::control::Coordinator::spawn(&lab, registry)?;
+//! // A system's coordinator runs (`esgm up --domain lab`).
+//! let esgm = connect(&lab)?; // or InProcessEsgm::default(), with the same code below
 //! let odometry = esgm.create_primitive_entity_trajectory_structure("odo", "RobotState")?;
 //! odometry.create_at_now("robot1", [("x", 1.0.into()), ("y", 2.0.into()), ("dir", 0.0.into())].into())?;
 //! let latest = odometry.get_latest()?;
