@@ -206,30 +206,41 @@ pub const DEFAULT_ICEORYX2_ROOT: &str = "/dev/shm/iceoryx2/";
 pub fn iceoryx2_config() -> &'static iceoryx2::config::Config {
     static CONFIG: std::sync::LazyLock<iceoryx2::config::Config> = std::sync::LazyLock::new(|| {
         let mut config = iceoryx2::config::Config::global_config().clone();
-        let default = iceoryx2::config::Global::default();
-        let wanted = match std::env::var(ICEORYX2_ROOT_ENV) {
-            Ok(root) => Some(root),
-            Err(_) if config.global.root_path() == default.root_path() => {
-                Some(DEFAULT_ICEORYX2_ROOT.to_owned())
-            }
-            // Set in iceoryx2's config file: the user's choice.
-            Err(_) => None,
-        };
-        if let Some(mut root) = wanted {
-            if !root.ends_with('/') {
-                root.push('/');
-            }
-            match iceoryx2::prelude::Path::try_from(root.as_str()) {
-                Ok(path) => config.global.set_root_path(&path),
-                // Every process would disagree on where the domain is: said loudly,
-                // and iceoryx2's default is kept (as by a process without the variable).
-                Err(e) => tracing::error!(variable = ICEORYX2_ROOT_ENV, value = %root, error = ?e,
-                    "not a usable directory for iceoryx2's files; using iceoryx2's default"),
+        let own_default =
+            config.global.root_path() == iceoryx2::config::Global::default().root_path();
+        let env = std::env::var(ICEORYX2_ROOT_ENV).ok();
+        if let Some(root) = chosen_root(env.as_deref(), own_default) {
+            let path = iceoryx2::prelude::Path::try_from(root.as_str()).or_else(|e| {
+                tracing::error!(variable = ICEORYX2_ROOT_ENV, value = %root, error = ?e,
+                    "not a usable directory for iceoryx2's files; using {DEFAULT_ICEORYX2_ROOT}");
+                iceoryx2::prelude::Path::try_from(DEFAULT_ICEORYX2_ROOT)
+            });
+            if let Ok(path) = path {
+                config.global.set_root_path(&path);
             }
         }
         config
     });
     &CONFIG
+}
+
+/// The root [`iceoryx2_config`] sets, with a trailing `/`, given [`ICEORYX2_ROOT_ENV`]'s
+/// value `env` and whether iceoryx2's config kept its own default root; `None` keeps
+/// the root of iceoryx2's config file. An empty value counts as unset, and a relative
+/// one is refused loudly for the default: every process of a domain must meet on the
+/// same files, wherever it was started.
+fn chosen_root(env: Option<&str>, own_default: bool) -> Option<String> {
+    let fallback = || own_default.then(|| DEFAULT_ICEORYX2_ROOT.to_owned());
+    match env {
+        None | Some("") => fallback(),
+        Some(root) if !root.starts_with('/') => {
+            tracing::error!(variable = ICEORYX2_ROOT_ENV, value = %root,
+                "not an absolute path; using {DEFAULT_ICEORYX2_ROOT}");
+            Some(DEFAULT_ICEORYX2_ROOT.to_owned())
+        }
+        Some(root) if root.ends_with('/') => Some(root.to_owned()),
+        Some(root) => Some(format!("{root}/")),
+    }
 }
 
 /// The iceoryx2 configuration of every esgm node: [`iceoryx2_config`] (its paths and
@@ -469,4 +480,19 @@ pub(crate) fn open_wake_service(
     qos: &TrajectoryQos,
 ) -> Result<WakeService, OpenError> {
     open_event_service(node, names.wake(), qos.wake_capacity())
+}
+
+#[cfg(test)]
+mod root_tests {
+    use super::*;
+
+    #[test]
+    fn the_root_is_the_variable_else_tmpfs_unless_iceoryx2_was_configured() {
+        assert_eq!(chosen_root(None, true).as_deref(), Some(DEFAULT_ICEORYX2_ROOT));
+        assert_eq!(chosen_root(None, false), None, "a root from iceoryx2's config file");
+        assert_eq!(chosen_root(Some(""), true).as_deref(), Some(DEFAULT_ICEORYX2_ROOT));
+        assert_eq!(chosen_root(Some("/run/x"), false).as_deref(), Some("/run/x/"));
+        assert_eq!(chosen_root(Some("/run/x/"), true).as_deref(), Some("/run/x/"));
+        assert_eq!(chosen_root(Some("x"), true).as_deref(), Some(DEFAULT_ICEORYX2_ROOT));
+    }
 }
