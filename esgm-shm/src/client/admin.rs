@@ -31,14 +31,13 @@
 //! reset must reach the writer's store and every replica, in the processes that hold
 //! them. The coordinator stays out of the data's way.
 
+use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use esgm_core::esgm::{
-    Esgm, EsgmStats, LimitReached, LogLevel, MemoryStats, Peer, TrajectoryReport, Unreachable,
-};
+use esgm_core::esgm::{Esgm, LimitReached, LogLevel, MemoryStats, Peer, Unreachable};
 use esgm_core::{DropCause, InProcessEsgm, QueryError, ResetForwarder};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
@@ -53,6 +52,7 @@ use serde::{Deserialize, Serialize};
 
 use super::mirrors::SharedMirrors;
 use super::shared_node::SharedNode;
+use super::stats_row::{Figures, StatsRow};
 use crate::capacity::{DomainLimits, EventCapacity, TOOL_RESERVE};
 use crate::service::{ShmNode, ShmService, open_event_service};
 
@@ -68,8 +68,12 @@ const BUFFER: usize = 4;
 /// it awake; this is the backstop). Every 2 s it was a wake-up a second in every
 /// process of an idle robot.
 const RECHECK: Duration = Duration::from_secs(30);
-/// The longest an asker sleeps between two looks for answers.
-const POLL: Duration = Duration::from_millis(1);
+/// The longest an asker sleeps between two looks for answers, in the first
+/// [`FAST_ANSWER`] of its wait (answers usually come within a few milliseconds; a
+/// writer of 1,000 trajectories takes about 5 ms to report them) and after it.
+const POLL: [Duration; 2] = [Duration::from_micros(100), Duration::from_millis(1)];
+/// How long an asker looks for answers often ([`POLL`]).
+const FAST_ANSWER: Duration = Duration::from_millis(50);
 
 type Channel = publish_subscribe::PortFactory<ShmService, [u8], ()>;
 
@@ -180,8 +184,9 @@ pub(crate) enum AdminAnswer {
         reset: usize,
     },
     /// Statistics of every local trajectory, each marked true if this process writes
-    /// it (the writer's are the trajectory's own; a replica's are what it received).
-    Stats(Vec<(bool, TrajectoryReport)>),
+    /// it (the writer's are the trajectory's own; a replica's are what it received), as
+    /// compact rows that the asker joins with the coordinator's listing.
+    Stats(Vec<StatsRow>),
     /// This process's memory.
     Memory(MemoryStats),
     /// The level was applied (`filter`: to a reloadable tracing filter too).
@@ -235,21 +240,22 @@ fn answer_to(envelope: Envelope, host: &str, id: u64) -> Option<(String, AdminAn
     }
 }
 
-/// Every trajectory's statistics across the processes' answers: the writer's report,
-/// with what readers alone saw dropped (lost on the way, rejected bytes) added, so
-/// every sample is accounted for; a replica's own report where no writer answered.
-/// The counts come from other processes: they saturate, never wrap.
-pub(crate) fn combine_stats(answers: Answers) -> EsgmStats {
-    let mut stats = EsgmStats::default();
+/// Every trajectory's figures across the processes' answers: the writer's, with what
+/// readers alone saw dropped (lost on the way, rejected bytes) added, so every sample
+/// is accounted for; a replica's own where no writer answered. The counts come from
+/// other processes: they saturate, never wrap. The listing joins them
+/// ([`super::stats_row::with_listing`]).
+pub(crate) fn combine_stats(answers: Answers) -> BTreeMap<String, Figures> {
+    let mut stats = BTreeMap::new();
     let mut from_writer = std::collections::BTreeSet::new();
     let mut at_readers: Vec<(String, DropCause, u64)> = Vec::new();
     for (_, answer) in answers {
-        let AdminAnswer::Stats(reports) = answer else { continue };
-        for (writes, report) in reports {
-            let name = report.info.name.clone();
+        let AdminAnswer::Stats(rows) = answer else { continue };
+        for row in rows {
+            let (name, writes, report) = row.into_parts();
             if writes {
                 from_writer.insert(name.clone());
-                stats.trajectories.insert(name, report);
+                stats.insert(name, report);
             } else {
                 for (cause, n) in &report.stats.dropped {
                     // What only a reader sees: its losses, its rejections, and an
@@ -262,13 +268,13 @@ pub(crate) fn combine_stats(answers: Answers) -> EsgmStats {
                     }
                 }
                 if !from_writer.contains(&name) {
-                    stats.trajectories.entry(name).or_insert(report);
+                    stats.entry(name).or_insert(report);
                 }
             }
         }
     }
     for (name, cause, n) in at_readers {
-        let Some(report) = stats.trajectories.get_mut(&name) else { continue };
+        let Some(report) = stats.get_mut(&name) else { continue };
         if !from_writer.contains(&name) {
             continue; // the report is a reader's own, already counting it
         }
@@ -298,9 +304,8 @@ pub(crate) fn combine_memory(answers: &Answers) -> MemoryStats {
 
 /// What a flush round compares to the one before: per trajectory, what entered its
 /// stream (added and dropped, saturating) and its worker's calls.
-pub(crate) fn progress(stats: EsgmStats) -> Vec<(String, u64, u64)> {
+pub(crate) fn progress(stats: BTreeMap<String, Figures>) -> Vec<(String, u64, u64)> {
     stats
-        .trajectories
         .into_iter()
         .map(|(n, r)| (n, r.stats.added.saturating_add(r.stats.dropped_total), r.worker.calls))
         .collect()
@@ -414,7 +419,7 @@ fn port_within<P, E: std::fmt::Debug>(
     loop {
         match make() {
             Ok(p) => return Ok(p),
-            Err(e) if busy(&e) && Instant::now() < deadline => std::thread::sleep(POLL),
+            Err(e) if busy(&e) && Instant::now() < deadline => std::thread::sleep(POLL[1]),
             Err(e) => return Err(format!("{e:?}")),
         }
     }
@@ -530,7 +535,8 @@ impl Admin {
 
     /// Asks every connected process `op` and waits up to `timeout` for all of them.
     pub fn ask(&self, op: AdminOp, timeout: Duration) -> Result<Answers, AdminError> {
-        let deadline = Instant::now() + timeout;
+        let started = Instant::now();
+        let deadline = started + timeout;
         let send = |reason: String| AdminError::Send {
             reason: Unreachable::transport(Peer::Processes, reason),
         };
@@ -605,7 +611,7 @@ impl Admin {
                 if Instant::now() >= deadline {
                     break;
                 }
-                std::thread::sleep(POLL);
+                std::thread::sleep(POLL[usize::from(started.elapsed() >= FAST_ANSWER)]);
             }
         }
         drop(publisher);
@@ -736,13 +742,17 @@ fn answer(host: &str, local: &InProcessEsgm, mirrors: &SharedMirrors, op: AdminO
             AdminAnswer::Done { reset: 0 }
         }
         AdminOp::Stats => {
-            let written = written(mirrors);
+            // A set: a writer of 1,000 trajectories looks each of them up.
+            let written: std::collections::HashSet<String> = written(mirrors).into_iter().collect();
             let stats = local.stats_here();
             AdminAnswer::Stats(
                 stats
                     .trajectories
                     .into_iter()
-                    .map(|(name, report)| (written.contains(&name), report))
+                    .map(|(name, r)| {
+                        let writes = written.contains(&name);
+                        StatsRow::new(name, writes, r.stats, r.worker)
+                    })
                     .collect(),
             )
         }
@@ -876,7 +886,7 @@ impl AdminReader {
         read.answers = answers.len();
         read.reset = resets(&answers);
         read.memory = combine_memory(&answers);
-        read.trajectories = progress(combine_stats(answers)).len();
+        read.trajectories = combine_stats(answers).len();
         Ok(read)
     }
 }
@@ -885,7 +895,7 @@ impl AdminReader {
 mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
-    use esgm_core::esgm::TrajectorySpec;
+    use esgm_core::esgm::{TrajectoryReport, TrajectorySpec};
 
     /// A report of a real trajectory, its counts as large as another process may claim.
     fn huge_report() -> TrajectoryReport {
@@ -903,10 +913,13 @@ mod tests {
         let report = huge_report();
         let answers = vec![(
             "w".to_owned(),
-            AdminAnswer::Stats(vec![(true, report.clone()), (false, report)]),
+            AdminAnswer::Stats(vec![
+                StatsRow::new("r".into(), true, report.stats.clone(), report.worker),
+                StatsRow::new("r".into(), false, report.stats, report.worker),
+            ]),
         )];
         let stats = combine_stats(answers);
-        let r = &stats.trajectories["r"].stats;
+        let r = &stats["r"].stats;
         assert_eq!((r.dropped_total, r.dropped[0].1), (u64::MAX, u64::MAX));
         assert_eq!(progress(stats)[0].1, u64::MAX);
 

@@ -73,6 +73,7 @@ pub mod prelude;
 mod receiver;
 mod settings;
 mod shared_node;
+mod stats_row;
 mod takeover;
 
 use crate::service::ShmService;
@@ -502,8 +503,37 @@ impl ShmEsgm {
     /// E7 across the system: every trajectory's statistics from the process that
     /// writes it (a replica's, what it received, where no writer answered).
     pub fn domain_stats(&self) -> Result<EsgmStats, AdminError> {
-        let answers = self.inner.admin.ask(AdminOp::Stats, self.inner.timeout)?;
-        Ok(admin::combine_stats(answers))
+        self.domain_stats_listed().map(|(_, stats)| stats)
+    }
+
+    /// [`ShmEsgm::domain_stats`] with the listing it joined the figures to (every
+    /// trajectory, as [`Esgm::trajectories`] lists them, also those no process
+    /// reported: a trajectory whose writer is gone and that nobody reads). The
+    /// coordinator's listing and the processes' answers are asked for at once.
+    pub fn domain_stats_listed(&self) -> Result<(Vec<TrajectoryInfo>, EsgmStats), AdminError> {
+        let (listing, answers) = std::thread::scope(|s| {
+            let listing = s.spawn(|| self.control(Request::ListTrajectories));
+            let answers = self.inner.admin.ask(AdminOp::Stats, self.inner.timeout);
+            (listing.join(), answers)
+        });
+        let listing = match listing {
+            Ok(Ok(Response::Trajectories(t))) => t,
+            Ok(other) => {
+                let reason = match other {
+                    Err(e) => e.into(),
+                    Ok(other) => Unreachable::malformed(Peer::Coordinator, format!("{other:?}")),
+                };
+                return Err(AdminError::Unavailable { reason });
+            }
+            Err(_) => {
+                let reason =
+                    Unreachable::transport(Peer::Connection, "the listing thread panicked");
+                return Err(AdminError::Unavailable { reason });
+            }
+        };
+        let stats =
+            stats_row::with_listing(admin::combine_stats(answers?), listing.iter().cloned());
+        Ok((listing, stats))
     }
 
     /// E7 across the system: the memory of every connected process added up (a
@@ -574,9 +604,12 @@ impl ShmEsgm {
                     });
                 }
             }
-            let progress =
-                self.domain_stats().map_err(|e| FlushError::Unavailable { reason: e.into() })?;
-            let progress = admin::progress(progress);
+            let answers = self
+                .inner
+                .admin
+                .ask(AdminOp::Stats, self.inner.timeout)
+                .map_err(|e| FlushError::Unavailable { reason: e.into() })?;
+            let progress = admin::progress(admin::combine_stats(answers));
             if previous.as_ref() == Some(&progress) {
                 return Ok(());
             }

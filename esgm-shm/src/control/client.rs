@@ -227,7 +227,8 @@ impl ControlClient {
         Ok(Self { domain: domain.to_owned(), client, service, _node: node, ring, timeout })
     }
 
-    /// Sends `request` and waits for the answer; the seed's errors come back as
+    /// Sends `request` and waits for the answer (polling: iceoryx2 has no wake-up for a
+    /// response, see [`answer_poll_cap`]); the seed's errors come back as
     /// [`ControlClientError::Remote`].
     pub fn call(&self, request: &Request) -> Result<Response, ControlClientError> {
         let bytes = encode(request).map_err(ControlClientError::Malformed)?;
@@ -241,7 +242,8 @@ impl ControlClient {
                 tracing::debug!(error = ?e, "cannot ring the coordinator; it looks soon anyway");
             }
         }
-        let deadline = Instant::now() + self.timeout;
+        let started = Instant::now();
+        let deadline = started + self.timeout;
         let mut pause = Duration::from_micros(20);
         loop {
             if let Some(answer) = pending.receive().map_err(ControlClientError::Receive)? {
@@ -274,7 +276,19 @@ impl ControlClient {
                 });
             }
             std::thread::sleep(pause);
-            pause = (pause * 2).min(Duration::from_millis(2));
+            pause = (pause * 2).min(answer_poll_cap(started.elapsed()));
         }
     }
 }
+
+/// The longest pause between two looks for the coordinator's answer, `waited` into a
+/// call. An answer usually comes within a few milliseconds (a list of 1,000
+/// trajectories takes about 3 ms to encode), and a pause that doubled up to 2 ms would
+/// add up to 2 ms to it: so pauses stay short for the first [`FAST_ANSWER`], and only a
+/// slow coordinator is looked at every 2 ms.
+fn answer_poll_cap(waited: Duration) -> Duration {
+    if waited < FAST_ANSWER { Duration::from_micros(100) } else { Duration::from_millis(2) }
+}
+
+/// How long a call looks for its answer often ([`answer_poll_cap`]).
+const FAST_ANSWER: Duration = Duration::from_millis(50);

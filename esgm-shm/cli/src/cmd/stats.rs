@@ -20,12 +20,11 @@ use crate::show::ms;
 /// them instead.
 pub fn run(domain: &str, json: bool) -> anyhow::Result<()> {
     let esgm = connect(domain)?;
-    let list = esgm.trajectories()?;
-    let domain_stats = match esgm.domain_stats() {
-        Ok(s) => Some(s),
+    let (list, domain_stats) = match esgm.domain_stats_listed() {
+        Ok((list, stats)) => (list, Some(stats)),
         Err(e) => {
             eprintln!("esgm: not every process answered ({e}); figures as this process reads them");
-            None
+            (esgm.trajectories()?, None)
         }
     };
     // One write for the whole table, not one per line (a domain may hold thousands of

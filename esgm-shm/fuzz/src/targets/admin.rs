@@ -59,20 +59,31 @@ fn generated_answers() -> Result<Vec<Vec<u8>>, Broken> {
     local
         .create_trajectory(TrajectorySpec::primitive("robot_state", "RobotState"))
         .map_err(|e| Broken::new("a trajectory is created for the seeds", e))?;
-    let mut report = local
+    let report = local
         .stats_here()
         .trajectories
         .remove("robot_state")
         .ok_or_else(|| Broken::new("a new trajectory has statistics", "none"))?;
-    report.stats.added = 1_000;
-    report.stats.dropped = vec![(DropCause::Lost, 3)];
-    report.stats.dropped_total = 3;
     let answer = |from: &str, answer: serde_json::Value| json!({"from": from, "id": QUESTION, "body": {"Answer": {"to": HOST, "answer": answer}}});
+    // A row as a process sends it: name, writes, the store's counts (added,
+    // dropped_total, violations, evicted, stored, held, subscribers, overflow, missed
+    // sample points), drops by cause, rate, add delays, the worker's counters.
+    let row = |writes: bool| {
+        json!([
+            report.info.name,
+            writes,
+            [1_000, 3, 0, 0, 5, 0, 1, 0, 0],
+            [[DropCause::Lost, 3]],
+            report.stats.rate_hz,
+            [report.stats.add_delay_p50, null, null, report.stats.add_delay_max],
+            [7, 7, 0, 0, 0, 0, 0, 0, 0, 0]
+        ])
+    };
     let memory =
         MemoryStats { trajectories: 1, stored_samples: 10, held_samples: 0, approx_bytes: 4096 };
     let messages = [
-        answer("robot-robot", json!({"Stats": [[true, report]]})),
-        answer("unit-detector", json!({"Stats": [[false, report]]})),
+        answer("robot-robot", json!({"Stats": [row(true)]})),
+        answer("unit-detector", json!({"Stats": [row(false)]})),
         answer("unit-detector", json!({"Memory": memory})),
     ];
     messages
