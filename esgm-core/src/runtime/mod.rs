@@ -675,6 +675,18 @@ impl InProcessEsgm {
         }
     }
 
+    /// [`InProcessEsgm::stats_here`] without the listings: each trajectory's name,
+    /// store statistics and worker counters, for a caller that has the listing
+    /// elsewhere (a process answering `esgm stats` for 1,000 trajectories, whose
+    /// asker gets the listing from the coordinator).
+    pub fn figures_here(&self) -> Vec<(String, crate::TrajectoryStats, crate::esgm::WorkerStats)> {
+        self.inner
+            .cells()
+            .iter()
+            .map(|c| (c.info.name.clone(), c.store.lock().stats(), c.counters.snapshot()))
+            .collect()
+    }
+
     /// Memory this runtime's trajectories use.
     pub fn memory_here(&self) -> MemoryStats {
         let mut seen = HashSet::new();

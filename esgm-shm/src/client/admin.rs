@@ -744,14 +744,13 @@ fn answer(host: &str, local: &InProcessEsgm, mirrors: &SharedMirrors, op: AdminO
         AdminOp::Stats => {
             // A set: a writer of 1,000 trajectories looks each of them up.
             let written: std::collections::HashSet<String> = written(mirrors).into_iter().collect();
-            let stats = local.stats_here();
             AdminAnswer::Stats(
-                stats
-                    .trajectories
+                local
+                    .figures_here()
                     .into_iter()
-                    .map(|(name, r)| {
+                    .map(|(name, stats, worker)| {
                         let writes = written.contains(&name);
-                        StatsRow::new(name, writes, r.stats, r.worker)
+                        StatsRow::new(name, writes, stats, worker)
                     })
                     .collect(),
             )
