@@ -5,9 +5,9 @@
 //! ([`esgm_core::codec`]) that readers use in place.
 //!
 //! This is the data plane ([`data_plane`]): [`TrajectoryPublisher`], [`TrajectorySubscriber`], the
-//! sample layout ([`payload`]), service naming ([`service_name`]), waiting
-//! ([`wait`]), structures encoded ahead of sending ([`structure_loan`]) and in-place
-//! images ([`image_loan`]), and the violations of a trajectory ([`violations`]). The
+//! sample layout ([`payload`](data_plane::payload)), service naming ([`service_name`](data_plane::service_name)), waiting
+//! ([`wait`](data_plane::wait)), structures encoded ahead of sending ([`structure_loan`](data_plane::structure_loan)) and in-place
+//! images ([`image_loan`](data_plane::image_loan)), and the violations of a trajectory ([`violations`](data_plane::violations)). The
 //! control plane (coordinator, registry) and [`connect`], the `Esgm` interface across
 //! processes, build on it: policy, history and queries are esgm-core's.
 //!
@@ -39,28 +39,28 @@
 //! ## Design decisions
 //! - **A payload of 16-byte blocks, not bytes.** The archive needs 16-byte alignment;
 //!   iceoryx2's `[u8]` is only 8-aligned, and asking for 16 pads every byte to 16
-//!   (a 385 MB segment for one image publisher). See [`payload`].
+//!   (a 385 MB segment for one image publisher). See [`payload`](data_plane::payload).
 //! - **Everything a filter needs is in the header.** Times, archive length, type id and
 //!   sequence travel in the iceoryx2 user header ([`SampleHeader`]), so type checks and
 //!   time lookups never touch the payload; the header is plain integers, so a corrupt
 //!   one is rejected by comparison, never undefined behaviour.
 //! - **Encode once, into the loan.** The publisher sizes the loan with a cheap walk of
-//!   the structure ([`size_hint`]) instead of a trial encode, and the codec writes
+//!   the structure ([`size_hint`](data_plane::size_hint)) instead of a trial encode, and the codec writes
 //!   straight into shared memory. A producer that knows its structure early encodes it
 //!   into a loan beforehand and only re-stamps its times and sends when the moment
-//!   comes ([`structure_loan`]). Images go further: the camera writes the pixels into
-//!   the loan and the codec completes the archive around them ([`image_loan`]).
+//!   comes ([`structure_loan`](data_plane::structure_loan)). Images go further: the camera writes the pixels into
+//!   the loan and the codec completes the archive around them ([`image_loan`](data_plane::image_loan)).
 //! - **Validate where bytes cross a process boundary.** Every received archive is
 //!   validated before it is handed out ([`Validation::InPlace`]); a trusted setup may
 //!   defer or skip it, explicitly and unsafely. Bad samples are typed errors and
 //!   counters ([`SubscriberStats`]), never panics.
 //! - **Spin briefly, then sleep on a futex.** A blocking reader sleeps on its
-//!   trajectory's futex word in shared memory ([`wake_word`]), half the cost of
+//!   trajectory's futex word in shared memory ([`wake_word`](data_plane::wake_word)), half the cost of
 //!   iceoryx2's event (a Unix datagram), which stays for waits over many trajectories.
 //!   The default [`WaitStrategy`] still spins 25 µs before sleeping; every wait has a
-//!   deadline because a dead publisher is not signalled. See [`wait`].
+//!   deadline because a dead publisher is not signalled. See [`wait`](data_plane::wait).
 //! - **One namespace per system, and per test.** Service names carry a domain
-//!   ([`service_name`]), so parallel tests and independent systems never meet.
+//!   ([`service_name`](data_plane::service_name)), so parallel tests and independent systems never meet.
 //!
 //! ## One writer per trajectory, and it gates
 //! Exactly one process writes a trajectory (the coordinator places it, see
@@ -69,7 +69,7 @@
 //! hold-and-reorder of late samples — gates every add, from that process or forwarded
 //! from others, and the add forms return the in-process outcomes and errors. The
 //! store's tap publishes what it admits inline, stamped with the gate's add time, and
-//! what it drops on the trajectory's violations service ([`violations`]), so every
+//! what it drops on the trajectory's violations service ([`violations`](data_plane::violations)), so every
 //! reader receives exactly the stream, already checked, in order.
 //!
 //! ## Where the history lives
@@ -90,11 +90,11 @@
 //! A replica's small fields are decoded (cheaper than bookkeeping); its images are
 //! not: each octet sequence of a large sample stays in the writer's chunk, kept
 //! borrowed until the last value reading it — in the cache, a unit's input, a
-//! subscriber's queue, a query answer — is dropped ([`holdings`]). A process that keeps
+//! subscriber's queue, a query answer — is dropped ([`holdings`](client::holdings)). A process that keeps
 //! more images than its subscriber may borrow (cache bound + a slack of 8) gets copies
 //! of the later ones, counted in [`ShmEsgm::holding_stats`].
 //!
-//! The publisher keeps the cache's bound of samples ([`qos::history_bound`]), so a
+//! The publisher keeps the cache's bound of samples ([`qos::history_bound`](data_plane::qos::history_bound)), so a
 //! replica made late starts with the writer's view; an `All` or `Duration` cache, which
 //! iceoryx2 needs as a number, gives late replicas at most [`DEFAULT_MAX_HISTORY`]
 //! (1024). Each replica holds its own view: one made late, or one that fell a whole
@@ -123,40 +123,33 @@ pub mod control;
 pub mod data_plane;
 pub mod process;
 
-// The data plane's modules keep their paths at the crate root (`esgm_shm::publisher`).
-pub(crate) use data_plane::sequence_gaps;
-pub use data_plane::{
-    capacity, image_layout, image_loan, payload, publisher, qos, received, sample_check, service,
-    service_name, size_hint, structure_loan, subscriber, type_id, violations, wait, wake_word,
-    writer_check,
-};
-// What connected processes hold in shared memory, with its old path.
-pub use client::holdings;
 // `use esgm_shm::prelude::*;`: connect, ShmEsgm and esgm_core's prelude.
 pub use client::prelude;
 
-pub use holdings::HoldingStats;
-pub use image_layout::ImageError;
-pub use image_loan::ImageLoan;
-pub use payload::{Block16, SampleHeader};
-pub use publisher::{PublishError, Published, SampleSizing, TrajectoryPublisher};
-pub use qos::{DEFAULT_MAX_HISTORY, Delivery, TrajectoryQos, history_bound, history_qos};
-pub use received::ReceivedSample;
-pub use sample_check::{SampleVerdict, check_sample};
-pub use service::{
+pub use client::holdings::HoldingStats;
+pub use data_plane::image_layout::ImageError;
+pub use data_plane::image_loan::ImageLoan;
+pub use data_plane::payload::{Block16, SampleHeader};
+pub use data_plane::publisher::{PublishError, Published, SampleSizing, TrajectoryPublisher};
+pub use data_plane::qos::{
+    DEFAULT_MAX_HISTORY, Delivery, TrajectoryQos, history_bound, history_qos,
+};
+pub use data_plane::received::ReceivedSample;
+pub use data_plane::sample_check::{SampleVerdict, check_sample};
+pub use data_plane::service::{
     Cleanup, CleanupFailure, CleanupReporter, DEFAULT_ICEORYX2_ROOT, DeadNodeCleanup,
     ICEORYX2_ROOT_ENV, OpenError, ShmNode, ShmService, cleanup_dead_nodes, iceoryx2_config,
     node_config,
 };
-pub use service_name::{
+pub use data_plane::service_name::{
     NameError, TrajectoryServiceNames, node_name, nodes_of, processes_of, unique_domain,
 };
-pub use structure_loan::StructureLoan;
-pub use subscriber::{ReceiveError, SubscriberStats, TrajectorySubscriber, Validation};
-pub use type_id::type_id;
-pub use violations::{ViolationPublisher, ViolationRecord, ViolationSubscriber};
-pub use wait::WaitStrategy;
-pub use writer_check::{Decided, WriterCheck};
+pub use data_plane::structure_loan::StructureLoan;
+pub use data_plane::subscriber::{ReceiveError, SubscriberStats, TrajectorySubscriber, Validation};
+pub use data_plane::type_id::type_id;
+pub use data_plane::violations::{ViolationPublisher, ViolationRecord, ViolationSubscriber};
+pub use data_plane::wait::WaitStrategy;
+pub use data_plane::writer_check::{Decided, WriterCheck};
 
 pub use client::{
     ConnectError, CoordinatorWatch, DOMAIN_ENV, ShmEsgm, ShmEsgmBuilder, WORKER_ENV, connect,

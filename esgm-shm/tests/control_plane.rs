@@ -120,7 +120,7 @@ fn a_change_that_cannot_be_saved_is_undone_refused_and_counted() {
         &domain,
         TypeRegistry::with_library(),
         state.clone(),
-        esgm_shm::capacity::DomainLimits::default(),
+        esgm_shm::data_plane::capacity::DomainLimits::default(),
     )
     .unwrap();
     let client = ControlClient::connect(&domain, DEADLINE).unwrap();

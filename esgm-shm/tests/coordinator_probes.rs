@@ -191,7 +191,7 @@ fn a_request_in_another_protocol_is_named_a_protocol_mismatch() {
         .create::<esgm_shm::ShmService>()
         .unwrap();
     let service = node
-        .service_builder(&esgm_shm::service_name::control_service(&d).unwrap())
+        .service_builder(&esgm_shm::data_plane::service_name::control_service(&d).unwrap())
         .request_response::<[u8], [u8]>()
         .max_active_requests_per_client(4)
         .open()

@@ -3,7 +3,7 @@
 //! `flush`) asked of every connected process, and their answers collected.
 //!
 //! Two publish-subscribe services of the domain carry it, sized by its limits
-//! ([`crate::capacity::DomainLimits`]) and created by the coordinator:
+//! ([`crate::data_plane::capacity::DomainLimits`]) and created by the coordinator:
 //! - **questions** (`esgm/<domain>/admin`): every connected process subscribes, and
 //!   its *admin thread* waits on the domain's admin wake-up. An asker opens a
 //!   publisher for its question alone (at most [`ASKERS`] at once; one more waits its
@@ -53,8 +53,8 @@ use serde::{Deserialize, Serialize};
 use super::mirrors::SharedMirrors;
 use super::shared_node::SharedNode;
 use super::stats_row::{Figures, StatsRow};
-use crate::capacity::{DomainLimits, EventCapacity, TOOL_RESERVE};
-use crate::service::{ShmNode, ShmService, open_event_service};
+use crate::data_plane::capacity::{DomainLimits, EventCapacity, TOOL_RESERVE};
+use crate::data_plane::service::{ShmNode, ShmService, open_event_service};
 
 /// Processes that may ask the domain at once; one more waits until one is answered.
 pub(crate) const ASKERS: usize = 8;
@@ -105,7 +105,7 @@ impl AdminServices {
     }
 
     /// The processes the domain admits, as its services were made (those a process
-    /// that is not a tool may take; see [`crate::capacity`]).
+    /// that is not a tool may take; see [`crate::data_plane::capacity`]).
     fn max_processes(&self) -> usize {
         self.questions.static_config().max_subscribers().saturating_sub(TOOL_RESERVE)
     }
@@ -350,7 +350,7 @@ pub enum AdminError {
         /// The name asked for.
         name: String,
     },
-    /// The domain has as many processes as it admits ([`crate::capacity`]).
+    /// The domain has as many processes as it admits ([`crate::data_plane::capacity`]).
     #[error(transparent)]
     LimitReached(LimitReached),
     /// The administration channel is not running in this process.
@@ -402,7 +402,7 @@ fn names(domain: &str) -> Result<(ServiceName, ServiceName, ServiceName), AdminE
             reason: Unreachable::transport(Peer::Processes, format!("{s}: {e:?}")),
         })
     };
-    let prefix = crate::service_name::SERVICE_PREFIX;
+    let prefix = crate::data_plane::service_name::SERVICE_PREFIX;
     Ok((
         name(format!("{prefix}/{domain}/admin"))?,
         name(format!("{prefix}/{domain}/admin-answers"))?,
@@ -464,7 +464,7 @@ impl Admin {
         }
         // The processes that crashed still count until someone cleans up after them.
         let lacks_room = |e: &AdminError| matches!(e, AdminError::LimitReached(_));
-        let (subscriber, listener) = crate::service::with_room(lacks_room, || {
+        let (subscriber, listener) = crate::data_plane::service::with_room(lacks_room, || {
             let connected = services.questions.dynamic_config().number_of_subscribers();
             if connected >= max {
                 return Err(full(connected));
@@ -585,8 +585,8 @@ impl Admin {
             if !cleaned && Instant::now() >= clean_after {
                 cleaned = true;
                 crate::control::server::log_cleanup(
-                    crate::service::cleanup_dead_nodes(),
-                    crate::service::CleanupReporter::Bystander,
+                    crate::data_plane::service::cleanup_dead_nodes(),
+                    crate::data_plane::service::CleanupReporter::Bystander,
                 );
                 expected = expected.min(connected());
                 continue;
@@ -640,7 +640,7 @@ impl Answerer {
     fn run(mut self) {
         let mut failures = 0u64;
         while !self.stop.load(Ordering::Acquire) {
-            if let Err(e) = crate::wait::timed_wait(&self.listener, RECHECK) {
+            if let Err(e) = crate::data_plane::wait::timed_wait(&self.listener, RECHECK) {
                 failures += 1;
                 if failures == 1 {
                     tracing::warn!(error = ?e, "the admin thread cannot wait; it polls");

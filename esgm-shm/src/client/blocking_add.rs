@@ -30,10 +30,10 @@ use iceoryx2::service::builder::request_response::{
 use iceoryx2::service::port_factory::client::ClientCreateError;
 use iceoryx2::service::port_factory::request_response::PortFactory;
 
-use crate::capacity::Readers;
 use crate::control::protocol::{decode, encode};
-use crate::service::{EventSpec, OpenError, ShmNode, ShmService, with_room};
-use crate::service_name::{NameError, TrajectoryServiceNames};
+use crate::data_plane::capacity::Readers;
+use crate::data_plane::service::{EventSpec, OpenError, ShmNode, ShmService, with_room};
+use crate::data_plane::service_name::{NameError, TrajectoryServiceNames};
 
 /// The longest a blocking add waits for the writer's answer. The writer answers in
 /// microseconds; waiting longer means it is gone or stuck, and the replica's lock is
@@ -73,7 +73,7 @@ fn open_service(
     };
     // In a domain shared with other users, a service just made by another user's
     // process is closed until its owner widens it.
-    crate::service::with_access(denied, || {
+    crate::data_plane::service::with_access(denied, || {
         node.service_builder(&name)
             .request_response::<[u8], [u8]>()
             .max_clients(readers.ports())

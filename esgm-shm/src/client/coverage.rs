@@ -7,7 +7,7 @@
 //! receiver thread also listens to the writer's event, the same sample wakes it too:
 //! a datagram and a second wake-up, 3–4 µs of every hop on this machine, for a
 //! replica already fed. So each import counts its connection in the word (see
-//! [`crate::wake_word`]; two connections of one process count as two):
+//! [`crate::data_plane::wake_word`]; two connections of one process count as two):
 //! - as a *receiver* while the receiver thread listens to the writer's event
 //!   ([`Coverage::receiving`], from after the listener exists until before it goes);
 //! - as *covered* while, in addition, one of its threads is asleep on the word
@@ -24,7 +24,7 @@ use std::sync::Arc;
 
 use parking_lot::Mutex;
 
-use crate::wake_word::WakeWord;
+use crate::data_plane::wake_word::WakeWord;
 
 /// One import's count in its trajectory's word: its own mapping of the word (its own
 /// slot, which a look for the dead can count out if this process dies), made when a
@@ -93,10 +93,10 @@ impl State {
 
 impl Coverage {
     /// This connection's count in the word of the wake-up service `service`; `None`
-    /// where readers do not sleep on words ([`crate::wake_word::WAKE_ENV`]). Nothing is
+    /// where readers do not sleep on words ([`crate::data_plane::wake_word::WAKE_ENV`]). Nothing is
     /// mapped until a thread sleeps ([`Coverage::asleep`]).
     pub fn new(service: &str) -> Option<Arc<Coverage>> {
-        crate::wake_word::futex_enabled()
+        crate::data_plane::wake_word::futex_enabled()
             .then(|| Arc::new(Coverage { service: service.to_owned(), state: Mutex::default() }))
     }
 
@@ -170,8 +170,8 @@ mod tests {
     /// A word's writer, and the service it belongs to (each `Coverage::open` of it is
     /// a mapping of its own, as another connection's would be).
     fn word() -> (WakeWord, String) {
-        let domain = crate::service_name::unique_domain("coverage");
-        let service = crate::service_name::wake_service_name(&domain, "t");
+        let domain = crate::data_plane::service_name::unique_domain("coverage");
+        let service = crate::data_plane::service_name::wake_service_name(&domain, "t");
         (WakeWord::open(&service).unwrap(), service)
     }
 
@@ -262,7 +262,10 @@ mod tests {
         let _receiving = coverage.receiving();
         drop(coverage.asleep(&writer).unwrap());
         // The domain ended and the word was made again while this connection stayed.
-        assert_eq!(crate::wake_word::remove_domain(service.split('/').nth(1).unwrap()), 1);
+        assert_eq!(
+            crate::data_plane::wake_word::remove_domain(service.split('/').nth(1).unwrap()),
+            1
+        );
         let anew = WakeWord::open(&service).unwrap();
         assert!(coverage.asleep(&anew).is_none(), "its count is in the old file");
         assert_eq!(writer.receivers(), (1, 0), "the old file's writer still notifies");
@@ -270,16 +273,17 @@ mod tests {
 
     #[test]
     fn a_dead_receivers_count_is_counted_out_once_iceoryx2_has_no_listener_for_it() {
-        let domain = crate::service_name::unique_domain("coverage-unheard");
+        let domain = crate::data_plane::service_name::unique_domain("coverage-unheard");
         let node = iceoryx2::prelude::NodeBuilder::new()
-            .config(crate::service::iceoryx2_config())
+            .config(crate::data_plane::service::iceoryx2_config())
             .create::<crate::ShmService>()
             .unwrap();
-        let publisher = crate::publisher::TrajectoryPublisher::builder("t", "RobotState")
-            .domain(&domain)
-            .create(&node)
-            .unwrap();
-        let service = crate::service_name::wake_service_name(&domain, "t");
+        let publisher =
+            crate::data_plane::publisher::TrajectoryPublisher::builder("t", "RobotState")
+                .domain(&domain)
+                .create(&node)
+                .unwrap();
+        let service = crate::data_plane::service_name::wake_service_name(&domain, "t");
         let watcher = WakeWord::open(&service).unwrap();
         // A receiver whose process died after iceoryx2 cleaned its listener up: its
         // count stays, its slot's lock went.
@@ -287,14 +291,14 @@ mod tests {
         assert!(dead.count_receiver_in());
         drop(dead);
         let es = esgm_core::EntityStructure::new("robot1", 10, 11).with("x", 1.0);
-        for _ in 1..crate::wake_word::FRUITLESS_RINGS {
+        for _ in 1..crate::data_plane::wake_word::FRUITLESS_RINGS {
             publisher.publish(&es).unwrap();
         }
         assert_eq!(watcher.receivers(), (1, 0), "not before as many sends as fruitless rings");
         publisher.publish(&es).unwrap();
         assert_eq!(watcher.receivers(), (0, 0), "counted out by the writer's look");
         drop(publisher);
-        crate::wake_word::remove_domain(&domain);
+        crate::data_plane::wake_word::remove_domain(&domain);
     }
 
     #[test]

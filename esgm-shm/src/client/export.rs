@@ -32,18 +32,18 @@ use super::settings::{
     fixed_sample_len, generation_domain, handle_qos, inbox_domain, inbox_qos, join_service,
 };
 use super::shared_node::SharedNode;
-use crate::capacity::{EventCapacity, Readers};
+use crate::client::holdings::{HoldingOwner, Holdings};
 use crate::control::protocol::TrajectoryRecord;
+use crate::data_plane::capacity::{EventCapacity, Readers};
+use crate::data_plane::image_loan::ImageChunk;
 use crate::data_plane::kept_history::{KeptHistory, Retention};
-use crate::holdings::{HoldingOwner, Holdings};
-use crate::image_loan::ImageChunk;
-use crate::publisher::{PublishError, SampleSizing, TrajectoryPublisher};
-use crate::service::EventSpec;
-use crate::service::OpenError;
-use crate::service_name::TrajectoryServiceNames;
-use crate::subscriber::{ReceiveError, TrajectorySubscriber};
-use crate::violations::ViolationPublisher;
-use crate::wait::WaitStrategy;
+use crate::data_plane::publisher::{PublishError, SampleSizing, TrajectoryPublisher};
+use crate::data_plane::service::EventSpec;
+use crate::data_plane::service::OpenError;
+use crate::data_plane::service_name::TrajectoryServiceNames;
+use crate::data_plane::subscriber::{ReceiveError, TrajectorySubscriber};
+use crate::data_plane::violations::ViolationPublisher;
+use crate::data_plane::wait::WaitStrategy;
 
 /// Where an export's violations publisher is opened ([`Outlet::violations`]).
 #[derive(Debug)]
@@ -174,7 +174,7 @@ impl Outlet {
         self.publish(&StoreEvent::Entered(sample.clone()));
         if let Some((_, owner)) = &self.own {
             let octets = sample.structure.attributes.iter().any(|a| {
-                matches!(&a.value, Value::OctetSeq(o) if o.len() >= crate::holdings::HOLD_MIN_BYTES)
+                matches!(&a.value, Value::OctetSeq(o) if o.len() >= crate::client::holdings::HOLD_MIN_BYTES)
             });
             if octets {
                 owner.count_sent(false);
@@ -248,7 +248,7 @@ impl Outlet {
         }
         self.violations.as_ref().ok_or_else(|| {
             PublishError::Violations(Box::new(OpenError::from(
-                crate::service_name::NameError::Empty { what: "violations" },
+                crate::data_plane::service_name::NameError::Empty { what: "violations" },
             )))
         })
     }
@@ -719,12 +719,17 @@ fn open_kept(
     policy: &esgm_core::FluentStreamPolicy,
 ) -> Option<KeptHistory> {
     let retention = Retention::of(&policy.cache);
-    KeptHistory::open_or_create(domain, trajectory, crate::type_id(type_name), retention)
-        .map_err(|e| {
-            tracing::warn!(trajectory, error = %e,
+    KeptHistory::open_or_create(
+        domain,
+        trajectory,
+        crate::data_plane::type_id::type_id(type_name),
+        retention,
+    )
+    .map_err(|e| {
+        tracing::warn!(trajectory, error = %e,
                 "no kept history: the trajectory's history will not outlive this process")
-        })
-        .ok()
+    })
+    .ok()
 }
 
 /// True if the trajectory's type has octet sequences (images).

@@ -24,7 +24,7 @@ use esgm_core::EntityStructure;
 use esgm_core::codec::{self, CodecError};
 use esgm_core::value::OctetsHolder;
 
-use crate::received::ReceivedSample;
+use crate::data_plane::received::ReceivedSample;
 
 /// Archives smaller than this are copied, never held: holding costs a borrowed chunk
 /// (of a limited budget), which only pays off for large octet sequences such as images.

@@ -4,7 +4,7 @@
 //!
 //! An exported trajectory of images gives its producers a [`LoanAllocator`] (its
 //! store's [`esgm_core::OctetsAllocator`]): a buffer is a loan from the trajectory's
-//! publisher ([`crate::image_loan`]), and the finished pixels become an
+//! publisher ([`crate::data_plane::image_loan`]), and the finished pixels become an
 //! [`Octets`] held by a [`LoanHolder`] that owns the loan. The structure made with
 //! them goes through the writer's gate like any other. When it enters the stream, the
 //! export's tap finds the loan in its `image_data`, has the codec complete the
@@ -12,7 +12,7 @@
 //! The writer's own store then keeps the structure as its own self-subscriber
 //! received it: the pixels are read through a received sample, which keeps the chunk
 //! borrowed for as long as a value in this process reads it (as in every reader, see
-//! [`crate::holdings`]); the loan's holder reads the same received bytes from then on.
+//! [`crate::client::holdings`]); the loan's holder reads the same received bytes from then on.
 //!
 //! A structure whose shape is not an image the layout can complete (other
 //! attributes, sizes that differ from the loan's), or whose pixels were already sent,
@@ -25,7 +25,7 @@ use esgm_core::value::{OctetsHolder, Value};
 use esgm_core::{EntityStructure, Octets, OctetsAllocator, PixelBuffer, PixelStorage};
 use parking_lot::Mutex;
 
-use crate::image_loan::ImageChunk;
+use crate::data_plane::image_loan::ImageChunk;
 
 /// The attributes of an image the layout completes around its pixels.
 const IMAGE_ATTRIBUTES: [&str; 4] = ["width", "height", "format", "image_data"];

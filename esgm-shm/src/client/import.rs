@@ -6,7 +6,7 @@
 //! The connection's receiver thread, woken by the writer's notify, takes each sample
 //! and enters it into the replica itself: the replica's subscribers and units are
 //! told from there, with no other thread in between. Images stay in the writer's
-//! chunk, owned by the values that read them ([`crate::holdings`]).
+//! chunk, owned by the values that read them ([`crate::client::holdings`]).
 //!
 //! Only the writer writes: a sample or reset is entered only if it comes from the
 //! publisher port the registry names as the writer ([`TrajectoryRecord::port`]) and
@@ -43,18 +43,18 @@ use super::settings::{
 };
 use super::shared_node::SharedNode;
 use super::takeover::{TakeOverAsk, WriterLiveness};
-use crate::capacity::{EventCapacity, Readers};
+use crate::client::holdings::{HoldingOwner, Holdings};
 use crate::control::protocol::{TrajectoryRecord, WriterPort};
+use crate::data_plane::capacity::{EventCapacity, Readers};
 use crate::data_plane::kept_history::KeptHistory;
-use crate::holdings::{HoldingOwner, Holdings};
-use crate::publisher::{SampleSizing, TrajectoryPublisher};
-use crate::service::{EventSpec, OpenError, ShmService, open_event_service};
-use crate::service_name::{NameError, TrajectoryServiceNames};
-use crate::subscriber::{ReceiveError, TrajectorySubscriber};
-use crate::violations::{ViolationSubscriber, violation_service_name};
-use crate::wait::{Sleeper, WaitStrategy, timed_wait};
-use crate::wake_word::WakeWord;
-use crate::writer_check::{Decided, WriterCheck};
+use crate::data_plane::publisher::{SampleSizing, TrajectoryPublisher};
+use crate::data_plane::service::{EventSpec, OpenError, ShmService, open_event_service};
+use crate::data_plane::service_name::{NameError, TrajectoryServiceNames};
+use crate::data_plane::subscriber::{ReceiveError, TrajectorySubscriber};
+use crate::data_plane::violations::{ViolationSubscriber, violation_service_name};
+use crate::data_plane::wait::{Sleeper, WaitStrategy, timed_wait};
+use crate::data_plane::wake_word::WakeWord;
+use crate::data_plane::writer_check::{Decided, WriterCheck};
 
 /// Where an import is made: the connection's node, domain, holdings and mirrors.
 #[derive(Debug, Clone, Copy)]
@@ -69,7 +69,7 @@ pub(crate) struct ImportSite<'a> {
     /// writer is gone ([`super::takeover`]).
     pub take_over: &'a crossbeam_channel::Sender<TakeOverAsk>,
     /// True for a short-lived tool's connection, which may use the ports a trajectory
-    /// keeps beyond its `readers` ([`crate::capacity`]); a long-lived reader counts
+    /// keeps beyond its `readers` ([`crate::data_plane::capacity`]); a long-lived reader counts
     /// itself against them.
     pub tool: bool,
 }
@@ -285,8 +285,8 @@ impl Import {
             rejected: 0,
             check: WriterCheck::new(record.port.map(|p| p.publisher)).holding(
                 match own_subscriber(&entity_type) {
-                    0 => crate::writer_check::MAX_HELD,
-                    _ => crate::writer_check::MAX_HELD_IMAGES,
+                    0 => crate::data_plane::writer_check::MAX_HELD,
+                    _ => crate::data_plane::writer_check::MAX_HELD_IMAGES,
                 },
             ),
             writer,
@@ -612,7 +612,7 @@ impl ReplicaFeed for ImportFeed {
 const WAIT_SLICE: std::time::Duration = std::time::Duration::from_secs(30);
 
 /// One subscription's sleep on its writer's wake-ups: the trajectory's futex word
-/// ([`crate::wake_word`]), or a listener on the writer's wake-up service where the
+/// ([`crate::data_plane::wake_word`]), or a listener on the writer's wake-up service where the
 /// word cannot be mapped.
 struct ImportWaiter {
     /// The generation listened to, and what it sleeps on.
@@ -823,7 +823,9 @@ impl FeedWaiter for JoinedWaiter {
                     .map(|(w, (word, _))| w.fall_asleep(Some(word)))
                     .collect();
                 // Counted out (the covers dropped) before any feed below.
-                asleep.map_or(Ok(()), |_asleep| crate::wake_word::sleep_any(&seen, timeout))
+                asleep.map_or(Ok(()), |_asleep| {
+                    crate::data_plane::wake_word::sleep_any(&seen, timeout)
+                })
             });
             if let Err(e) = slept {
                 tracing::warn!(error = %e,
@@ -847,7 +849,7 @@ impl FeedWaiter for JoinedWaiter {
             self.feed();
             return true;
         };
-        match crate::wait::wait_any(&listeners, timeout) {
+        match crate::data_plane::wait::wait_any(&listeners, timeout) {
             Ok(()) => {
                 self.feed();
                 true
@@ -925,7 +927,7 @@ impl FeedWaiter for ImportWaiter {
             self.feed();
             return true;
         };
-        match crate::wait::timed_wait(listener, timeout.min(WAIT_SLICE)) {
+        match crate::data_plane::wait::timed_wait(listener, timeout.min(WAIT_SLICE)) {
             Ok(_) => {
                 self.feed();
                 true

@@ -24,10 +24,10 @@ use super::mirrors::SharedMirrors;
 use super::receiver::Receiver as SampleReceiver;
 use super::shared_node::SharedNode;
 use super::takeover::TakeOverAsk;
+use crate::client::holdings::{HoldingStats, Holdings};
 use crate::control::protocol::{Assignment, ControlError, Request, Response, TrajectoryRecord};
 use crate::control::{ControlClient, ControlClientError};
-use crate::holdings::{HoldingStats, Holdings};
-use crate::service::OpenError;
+use crate::data_plane::service::OpenError;
 
 /// How often the location thread looks after what it holds, in one wake-up: it
 /// hands readers that connected without ringing (a bridge's or a recorder's own
@@ -114,7 +114,7 @@ impl Looked {
     /// What `node` subscribes to for the versions of `domain`'s registry (`None`, and
     /// a debug line, where it cannot: the coordinator is then asked).
     pub fn subscribe(node: &crate::ShmNode, domain: &str) -> Self {
-        let limits = crate::capacity::DomainLimits::default();
+        let limits = crate::data_plane::capacity::DomainLimits::default();
         let versions = crate::control::server::open_version_service(node, domain, &limits)
             .and_then(|s| s.subscriber_builder().create().map_err(|e| format!("{e:?}")))
             .map_err(|e| tracing::debug!(error = %e, "the registry's versions are asked for"))

@@ -16,7 +16,7 @@ use parking_lot::{Mutex, MutexGuard};
 
 use super::export::Export;
 use super::import::Import;
-use crate::service::{EventSpec, ShmService};
+use crate::data_plane::service::{EventSpec, ShmService};
 
 /// One mirrored trajectory's import or export: a self-contained object with its own
 /// lock. The receiver thread, a subscription that waits on its writer and the

@@ -76,7 +76,7 @@ mod shared_node;
 mod stats_row;
 mod takeover;
 
-use crate::service::ShmService;
+use crate::data_plane::service::ShmService;
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -90,9 +90,9 @@ use esgm_core::esgm::{
 use esgm_core::{EntityStructureType, InProcessEsgm, InProcessTrajectory, TypeRegistryError};
 use iceoryx2::prelude::NodeBuilder;
 
+use crate::client::holdings::{HoldingStats, Holdings};
 use crate::control::protocol::{ControlError, Request, Response};
 use crate::control::{ControlClient, ControlClientError};
-use crate::holdings::{HoldingStats, Holdings};
 pub use admin::AdminError;
 use admin::{Admin, AdminAnswer, AdminOp, DomainReset};
 #[doc(hidden)]
@@ -118,7 +118,7 @@ pub const DEFAULT_TIMEOUT: Duration = Duration::from_secs(5);
 #[non_exhaustive]
 pub enum ConnectError {
     /// The domain has as many processes as it admits (`esgm up --max-processes`; see
-    /// [`crate::capacity`]): this process was refused, every other is served.
+    /// [`crate::data_plane::capacity`]): this process was refused, every other is served.
     #[error(transparent)]
     LimitReached(esgm_core::esgm::LimitReached),
     /// No coordinator answered (see the reason; start one with `esgm up`).
@@ -133,7 +133,7 @@ pub enum ConnectError {
     Receiver(#[from] ReceiverError),
     /// The domain or host cannot name an iceoryx2 service; rename it.
     #[error(transparent)]
-    Name(#[from] crate::service_name::NameError),
+    Name(#[from] crate::data_plane::service_name::NameError),
     /// The domain's administration channel (domain-wide reset, stats, log level,
     /// flush) could not be joined.
     #[error(transparent)]
@@ -177,7 +177,7 @@ impl ShmEsgmBuilder {
         self
     }
 
-    /// The system's domain (default [`crate::service_name::SYSTEM_DOMAIN`], `esgm`, as
+    /// The system's domain (default [`crate::data_plane::service_name::SYSTEM_DOMAIN`], `esgm`, as
     /// the `esgm` command's).
     #[must_use]
     pub fn domain(mut self, domain: impl Into<String>) -> Self {
@@ -203,7 +203,7 @@ impl ShmEsgmBuilder {
 
     /// Connects as a short-lived tool (a command such as `esgm latest`): it may use the
     /// ports every domain-wide and trajectory service keeps beyond its limits
-    /// ([`crate::capacity`]), so a domain whose processes or a trajectory whose
+    /// ([`crate::data_plane::capacity`]), so a domain whose processes or a trajectory whose
     /// readers reached their limit can still be looked at and added to. A long-lived
     /// process must not: it would take the room the tools need.
     #[must_use]
@@ -222,7 +222,9 @@ impl ShmEsgmBuilder {
     /// Connects: starts the location thread, which opens the control service.
     pub fn connect(self) -> Result<ShmEsgm, ConnectError> {
         raise_file_limit();
-        let domain = self.domain.unwrap_or_else(|| crate::service_name::SYSTEM_DOMAIN.to_owned());
+        let domain = self
+            .domain
+            .unwrap_or_else(|| crate::data_plane::service_name::SYSTEM_DOMAIN.to_owned());
         let host = self.host.unwrap_or_else(default_host);
         let timeout = self.timeout.unwrap_or(DEFAULT_TIMEOUT);
         let mut local = InProcessEsgm::builder();
@@ -231,8 +233,10 @@ impl ShmEsgmBuilder {
         }
         let local = local.create();
         let node = NodeBuilder::new()
-            .config(&crate::service::node_config(crate::service::Cleanup::None))
-            .name(&crate::service_name::node_name(&domain, &host))
+            .config(&crate::data_plane::service::node_config(
+                crate::data_plane::service::Cleanup::None,
+            ))
+            .name(&crate::data_plane::service_name::node_name(&domain, &host))
             .create::<ShmService>()
             .map_err(ControlClientError::node)?;
         let control = ControlClient::connect(&domain, timeout).map_err(|e| match e {
@@ -244,8 +248,8 @@ impl ShmEsgmBuilder {
         let holdings = Arc::new(Holdings::default());
         let receiver = SampleReceiver::start(
             &node,
-            crate::service_name::node_name(&domain, &format!("{host}/receiver")),
-            crate::service_name::doorbell_service(&domain, &host)?,
+            crate::data_plane::service_name::node_name(&domain, &format!("{host}/receiver")),
+            crate::data_plane::service_name::doorbell_service(&domain, &host)?,
             Arc::clone(&mirrors),
         )?;
         let admin =
@@ -430,7 +434,7 @@ impl ShmEsgm {
     /// Images (octet sequences) received from other processes that this process reads
     /// in shared memory, and those it had to copy: a replica's cache, its units, its
     /// subscribers and query answers share the writer's chunk, borrowed until the last
-    /// value reading it is dropped (see [`crate::holdings`]). `None` if this
+    /// value reading it is dropped (see [`crate::client::holdings`]). `None` if this
     /// process's location thread has stopped (never, since values own what they
     /// hold; kept for callers that match on it).
     pub fn holding_stats(&self) -> Option<HoldingStats> {

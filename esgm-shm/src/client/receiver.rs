@@ -37,8 +37,8 @@ use iceoryx2::prelude::{
 
 use super::mirrors::{Route, SharedMirrors};
 use super::shared_node::SharedNode;
-use crate::capacity::EventCapacity;
-use crate::service::{EventSpec, ShmNode, ShmService};
+use crate::data_plane::capacity::EventCapacity;
+use crate::data_plane::service::{EventSpec, ShmNode, ShmService};
 
 /// The longest the receiver sleeps before it pumps anyway and looks for a new set of
 /// services (and for its stop).
@@ -130,7 +130,7 @@ fn never_preempt_on_wake_up() {
 fn run(node_name: &NodeName, doorbell: &EventSpec, mirrors: &SharedMirrors) {
     never_preempt_on_wake_up();
     let node = match NodeBuilder::new()
-        .config(&crate::service::node_config(crate::service::Cleanup::None))
+        .config(&crate::data_plane::service::node_config(crate::data_plane::service::Cleanup::None))
         .name(node_name)
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ShmService>()

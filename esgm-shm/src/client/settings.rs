@@ -9,9 +9,9 @@ use esgm_core::{
 
 use iceoryx2::prelude::ServiceName;
 
-use crate::capacity::Readers;
-use crate::qos::{DEFAULT_MAX_HISTORY, TrajectoryQos, history_bound, history_qos};
-use crate::service_name::{NameError, TrajectoryServiceNames};
+use crate::data_plane::capacity::Readers;
+use crate::data_plane::qos::{DEFAULT_MAX_HISTORY, TrajectoryQos, history_bound, history_qos};
+use crate::data_plane::service_name::{NameError, TrajectoryServiceNames};
 
 /// The most samples of a trajectory carrying octets (images, blobs of bytes) kept in
 /// shared memory for late readers when its cache has no element bound: every kept
@@ -21,7 +21,7 @@ pub(crate) const MAX_OCTET_HISTORY: usize = 16;
 
 /// Samples a replica may keep borrowed beyond its cache's bound: images that units,
 /// subscriptions and query answers still read after the cache evicted them (see
-/// [`crate::holdings`]). Past it, images are copied (and counted).
+/// [`crate::client::holdings`]). Past it, images are copied (and counted).
 pub(crate) const HOLD_SLACK: usize = 8;
 
 /// The service settings every process opens a trajectory's data service with, writer
@@ -39,7 +39,7 @@ pub(crate) const HOLD_SLACK: usize = 8;
 /// removed by iceoryx2's dead-node cleanup when its successor's node is made.)
 ///
 /// The trajectory's `readers` (its record's [`crate::control::TrajectoryRecord::readers`])
-/// size its subscribers and nodes ([`crate::capacity`]).
+/// size its subscribers and nodes ([`crate::data_plane::capacity`]).
 pub fn bridge_qos(
     policy: &FluentStreamPolicy,
     entity_type: &EntityStructureType,
@@ -53,7 +53,7 @@ pub fn bridge_qos(
     };
     let qos = history_qos(bound, TrajectoryQos::default());
     // Readers decode a structure without octets into their own memory and give its
-    // sample back at once ([`crate::holdings`]): they borrow one at a time. Images
+    // sample back at once ([`crate::client::holdings`]): they borrow one at a time. Images
     // stay in the writer's chunk for as long as a value reads them.
     let max_borrowed_samples = match octets {
         true => qos.max_borrowed_samples + HOLD_SLACK,
@@ -74,7 +74,7 @@ pub(crate) fn own_subscriber(entity_type: &EntityStructureType) -> usize {
 /// The largest structure of `entity_type` a writer's pool is sized for, if the type
 /// bounds its structures' size: every attribute a number, time, position, rotation or
 /// boolean. The publisher then loans from one fixed-size pool
-/// ([`crate::publisher::SampleSizing::Fixed`]); a growable one keeps bookkeeping for
+/// ([`crate::data_plane::publisher::SampleSizing::Fixed`]); a growable one keeps bookkeeping for
 /// 255 possible segments, about 2 MiB of private memory per publisher and 300 KiB per
 /// reader connected to it (iceoryx2 0.10, measured), whatever the samples' size.
 /// `None` for strings, sequences, frames and octets, whose structures grow.

@@ -4,7 +4,7 @@ use std::sync::Arc;
 
 use parking_lot::Mutex;
 
-use crate::service::ShmNode;
+use crate::data_plane::service::ShmNode;
 
 /// The node every port of one connection is opened on. An iceoryx2 node may move
 /// between threads but not be shared by them, so it sits behind a lock; ports are

@@ -1,6 +1,6 @@
 //! The client side of the control plane: asks the coordinator, with a deadline.
 
-use crate::service::ShmService;
+use crate::data_plane::service::ShmService;
 use iceoryx2::port::notifier::Notifier;
 use std::time::{Duration, Instant};
 
@@ -13,9 +13,9 @@ use iceoryx2::service::port_factory::client::ClientCreateError;
 use iceoryx2::service::port_factory::request_response::PortFactory;
 
 use super::protocol::{ControlError, Request, Response, decode, encode};
-use crate::capacity::DomainLimits;
-use crate::service::ShmNode;
-use crate::service_name::{NameError, control_service};
+use crate::data_plane::capacity::DomainLimits;
+use crate::data_plane::service::ShmNode;
+use crate::data_plane::service_name::{NameError, control_service};
 use esgm_core::esgm::{LimitReached, Peer, Unreachable};
 use iceoryx2::service::port_factory::PortFactory as _;
 
@@ -68,7 +68,7 @@ pub enum ControlClientError {
         domain: String,
     },
     /// The domain's control service has as many clients as it admits (one per
-    /// process; see [`crate::capacity`]).
+    /// process; see [`crate::data_plane::capacity`]).
     #[error(transparent)]
     LimitReached(LimitReached),
     /// The client port could not be created.
@@ -178,8 +178,10 @@ impl ControlClient {
     pub fn connect(domain: &str, timeout: Duration) -> Result<Self, ControlClientError> {
         let name = control_service(domain)?;
         let node = NodeBuilder::new()
-            .config(&crate::service::node_config(crate::service::Cleanup::None))
-            .name(&crate::service_name::node_name(domain, "control-client"))
+            .config(&crate::data_plane::service::node_config(
+                crate::data_plane::service::Cleanup::None,
+            ))
+            .name(&crate::data_plane::service_name::node_name(domain, "control-client"))
             .create::<ShmService>()
             .map_err(ControlClientError::node)?;
         let service = node
@@ -201,7 +203,7 @@ impl ControlClient {
         // A crashed process's client holds its room until someone cleans up after it.
         let lacks_room =
             |e: &ClientCreateError| *e == ClientCreateError::ExceedsMaxSupportedClients;
-        let client = crate::service::with_room(lacks_room, || {
+        let client = crate::data_plane::service::with_room(lacks_room, || {
             service
                 .client_builder()
                 .initial_max_slice_len(4096)
@@ -215,7 +217,7 @@ impl ControlClient {
                     service
                         .static_config()
                         .max_clients()
-                        .saturating_sub(16 + crate::capacity::TOOL_RESERVE),
+                        .saturating_sub(16 + crate::data_plane::capacity::TOOL_RESERVE),
                 ))
             }
             e => ControlClientError::Client(e),
@@ -227,8 +229,8 @@ impl ControlClient {
         Ok(Self { domain: domain.to_owned(), client, service, _node: node, ring, timeout })
     }
 
-    /// Sends `request` and waits for the answer (polling: iceoryx2 has no wake-up for a
-    /// response, see [`answer_poll_cap`]); the seed's errors come back as
+    /// Sends `request` and waits for the answer (polling, often for its first 50 ms:
+    /// iceoryx2 has no wake-up for a response); the seed's errors come back as
     /// [`ControlClientError::Remote`].
     pub fn call(&self, request: &Request) -> Result<Response, ControlClientError> {
         let bytes = encode(request).map_err(ControlClientError::Malformed)?;
@@ -264,8 +266,8 @@ impl ControlClient {
                 // cleans up after it (nobody scans for dead nodes at connect): if
                 // cleaning up leaves no server, nobody serves, which is not slowness.
                 crate::control::server::log_cleanup(
-                    crate::service::cleanup_dead_nodes(),
-                    crate::service::CleanupReporter::Bystander,
+                    crate::data_plane::service::cleanup_dead_nodes(),
+                    crate::data_plane::service::CleanupReporter::Bystander,
                 );
                 if self.service.dynamic_config().number_of_servers() == 0 {
                     return Err(ControlClientError::NotServing { domain: self.domain.clone() });

@@ -236,10 +236,10 @@ pub struct TrajectoryRecord {
     #[serde(default)]
     pub released: bool,
     /// How many processes may read it at once: the capacity every process opens its
-    /// services with ([`crate::capacity`]); the spec's `readers`, else the domain's
+    /// services with ([`crate::data_plane::capacity`]); the spec's `readers`, else the domain's
     /// default.
     #[serde(default)]
-    pub readers: crate::capacity::Readers,
+    pub readers: crate::data_plane::capacity::Readers,
     /// Its history is not kept beyond its writer ([`TrajectorySpec::volatile`]).
     #[serde(default)]
     pub volatile: bool,

@@ -16,8 +16,8 @@ use super::protocol::{
 };
 use super::refusal::Refusal;
 use super::state::{SNAPSHOT_VERSION, SavedTrajectory, Snapshot};
-use crate::capacity::{DomainLimits, Readers};
 use crate::control::holding_stats::HoldingStats;
+use crate::data_plane::capacity::{DomainLimits, Readers};
 
 #[derive(Debug, Clone)]
 struct Placement {

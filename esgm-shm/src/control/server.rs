@@ -2,8 +2,8 @@
 //! after processes that died.
 
 use crate::data_plane::kept_history::KeptHistory;
+use crate::data_plane::service::ShmService;
 use crate::data_plane::service_name::generation_domain;
-use crate::service::ShmService;
 use iceoryx2::port::listener::Listener;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -25,10 +25,10 @@ use super::persistence::Persistence;
 use super::protocol::{ControlError, Request, Response, decode, encode};
 use super::registry::{Origin, Registry, changes_registry};
 use super::state::{StateDir, StateError};
-use crate::capacity::{DomainLimits, EventCapacity};
 use crate::client::admin::AdminServices;
-use crate::service::ShmNode;
-use crate::service_name::{NameError, control_service};
+use crate::data_plane::capacity::{DomainLimits, EventCapacity};
+use crate::data_plane::service::ShmNode;
+use crate::data_plane::service_name::{NameError, control_service};
 
 /// Control clients a domain with `limits` admits: one per process (its connection's
 /// location thread) with the tools' reserve, and a margin for supervisors and for
@@ -128,7 +128,7 @@ type ControlRequest = iceoryx2::active_request::ActiveRequest<ShmService, [u8], 
 /// Each cleanup reads every iceoryx2 node of the host: about 150 ms for a domain of
 /// 60 processes (180 nodes), so every 2 s it was 2 % of a core and every 30 s still
 /// half the whole domain's idle budget. Nothing waits for it: a process that needs a
-/// dead one's room cleans up itself ([`crate::service::with_room`]), an admin question
+/// dead one's room cleans up itself ([`crate::data_plane::service::with_room`]), an admin question
 /// that misses answers does too, and a supervised worker's exit cleans up at once.
 /// What it still reclaims is the memory of processes that crashed and left nothing
 /// waiting, within five minutes.
@@ -150,13 +150,14 @@ pub(crate) fn open_control_wake(
     domain: &str,
     limits: &DomainLimits,
 ) -> Result<iceoryx2::service::port_factory::event::PortFactory<ShmService>, String> {
-    let name = crate::service_name::control_wake_service(domain).map_err(|e| e.to_string())?;
+    let name =
+        crate::data_plane::service_name::control_wake_service(domain).map_err(|e| e.to_string())?;
     let capacity = EventCapacity {
         listeners: 4,
         notifiers: control_clients(limits),
         nodes: limits.process_nodes(),
     };
-    crate::service::open_event_service(node, &name, capacity).map_err(|e| e.to_string())
+    crate::data_plane::service::open_event_service(node, &name, capacity).map_err(|e| e.to_string())
 }
 
 /// The service on which the coordinator announces its registry's version
@@ -172,7 +173,8 @@ pub(crate) fn open_version_service(
     iceoryx2::service::port_factory::publish_subscribe::PortFactory<ShmService, u64, ()>,
     String,
 > {
-    let text = format!("{}/{domain}/registry-version", crate::service_name::SERVICE_PREFIX);
+    let text =
+        format!("{}/{domain}/registry-version", crate::data_plane::service_name::SERVICE_PREFIX);
     let name = iceoryx2::prelude::ServiceName::new(&text).map_err(|e| format!("{text}: {e:?}"))?;
     let sized = node
         .service_builder(&name)
@@ -311,11 +313,13 @@ impl Coordinator {
         let name = control_service(domain)?;
         let limits = registry.limits();
         let node = NodeBuilder::new()
-            .config(&crate::service::node_config(crate::service::Cleanup::OnCreation))
-            .name(&crate::service_name::node_name(domain, "coordinator"))
+            .config(&crate::data_plane::service::node_config(
+                crate::data_plane::service::Cleanup::OnCreation,
+            ))
+            .name(&crate::data_plane::service_name::node_name(domain, "coordinator"))
             .create::<ShmService>()
             .map_err(CoordinatorError::Node)?;
-        log_cleanup(cleanup_dead_nodes(), crate::service::CleanupReporter::Owner);
+        log_cleanup(cleanup_dead_nodes(), crate::data_plane::service::CleanupReporter::Owner);
         let builder = || {
             node.service_builder(&name)
                 .request_response::<[u8], [u8]>()
@@ -738,7 +742,7 @@ impl Coordinator {
         let Some(wake) = &self.wake else {
             return std::thread::sleep(timeout.min(Duration::from_millis(1)));
         };
-        if let Err(e) = crate::wait::timed_wait(wake, timeout) {
+        if let Err(e) = crate::data_plane::wait::timed_wait(wake, timeout) {
             tracing::warn!(error = ?e, "cannot wait for requests; polling");
             std::thread::sleep(timeout.min(Duration::from_millis(1)));
         }
@@ -791,7 +795,7 @@ fn janitor(asked: &crossbeam_channel::Receiver<()>, stop: &AtomicBool, every: Du
         if stop.load(Ordering::Relaxed) {
             return;
         }
-        log_cleanup(cleanup_dead_nodes(), crate::service::CleanupReporter::Owner);
+        log_cleanup(cleanup_dead_nodes(), crate::data_plane::service::CleanupReporter::Owner);
     }
 }
 
@@ -821,7 +825,7 @@ impl CoordinatorThread {
 /// it looks anyway within [`IDLE_WAIT`].
 fn ring_coordinator(domain: &str) {
     let rung = NodeBuilder::new()
-        .config(&crate::service::node_config(crate::service::Cleanup::None))
+        .config(&crate::data_plane::service::node_config(crate::data_plane::service::Cleanup::None))
         .create::<ShmService>()
         .map_err(|e| format!("{e:?}"))
         .and_then(|node| open_control_wake(&node, domain, &DomainLimits::default()))
@@ -844,13 +848,13 @@ impl Drop for CoordinatorThread {
     }
 }
 
-pub use crate::service::cleanup_dead_nodes;
+pub use crate::data_plane::service::cleanup_dead_nodes;
 
 /// Logs the outcome of a [`cleanup_dead_nodes`] that runs in the background, as
-/// `reporter` should ([`DeadNodeCleanup::log`](crate::service::DeadNodeCleanup::log)).
+/// `reporter` should ([`DeadNodeCleanup::log`](crate::data_plane::service::DeadNodeCleanup::log)).
 pub fn log_cleanup(
-    outcome: Result<crate::service::DeadNodeCleanup, iceoryx2::node::NodeListFailure>,
-    reporter: crate::service::CleanupReporter,
+    outcome: Result<crate::data_plane::service::DeadNodeCleanup, iceoryx2::node::NodeListFailure>,
+    reporter: crate::data_plane::service::CleanupReporter,
 ) {
     match outcome {
         Ok(cleaned) => cleaned.log(reporter),

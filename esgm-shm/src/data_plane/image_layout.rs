@@ -14,7 +14,7 @@
 use esgm_core::codec::{CodecError, IMAGE_OVERHEAD_MAX, IMAGE_PIXELS_MAX};
 use esgm_core::library::Image;
 
-use crate::payload::BLOCK_LEN;
+use crate::data_plane::payload::BLOCK_LEN;
 
 pub use esgm_core::codec::{IMAGE_NAME_MAX, IMAGE_PIXELS_OFFSET};
 
@@ -76,7 +76,7 @@ pub fn image_loan_len(pixel_len: usize) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::payload::{Block16, blocks_for};
+    use crate::data_plane::payload::{Block16, blocks_for};
     use esgm_core::codec::{self, encode_image_into};
     use esgm_core::{Entity, Octets};
 

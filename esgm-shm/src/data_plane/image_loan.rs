@@ -3,7 +3,7 @@
 //! A camera asks its publisher for an [`ImageLoan`], fills [`ImageLoan::pixels_mut`]
 //! (or the uninitialised view, see below) with the frame, and calls
 //! [`ImageLoan::send`] with the entity's name and times. The pixels sit at a fixed
-//! offset of the loan ([`crate::image_layout`]); sending has the codec complete an
+//! offset of the loan ([`crate::data_plane::image_layout`]); sending has the codec complete an
 //! ordinary `Image` entity structure around them
 //! ([`esgm_core::codec::encode_image_into`]: a few hundred bytes of envelope, names,
 //! attributes and root) and sends. The pixels are written once, by the camera, where
@@ -35,7 +35,7 @@
 //! `pixels_uninit_mut` avoids. (Measured with the earlier template layout; sending
 //! now encodes the few hundred bytes around the pixels instead of copying a template.)
 
-use crate::service::ShmService;
+use crate::data_plane::service::ShmService;
 use std::mem::MaybeUninit;
 use std::ops::Range;
 
@@ -44,10 +44,10 @@ use esgm_core::library::Image;
 use esgm_core::{Entity, Octets, Time};
 use iceoryx2::sample_mut_uninit::SampleMutUninit;
 
-use crate::image_layout::{IMAGE_NAME_MAX, IMAGE_PIXELS_OFFSET, ImageError};
-use crate::payload::{Block16, SampleHeader, as_uninit_bytes, copy_into, zero_fill};
-use crate::publisher::{PublishError, Published, TrajectoryPublisher};
-use crate::structure_loan::StructureLoan;
+use crate::data_plane::image_layout::{IMAGE_NAME_MAX, IMAGE_PIXELS_OFFSET, ImageError};
+use crate::data_plane::payload::{Block16, SampleHeader, as_uninit_bytes, copy_into, zero_fill};
+use crate::data_plane::publisher::{PublishError, Published, TrajectoryPublisher};
+use crate::data_plane::structure_loan::StructureLoan;
 
 type UninitSample = SampleMutUninit<ShmService, [MaybeUninit<Block16>], SampleHeader>;
 

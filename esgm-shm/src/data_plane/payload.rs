@@ -21,7 +21,7 @@
 //! |      8 | `create_time` | i64  | the structure's create time (ns)                     |
 //! |     16 | `add_time`    | i64  | when the publisher sent it (ns, publisher's clock)   |
 //! |     24 | `archive_len` | u64  | payload bytes in use, codec envelope included        |
-//! |     32 | `type_id`     | u64  | [`crate::type_id()`] of the trajectory's type name   |
+//! |     32 | `type_id`     | u64  | [`crate::data_plane::type_id::type_id()`] of the trajectory's type name   |
 //! |     40 | `sequence`    | u64  | per-publisher counter, +1 per sent sample            |
 //! |     48 | `kind`        | u32  | what the payload is ([`SampleHeader::KIND_STRUCTURE`]) |
 //! |     52 | `flags`       | u32  | properties of the payload ([`SampleHeader::FLAG_IMAGE_IN_PLACE`]) |
@@ -119,7 +119,7 @@ pub struct SampleHeader {
     pub add_time: Time,
     /// Payload bytes in use, codec envelope included; the rest of the slice is zero.
     pub archive_len: u64,
-    /// [`crate::type_id()`] of the trajectory's entity structure type name.
+    /// [`crate::data_plane::type_id::type_id()`] of the trajectory's entity structure type name.
     pub type_id: u64,
     /// Per-publisher sequence number, starting at 0; a gap means samples were dropped
     /// (overwritten in a full subscriber buffer).

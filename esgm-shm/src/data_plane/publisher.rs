@@ -3,7 +3,7 @@
 //!
 //! # One write, no heap buffer
 //! [`TrajectoryPublisher::publish`] loans a slice sized by
-//! [`crate::size_hint::archived_size_hint`] (a walk over the structure, no encode) and
+//! [`crate::data_plane::size_hint::archived_size_hint`] (a walk over the structure, no encode) and
 //! has the codec encode straight into the uninitialised loan
 //! ([`codec::encode_into_uninit`]); the header carries the archive length, times and
 //! type id. The codec initialises exactly the bytes it reports (rkyv writes padding
@@ -20,7 +20,7 @@
 //! that actually fits.
 //!
 //! [`TrajectoryPublisher::loan_structure`] splits `publish` in two: encode into the
-//! loan now, send later ([`crate::structure_loan`]).
+//! loan now, send later ([`crate::data_plane::structure_loan`]).
 //!
 //! # The next loan, made ahead
 //! After each structure it sends, the publisher loans the slice for the next one (of
@@ -34,7 +34,7 @@
 //! larger) loans its own.
 //!
 //! Images written by a camera go through [`TrajectoryPublisher::loan_image`] instead,
-//! which lets the camera fill the pixels in place (see [`crate::image_loan`]).
+//! which lets the camera fill the pixels in place (see [`crate::data_plane::image_loan`]).
 //!
 //! # Late joiners
 //! iceoryx2 keeps the last `history_size` samples in the publisher and hands them to a
@@ -42,7 +42,7 @@
 //! when [`TrajectoryPublisher::update_connections`] is called. A producer that publishes
 //! rarely should call it periodically so that new subscribers get the history at once.
 
-use crate::service::ShmService;
+use crate::data_plane::service::ShmService;
 use std::cell::Cell;
 use std::time::Duration;
 
@@ -56,18 +56,20 @@ use iceoryx2::prelude::{AllocationStrategy, BackpressureStrategy};
 use iceoryx2::sample_mut::SampleMut;
 use iceoryx2::service::port_factory::PortFactory;
 
-use crate::image_layout::{ImageError, image_loan_len, pixel_len};
-use crate::image_loan::{ImageChunk, ImageLoan};
-use crate::payload::{BLOCK_LEN, Block16, SampleHeader, as_uninit_bytes, blocks_for, zero_fill};
-use crate::qos::{Delivery, TrajectoryQos};
-use crate::service::{
+use crate::data_plane::image_layout::{ImageError, image_loan_len, pixel_len};
+use crate::data_plane::image_loan::{ImageChunk, ImageLoan};
+use crate::data_plane::payload::{
+    BLOCK_LEN, Block16, SampleHeader, as_uninit_bytes, blocks_for, zero_fill,
+};
+use crate::data_plane::qos::{Delivery, TrajectoryQos};
+use crate::data_plane::service::{
     DataService, OpenError, ShmNode, WakeService, open_data_service, open_wake_service, with_room,
 };
-use crate::service_name::{DEFAULT_DOMAIN, TrajectoryServiceNames};
-use crate::size_hint::archived_size_hint;
-use crate::structure_loan::StructureLoan;
-use crate::type_id::type_id;
-use crate::wake_word::WakeWord;
+use crate::data_plane::service_name::{DEFAULT_DOMAIN, TrajectoryServiceNames};
+use crate::data_plane::size_hint::archived_size_hint;
+use crate::data_plane::structure_loan::StructureLoan;
+use crate::data_plane::type_id::type_id;
+use crate::data_plane::wake_word::WakeWord;
 
 /// Default initial size of a publisher's samples: small structures fit without growth.
 pub const DEFAULT_INITIAL_MAX_LEN: usize = 4096;
@@ -119,7 +121,7 @@ pub enum PublishError {
     /// The trajectory's violations service could not be opened (at its first
     /// violation).
     #[error("cannot open the violations service: {0}")]
-    Violations(#[source] Box<crate::service::OpenError>),
+    Violations(#[source] Box<crate::data_plane::service::OpenError>),
 }
 
 /// What a successful publish did.
@@ -151,7 +153,7 @@ impl TrajectoryPublisherBuilder {
         self
     }
 
-    /// All service settings at once (see [`crate::qos`]).
+    /// All service settings at once (see [`crate::data_plane::qos`]).
     pub fn qos(mut self, qos: TrajectoryQos) -> Self {
         self.qos = qos;
         self
@@ -204,8 +206,8 @@ impl TrajectoryPublisherBuilder {
     }
 
     /// Has no effect: image loans no longer depend on the entity name (any name of up
-    /// to [`crate::image_layout::IMAGE_NAME_MAX`] bytes is sent in place, see
-    /// [`crate::image_layout`]). Kept so that existing callers compile.
+    /// to [`crate::data_plane::image_layout::IMAGE_NAME_MAX`] bytes is sent in place, see
+    /// [`crate::data_plane::image_layout`]). Kept so that existing callers compile.
     pub fn image_name(self, _name: impl Into<String>) -> Self {
         self
     }
@@ -288,7 +290,7 @@ pub struct TrajectoryPublisher {
     port: Publisher<ShmService, [Block16], SampleHeader>,
     notifier: Notifier<ShmService>,
     /// The notifier's service, whose listeners a ring that found every receiver
-    /// covered is compared with ([`crate::wake_word::Ring::covered`]).
+    /// covered is compared with ([`crate::data_plane::wake_word::Ring::covered`]).
     wake: WakeService,
     /// Rung before the notifier: readers sleeping on the futex word ([`WakeWord`]).
     word: Option<WakeWord>,
@@ -318,7 +320,7 @@ enum Listeners {
     /// Every one: a new reader waits for its history on a listener of its own.
     All,
     /// Every one, unless every listener belongs to a connection covered by a thread
-    /// asleep on the word ([`crate::wake_word::Ring::covered`]): a notify goes to all
+    /// asleep on the word ([`crate::data_plane::wake_word::Ring::covered`]): a notify goes to all
     /// or to none.
     Uncovered,
 }
@@ -411,7 +413,7 @@ impl TrajectoryPublisher {
 
     /// How many sends skipped the iceoryx2 notify because every connection listening
     /// to it was counted as covered by a thread asleep on the futex word, which feeds
-    /// it once woken (see [`crate::wake_word`]): for diagnostics and tests.
+    /// it once woken (see [`crate::data_plane::wake_word`]): for diagnostics and tests.
     pub fn notifies_spared(&self) -> u64 {
         self.notifies_spared.get()
     }
@@ -510,7 +512,7 @@ impl TrajectoryPublisher {
     }
 
     /// Encodes `es` into loaned shared memory now, for sending later with
-    /// [`StructureLoan::send`] (see [`crate::structure_loan`]): the encoding is done
+    /// [`StructureLoan::send`] (see [`crate::data_plane::structure_loan`]): the encoding is done
     /// before the moment the structure has to go.
     pub fn loan_structure(&self, es: &EntityStructure) -> Result<StructureLoan<'_>, PublishError> {
         let mut want = archived_size_hint(es);

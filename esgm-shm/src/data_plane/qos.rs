@@ -40,7 +40,7 @@
 
 use esgm_core::CacheConstraint;
 
-use crate::capacity::{EventCapacity, Readers};
+use crate::data_plane::capacity::{EventCapacity, Readers};
 
 /// What a publisher does when a subscriber's buffer is full.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -91,7 +91,7 @@ impl Default for TrajectoryQos {
 }
 
 impl TrajectoryQos {
-    /// Room for `readers` reader processes ([`crate::capacity`]): their subscribers and
+    /// Room for `readers` reader processes ([`crate::data_plane::capacity`]): their subscribers and
     /// nodes, with the tools' reserve.
     #[must_use]
     pub fn readers(self, readers: Readers) -> Self {

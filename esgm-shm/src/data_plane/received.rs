@@ -1,6 +1,6 @@
 //! A sample a subscriber took from shared memory, read in place.
 
-use crate::service::ShmService;
+use crate::data_plane::service::ShmService;
 use std::cell::Cell;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -10,8 +10,8 @@ use esgm_core::codec::{self, ArchivedEntityStructure, CodecError};
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::sample::Sample;
 
-use crate::payload::{Block16, SampleHeader, as_bytes};
-use crate::sample_check::validate;
+use crate::data_plane::payload::{Block16, SampleHeader, as_bytes};
+use crate::data_plane::sample_check::validate;
 
 /// The iceoryx2 sample type of a trajectory.
 pub(crate) type RawSample = Sample<ShmService, [Block16], SampleHeader>;

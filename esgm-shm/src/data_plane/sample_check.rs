@@ -13,8 +13,8 @@
 
 use esgm_core::codec::{self, ArchivedEntityStructure, CodecError, ENVELOPE_LEN};
 
-use crate::payload::SampleHeader;
-use crate::subscriber::{ReceiveError, Validation};
+use crate::data_plane::payload::SampleHeader;
+use crate::data_plane::subscriber::{ReceiveError, Validation};
 
 /// A sample that passed [`check_sample`]: what the reader may hand out.
 #[derive(Debug)]
@@ -40,7 +40,7 @@ pub enum SampleVerdict<'a> {
 /// Checks a sample's header and payload as a reader must before using either.
 ///
 /// `payload` is every byte delivered (the loaned slice, possibly longer than the
-/// archive); `expected_type_id` is [`crate::type_id()`] of the reader's type. The
+/// archive); `expected_type_id` is [`crate::data_plane::type_id::type_id()`] of the reader's type. The
 /// errors are [`ReceiveError::TypeMismatch`], [`ReceiveError::UnknownKind`],
 /// [`ReceiveError::Truncated`] and [`ReceiveError::Malformed`]; nothing the header or
 /// payload holds makes it panic or read out of bounds.

@@ -15,10 +15,10 @@ use esgm_core::esgm::{Limit, LimitReached};
 use iceoryx2::service::builder::event::EventOpenError;
 use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError;
 
-use crate::capacity::{EventCapacity, Readers};
-use crate::payload::{Block16, SampleHeader};
-use crate::qos::{Delivery, TrajectoryQos};
-use crate::service_name::{NameError, TrajectoryServiceNames};
+use crate::data_plane::capacity::{EventCapacity, Readers};
+use crate::data_plane::payload::{Block16, SampleHeader};
+use crate::data_plane::qos::{Delivery, TrajectoryQos};
+use crate::data_plane::service_name::{NameError, TrajectoryServiceNames};
 
 /// The iceoryx2 service type of every esgm port: inter-process services whose ports
 /// are `Send + Sync`.
@@ -308,7 +308,7 @@ pub enum OpenError {
     /// [`crate::WaitStrategy::BusySpin`], which needs none, or raise the limit.
     #[error("cannot create the wake-up listener: {0}")]
     Listener(#[source] ListenerCreateError),
-    /// A limit of the trajectory's services was reached ([`crate::capacity`]); the
+    /// A limit of the trajectory's services was reached ([`crate::data_plane::capacity`]); the
     /// error names the setting that raises it.
     #[error(transparent)]
     LimitReached(#[from] LimitReached),
@@ -435,7 +435,7 @@ impl EventSpec {
 }
 
 /// Opens (or creates) an esgm wake-up event service sized `capacity`
-/// ([`crate::capacity`]). Every opener asks for the same capacity, derived from the
+/// ([`crate::data_plane::capacity`]). Every opener asks for the same capacity, derived from the
 /// trajectory's record or the domain's limits, so whichever process comes first, the
 /// others fit.
 pub(crate) fn open_event_service(

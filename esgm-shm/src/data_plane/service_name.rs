@@ -4,7 +4,7 @@
 //!
 //! | service                         | pattern           | carries                      |
 //! |---------------------------------|-------------------|------------------------------|
-//! | `esgm/<domain>/traj/<name>`     | publish-subscribe | the samples ([`crate::payload`]) |
+//! | `esgm/<domain>/traj/<name>`     | publish-subscribe | the samples ([`crate::data_plane::payload`]) |
 //! | `esgm/<domain>/wake/<name>`     | event             | "a sample was sent" wake-ups |
 //!
 //! The domain exists so that independent systems on one host, and tests running in
@@ -16,7 +16,7 @@
 //! and `:` — no `/`, so that the mapping stays one-to-one and reversible (a discovery
 //! tool can read a trajectory name back from a service name).
 
-use crate::service::ShmService;
+use crate::data_plane::service::ShmService;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use iceoryx2::prelude::ServiceName;
@@ -179,7 +179,7 @@ pub fn nodes_of(domain: &str) -> Result<Vec<(String, bool)>, iceoryx2::node::Nod
     use iceoryx2::node::{Node, NodeState, NodeView};
     let prefix = format!("{SERVICE_PREFIX}/{domain}/");
     let mut out = Vec::new();
-    Node::<ShmService>::list(crate::service::iceoryx2_config(), |state| {
+    Node::<ShmService>::list(crate::data_plane::service::iceoryx2_config(), |state| {
         let (details, alive) = match &state {
             NodeState::Alive(v) => (v.details().clone(), true),
             NodeState::Dead(v) => (v.details().clone(), false),
@@ -204,7 +204,7 @@ pub fn processes_of(
     use iceoryx2::node::{Node, NodeState, NodeView};
     let prefix = format!("{SERVICE_PREFIX}/{domain}/");
     let mut out: std::collections::BTreeMap<u32, Vec<String>> = Default::default();
-    Node::<ShmService>::list(crate::service::iceoryx2_config(), |state| {
+    Node::<ShmService>::list(crate::data_plane::service::iceoryx2_config(), |state| {
         if let NodeState::Alive(v) = &state {
             let name = v.details().as_ref().map(|d| d.name().as_str().to_owned());
             // A node of the domain without a readable process id is warned about below.
@@ -230,7 +230,7 @@ pub fn processes_of(
 ///
 /// Why per generation: an iceoryx2 service lives while any port of it does, and a
 /// value that still reads an image owns a share of its subscriber port (see
-/// [`crate::holdings`]). A name destroyed and created again — possibly with another
+/// [`crate::client::holdings`]). A name destroyed and created again — possibly with another
 /// cache, so other service settings — must not have to open the former trajectory's
 /// services, which may linger for as long as such a value; and the former's chunks
 /// are never the new one's.

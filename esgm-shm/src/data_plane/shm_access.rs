@@ -32,7 +32,7 @@ impl ShmAccess {
     }
 
     /// The mode of a file esgm makes itself in the domain's shared memory (a
-    /// trajectory's [`crate::wake_word`]): read and write for the owner and for the
+    /// trajectory's [`crate::data_plane::wake_word`]): read and write for the owner and for the
     /// classes this access admits.
     pub(crate) fn file_mode(self) -> u32 {
         0o600 | self.widen(0o600)

@@ -17,7 +17,7 @@
 use esgm_core::Time;
 use esgm_core::codec;
 
-use crate::publisher::{LoanedSample, PublishError, Published, TrajectoryPublisher};
+use crate::data_plane::publisher::{LoanedSample, PublishError, Published, TrajectoryPublisher};
 
 /// An entity structure archived in a loaned shared-memory slice, ready to send; see
 /// the module docs.

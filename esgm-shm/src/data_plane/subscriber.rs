@@ -3,7 +3,7 @@
 //!
 //! Every sample goes through [`check_sample`] (the header's type id, kind and archive
 //! length, then with [`Validation::InPlace`], the default, the archive itself); see
-//! [`crate::sample_check`] for the order and why it is one pure function.
+//! [`crate::data_plane::sample_check`] for the order and why it is one pure function.
 //!
 //! A sample failing any check is returned to iceoryx2 at once and reported as a typed
 //! [`ReceiveError`]; the counters in [`SubscriberStats`] say how often. Nothing a peer
@@ -18,19 +18,19 @@ use iceoryx2::identifiers::UniquePublisherId;
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::service::port_factory::PortFactory;
 
-use crate::payload::as_bytes;
-use crate::qos::TrajectoryQos;
-use crate::received::SubscriberPort;
-use crate::received::{Checked, Counters, ReceivedSample};
-use crate::sample_check::{SampleVerdict, check_sample};
+use crate::data_plane::payload::as_bytes;
+use crate::data_plane::qos::TrajectoryQos;
+use crate::data_plane::received::SubscriberPort;
+use crate::data_plane::received::{Checked, Counters, ReceivedSample};
+use crate::data_plane::sample_check::{SampleVerdict, check_sample};
 use esgm_core::esgm::{Limit, LimitReached};
 
-use crate::service::{
+use crate::data_plane::service::{
     DataService, OpenError, ShmNode, open_data_service, open_wake_service, with_room,
 };
-use crate::service_name::{DEFAULT_DOMAIN, TrajectoryServiceNames};
-use crate::type_id::type_id;
-use crate::wait::{Sleeper, WaitStrategy, Waiter, deadline_after};
+use crate::data_plane::service_name::{DEFAULT_DOMAIN, TrajectoryServiceNames};
+use crate::data_plane::type_id::type_id;
+use crate::data_plane::wait::{Sleeper, WaitStrategy, Waiter, deadline_after};
 
 /// When a subscriber validates archives.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -151,7 +151,7 @@ impl TrajectorySubscriberBuilder {
     /// Refuses to subscribe, with [`esgm_core::esgm::LimitReached`], when the
     /// trajectory already has `limit` subscribers: a long-lived reader counts itself
     /// against the trajectory's `readers`, and leaves the ports beyond them to
-    /// short-lived tools ([`crate::capacity`]). Default: no count (iceoryx2's own
+    /// short-lived tools ([`crate::data_plane::capacity`]). Default: no count (iceoryx2's own
     /// limit alone).
     pub fn reader_limit(mut self, limit: usize) -> Self {
         self.reader_limit = Some(limit);
@@ -165,7 +165,7 @@ impl TrajectorySubscriberBuilder {
     }
 
     /// The service settings, used if this subscriber creates the service (see
-    /// [`crate::qos`]); default [`TrajectoryQos::default`].
+    /// [`crate::data_plane::qos`]); default [`TrajectoryQos::default`].
     pub fn qos(mut self, qos: TrajectoryQos) -> Self {
         self.qos = qos;
         self
@@ -202,7 +202,7 @@ impl TrajectorySubscriberBuilder {
         let service = open_data_service(node, &names, &self.qos)?;
         if let Some(limit) = self.reader_limit {
             // Counted before the port is made, so the reserve beyond `limit` stays for
-            // tools ([`crate::capacity`]); iceoryx2's own count is the backstop.
+            // tools ([`crate::data_plane::capacity`]); iceoryx2's own count is the backstop.
             if service.dynamic_config().number_of_subscribers() >= limit {
                 return Err(OpenError::LimitReached(LimitReached::trajectory(
                     Limit::Readers,

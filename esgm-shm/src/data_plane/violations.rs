@@ -21,8 +21,8 @@
 //! oldest ones rather than stall the writer; the record's sequence number shows the gap
 //! ([`ViolationSubscriberStats::lost`]).
 
-use crate::capacity::{EventCapacity, Readers};
-use crate::service::ShmService;
+use crate::data_plane::capacity::{EventCapacity, Readers};
+use crate::data_plane::service::ShmService;
 use std::cell::{Cell, RefCell};
 use std::time::Duration;
 
@@ -34,12 +34,14 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::{ServiceName, ZeroCopySend};
 use iceoryx2::service::port_factory::{event, publish_subscribe};
 
-use crate::publisher::PublishError;
-use crate::sequence_gaps::SequenceGaps;
-use crate::service::{OpenError, ShmNode, with_room};
-use crate::service_name::{DEFAULT_DOMAIN, NameError, SERVICE_PREFIX, TrajectoryServiceNames};
-use crate::subscriber::ReceiveError;
-use crate::wait::{Sleeper, WaitStrategy, Waiter, deadline_after};
+use crate::data_plane::publisher::PublishError;
+use crate::data_plane::sequence_gaps::SequenceGaps;
+use crate::data_plane::service::{OpenError, ShmNode, with_room};
+use crate::data_plane::service_name::{
+    DEFAULT_DOMAIN, NameError, SERVICE_PREFIX, TrajectoryServiceNames,
+};
+use crate::data_plane::subscriber::ReceiveError;
+use crate::data_plane::wait::{Sleeper, WaitStrategy, Waiter, deadline_after};
 
 /// Unread violations a subscriber can queue before the oldest are overwritten.
 pub const VIOLATION_BUFFER: usize = 64;
@@ -151,7 +153,11 @@ fn open_services(
         .enable_safe_overflow(true)
         .open_or_create()
         .map_err(|source| OpenError::DataService { service: text.clone(), source })?;
-    let wake = crate::service::open_event_service(node, &name, EventCapacity::violations(readers))?;
+    let wake = crate::data_plane::service::open_event_service(
+        node,
+        &name,
+        EventCapacity::violations(readers),
+    )?;
     Ok(ViolationServices { data, wake })
 }
 

@@ -41,7 +41,7 @@
 //! costs under 0.1 % more.
 //!
 //! # Sleeping on a futex word
-//! A blocking reader sleeps on its trajectory's futex word ([`crate::wake_word`]): the
+//! A blocking reader sleeps on its trajectory's futex word ([`crate::data_plane::wake_word`]): the
 //! writer adds one to it after every send and calls `FUTEX_WAKE` only when somebody
 //! sleeps, so while readers spin, or nobody reads, a publish costs one atomic add and
 //! no system call. A reader about to sleep loads the word, polls once more, and sleeps
@@ -61,8 +61,8 @@
 //! Every wait takes a timeout: a publisher that dies is not signalled to a waiting
 //! reader, so without a deadline a reader could wait forever.
 
-use crate::service::ShmService;
-use crate::wake_word::WakeWord;
+use crate::data_plane::service::ShmService;
+use crate::data_plane::wake_word::WakeWord;
 use std::time::{Duration, Instant};
 
 use iceoryx2::port::listener::{Listener, ListenerWaitError};
@@ -114,13 +114,13 @@ pub(crate) enum Sleeper {
 }
 
 impl Sleeper {
-    /// The word of the wake-up service `service` (unless [`crate::wake_word::WAKE_ENV`]
+    /// The word of the wake-up service `service` (unless [`crate::data_plane::wake_word::WAKE_ENV`]
     /// says `event`), else the listener `listener` makes.
     pub(crate) fn open<E>(
         service: &str,
         listener: impl FnOnce() -> Result<Listener<ShmService>, E>,
     ) -> Result<Sleeper, E> {
-        if crate::wake_word::futex_enabled() {
+        if crate::data_plane::wake_word::futex_enabled() {
             match WakeWord::open(service) {
                 Ok(word) => return Ok(Sleeper::Word(word)),
                 Err(e) => tracing::debug!(service, error = %e,
@@ -336,10 +336,10 @@ mod tests {
     fn wait_any_wakes_on_whichever_listener_is_notified_and_consumes_it() {
         use iceoryx2::prelude::{NodeBuilder, ServiceName};
         let node = NodeBuilder::new()
-            .config(crate::service::iceoryx2_config())
+            .config(crate::data_plane::service::iceoryx2_config())
             .create::<ShmService>()
             .unwrap();
-        let domain = crate::service_name::unique_domain("wait-any");
+        let domain = crate::data_plane::service_name::unique_domain("wait-any");
         let events: Vec<_> = ["a", "b"]
             .iter()
             .map(|n| {

@@ -770,20 +770,21 @@ mod tests {
     use super::*;
 
     fn unique() -> String {
-        let domain = crate::service_name::unique_domain("wake-word");
-        crate::service_name::wake_service_name(&domain, "t")
+        let domain = crate::data_plane::service_name::unique_domain("wake-word");
+        crate::data_plane::service_name::wake_service_name(&domain, "t")
     }
 
     #[test]
     fn a_domains_words_are_found_by_name_and_removed_at_its_end() {
-        let domain = crate::service_name::unique_domain("wake-end");
+        let domain = crate::data_plane::service_name::unique_domain("wake-end");
         let generation = format!("{domain}.g3");
         let other = format!("{domain}.b");
         let words: Vec<_> = [&domain, &generation, &other]
             .iter()
             .enumerate()
             .map(|(i, d)| {
-                let service = crate::service_name::wake_service_name(d, &format!("t/{i}"));
+                let service =
+                    crate::data_plane::service_name::wake_service_name(d, &format!("t/{i}"));
                 assert!(path_for(&service).to_string_lossy().contains(d.as_str()));
                 WakeWord::open(&service).unwrap()
             })

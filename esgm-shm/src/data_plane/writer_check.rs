@@ -19,7 +19,7 @@
 
 use std::collections::VecDeque;
 
-use crate::sequence_gaps::SequenceGaps;
+use crate::data_plane::sequence_gaps::SequenceGaps;
 
 /// The most arrivals held while the registry has not named the writer's port: a
 /// restarted writer is named within a location tick, so this bounds only what a

@@ -180,7 +180,7 @@ impl DomainScan {
 /// iceoryx2's directories that every domain and user of the host shares: its root,
 /// and the node and service directories in it.
 pub fn shared_dirs() -> [PathBuf; 3] {
-    let global = &crate::service::iceoryx2_config().global;
+    let global = &crate::data_plane::service::iceoryx2_config().global;
     [global.root_path(), &global.node_dir(), &global.service_dir()]
         .map(|p| PathBuf::from(p.to_string()))
 }
@@ -420,7 +420,7 @@ impl DomainIds {
 /// The hashes (static configurations) and unique ids (dynamic configurations) of the
 /// domain's services.
 fn service_tokens(domain: &str) -> Result<HashSet<String>, AccessError> {
-    let config = crate::service::iceoryx2_config();
+    let config = crate::data_plane::service::iceoryx2_config();
     let mut tokens = HashSet::new();
 
     ShmService::list(config, |service| {
@@ -437,7 +437,7 @@ fn service_tokens(domain: &str) -> Result<HashSet<String>, AccessError> {
 
 /// The domain's nodes, every user's whose details this user can read.
 fn domain_nodes(domain: &str) -> Result<Vec<u128>, AccessError> {
-    let config = crate::service::iceoryx2_config();
+    let config = crate::data_plane::service::iceoryx2_config();
     let mut nodes = Vec::new();
     Node::<ShmService>::list(config, |state| {
         let view_of = |id: u128, details: Option<&iceoryx2::node::NodeDetails>| {

@@ -26,8 +26,8 @@ use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use esgm_shm::capacity::{DEFAULT_MAX_PROCESSES, DEFAULT_READERS, DomainLimits};
 use esgm_shm::control::{ControlClient, ProcessSpec, Request, Response, StateDir};
+use esgm_shm::data_plane::capacity::{DEFAULT_MAX_PROCESSES, DEFAULT_READERS, DomainLimits};
 use esgm_shm::unique_domain;
 use serde::Serialize;
 
@@ -147,7 +147,7 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(1, |d| d.as_nanos() as u64)
     });
-    let domain = if domain == esgm_shm::service_name::SYSTEM_DOMAIN {
+    let domain = if domain == esgm_shm::data_plane::service_name::SYSTEM_DOMAIN {
         unique_domain("chaos")
     } else {
         domain.to_owned()

@@ -31,8 +31,8 @@ use std::sync::mpsc;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use esgm_shm::capacity::{DEFAULT_MAX_PROCESSES, DEFAULT_READERS, DomainLimits};
 use esgm_shm::control::StateDir;
+use esgm_shm::data_plane::capacity::{DEFAULT_MAX_PROCESSES, DEFAULT_READERS, DomainLimits};
 use esgm_shm::unique_domain;
 use serde::Serialize;
 
@@ -158,7 +158,7 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
     if !a.settle_seconds.is_finite() || a.settle_seconds < 0.0 {
         bail!("--settle-seconds must be zero or more seconds, got {}", a.settle_seconds);
     }
-    let domain = if domain == esgm_shm::service_name::SYSTEM_DOMAIN {
+    let domain = if domain == esgm_shm::data_plane::service_name::SYSTEM_DOMAIN {
         unique_domain("scale")
     } else {
         domain.to_owned()

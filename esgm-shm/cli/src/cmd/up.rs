@@ -26,8 +26,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use esgm_cli::serve::Serve;
-use esgm_shm::capacity::{DEFAULT_MAX_PROCESSES, DEFAULT_READERS, DomainLimits};
 use esgm_shm::control::{ControlClient, Request, StateDir};
+use esgm_shm::data_plane::capacity::{DEFAULT_MAX_PROCESSES, DEFAULT_READERS, DomainLimits};
 use esgm_shm::process::access::{ACCESS_ENV, ShmAccess};
 use esgm_shm::process::cpu_latency::{self, CPU_LATENCY_ENV, CpuLatency};
 
