@@ -108,7 +108,7 @@
 //! ## The coordinator is not a single point of failure
 //! The coordinator ([`control`]) is a registry and a supervisor; samples never pass
 //! through it. If it dies, the processes that run keep exchanging samples, and workers
-//! wait for a new one ([`control::attach`] tells a slow coordinator from a gone one).
+//! wait for a new one ([`client::attach`] tells a slow coordinator from a gone one).
 //! A new coordinator comes back whole from a **persisted state file**, not from the
 //! processes re-registering: the registry holds what no live process holds in full
 //! (types and trajectories declared by processes that have left, the process table

@@ -151,6 +151,17 @@ pub fn remove_domain_files(domain: &str) -> usize {
         + crate::data_plane::kept_history::KeptHistory::remove_domain(domain)
 }
 
+/// True while process `pid` runs (a zombie has stopped).
+pub(crate) fn process_alive(pid: u32) -> bool {
+    match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
+        Ok(stat) => {
+            stat.rsplit_once(')').is_some_and(|(_, rest)| !rest.trim_start().starts_with('Z'))
+        }
+        // No stat to read: the process is gone.
+        Err(_) => false,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -17,13 +17,13 @@ use esgm_core::esgm::{CreateError, TrajectorySpec};
 use esgm_core::library::RobotState;
 use esgm_core::{Entity, Esgm, FluentStreamPolicy, SharedClock, Time, millis};
 use esgm_shm::ShmEsgm;
-use esgm_shm::control::attach::serve_while_system_lives;
+use esgm_shm::client::attach::serve_while_system_lives;
 
 use crate::publisher::RobotPublisher;
 
 /// How long a stopped system's coordinator may stay gone before a running robot
 /// leaves (a slow or crashed coordinator is waited for, publishing on: see
-/// [`esgm_shm::control::attach`]).
+/// [`esgm_shm::client::attach`]).
 pub const COORDINATOR_PATIENCE: Duration = Duration::from_millis(500);
 
 /// How long [`start`] waits for the trajectory it follows to be created (a system

@@ -42,28 +42,22 @@ use esgm_core::{DropCause, InProcessEsgm, QueryError, ResetForwarder};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
 use iceoryx2::port::subscriber::{Subscriber, SubscriberCreateError};
-use iceoryx2::prelude::{AllocationStrategy, PortFactory as _, ServiceName};
-use iceoryx2::service::builder::publish_subscribe::{
-    PublishSubscribeOpenError, PublishSubscribeOpenOrCreateError,
-};
-use iceoryx2::service::port_factory::{event, publish_subscribe};
+use iceoryx2::prelude::{AllocationStrategy, PortFactory as _};
 use parking_lot::Mutex;
 use serde::{Deserialize, Serialize};
 
 use super::mirrors::SharedMirrors;
 use super::shared_node::SharedNode;
 use super::stats_row::{Figures, StatsRow};
-use crate::data_plane::capacity::{DomainLimits, EventCapacity, TOOL_RESERVE};
-use crate::data_plane::service::{ShmNode, ShmService, open_event_service};
+pub(crate) use crate::control::admin_services::ASKERS;
+use crate::control::admin_services::AdminServices;
+use crate::data_plane::capacity::DomainLimits;
+use crate::data_plane::service::ShmService;
 
-/// Processes that may ask the domain at once; one more waits until one is answered.
-pub(crate) const ASKERS: usize = 8;
 /// The largest question or answer, in bytes: statistics of every trajectory a process
 /// holds (a few hundred bytes each) fit thousands. Messages are loaned from a
 /// fixed-size pool mapped (not committed) for the askers' queues.
 const MAX_MESSAGE: usize = 4 << 20;
-/// Questions a process may have waiting before the oldest is dropped.
-const BUFFER: usize = 4;
 /// The longest the admin thread sleeps before it looks for its stop (stopping rings
 /// it awake; this is the backstop). Every 2 s it was a wake-up a second in every
 /// process of an idle robot.
@@ -74,76 +68,6 @@ const RECHECK: Duration = Duration::from_secs(30);
 const POLL: [Duration; 2] = [Duration::from_micros(100), Duration::from_millis(1)];
 /// How long an asker looks for answers often ([`POLL`]).
 const FAST_ANSWER: Duration = Duration::from_millis(50);
-
-type Channel = publish_subscribe::PortFactory<ShmService, [u8], ()>;
-
-/// The domain's administration services (see the module docs): opened by every
-/// process, created by the coordinator with the domain's limits.
-#[derive(Debug)]
-pub(crate) struct AdminServices {
-    questions: Channel,
-    answers: Channel,
-    wake: event::PortFactory<ShmService>,
-}
-
-impl AdminServices {
-    /// Opens (or creates, sized for `limits`) the administration services of `domain`
-    /// on `node`. A domain made with other limits is opened as it is.
-    pub fn open(node: &ShmNode, domain: &str, limits: &DomainLimits) -> Result<Self, AdminError> {
-        let (questions, answers, wake) = names(domain)?;
-        let unavailable = |what: &str, e: &dyn std::fmt::Debug| AdminError::Unavailable {
-            reason: Unreachable::transport(Peer::Processes, format!("{what}: {e:?}")),
-        };
-        let processes = limits.process_ports();
-        let questions = open_channel(node, &questions, ASKERS, processes, limits)
-            .map_err(|e| unavailable("the admin questions", &e))?;
-        let answers = open_channel(node, &answers, processes, ASKERS, limits)
-            .map_err(|e| unavailable("the admin answers", &e))?;
-        let wake = open_event_service(node, &wake, EventCapacity::domain(limits))
-            .map_err(|e| unavailable("the admin wake-up", &e))?;
-        Ok(Self { questions, answers, wake })
-    }
-
-    /// The processes the domain admits, as its services were made (those a process
-    /// that is not a tool may take; see [`crate::data_plane::capacity`]).
-    fn max_processes(&self) -> usize {
-        self.questions.static_config().max_subscribers().saturating_sub(TOOL_RESERVE)
-    }
-}
-
-/// Opens a channel with `publishers` and `subscribers`, or as it is if it was made
-/// with other numbers.
-fn open_channel(
-    node: &ShmNode,
-    name: &ServiceName,
-    publishers: usize,
-    subscribers: usize,
-    limits: &DomainLimits,
-) -> Result<Channel, PublishSubscribeOpenOrCreateError> {
-    let opened = node
-        .service_builder(name)
-        .publish_subscribe::<[u8]>()
-        .max_publishers(publishers)
-        .max_subscribers(subscribers)
-        .max_nodes(limits.process_nodes())
-        .subscriber_max_buffer_size(BUFFER)
-        .subscriber_max_borrowed_samples(1)
-        .history_size(0)
-        .open_or_create();
-    match opened {
-        Err(PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
-            PublishSubscribeOpenError::DoesNotSupportRequestedAmountOfPublishers
-            | PublishSubscribeOpenError::DoesNotSupportRequestedAmountOfSubscribers
-            | PublishSubscribeOpenError::DoesNotSupportRequestedAmountOfNodes,
-        )) => node
-            .service_builder(name)
-            .publish_subscribe::<[u8]>()
-            .subscriber_max_buffer_size(BUFFER)
-            .open()
-            .map_err(PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError),
-        opened => opened,
-    }
-}
 
 /// A question to every process.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -396,20 +320,6 @@ impl std::fmt::Debug for Admin {
     }
 }
 
-fn names(domain: &str) -> Result<(ServiceName, ServiceName, ServiceName), AdminError> {
-    let name = |s: String| {
-        ServiceName::new(&s).map_err(|e| AdminError::Unavailable {
-            reason: Unreachable::transport(Peer::Processes, format!("{s}: {e:?}")),
-        })
-    };
-    let prefix = crate::data_plane::service_name::SERVICE_PREFIX;
-    Ok((
-        name(format!("{prefix}/{domain}/admin"))?,
-        name(format!("{prefix}/{domain}/admin-answers"))?,
-        name(format!("{prefix}/{domain}/admin-wake"))?,
-    ))
-}
-
 /// Retries `make` while iceoryx2 says every port is taken (`busy`), until `deadline`.
 fn port_within<P, E: std::fmt::Debug>(
     deadline: Instant,
@@ -441,8 +351,9 @@ impl Admin {
         let unavailable = |what: &str, e: &dyn std::fmt::Debug| AdminError::Unavailable {
             reason: Unreachable::transport(Peer::Processes, format!("{what}: {e:?}")),
         };
-        let services =
-            node.with(|node| AdminServices::open(node, domain, &DomainLimits::default()))?;
+        let services = node
+            .with(|node| AdminServices::open(node, domain, &DomainLimits::default()))
+            .map_err(|reason| AdminError::Unavailable { reason })?;
         let max = services.max_processes();
         let full = |connected: usize| {
             AdminError::LimitReached(LimitReached::processes(domain, max.min(connected)))

@@ -60,6 +60,7 @@
 //!   with their subscribers; a re-pointed name keeps its type.
 
 pub(crate) mod admin;
+pub mod attach;
 mod blocking_add;
 mod coordinator_watch;
 mod coverage;

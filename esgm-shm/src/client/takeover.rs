@@ -57,8 +57,7 @@ impl WriterLiveness {
     /// process recorded as its writer is not alive. One `kill(pid, 0)` per call.
     pub fn gone(&self) -> bool {
         let pid = self.pid();
-        self.released.load(Ordering::Relaxed)
-            || (pid != 0 && !crate::control::attach::process_alive(pid))
+        self.released.load(Ordering::Relaxed) || (pid != 0 && !crate::process::process_alive(pid))
     }
 }
 

@@ -7,12 +7,11 @@
 //! - [`Coordinator`]: serves the registry.
 //! - [`processes`]: the workers a system keeps running, declared to the coordinator.
 //! - [`ControlClient`]: asks it, with a deadline on every call.
-//! - [`attach`]: a worker's main loop, which rides out a slow or crashed coordinator.
 //! - [`limits`]: what the coordinator accepts (bounded names and requests).
 //! - [`state`]: the registry on disk, so a crashed coordinator comes back whole (and
 //!   why a state file rather than processes re-registering).
 
-pub mod attach;
+pub(crate) mod admin_services;
 pub mod client;
 pub(crate) mod holding_stats;
 pub mod limits;

@@ -521,7 +521,7 @@ impl Registry {
             }));
         }
         let gone = placement.released
-            || placement.port.is_some_and(|p| !super::attach::process_alive(p.pid));
+            || placement.port.is_some_and(|p| !crate::process::process_alive(p.pid));
         if gone {
             if let Some(p) = self.placement.get_mut(trajectory) {
                 tracing::info!(%trajectory, from = %p.writer, to = %host, "writer taken over");
@@ -569,7 +569,7 @@ impl Registry {
             }));
         }
         if let Some(held) = placement.port {
-            if held.pid != pid && super::attach::process_alive(held.pid) {
+            if held.pid != pid && crate::process::process_alive(held.pid) {
                 return Err(not_allowed(Refusal::WriterLives {
                     trajectory: trajectory.to_owned(),
                     holder: held.pid,

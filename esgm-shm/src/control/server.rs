@@ -20,12 +20,12 @@ use iceoryx2::service::port_factory::PortFactory as _;
 use iceoryx2::service::port_factory::request_response::PortFactory;
 use iceoryx2::service::port_factory::server::ServerCreateError;
 
+use super::admin_services::AdminServices;
 use super::limits::MAX_REQUEST_BYTES;
 use super::persistence::Persistence;
 use super::protocol::{ControlError, Request, Response, decode, encode};
 use super::registry::{Origin, Registry, changes_registry};
 use super::state::{StateDir, StateError};
-use crate::client::admin::AdminServices;
 use crate::data_plane::capacity::{DomainLimits, EventCapacity};
 use crate::data_plane::service::ShmNode;
 use crate::data_plane::service_name::{NameError, control_service};

@@ -7,7 +7,7 @@
 //! - **slow**: the coordinator's service is there but an answer overstays its
 //!   deadline (a busy machine). The worker keeps serving.
 //! - **gone, the system kept**: no coordinator serves, but the domain's registry is
-//!   kept on disk ([`super::state`]) — the coordinator crashed. The worker keeps
+//!   kept on disk ([`crate::control::state`]) — the coordinator crashed. The worker keeps
 //!   serving and waits; a new `esgm up` takes over the control service this worker
 //!   still holds, restores the registry, and the worker's control calls reach it
 //!   again (re-attached, with nothing to re-register).
@@ -16,10 +16,10 @@
 
 use std::time::{Duration, Instant};
 
-use super::client::ControlClientError;
-use super::protocol::{Request, Response};
-use super::state::StateDir;
-use crate::client::ShmEsgm;
+use super::ShmEsgm;
+use crate::control::ControlClientError;
+use crate::control::protocol::{Request, Response};
+use crate::control::state::StateDir;
 
 /// How often a serving worker looks at its coordinator.
 pub const CHECK_EVERY: Duration = Duration::from_millis(250);
@@ -52,23 +52,12 @@ pub fn look(esgm: &ShmEsgm, known_pid: &mut Option<u32>) -> CoordinatorSight {
             e @ (ControlClientError::Timeout { .. }
             | ControlClientError::LocationUnavailable { .. }),
         ) => match *known_pid {
-            Some(pid) if !process_alive(pid) => {
+            Some(pid) if !crate::process::process_alive(pid) => {
                 CoordinatorSight::Gone(format!("the coordinator (pid {pid}) has exited"))
             }
             _ => CoordinatorSight::Slow(e.to_string()),
         },
         Err(e) => CoordinatorSight::Gone(e.to_string()),
-    }
-}
-
-/// True while process `pid` runs (a zombie has stopped).
-pub(crate) fn process_alive(pid: u32) -> bool {
-    match std::fs::read_to_string(format!("/proc/{pid}/stat")) {
-        Ok(stat) => {
-            stat.rsplit_once(')').is_some_and(|(_, rest)| !rest.trim_start().starts_with('Z'))
-        }
-        // No stat to read: the process is gone.
-        Err(_) => false,
     }
 }
 
