@@ -52,7 +52,7 @@ fn assert_frame(s: &Sample, frame: u64, when: &str) {
 /// A camera location writing `frames` (cache 3) and a reader location holding one
 /// received image, frame 1.
 struct Setup {
-    _c: CoordinatorThread,
+    _c: common::TestDomain,
     camera: ShmEsgm,
     frames: InProcessTrajectory,
     reader: ShmEsgm,

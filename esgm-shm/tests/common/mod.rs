@@ -16,12 +16,40 @@ use iceoryx2::prelude::{LogLevel, NodeBuilder, set_log_level};
 /// lost sample fails the test instead of hanging it.
 pub const TIMEOUT: Duration = Duration::from_secs(10);
 
-/// A coordinator on a thread of this test process, in a domain of its own.
-pub fn coordinator(prefix: &str) -> esgm_shm::control::CoordinatorThread {
+/// A coordinator on a thread of this test process, in a domain of its own, which
+/// ends when it is dropped ([`TestDomain`]).
+pub fn coordinator(prefix: &str) -> TestDomain {
     node(); // quiet iceoryx2's config warning
     let domain = esgm_shm::unique_domain(prefix);
     let registry = esgm_shm::control::Registry::new(esgm_core::TypeRegistry::with_library());
-    esgm_shm::control::Coordinator::spawn(&domain, registry).expect("start a coordinator")
+    let coordinator =
+        esgm_shm::control::Coordinator::spawn(&domain, registry).expect("start a coordinator");
+    TestDomain { coordinator: Some(coordinator), domain }
+}
+
+/// A test's domain: its coordinator, and when dropped, the domain's end, as `esgm
+/// down` ends it. A process the test killed stays counted as a user of the futex words
+/// it mapped, and kept histories outlive their writers by design: without the end,
+/// their files would stay in `/dev/shm` after the test.
+pub struct TestDomain {
+    coordinator: Option<esgm_shm::control::CoordinatorThread>,
+    domain: String,
+}
+
+impl std::ops::Deref for TestDomain {
+    type Target = esgm_shm::control::CoordinatorThread;
+
+    fn deref(&self) -> &Self::Target {
+        self.coordinator.as_ref().expect("the coordinator runs until the domain ends")
+    }
+}
+
+impl Drop for TestDomain {
+    fn drop(&mut self) {
+        // The coordinator stops first; then the domain ends.
+        drop(self.coordinator.take());
+        esgm_shm::process::remove_domain_files(&self.domain);
+    }
 }
 
 /// Polls `cond` until it holds or [`TIMEOUT`] passes; returns whether it held (the
