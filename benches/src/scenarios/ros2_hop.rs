@@ -39,11 +39,11 @@ use crate::wait_mode::WaitMode;
 
 /// Whether this process may make network namespaces (root), for `netns` (the tests'
 /// helpers, included rather than copied).
-#[path = "../../../esgm-shm/cli/tests/common/capability.rs"]
+#[path = "../../../esgm-shm/apps/cli/tests/common/capability.rs"]
 mod capability;
 /// A loopback-only network namespace, removed when dropped (the tests' helper); also
 /// where `refsys-ros2`'s nodes run.
-#[path = "../../../esgm-shm/cli/tests/common/netns.rs"]
+#[path = "../../../esgm-shm/apps/cli/tests/common/netns.rs"]
 pub(crate) mod netns;
 
 use netns::Namespace;

@@ -10,7 +10,7 @@
 //! fails these tests; elsewhere they are skipped with a note.
 #![allow(clippy::panic, clippy::unwrap_used, clippy::expect_used)] // a test fails loudly
 
-#[path = "../../cli/tests/common/capability.rs"]
+#[path = "../../apps/cli/tests/common/capability.rs"]
 mod capability;
 
 use std::io::{BufRead as _, BufReader, Write as _};

@@ -6,7 +6,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 /// The independent reader (PyPI's `mcap`), shared with the recording crate's tests.
-#[path = "../../../esgm-core/recording/tests/common/python.rs"]
+#[path = "../../../../esgm-core/recording/tests/common/python.rs"]
 mod python;
 
 use std::path::Path;

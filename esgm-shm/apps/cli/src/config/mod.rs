@@ -2,7 +2,7 @@
 //! trajectories with their policies — declared in TOML and brought up by `esgm apply`
 //! or `esgm up --config`. The declarative face of DyKnow's policies.
 //!
-//! The format is documented by example in `esgm-shm/cli/tutorial.toml` (the seed's
+//! The format is documented by example in `esgm-shm/apps/cli/tutorial.toml` (the seed's
 //! tutorial as a file, which `esgm demo` itself runs). In short:
 //!
 //! ```toml

@@ -7,7 +7,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used, clippy::panic)]
 
 /// The venv with the independent implementations (`target/py-venv`).
-#[path = "../../../esgm-core/recording/tests/common/python.rs"]
+#[path = "../../../../esgm-core/recording/tests/common/python.rs"]
 mod python;
 
 use std::collections::BTreeMap;

@@ -19,7 +19,7 @@ mod capability;
 mod netns;
 
 /// The venv with the independent implementations (`target/py-venv`).
-#[path = "../../../esgm-core/recording/tests/common/python.rs"]
+#[path = "../../../../esgm-core/recording/tests/common/python.rs"]
 mod python;
 
 use std::io::{BufRead, BufReader};

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Builds the Debian package `esgm` for this machine's architecture:
 #
-#   esgm-shm/cli/packaging/deb.sh [OUT_DIR]        # default target/debian
+#   esgm-shm/apps/cli/packaging/deb.sh [OUT_DIR]        # default target/debian
 #   sudo apt install ./target/debian/esgm_0.1.0_amd64.deb
 #
 # It holds the `esgm` command (its workers are `esgm worker …`, the same executable),
@@ -17,7 +17,7 @@
 # dpkg-deb's -Z. Needs dpkg-deb, objdump (binutils: the glibc the executables need)
 # and CMake; no root: files are owned by root through dpkg-deb's --root-owner-group.
 set -euo pipefail
-cd "$(dirname "$0")/../../.."
+cd "$(dirname "$0")/../../../.."
 
 out=${1:-target/debian}
 version=$(sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -n1)

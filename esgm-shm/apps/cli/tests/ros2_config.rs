@@ -12,7 +12,7 @@
 mod common;
 
 /// The venv with the independent implementations (`target/py-venv`).
-#[path = "../../../esgm-core/recording/tests/common/python.rs"]
+#[path = "../../../../esgm-core/recording/tests/common/python.rs"]
 mod python;
 
 use std::path::{Path, PathBuf};

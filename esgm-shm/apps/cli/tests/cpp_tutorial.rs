@@ -23,7 +23,7 @@ use common::{ESGM, capability};
 const DEMO_PATIENCE: Duration = Duration::from_secs(120);
 
 fn checkout() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..").canonicalize().unwrap()
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../..").canonicalize().unwrap()
 }
 
 /// The directory of the `libesgm_c.so` built with this test: `deps` beside the `esgm`

@@ -17,7 +17,7 @@ use crate::text::mutate_text;
 /// of declaration and setting.
 pub fn seed_files() -> [(&'static str, &'static str); 2] {
     [
-        ("tutorial.toml", include_str!("../../../cli/tutorial.toml")),
+        ("tutorial.toml", include_str!("../../../../apps/cli/tutorial.toml")),
         ("everything.toml", include_str!("../../seeds/everything.toml")),
     ]
 }

@@ -10,7 +10,7 @@
 mod common;
 
 /// The test venv (`target/py-venv`), with maturin and pytest.
-#[path = "../../../esgm-core/recording/tests/common/python.rs"]
+#[path = "../../../../esgm-core/recording/tests/common/python.rs"]
 mod python;
 
 use std::path::{Path, PathBuf};
@@ -31,7 +31,7 @@ fn said(out: &Output) -> String {
 fn the_python_package_passes_its_tests_on_both_runtimes() {
     let python = python::venv_python();
     let venv = python.parent().and_then(|bin| bin.parent()).unwrap().to_path_buf();
-    let package = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../python");
+    let package = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../python");
     let building = MATURIN.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
     let built = Command::new(venv.join("bin/maturin"))
         .args(["develop", "--quiet", "-m"])
@@ -73,7 +73,7 @@ fn the_python_package_passes_its_tests_on_both_runtimes() {
 #[test]
 fn a_built_wheel_installs_into_a_fresh_venv_and_reaches_a_domain() {
     let venv = python::venv_python().parent().and_then(Path::parent).unwrap().to_path_buf();
-    let package = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../python");
+    let package = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../python");
     let scratch = std::env::temp_dir().join(format!("esgm-wheel-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&scratch);
     let wheels = scratch.join("wheels");
