@@ -3,11 +3,12 @@
 
 use std::sync::{Mutex, PoisonError};
 
+use esgm_core::esgm::{Stamped, TypedUnit};
 use esgm_core::library::{BlobSeq, Image};
-use esgm_core::{CompUnit, ComputeError, Entity, EntityStructure, InputType, Sample, Time};
+use esgm_core::{ComputeError, Entity, InputType, Time};
 
 use crate::blob_detection::{BlobDetectionConfig, BlobDetector};
-use crate::unit_input::{exactly, failed, read};
+use crate::unit_input::failed;
 
 /// The `BlobDetection` unit: the blobs of each new image.
 ///
@@ -35,25 +36,31 @@ impl BlobDetectionUnit {
         Self { detector: Mutex::new(BlobDetector::new(config)) }
     }
 
-    /// Its input types, for `add_comp_unit`: one `Image`.
+    /// Its input types, for `add_comp_unit`: one `Image` ([`TypedUnit::Inputs`]).
     pub fn input_types() -> Vec<InputType> {
-        vec![InputType::Type(Image::TYPE_NAME.to_owned())]
+        <Self as TypedUnit>::input_types()
     }
 }
 
-impl CompUnit for BlobDetectionUnit {
-    fn compute(&self, inputs: &[Sample], qtime: Time) -> Result<EntityStructure, ComputeError> {
-        let [image_sample] = exactly(Self::NAME, inputs).map_err(failed)?;
-        let image: Image = read(Self::NAME, 0, image_sample).map_err(failed)?;
+impl TypedUnit for BlobDetectionUnit {
+    const NAME: &'static str = "BlobDetection";
+    type Inputs = (Stamped<Image>,);
+    type Output = BlobSeq;
+
+    fn compute(
+        &self,
+        (image,): Self::Inputs,
+        qtime: Time,
+    ) -> Result<Stamped<BlobSeq>, ComputeError> {
         // The detector resets its scratch buffers on every call, so a poisoned lock
         // (a panic elsewhere while holding it) leaves nothing stale behind.
         let blobs = self
             .detector
             .lock()
             .unwrap_or_else(PoisonError::into_inner)
-            .detect(&image)
+            .detect(&image.value)
             .map_err(failed)?;
-        Ok(blobs.to_structure(Self::STRUCTURE_NAME, image_sample.valid_time, qtime))
+        Ok(Stamped::new(Self::STRUCTURE_NAME, image.valid_time, qtime, blobs))
     }
 }
 
@@ -72,7 +79,7 @@ mod tests {
         let unit =
             BlobDetectionUnit::new(BlobDetectionConfig { min_size: 1, ..Default::default() });
         let image = mono(4, 2, vec![0, 0, 255, 255, 0, 0, 255, 255]);
-        let es = unit.compute(&[sample(&image, 100)], 250).unwrap();
+        let es = unit.compute_samples(&[sample(&image, 100)], 250).unwrap();
         assert_eq!((es.name.as_str(), es.valid_time, es.create_time), ("blobs", 100, 250));
         let blobs = BlobSeq::from_structure(&es).unwrap();
         assert_eq!(blobs.items, vec![Blob { x: 3, y: 1, size: 4 }]);
@@ -80,7 +87,8 @@ mod tests {
 
     #[test]
     fn an_image_without_blobs_gives_an_empty_sequence() {
-        let es = BlobDetectionUnit::default().compute(&[sample(&mono(2, 2, vec![0; 4]), 1)], 2);
+        let es =
+            BlobDetectionUnit::default().compute_samples(&[sample(&mono(2, 2, vec![0; 4]), 1)], 2);
         assert_eq!(BlobSeq::from_structure(&es.unwrap()).unwrap().items, vec![]);
     }
 
@@ -89,13 +97,13 @@ mod tests {
         let unit = BlobDetectionUnit::default();
         let truncated = mono(4, 2, vec![0; 5]);
         assert_eq!(
-            unit.compute(&[sample(&truncated, 1)], 2),
+            unit.compute_samples(&[sample(&truncated, 1)], 2),
             Err(ComputeError::Failed {
                 reason: "image data is 5 bytes, its size and format need 8".into()
             })
         );
         let not_an_image = sample(&Blob { x: 1, y: 1, size: 1 }, 1);
-        let Err(ComputeError::Failed { reason }) = unit.compute(&[not_an_image], 2) else {
+        let Err(ComputeError::Failed { reason }) = unit.compute_samples(&[not_an_image], 2) else {
             panic!("a blob was read as an image");
         };
         assert!(
@@ -103,7 +111,7 @@ mod tests {
             "{reason}"
         );
         assert_eq!(
-            unit.compute(&[], 2),
+            unit.compute_samples(&[], 2),
             Err(ComputeError::Failed { reason: "BlobDetection takes 1 input(s), got 0".into() })
         );
     }

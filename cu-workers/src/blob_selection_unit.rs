@@ -1,11 +1,11 @@
 //! [`select_blob`] as an esgm computational unit: `BlobSeq` → `Blob` (the seed's
 //! `BlobSelectionCU`).
 
+use esgm_core::esgm::{Stamped, TypedUnit};
 use esgm_core::library::{Blob, BlobSeq};
-use esgm_core::{CompUnit, ComputeError, Entity, EntityStructure, InputType, Sample, Time};
+use esgm_core::{ComputeError, Entity, InputType, Time};
 
 use crate::blob_selection::select_blob;
-use crate::unit_input::{exactly, failed, read};
 
 /// The `BlobSelection` unit: the current object of interest in each new blob sequence.
 ///
@@ -23,18 +23,20 @@ impl BlobSelectionUnit {
     /// The name of every structure it produces.
     pub const STRUCTURE_NAME: &'static str = "blob";
 
-    /// Its input types, for `add_comp_unit`: one `BlobSeq`.
+    /// Its input types, for `add_comp_unit`: one `BlobSeq` ([`TypedUnit::Inputs`]).
     pub fn input_types() -> Vec<InputType> {
-        vec![InputType::Type(BlobSeq::TYPE_NAME.to_owned())]
+        <Self as TypedUnit>::input_types()
     }
 }
 
-impl CompUnit for BlobSelectionUnit {
-    fn compute(&self, inputs: &[Sample], qtime: Time) -> Result<EntityStructure, ComputeError> {
-        let [blobs_sample] = exactly(Self::NAME, inputs).map_err(failed)?;
-        let blobs: BlobSeq = read(Self::NAME, 0, blobs_sample).map_err(failed)?;
-        let blob = select_blob(&blobs).ok_or(ComputeError::ValueNotAvailable)?;
-        Ok(blob.to_structure(Self::STRUCTURE_NAME, blobs_sample.valid_time, qtime))
+impl TypedUnit for BlobSelectionUnit {
+    const NAME: &'static str = "BlobSelection";
+    type Inputs = (Stamped<BlobSeq>,);
+    type Output = Blob;
+
+    fn compute(&self, (blobs,): Self::Inputs, qtime: Time) -> Result<Stamped<Blob>, ComputeError> {
+        let blob = select_blob(&blobs.value).ok_or(ComputeError::ValueNotAvailable)?;
+        Ok(Stamped::new(Self::STRUCTURE_NAME, blobs.valid_time, qtime, blob))
     }
 }
 
@@ -48,7 +50,7 @@ mod tests {
     fn selects_the_largest_blob_valid_when_the_blobs_are() {
         let blobs =
             BlobSeq { items: vec![Blob { x: 1, y: 1, size: 5 }, Blob { x: 9, y: 4, size: 50 }] };
-        let es = BlobSelectionUnit.compute(&[sample(&blobs, 300)], 420).unwrap();
+        let es = BlobSelectionUnit.compute_samples(&[sample(&blobs, 300)], 420).unwrap();
         assert_eq!((es.name.as_str(), es.valid_time, es.create_time), ("blob", 300, 420));
         assert_eq!(Blob::from_structure(&es).unwrap(), Blob { x: 9, y: 4, size: 50 });
     }
@@ -57,7 +59,7 @@ mod tests {
     fn no_blobs_is_no_value() {
         let empty = BlobSeq { items: Vec::new() };
         assert_eq!(
-            BlobSelectionUnit.compute(&[sample(&empty, 1)], 2),
+            BlobSelectionUnit.compute_samples(&[sample(&empty, 1)], 2),
             Err(ComputeError::ValueNotAvailable)
         );
     }
@@ -66,11 +68,11 @@ mod tests {
     fn malformed_inputs_fail() {
         let robot = sample(&RobotState { x: 0.0, y: 0.0, dir: 0.0 }, 1);
         assert!(matches!(
-            BlobSelectionUnit.compute(std::slice::from_ref(&robot), 2),
+            BlobSelectionUnit.compute_samples(std::slice::from_ref(&robot), 2),
             Err(ComputeError::Failed { .. })
         ));
         assert!(matches!(
-            BlobSelectionUnit.compute(&[robot.clone(), robot], 2),
+            BlobSelectionUnit.compute_samples(&[robot.clone(), robot], 2),
             Err(ComputeError::Failed { .. })
         ));
     }

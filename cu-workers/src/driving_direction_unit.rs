@@ -1,13 +1,13 @@
 //! [`ComputeDirection`] as an esgm computational unit: `RobotState`, `Blob` →
 //! `DrivingDirection` (the seed's `DrivingDirectionCU`).
 
+use esgm_core::esgm::{Stamped, TypedUnit};
 use esgm_core::library::{Blob, DrivingDirection, RobotState};
-use esgm_core::{CompUnit, ComputeError, Entity, EntityStructure, InputType, Sample, Time};
+use esgm_core::{ComputeError, Entity, InputType, Time};
 
 use crate::driving_direction::{
     ComputeDirection, DrivingDirectionConfig, DrivingDirectionConfigError,
 };
-use crate::unit_input::{exactly, failed, read};
 
 /// The `DrivingDirection` unit: where to drive to approach the current blob.
 ///
@@ -40,37 +40,46 @@ impl DrivingDirectionUnit {
         &self.unit
     }
 
-    /// Its input types, for `add_comp_unit`: a `RobotState` then a `Blob`.
+    /// Its input types, for `add_comp_unit`: a `RobotState` then a `Blob`
+    /// ([`TypedUnit::Inputs`]).
     pub fn input_types() -> Vec<InputType> {
-        vec![
-            InputType::Type(RobotState::TYPE_NAME.to_owned()),
-            InputType::Type(Blob::TYPE_NAME.to_owned()),
-        ]
+        <Self as TypedUnit>::input_types()
     }
 }
 
-impl CompUnit for DrivingDirectionUnit {
-    fn compute(&self, inputs: &[Sample], qtime: Time) -> Result<EntityStructure, ComputeError> {
-        let [robot_sample, blob_sample] = exactly(Self::NAME, inputs).map_err(failed)?;
-        let robot: RobotState = read(Self::NAME, 0, robot_sample).map_err(failed)?;
-        let blob: Blob = read(Self::NAME, 1, blob_sample).map_err(failed)?;
+impl TypedUnit for DrivingDirectionUnit {
+    const NAME: &'static str = "DrivingDirection";
+    type Inputs = (Stamped<RobotState>, Stamped<Blob>);
+    type Output = DrivingDirection;
+
+    fn compute(
+        &self,
+        (robot, blob): Self::Inputs,
+        qtime: Time,
+    ) -> Result<Stamped<DrivingDirection>, ComputeError> {
         let direction = self
             .unit
-            .compute_synchronized(&robot, robot_sample.valid_time, &blob, blob_sample.valid_time)
+            .compute_synchronized(&robot.value, robot.valid_time, &blob.value, blob.valid_time)
             .ok_or(ComputeError::ValueNotAvailable)?;
-        Ok(direction.to_structure(Self::STRUCTURE_NAME, robot_sample.valid_time, qtime))
+        Ok(Stamped::new(Self::STRUCTURE_NAME, robot.valid_time, qtime, direction))
     }
 
     /// The temporal function (E6): the direction at `t` from the robot state and the
     /// blob as their generators give them at `t` (interpolated, most recent, …), so a
     /// stream sampled at a fixed period steers from values that hold at one instant.
     /// The synchronization rule does not apply: both inputs are valid at `t`.
-    fn compute_at(&self, inputs: &[Sample], t: Time) -> Result<EntityStructure, ComputeError> {
-        let [robot_sample, blob_sample] = exactly(Self::NAME, inputs).map_err(failed)?;
-        let robot: RobotState = read(Self::NAME, 0, robot_sample).map_err(failed)?;
-        let blob: Blob = read(Self::NAME, 1, blob_sample).map_err(failed)?;
-        let created = robot_sample.create_time.max(blob_sample.create_time);
-        Ok(self.unit.compute(&robot, &blob).to_structure(Self::STRUCTURE_NAME, t, created))
+    fn compute_at(
+        &self,
+        (robot, blob): Self::Inputs,
+        t: Time,
+    ) -> Result<Stamped<DrivingDirection>, ComputeError> {
+        let created = robot.create_time.max(blob.create_time);
+        Ok(Stamped::new(
+            Self::STRUCTURE_NAME,
+            t,
+            created,
+            self.unit.compute(&robot.value, &blob.value),
+        ))
     }
 }
 
@@ -85,7 +94,8 @@ mod tests {
     #[test]
     fn steers_from_the_robot_state_once_it_is_as_new_as_the_blob() {
         let unit = DrivingDirectionUnit::default();
-        let es = unit.compute(&[sample(&ROBOT, 500), sample(&RIGHT_BLOB, 500)], 510).unwrap();
+        let es =
+            unit.compute_samples(&[sample(&ROBOT, 500), sample(&RIGHT_BLOB, 500)], 510).unwrap();
         assert_eq!((es.name.as_str(), es.valid_time, es.create_time), ("driving_dir", 500, 510));
         let direction = DrivingDirection::from_structure(&es).unwrap();
         assert_eq!(direction, ComputeDirection::default().compute(&ROBOT, &RIGHT_BLOB));
@@ -95,7 +105,8 @@ mod tests {
     #[test]
     fn the_temporal_function_steers_from_both_values_at_its_time() {
         let unit = DrivingDirectionUnit::default();
-        let es = unit.compute_at(&[sample(&ROBOT, 499), sample(&RIGHT_BLOB, 500)], 450).unwrap();
+        let es =
+            unit.compute_samples_at(&[sample(&ROBOT, 499), sample(&RIGHT_BLOB, 500)], 450).unwrap();
         assert_eq!((es.valid_time, es.create_time), (450, 500));
         let direction = DrivingDirection::from_structure(&es).unwrap();
         assert_eq!(direction, ComputeDirection::default().compute(&ROBOT, &RIGHT_BLOB));
@@ -105,7 +116,7 @@ mod tests {
     fn a_robot_state_older_than_the_blob_is_no_value() {
         let unit = DrivingDirectionUnit::default();
         assert_eq!(
-            unit.compute(&[sample(&ROBOT, 499), sample(&RIGHT_BLOB, 500)], 510),
+            unit.compute_samples(&[sample(&ROBOT, 499), sample(&RIGHT_BLOB, 500)], 510),
             Err(ComputeError::ValueNotAvailable)
         );
     }
@@ -114,13 +125,13 @@ mod tests {
     fn swapped_or_missing_inputs_fail() {
         let unit = DrivingDirectionUnit::default();
         let Err(ComputeError::Failed { reason }) =
-            unit.compute(&[sample(&RIGHT_BLOB, 1), sample(&ROBOT, 1)], 2)
+            unit.compute_samples(&[sample(&RIGHT_BLOB, 1), sample(&ROBOT, 1)], 2)
         else {
             panic!("swapped inputs were accepted");
         };
         assert!(reason.starts_with("input 0 of DrivingDirection is not a readable `RobotState`"));
         assert_eq!(
-            unit.compute(&[sample(&ROBOT, 1)], 2),
+            unit.compute_samples(&[sample(&ROBOT, 1)], 2),
             Err(ComputeError::Failed { reason: "DrivingDirection takes 2 input(s), got 1".into() })
         );
     }

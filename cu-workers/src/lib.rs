@@ -14,20 +14,23 @@
 //! `examples/tutorial.rs` runs the seed's whole tutorial (chapters 8–10) in process.
 //!
 //! ## Design decisions
-//! - **Pure computations, thin adapters.** Each computation is a plain function or a
+//! - **Pure computations, typed units.** Each computation is a plain function or a
 //!   struct with a `&mut self` method over the typed library structs, tested here
-//!   without a runtime. Each `…Unit` (in a sibling `*_unit.rs`) adapts one to
-//!   [`esgm_core::CompUnit`]: it reads the input samples as typed structs, calls the
-//!   computation and stamps the output's times. The adapters name only esgm-core's
-//!   traits, so the same units run in process and in a worker process.
+//!   without a runtime. Each `…Unit` (in a sibling `*_unit.rs`) is a
+//!   [`esgm_core::esgm::TypedUnit`]: it declares its inputs and output as library
+//!   structs and receives them decoded, with their times; registered through
+//!   [`esgm_core::esgm::TypedUnitAdapter`], esgm-core reads the input samples, checks
+//!   their count and types, and stamps the output. The units name only esgm-core's
+//!   traits, so the same units run in process and in a worker process. The moving
+//!   average, over any type, stays an untyped [`esgm_core::CompUnit`].
 //! - **"No value" is `None`.** Where the seed throws `ValueNotAvailable` (no blob to
 //!   select, inputs not yet synchronized) a unit returns `Option`; the adapter turns it
 //!   into [`esgm_core::ComputeError::ValueNotAvailable`].
 //! - **Malformed input is an error, never a panic.** Images come from other processes;
-//!   the detector checks sizes and formats and reports a typed [`DetectionError`], and
-//!   an adapter given structures of the wrong type reports a [`UnitInputError`]; the
-//!   adapters hand either to the runtime as [`esgm_core::ComputeError::Failed`] with
-//!   the error's message.
+//!   the detector checks sizes and formats and reports a typed [`DetectionError`];
+//!   structures of the wrong type or number fail the call, naming the input
+//!   ([`UnitInputError`] for the moving average); the runtime gets either as
+//!   [`esgm_core::ComputeError::Failed`] with the error's message.
 //! - **Scratch space is reused.** The detector keeps its label and union-find buffers
 //!   between frames, so a steady stream of frames allocates only the output.
 //!

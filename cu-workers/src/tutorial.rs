@@ -2,6 +2,7 @@
 
 use std::sync::Arc;
 
+use esgm_core::esgm::TypedUnitAdapter;
 use esgm_core::{Esgm, RegistrationError};
 
 use crate::{BlobDetectionUnit, BlobSelectionUnit, DrivingDirectionUnit};
@@ -18,19 +19,19 @@ pub fn register_tutorial_units(esgm: &impl Esgm) -> Result<(), RegistrationError
         BlobDetectionUnit::NAME,
         BlobDetectionUnit::OUTPUT_TYPE,
         BlobDetectionUnit::input_types(),
-        Arc::new(BlobDetectionUnit::default()),
+        Arc::new(TypedUnitAdapter(BlobDetectionUnit::default())),
     )?;
     esgm.add_comp_unit(
         BlobSelectionUnit::NAME,
         BlobSelectionUnit::OUTPUT_TYPE,
         BlobSelectionUnit::input_types(),
-        Arc::new(BlobSelectionUnit),
+        Arc::new(TypedUnitAdapter(BlobSelectionUnit)),
     )?;
     esgm.add_comp_unit(
         DrivingDirectionUnit::NAME,
         DrivingDirectionUnit::OUTPUT_TYPE,
         DrivingDirectionUnit::input_types(),
-        Arc::new(DrivingDirectionUnit::default()),
+        Arc::new(TypedUnitAdapter(DrivingDirectionUnit::default())),
     )
 }
 

@@ -1,7 +1,8 @@
-//! Reading a computational unit's inputs: the one place the runtime adapters turn
-//! [`Sample`]s into the typed library structs, and their failures into a typed error.
+//! Reading an untyped unit's inputs (the moving average, over any type a system file
+//! names), and a unit's failures as the runtime's outcome. The typed units
+//! ([`esgm_core::esgm::TypedUnit`]) have their inputs read by esgm-core's adapter.
 
-use esgm_core::{ComputeError, Entity, FromEntityError, Sample};
+use esgm_core::{ComputeError, Sample};
 
 /// A unit's inputs cannot be read. The runtime counts the call as failed and logs this
 /// message; the trajectory keeps running.
@@ -20,20 +21,6 @@ pub enum UnitInputError {
         /// Inputs given.
         found: usize,
     },
-    /// An input is not a structure of the type the unit declares: connect a trajectory
-    /// of that type (registering the unit with typed inputs makes the runtime refuse
-    /// others up front), or fix the producer.
-    #[error("input {position} of {unit} is not a readable `{type_name}`: {source}")]
-    WrongType {
-        /// The unit's registered name.
-        unit: &'static str,
-        /// The input's position (0-based, in the trajectory's input order).
-        position: usize,
-        /// The type the unit expects there.
-        type_name: &'static str,
-        /// What did not fit.
-        source: FromEntityError,
-    },
 }
 
 /// The inputs as an array of exactly `N`, for destructuring.
@@ -45,20 +32,6 @@ pub(crate) fn exactly<'a, const N: usize>(
         unit,
         expected: N,
         found: inputs.len(),
-    })
-}
-
-/// Input `position` as a `T`.
-pub(crate) fn read<T: Entity>(
-    unit: &'static str,
-    position: usize,
-    sample: &Sample,
-) -> Result<T, UnitInputError> {
-    T::from_structure(sample).map_err(|source| UnitInputError::WrongType {
-        unit,
-        position,
-        type_name: T::TYPE_NAME,
-        source,
     })
 }
 

@@ -40,7 +40,7 @@ use cu_workers::{
     BlobDetectionUnit, BlobDetector, BlobSelectionUnit, ComputeDirection, DrivingDirectionConfig,
     DrivingDirectionUnit, select_blob,
 };
-use esgm_core::esgm::{CompUnit, TrajectorySpec};
+use esgm_core::esgm::{CompUnit, TrajectorySpec, TypedUnitAdapter};
 use esgm_core::library::{Blob, RobotState};
 use esgm_core::{
     Entity, EntityTrajectoryStructure, Esgm, FluentStreamPolicy, Sample, SubscribeOptions, Time,
@@ -176,17 +176,17 @@ fn serve(domain: &str, worker: &str) -> anyhow::Result<Vec<String>> {
             BlobDetectionUnit::NAME => (
                 BlobDetectionUnit::OUTPUT_TYPE,
                 BlobDetectionUnit::input_types(),
-                Arc::new(BlobDetectionUnit::default()),
+                Arc::new(TypedUnitAdapter(BlobDetectionUnit::default())),
             ),
             BlobSelectionUnit::NAME => (
                 BlobSelectionUnit::OUTPUT_TYPE,
                 BlobSelectionUnit::input_types(),
-                Arc::new(BlobSelectionUnit),
+                Arc::new(TypedUnitAdapter(BlobSelectionUnit)),
             ),
             DrivingDirectionUnit::NAME => (
                 DrivingDirectionUnit::OUTPUT_TYPE,
                 DrivingDirectionUnit::input_types(),
-                Arc::new(DrivingDirectionUnit::default()),
+                Arc::new(TypedUnitAdapter(DrivingDirectionUnit::default())),
             ),
             other => bail!("unknown pipeline worker {other}"),
         };

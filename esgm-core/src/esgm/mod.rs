@@ -17,12 +17,14 @@ mod errors;
 mod interfaces;
 mod report;
 mod spec;
+mod typed_unit;
 
 pub use crate::failures::{Limit, LimitReached, Peer, Unreachable};
 pub use errors::{CreateError, FlushError, InputType, LookupError, RegistrationError, SystemError};
 pub use interfaces::{CompUnit, ComputeError, SensorError, SensorInterface};
 pub use report::{EsgmStats, LogLevel, MemoryStats, TrajectoryInfo, TrajectoryReport, WorkerStats};
 pub use spec::{TrajectoryKind, TrajectorySource, TrajectorySpec};
+pub use typed_unit::{Stamped, TypedUnit, TypedUnitAdapter, UnitInputs};
 
 use std::sync::Arc;
 

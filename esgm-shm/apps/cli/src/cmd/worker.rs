@@ -17,7 +17,7 @@ use anyhow::{Context, bail};
 use camera_publisher::CameraArgs;
 use cu_workers::{BlobDetectionUnit, BlobSelectionUnit, DrivingDirectionUnit, MovingAverageUnit};
 use esgm_core::Esgm;
-use esgm_core::esgm::{CompUnit, InputType};
+use esgm_core::esgm::{CompUnit, InputType, TypedUnitAdapter};
 use esgm_shm::ShmEsgm;
 use esgm_shm::client::attach::serve_while_system_lives;
 use robot_publisher::RobotArgs;
@@ -109,17 +109,17 @@ pub fn builtin_unit(
         BlobDetectionUnit::NAME => (
             BlobDetectionUnit::OUTPUT_TYPE.into(),
             BlobDetectionUnit::input_types(),
-            Arc::new(BlobDetectionUnit::default()),
+            Arc::new(TypedUnitAdapter(BlobDetectionUnit::default())),
         ),
         BlobSelectionUnit::NAME => (
             BlobSelectionUnit::OUTPUT_TYPE.into(),
             BlobSelectionUnit::input_types(),
-            Arc::new(BlobSelectionUnit),
+            Arc::new(TypedUnitAdapter(BlobSelectionUnit)),
         ),
         DrivingDirectionUnit::NAME => (
             DrivingDirectionUnit::OUTPUT_TYPE.into(),
             DrivingDirectionUnit::input_types(),
-            Arc::new(DrivingDirectionUnit::default()),
+            Arc::new(TypedUnitAdapter(DrivingDirectionUnit::default())),
         ),
         MovingAverageUnit::BUILTIN => {
             let t = type_name.context("MovingAverage needs --type, the type it averages")?;
