@@ -82,21 +82,8 @@ fn time_runs(
     let mut latency = Latency::new()?;
     for i in 0..warmup + samples {
         let started = Instant::now();
-        let out = Command::new(esgm)
-            .args(args)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .output()
-            .with_context(|| format!("cannot run {}", esgm.display()))?;
+        run_esgm(esgm, args)?;
         let took = started.elapsed();
-        if !out.status.success() {
-            bail!(
-                "`esgm {}` failed: {}",
-                args.join(" "),
-                String::from_utf8_lossy(&out.stderr).trim()
-            );
-        }
         if i >= warmup {
             latency.record(took);
         }

@@ -51,6 +51,7 @@ use super::shared_node::SharedNode;
 use super::stats_row::{Figures, StatsRow};
 pub(crate) use crate::control::admin_services::ASKERS;
 use crate::control::admin_services::AdminServices;
+use crate::control::client::answer_poll_cap;
 use crate::data_plane::capacity::DomainLimits;
 use crate::data_plane::service::ShmService;
 
@@ -62,12 +63,11 @@ const MAX_MESSAGE: usize = 4 << 20;
 /// it awake; this is the backstop). Every 2 s it was a wake-up a second in every
 /// process of an idle robot.
 const RECHECK: Duration = Duration::from_secs(30);
-/// The longest an asker sleeps between two looks for answers, in the first
-/// [`FAST_ANSWER`] of its wait (answers usually come within a few milliseconds; a
-/// writer of 1,000 trajectories takes about 5 ms to report them) and after it.
-const POLL: [Duration; 2] = [Duration::from_micros(100), Duration::from_millis(1)];
-/// How long an asker looks for answers often ([`POLL`]).
-const FAST_ANSWER: Duration = Duration::from_millis(50);
+/// The longest an asker sleeps between two looks for answers once they are slow to
+/// come (often before: [`crate::control::client::answer_poll_cap`]; a writer of 1,000
+/// trajectories takes a few milliseconds to report them), and between two tries for a
+/// port while every one is taken.
+const POLL: Duration = Duration::from_millis(1);
 
 /// A question to every process.
 #[derive(Debug, Clone, Serialize, Deserialize)]
@@ -329,7 +329,7 @@ fn port_within<P, E: std::fmt::Debug>(
     loop {
         match make() {
             Ok(p) => return Ok(p),
-            Err(e) if busy(&e) && Instant::now() < deadline => std::thread::sleep(POLL[1]),
+            Err(e) if busy(&e) && Instant::now() < deadline => std::thread::sleep(POLL),
             Err(e) => return Err(format!("{e:?}")),
         }
     }
@@ -522,7 +522,7 @@ impl Admin {
                 if Instant::now() >= deadline {
                     break;
                 }
-                std::thread::sleep(POLL[usize::from(started.elapsed() >= FAST_ANSWER)]);
+                std::thread::sleep(answer_poll_cap(started.elapsed(), POLL));
             }
         }
         drop(publisher);

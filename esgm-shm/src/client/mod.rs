@@ -523,13 +523,7 @@ impl ShmEsgm {
         });
         let listing = match listing {
             Ok(Ok(Response::Trajectories(t))) => t,
-            Ok(other) => {
-                let reason = match other {
-                    Err(e) => e.into(),
-                    Ok(other) => Unreachable::malformed(Peer::Coordinator, format!("{other:?}")),
-                };
-                return Err(AdminError::Unavailable { reason });
-            }
+            Ok(other) => return Err(AdminError::Unavailable { reason: not_given(other) }),
             Err(_) => {
                 let reason =
                     Unreachable::transport(Peer::Connection, "the listing thread panicked");
@@ -647,11 +641,16 @@ impl ShmEsgm {
 /// A listing the coordinator did not give, as the caller's error (never this
 /// process's own view, which would look complete and not be).
 fn unanswered(operation: &str, answer: Result<Response, ControlClientError>) -> SystemError {
-    let reason = match answer {
+    SystemError::Unavailable { operation: operation.to_owned(), reason: not_given(answer) }
+}
+
+/// Why the coordinator did not give what was asked: the call failed, or it answered
+/// something else.
+fn not_given(answer: Result<Response, ControlClientError>) -> Unreachable {
+    match answer {
         Err(e) => e.into(),
         Ok(other) => Unreachable::malformed(Peer::Coordinator, format!("{other:?}")),
-    };
-    SystemError::Unavailable { operation: operation.to_owned(), reason }
+    }
 }
 
 /// A domain-wide question that did not reach every process, as the caller's error.

@@ -278,18 +278,19 @@ impl ControlClient {
                 });
             }
             std::thread::sleep(pause);
-            pause = (pause * 2).min(answer_poll_cap(started.elapsed()));
+            pause = (pause * 2).min(answer_poll_cap(started.elapsed(), Duration::from_millis(2)));
         }
     }
 }
 
-/// The longest pause between two looks for the coordinator's answer, `waited` into a
-/// call. An answer usually comes within a few milliseconds (a list of 1,000
-/// trajectories takes about 3 ms to encode), and a pause that doubled up to 2 ms would
-/// add up to 2 ms to it: so pauses stay short for the first [`FAST_ANSWER`], and only a
-/// slow coordinator is looked at every 2 ms.
-fn answer_poll_cap(waited: Duration) -> Duration {
-    if waited < FAST_ANSWER { Duration::from_micros(100) } else { Duration::from_millis(2) }
+/// The longest pause between two looks for an answer, `waited` into a call: the
+/// coordinator's to a control call, or the processes' to an admin question (iceoryx2
+/// has no wake-up for either). An answer usually comes within a few milliseconds (a
+/// list of 1,000 trajectories takes about 3 ms to encode), and a pause of `slow` would
+/// add up to `slow` to it: so pauses stay short for the first [`FAST_ANSWER`], and only
+/// a slow answer is looked for every `slow`.
+pub(crate) fn answer_poll_cap(waited: Duration, slow: Duration) -> Duration {
+    if waited < FAST_ANSWER { Duration::from_micros(100) } else { slow }
 }
 
 /// How long a call looks for its answer often ([`answer_poll_cap`]).
