@@ -196,3 +196,43 @@ fn system_calls_without_a_coordinator_are_errors_not_a_partial_view() {
     unavailable(esgm.comp_units().map(|u| u.len()), "units");
     unavailable(esgm.entity_structure_type_names().map(|n| n.len()), "types");
 }
+
+/// The coordinator keeps the encoded listing between changes of the registry: each
+/// change, made or undone because it could not be saved, shows in the next listing.
+#[test]
+fn every_listing_shows_the_registry_as_it_stands() {
+    let domain = unique_domain("control_listing");
+    let dir = tempfile::tempdir().unwrap();
+    let state = esgm_shm::control::StateDir::at(dir.path());
+    let (_coordinator, _) = Coordinator::spawn_recovering(
+        &domain,
+        TypeRegistry::with_library(),
+        state,
+        esgm_shm::data_plane::capacity::DomainLimits::default(),
+    )
+    .unwrap();
+    let client = ControlClient::connect(&domain, DEADLINE).unwrap();
+    let listed = || match client.call(&Request::ListTrajectories).unwrap() {
+        Response::Trajectories(t) => t.into_iter().map(|i| i.name).collect::<Vec<_>>(),
+        other => panic!("{other:?}"),
+    };
+    let create = |name: &str| Request::CreateTrajectory {
+        spec: TrajectorySpec::primitive(name, "RobotState"),
+        host: "test".into(),
+    };
+    assert!(listed().is_empty());
+    client.call(&create("a")).unwrap();
+    assert_eq!(listed(), ["a"]);
+    assert_eq!(listed(), ["a"], "asked again, unchanged");
+    client.call(&create("b")).unwrap();
+    assert_eq!(listed(), ["a", "b"]);
+
+    let blocker = dir.path().join("registry.json.tmp");
+    std::fs::create_dir(&blocker).unwrap();
+    assert!(client.call(&create("c")).is_err(), "an unsaved change is refused");
+    assert_eq!(listed(), ["a", "b"], "the undone change is not listed");
+    std::fs::remove_dir(&blocker).unwrap();
+
+    client.call(&Request::DestroyEntityTrajectoryStructure { name: "a".into() }).unwrap();
+    assert_eq!(listed(), ["b"]);
+}

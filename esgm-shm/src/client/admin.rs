@@ -31,7 +31,7 @@
 //! reset must reach the writer's store and every replica, in the processes that hold
 //! them. The coordinator stays out of the data's way.
 
-use std::collections::BTreeMap;
+use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread::JoinHandle;
@@ -169,18 +169,17 @@ fn answer_to(envelope: Envelope, host: &str, id: u64) -> Option<(String, AdminAn
 /// is accounted for; a replica's own where no writer answered. The counts come from
 /// other processes: they saturate, never wrap. The listing joins them
 /// ([`super::stats_row::with_listing`]).
-pub(crate) fn combine_stats(answers: Answers) -> BTreeMap<String, Figures> {
-    let mut stats = BTreeMap::new();
-    let mut from_writer = std::collections::BTreeSet::new();
+pub(crate) fn combine_stats(answers: Answers) -> HashMap<String, Figures> {
+    // Each trajectory's figures, and whether they are its writer's (a hash map: the
+    // listing that joins them is in name order already).
+    let rows = answers.iter().map(|(_, a)| if let AdminAnswer::Stats(r) = a { r.len() } else { 0 });
+    let mut stats: HashMap<String, (bool, Figures)> = HashMap::with_capacity(rows.sum());
     let mut at_readers: Vec<(String, DropCause, u64)> = Vec::new();
     for (_, answer) in answers {
         let AdminAnswer::Stats(rows) = answer else { continue };
         for row in rows {
             let (name, writes, report) = row.into_parts();
-            if writes {
-                from_writer.insert(name.clone());
-                stats.insert(name, report);
-            } else {
+            if !writes {
                 for (cause, n) in &report.stats.dropped {
                     // What only a reader sees: its losses, its rejections, and an
                     // exporting bridge's losses on the way out.
@@ -191,24 +190,30 @@ pub(crate) fn combine_stats(answers: Answers) -> BTreeMap<String, Figures> {
                         at_readers.push((name.clone(), *cause, *n));
                     }
                 }
-                if !from_writer.contains(&name) {
-                    stats.entry(name).or_insert(report);
+            }
+            match stats.entry(name) {
+                std::collections::hash_map::Entry::Vacant(slot) => {
+                    slot.insert((writes, report));
+                }
+                // The writer's figures replace a replica's, never the other way.
+                std::collections::hash_map::Entry::Occupied(mut slot) => {
+                    if writes && !slot.get().0 {
+                        slot.insert((writes, report));
+                    }
                 }
             }
         }
     }
     for (name, cause, n) in at_readers {
-        let Some(report) = stats.get_mut(&name) else { continue };
-        if !from_writer.contains(&name) {
-            continue; // the report is a reader's own, already counting it
-        }
+        // Where no writer answered, the report is a reader's own, already counting it.
+        let Some((true, report)) = stats.get_mut(&name) else { continue };
         match report.stats.dropped.iter_mut().find(|(c, _)| *c == cause) {
             Some((_, total)) => *total = total.saturating_add(n),
             None => report.stats.dropped.push((cause, n)),
         }
         report.stats.dropped_total = report.stats.dropped_total.saturating_add(n);
     }
-    stats
+    stats.into_iter().map(|(name, (_, figures))| (name, figures)).collect()
 }
 
 /// The memory of every answering process added up (saturating: the numbers are other
@@ -228,11 +233,14 @@ pub(crate) fn combine_memory(answers: &Answers) -> MemoryStats {
 
 /// What a flush round compares to the one before: per trajectory, what entered its
 /// stream (added and dropped, saturating) and its worker's calls.
-pub(crate) fn progress(stats: BTreeMap<String, Figures>) -> Vec<(String, u64, u64)> {
-    stats
+pub(crate) fn progress(stats: HashMap<String, Figures>) -> Vec<(String, u64, u64)> {
+    let mut progress: Vec<_> = stats
         .into_iter()
         .map(|(n, r)| (n, r.stats.added.saturating_add(r.stats.dropped_total), r.worker.calls))
-        .collect()
+        .collect();
+    // In name order, so that two rounds compare equal when nothing moved.
+    progress.sort_unstable();
+    progress
 }
 
 /// Trajectories the answering processes reset (saturating).
@@ -653,14 +661,15 @@ fn answer(host: &str, local: &InProcessEsgm, mirrors: &SharedMirrors, op: AdminO
             AdminAnswer::Done { reset: 0 }
         }
         AdminOp::Stats => {
-            // A set: a writer of 1,000 trajectories looks each of them up.
-            let written: std::collections::HashSet<String> = written(mirrors).into_iter().collect();
+            let figures = local.figures_here();
+            // Looked up in the mirrors' own map, under one lock: a writer of 1,000
+            // trajectories answers without copying their names into a set first.
+            let mirrors = mirrors.lock();
             AdminAnswer::Stats(
-                local
-                    .figures_here()
+                figures
                     .into_iter()
                     .map(|(name, stats, worker)| {
-                        let writes = written.contains(&name);
+                        let writes = mirrors.exports.contains_key(&name);
                         StatsRow::new(name, writes, stats, worker)
                     })
                     .collect(),

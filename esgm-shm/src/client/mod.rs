@@ -508,14 +508,14 @@ impl ShmEsgm {
     /// E7 across the system: every trajectory's statistics from the process that
     /// writes it (a replica's, what it received, where no writer answered).
     pub fn domain_stats(&self) -> Result<EsgmStats, AdminError> {
-        self.domain_stats_listed().map(|(_, stats)| stats)
+        self.domain_stats_listed().map(|(stats, _)| stats)
     }
 
-    /// [`ShmEsgm::domain_stats`] with the listing it joined the figures to (every
-    /// trajectory, as [`Esgm::trajectories`] lists them, also those no process
-    /// reported: a trajectory whose writer is gone and that nobody reads). The
-    /// coordinator's listing and the processes' answers are asked for at once.
-    pub fn domain_stats_listed(&self) -> Result<(Vec<TrajectoryInfo>, EsgmStats), AdminError> {
+    /// [`ShmEsgm::domain_stats`], and the listed trajectories that no process reported
+    /// (a trajectory whose writer is gone and that nobody reads): with the reports, every
+    /// trajectory [`Esgm::trajectories`] lists. The coordinator's listing and the
+    /// processes' answers are asked for at once.
+    pub fn domain_stats_listed(&self) -> Result<(EsgmStats, Vec<TrajectoryInfo>), AdminError> {
         let (listing, answers) = std::thread::scope(|s| {
             let listing = s.spawn(|| self.control(Request::ListTrajectories));
             let answers = self.inner.admin.ask(AdminOp::Stats, self.inner.timeout);
@@ -530,9 +530,7 @@ impl ShmEsgm {
                 return Err(AdminError::Unavailable { reason });
             }
         };
-        let stats =
-            stats_row::with_listing(admin::combine_stats(answers?), listing.iter().cloned());
-        Ok((listing, stats))
+        Ok(stats_row::with_listing(admin::combine_stats(answers?), listing))
     }
 
     /// E7 across the system: the memory of every connected process added up (a

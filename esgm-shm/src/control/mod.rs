@@ -15,6 +15,7 @@ pub(crate) mod admin_services;
 pub mod client;
 pub(crate) mod holding_stats;
 pub mod limits;
+mod listing_wire;
 pub mod persistence;
 pub mod processes;
 pub mod protocol;

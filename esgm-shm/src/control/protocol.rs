@@ -295,8 +295,8 @@ pub enum Response {
     Definitions(Vec<(String, EntityStructureType)>),
     /// A trajectory (boxed: by far the largest answer, and a rare one).
     Trajectory(Box<TrajectoryRecord>),
-    /// Trajectories.
-    Trajectories(Vec<TrajectoryInfo>),
+    /// Trajectories (on the wire as one compact array each, the default policy left out).
+    Trajectories(#[serde(with = "super::listing_wire")] Vec<TrajectoryInfo>),
     /// Sensors.
     Sensors(Vec<SensorRecord>),
     /// Units.

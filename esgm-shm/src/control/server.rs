@@ -226,6 +226,20 @@ pub struct Coordinator {
     /// Announces the registry's version ([`open_version_service`]), and the last
     /// version announced.
     version: Option<VersionOut>,
+    /// Requests handled that could change the registry, whatever their outcome, and
+    /// saves made: the listing below was encoded at one of these counts.
+    changes: u64,
+    /// The answer to [`Request::ListTrajectories`], encoded at [`Coordinator::changes`]
+    /// (`None`: not yet, or changed since). Every CLI listing and every process that
+    /// sees the registry change asks for it; at 1,000 trajectories, cloning and
+    /// encoding it for each was most of the coordinator's work.
+    listing: Option<(u64, Arc<[u8]>)>,
+}
+
+/// An answer to send: made for this request, or the listing encoded before.
+enum Answer {
+    Made(Response),
+    Encoded(Arc<[u8]>),
 }
 
 /// The coordinator's end of the registry-version service.
@@ -399,6 +413,8 @@ impl Coordinator {
             _lock: lock,
             _admin: admin,
             version,
+            changes: 0,
+            listing: None,
         })
     }
 
@@ -486,6 +502,9 @@ impl Coordinator {
                 return Ok(n);
             }
             if changed {
+                // A save that fails rolls the registry back: a listing encoded within
+                // this batch may show what no longer stands.
+                self.changes += 1;
                 match self.save_state() {
                     Ok(()) => self.remove_ended(),
                     Err(refusal) => {
@@ -493,14 +512,18 @@ impl Coordinator {
                         self.ended.clear();
                         for (_, response, changes) in &mut batch {
                             if *changes {
-                                *response = Response::Error(refusal.clone());
+                                *response = Answer::Made(Response::Error(refusal.clone()));
                             }
                         }
                     }
                 }
             }
             for (active, response, _) in batch {
-                if self.respond(&active, &response) {
+                let sent = match response {
+                    Answer::Made(response) => self.respond(&active, &response),
+                    Answer::Encoded(bytes) => self.send(&active, &bytes),
+                };
+                if sent {
                     n += 1;
                 }
             }
@@ -528,14 +551,54 @@ impl Coordinator {
     }
 
     /// The answer to one request, and whether it changed the registry.
-    fn handle(&mut self, active: &ControlRequest) -> (Response, bool) {
+    fn handle(&mut self, active: &ControlRequest) -> (Answer, bool) {
         let payload = active.payload();
         if payload.len() > MAX_REQUEST_BYTES {
             tracing::warn!(bytes = payload.len(), "control request too large; refused");
             let refusal = ControlError::TooLarge { bytes: payload.len(), max: MAX_REQUEST_BYTES };
-            return (Response::Error(refusal), false);
+            return (Answer::Made(Response::Error(refusal)), false);
         }
-        match decode::<Request>(payload) {
+        let request = decode::<Request>(payload);
+        if let Ok(Request::ListTrajectories) = request {
+            if let Some(bytes) = self.listing() {
+                return (Answer::Encoded(bytes), false);
+            }
+        }
+        let (response, changed) = self.handle_made(active, request);
+        (Answer::Made(response), changed)
+    }
+
+    /// The listing of every trajectory, encoded once per change of the registry;
+    /// `None` if it cannot be encoded or sent whole (then it is made and refused as any
+    /// answer is).
+    fn listing(&mut self) -> Option<Arc<[u8]>> {
+        if let Some((at, bytes)) = &self.listing {
+            if *at == self.changes {
+                return Some(Arc::clone(bytes));
+            }
+        }
+        let response = self.registry.handle(Request::ListTrajectories);
+        let bytes: Arc<[u8]> = match encode(&response) {
+            Ok(b)
+                if b.len() <= MAX_RESPONSE_BYTES
+                    && matches!(response, Response::Trajectories(_)) =>
+            {
+                b.into()
+            }
+            _ => return None,
+        };
+        self.listing = Some((self.changes, Arc::clone(&bytes)));
+        Some(bytes)
+    }
+
+    /// The answer made for one request (as decoded from `active`), and whether it
+    /// changed the registry.
+    fn handle_made(
+        &mut self,
+        active: &ControlRequest,
+        request: Result<Request, serde_json::Error>,
+    ) -> (Response, bool) {
+        match request {
             Ok(Request::Shutdown) => {
                 tracing::info!(domain = %self.domain, "shutdown requested");
                 self.shutdown_requested = true;
@@ -550,6 +613,9 @@ impl Coordinator {
             }
             Ok(request) => {
                 let persist = changes_registry(&request);
+                if persist {
+                    self.changes += 1;
+                }
                 let origin = match &request {
                     Request::ReportProcess { .. }
                     | Request::ReportWriter { .. }
@@ -609,8 +675,14 @@ impl Coordinator {
                 return false;
             }
         };
+        self.send(active, &bytes)
+    }
+
+    /// Sends the encoded answer `bytes` to the client of `active`; false (logged and
+    /// counted) if it could not.
+    fn send(&mut self, active: &ControlRequest, bytes: &[u8]) -> bool {
         let sent = match active.loan_slice_uninit(bytes.len()) {
-            Ok(loan) => loan.write_from_slice(&bytes).send().map_err(CoordinatorError::Send),
+            Ok(loan) => loan.write_from_slice(bytes).send().map_err(CoordinatorError::Send),
             Err(e) => Err(CoordinatorError::Loan(e)),
         };
         match sent {

@@ -2,14 +2,14 @@
 //! the writer's valid → add time, carried in every sample), then the system's processes
 //! with their restarts.
 
-use esgm_core::esgm::TrajectoryKind;
-use esgm_core::{EntityTrajectoryStructure, Esgm};
-use std::io::Write as _;
+use esgm_core::esgm::{TrajectoryInfo, TrajectoryKind, WorkerStats};
+use esgm_core::{EntityTrajectoryStructure, Esgm, TrajectoryStats};
+use std::io::Write;
 
 use serde_json::json;
 
 use crate::session::{connect_tool as connect, trajectory};
-use crate::show::ms;
+use crate::show::{Line, TwoDecimals, ms};
 
 /// Prints one line (or JSON object) per trajectory, then every drop by cause and
 /// every unit or sensor whose calls failed.
@@ -20,13 +20,22 @@ use crate::show::ms;
 /// them instead.
 pub fn run(domain: &str, json: bool) -> anyhow::Result<()> {
     let esgm = connect(domain)?;
-    let (list, domain_stats) = match esgm.domain_stats_listed() {
-        Ok((list, stats)) => (list, Some(stats)),
+    // Every listed trajectory with its figures: the domain's, or where some process
+    // did not answer, this process's own reading of each.
+    let (stats, unreported) = match esgm.domain_stats_listed() {
+        Ok((stats, unreported)) => (stats.trajectories, unreported),
         Err(e) => {
             eprintln!("esgm: not every process answered ({e}); figures as this process reads them");
-            (esgm.trajectories()?, None)
+            (Default::default(), esgm.trajectories()?)
         }
     };
+    let mut rows: Vec<(TrajectoryInfo, TrajectoryStats, Option<WorkerStats>)> = Vec::new();
+    for info in unreported {
+        let s = trajectory(&esgm, &info.name)?.stats()?;
+        rows.push((info, s, None));
+    }
+    rows.extend(stats.into_values().map(|r| (r.info, r.stats, Some(r.worker))));
+    rows.sort_by(|a, b| a.0.name.cmp(&b.0.name));
     // One write for the whole table, not one per line (a domain may hold thousands of
     // trajectories).
     let mut out = std::io::BufWriter::new(std::io::stdout().lock());
@@ -45,11 +54,8 @@ pub fn run(domain: &str, json: bool) -> anyhow::Result<()> {
         )?;
     }
     let mut drops = Vec::new();
-    for info in list {
-        let (s, worker) = match domain_stats.as_ref().and_then(|d| d.get(&info.name)) {
-            Some(report) => (report.stats.clone(), Some(report.worker)),
-            None => (trajectory(&esgm, &info.name)?.stats()?, None),
-        };
+    let mut line = Line::default();
+    for (info, s, worker) in &rows {
         if json {
             writeln!(
                 out,
@@ -57,18 +63,19 @@ pub fn run(domain: &str, json: bool) -> anyhow::Result<()> {
                 json!({ "trajectory": info.name, "kind": info.kind.name(), "stats": s, "worker": worker })
             )?;
         } else {
-            writeln!(
-                out,
-                "{:<20} {:<10} {:>7} {:>7} {:>7} {:>8.2} {:>11} {:>11}",
-                info.name,
-                info.kind.name(),
-                s.added,
-                s.stored,
-                s.dropped_total,
-                s.rate_hz,
-                ms(s.add_delay_p50),
-                ms(s.add_delay_p99)
-            )?;
+            // Each line is made in one string and written at once: padding a cell
+            // through the buffered writer costs a call per space, a millisecond over a
+            // table of 1,000 trajectories.
+            line.clear()
+                .left(&info.name, 20)
+                .left(info.kind.name(), 10)
+                .right(s.added, 7)
+                .right(s.stored, 7)
+                .right(s.dropped_total, 7)
+                .right(TwoDecimals(s.rate_hz), 8)
+                .right(ms(s.add_delay_p50), 11)
+                .right(ms(s.add_delay_p99), 11);
+            writeln!(out, "{}", line.as_str())?;
             for (cause, n) in &s.dropped {
                 drops.push(format!("{}: {n} dropped: {cause}", info.name));
             }
