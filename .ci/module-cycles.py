@@ -9,9 +9,9 @@ between two of them means one no longer sits under the other.
 A module's edges are the `crate::<module>` paths its files name (in `use` lines and in
 code; comments and doc comments are left out), each file counting for the top-level
 module it belongs to (`src/control/server.rs` is `control`; `src/process.rs` and
-`src/process/access.rs` are `process`). The crate root (`lib.rs`) and tests
-(`tests.rs`, `mod tests` blocks are not told apart, so a test's import counts) are
-what they are: lib.rs is left out, as it only declares and re-exports.
+`src/process/access.rs` are `process`). The crate root (`lib.rs`) is left out, as it
+only declares and re-exports. Test code is left out too: a `#[cfg(test)]` module,
+inline or in its own file, may use any layer to build its fixtures without being one.
 
 Usage: module-cycles.py SRC_DIR [SRC_DIR...]; prints each crate's edges and exits 1
 on a cycle, naming it and a file for each of its edges.
@@ -36,6 +36,37 @@ def code_of(text):
     return "\n".join(out)
 
 
+TEST_BLOCK = re.compile(r"#\[cfg\(test\)\]\s*(?:pub(?:\([a-z]+\))?\s+)?mod\s+[a-z_][a-z0-9_]*\s*\{")
+TEST_FILE = re.compile(r"#\[cfg\(test\)\]\s*(?:pub(?:\([a-z]+\))?\s+)?mod\s+([a-z_][a-z0-9_]*)\s*;")
+
+
+def without_test_blocks(code):
+    """The code without its inline `#[cfg(test)] mod x { ... }` blocks (comments and
+    strings are already gone, so braces balance)."""
+    while True:
+        m = TEST_BLOCK.search(code)
+        if not m:
+            return code
+        depth, i = 1, m.end()
+        while i < len(code) and depth:
+            depth += {"{": 1, "}": -1}.get(code[i], 0)
+            i += 1
+        code = code[: m.start()] + code[i:]
+
+
+def test_files(path, code):
+    """The files of the `#[cfg(test)] mod x;` declarations in `path`'s code."""
+    base = os.path.dirname(path)
+    name = os.path.basename(path)
+    if name not in ("mod.rs", "lib.rs", "main.rs"):
+        base = os.path.join(base, name[:-3])
+    found = set()
+    for module in TEST_FILE.findall(code):
+        found.add(os.path.normpath(os.path.join(base, module + ".rs")))
+        found.add(os.path.normpath(os.path.join(base, module, "mod.rs")))
+    return found
+
+
 def modules_of(src):
     """Top-level module name -> list of its .rs files."""
     mods = {}
@@ -52,10 +83,17 @@ def modules_of(src):
 
 
 def edges_of(mods):
+    codes, tests = {}, set()
+    for files in mods.values():
+        for f in files:
+            codes[f] = code_of(open(f, encoding="utf-8").read())
+            tests |= test_files(f, codes[f])
     edges = {}
     for mod, files in mods.items():
         for f in files:
-            code = code_of(open(f, encoding="utf-8").read())
+            if os.path.normpath(f) in tests:
+                continue
+            code = without_test_blocks(codes[f])
             named = set(PATH.findall(code))
             for group in GROUP.findall(code):
                 named.update(re.findall(r"(?:^|,)\s*([a-z_][a-z0-9_]*)", group))

@@ -19,7 +19,7 @@ use std::collections::VecDeque;
 use std::num::NonZeroUsize;
 
 use esgm_core::entity::{Entity, FromEntityError};
-use esgm_core::frame::{AttributeValuePair, EntityFrame, EntityStructure};
+use esgm_core::value::frame::{AttributeValuePair, EntityFrame, EntityStructure};
 use esgm_core::value::{
     Pos2, Position, PositionAltitude, PositionAltitudeRotation, Rotation, Value, ValueSort, Vec3,
 };

@@ -13,9 +13,9 @@
 
 use std::sync::Arc;
 
-use crate::frame::{AttributeValuePair, EntityFrame, EntityStructure};
 use crate::sample::Sample;
 use crate::time::Time;
+use crate::value::frame::{AttributeValuePair, EntityFrame, EntityStructure};
 use crate::value::{
     Pos2, Position, PositionAltitude, PositionAltitudeRotation, Rotation, Value, Vec3,
 };

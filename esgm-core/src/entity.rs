@@ -18,9 +18,9 @@
 //! assert_eq!(Blob::from_structure(&es).unwrap(), Blob { x: 1, y: 2, size: 3 });
 //! ```
 
-use crate::frame::{AttributeValuePair, EntityFrame, EntityStructure, find_attribute};
 use crate::time::Time;
 use crate::types::EntityStructureType;
+use crate::value::frame::{AttributeValuePair, EntityFrame, EntityStructure, find_attribute};
 use crate::value::{
     Octets, Pos2, Position, PositionAltitude, PositionAltitudeRotation, Rotation, Value, ValueSort,
     Vec3,

@@ -25,8 +25,8 @@ use std::sync::Arc;
 
 use crate::codec::{ArchivedEntityStructure, ArchivedValue, decode_value};
 use crate::entity::AttributeField;
-use crate::frame::{EntityFrame, EntityStructure};
 use crate::sample::Sample;
+use crate::value::frame::{EntityFrame, EntityStructure};
 use crate::value::{
     Octets, Pos2, Position, PositionAltitude, PositionAltitudeRotation, Rotation, Value, ValueSort,
     Vec3,

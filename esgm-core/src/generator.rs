@@ -4,10 +4,10 @@
 use std::sync::Arc;
 
 use crate::approximation::{MergeRule, ValueApproximation, interpolated, merge};
-use crate::frame::EntityStructure;
 use crate::sample::Sample;
 use crate::store::{QueryError, TrajectoryStore};
 use crate::time::Time;
+use crate::value::frame::EntityStructure;
 
 /// The constraints of a fluent generator: how to approximate between samples and how
 /// to merge samples sharing a valid time.

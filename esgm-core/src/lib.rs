@@ -37,10 +37,10 @@ pub mod entity_view;
 pub mod esgm;
 mod failures;
 pub mod filter;
-pub mod frame;
 pub mod generator;
 pub mod generator_entry;
 pub mod library;
+mod nesting;
 pub mod octets;
 pub mod operators;
 pub mod pixel_buffer;
@@ -64,7 +64,6 @@ pub use esgm::{
     LookupError, RegistrationError, SensorError, SensorInterface, SystemError, TrajectorySpec,
 };
 pub use filter::{Filter, FilterError};
-pub use frame::{AttributeList, AttributeValuePair, EntityFrame, EntityStructure};
 pub use generator::{FluentGenerator, GeneratorPolicy};
 pub use pixel_buffer::{HeapAllocator, OctetsAllocator, PixelBuffer, PixelStorage};
 pub use policy::{
@@ -83,6 +82,7 @@ pub use time::{TIMEUNITS_PER_MILLI_SECOND, TIMEUNITS_PER_SECOND, Time, micros, m
 pub use type_check::{InvalidType, TypeChecker};
 pub use type_registry::{TypeRegistry, TypeRegistryError};
 pub use types::{Attr, EntityStructureType, TypeDefinitionError};
+pub use value::frame::{AttributeList, AttributeValuePair, EntityFrame, EntityStructure};
 pub use value::{
     Octets, Pos2, Position, PositionAltitude, PositionAltitudeRotation, Rotation, Value, ValueSort,
     Vec3,

@@ -14,6 +14,10 @@ use std::sync::Arc;
 
 use rkyv::{Archive, Deserialize, Serialize};
 
+/// How an octet sequence is archived (re-exported where users name it, in
+/// [`crate::codec`]).
+pub(crate) mod archive;
+
 /// Something that keeps bytes alive outside this process's heap — a borrowed
 /// shared-memory sample — for as long as any [`Octets`] made from it exists.
 ///
@@ -57,7 +61,7 @@ impl OctetBytes {
 /// can keep it there ([`Octets::held`]) instead of copying it to its heap.
 #[derive(Clone, Archive, Serialize, Deserialize)]
 #[rkyv(derive(Debug))]
-pub struct Octets(#[rkyv(with = crate::codec::SharedBytes)] pub(crate) OctetBytes);
+pub struct Octets(#[rkyv(with = archive::SharedBytes)] pub(crate) OctetBytes);
 
 impl Octets {
     /// Wraps bytes without copying them again.

@@ -21,11 +21,11 @@ pub use crate::esgm::{
     CompUnit, ComputeError, EntityTrajectoryStructure, Esgm, InputType, SensorError,
     SensorInterface, TrajectorySpec,
 };
-pub use crate::frame::{EntityFrame, EntityStructure};
 pub use crate::policy::FluentStreamPolicy;
 pub use crate::runtime::{InProcessEsgm, InProcessTrajectory};
 pub use crate::sample::Sample;
 pub use crate::store::{AddOutcome, SubscribeOptions};
 pub use crate::time::{Time, micros, millis, secs};
 pub use crate::types::EntityStructureType;
+pub use crate::value::frame::{EntityFrame, EntityStructure};
 pub use crate::value::{Value, ValueSort};

@@ -3,8 +3,8 @@
 use std::ops::Deref;
 use std::sync::Arc;
 
-use crate::frame::EntityStructure;
 use crate::time::Time;
+use crate::value::frame::EntityStructure;
 
 /// An entity structure as stored in a trajectory or returned by a query.
 ///

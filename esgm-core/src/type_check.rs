@@ -9,9 +9,9 @@
 use std::collections::HashMap;
 use std::sync::Arc;
 
-use crate::frame::AttributeValuePair;
 use crate::type_registry::{TypeRegistry, TypeRegistryError};
 use crate::types::EntityStructureType;
+use crate::value::frame::AttributeValuePair;
 use crate::value::{Value, ValueSort};
 
 /// A structure does not fit its type (the seed's `InvalidType`, with the attribute
@@ -198,7 +198,7 @@ impl TypeChecker {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::frame::{EntityFrame, EntityStructure};
+    use crate::value::frame::{EntityFrame, EntityStructure};
 
     fn registry() -> TypeRegistry {
         let mut r = TypeRegistry::new();

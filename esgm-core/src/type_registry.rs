@@ -38,7 +38,7 @@ pub enum TypeRegistryError {
     #[error("the ESGM is unavailable: {reason}")]
     Unavailable {
         /// Why.
-        reason: crate::esgm::Unreachable,
+        reason: crate::failures::Unreachable,
     },
 }
 

@@ -19,9 +19,12 @@ use std::fmt;
 
 use rkyv::{Archive, Deserialize, Serialize};
 
-use crate::frame::EntityFrame;
+// Frames hold values and a value can hold frames: the two are one module.
+pub mod frame;
+
 pub use crate::octets::{ArchivedOctets, Octets, OctetsHolder};
 use crate::time::Time;
+use frame::EntityFrame;
 
 /// The sort (type) of a [`Value`], as in the seed's `ValueSort` enum.
 #[derive(
@@ -360,7 +363,7 @@ pub struct PositionAltitudeRotation {
 ))]
 #[rkyv(deserialize_bounds(__D::Error: rkyv::rancor::Source))]
 #[rkyv(bytecheck(bounds(
-    __C: rkyv::validation::ArchiveContext + crate::codec::NestingContext,
+    __C: rkyv::validation::ArchiveContext + crate::nesting::NestingContext,
     <__C as rkyv::rancor::Fallible>::Error: rkyv::rancor::Source,
 )))]
 #[rkyv(derive(Debug))]
@@ -407,13 +410,13 @@ pub enum Value {
     /// `POSITION_ALTITUDE_ROTATION_TYPE`.
     PositionAltitudeRotation(#[rkyv(with = rkyv::with::AsBox)] PositionAltitudeRotation),
     /// `AGG_TYPE`: a tuple of values.
-    Agg(#[rkyv(omit_bounds, with = crate::codec::Nest)] Vec<Value>),
+    Agg(#[rkyv(omit_bounds, with = crate::nesting::Nest)] Vec<Value>),
     /// `COLLECTION_TYPE`: a collection of values.
-    Collection(#[rkyv(omit_bounds, with = crate::codec::Nest)] Vec<Value>),
+    Collection(#[rkyv(omit_bounds, with = crate::nesting::Nest)] Vec<Value>),
     /// `ENTITY_FRAME_TYPE`: a nested frame.
-    EntityFrame(#[rkyv(omit_bounds, with = crate::codec::Nest)] Box<EntityFrame>),
+    EntityFrame(#[rkyv(omit_bounds, with = crate::nesting::Nest)] Box<EntityFrame>),
     /// `ENTITY_FRAME_SEQ_TYPE`: a sequence of frames.
-    EntityFrameSeq(#[rkyv(omit_bounds, with = crate::codec::Nest)] Vec<EntityFrame>),
+    EntityFrameSeq(#[rkyv(omit_bounds, with = crate::nesting::Nest)] Vec<EntityFrame>),
 }
 
 impl Value {

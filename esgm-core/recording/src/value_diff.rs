@@ -8,7 +8,7 @@
 //! `|a − b| ≤ tolerance`; everything else is equal when equal. Octet sequences
 //! (images) are compared byte for byte and the first differing byte is named.
 
-use esgm_core::frame::{AttributeValuePair, EntityStructure};
+use esgm_core::value::frame::{AttributeValuePair, EntityStructure};
 use esgm_core::value::{Pos2, Position, Rotation, Value, Vec3};
 
 /// One place where two values differ.

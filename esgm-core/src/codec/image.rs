@@ -38,16 +38,16 @@ use std::ops::Range;
 use rkyv::rancor::{BoxedError, Source};
 use rkyv::ser::{Positional, Writer};
 
-use super::octets::{ArchiveTooLarge, MAX_ARCHIVE_LEN, PlaceOctets};
 use super::{
     ARCHIVE_ALIGNMENT, ArchivedAttributeValuePair, ArchivedEntityStructure, CodecError,
     ENVELOPE_LEN, write_envelope,
 };
 use crate::entity::Entity;
-use crate::frame::EntityStructure;
 use crate::library::Image;
+use crate::octets::archive::{ArchiveTooLarge, MAX_ARCHIVE_LEN, PlaceOctets};
 use crate::time::Time;
 use crate::value::Octets;
+use crate::value::frame::EntityStructure;
 
 /// Offset of the pixel bytes in a buffer written by [`encode_image_into`]: after the
 /// envelope and the region for the names (see the module docs). A multiple of

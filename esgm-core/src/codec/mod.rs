@@ -24,8 +24,6 @@
 //! image layout, `restamp.rs` the in-place change of an archive's times.
 
 mod image;
-mod nesting;
-mod octets;
 mod restamp;
 mod writer;
 
@@ -37,15 +35,17 @@ use rkyv::rancor::{BoxedError, Failure};
 use rkyv::ser::writer::Buffer;
 use rkyv::util::AlignedVec;
 
-use crate::frame::EntityStructure;
-pub use crate::frame::{ArchivedAttributeValuePair, ArchivedEntityFrame, ArchivedEntityStructure};
+pub use crate::nesting::{ArchivedNest, MAX_NESTING, Nest, NestingContext};
+pub use crate::octets::archive::{HoldOctets, PlaceOctets, SharedBytes, SharedBytesResolver};
 use crate::octets::{Octets, OctetsHolder};
+use crate::value::frame::EntityStructure;
+pub use crate::value::frame::{
+    ArchivedAttributeValuePair, ArchivedEntityFrame, ArchivedEntityStructure,
+};
 pub use crate::value::{ArchivedOctets, ArchivedValue, ArchivedValueSort};
 pub use image::{
     IMAGE_NAME_MAX, IMAGE_OVERHEAD_MAX, IMAGE_PIXELS_MAX, IMAGE_PIXELS_OFFSET, encode_image_into,
 };
-pub use nesting::{ArchivedNest, MAX_NESTING, Nest, NestingContext};
-pub use octets::{HoldOctets, PlaceOctets, SharedBytes, SharedBytesResolver};
 pub use restamp::restamp;
 use writer::CountingWriter;
 
@@ -243,7 +243,7 @@ pub fn access(bytes: &[u8]) -> Result<&ArchivedEntityStructure, CodecError> {
 fn validate<E: rkyv::rancor::Source>(body: &[u8]) -> Result<&ArchivedEntityStructure, E> {
     rkyv::api::access_with_context::<ArchivedEntityStructure, _, E>(
         body,
-        &mut nesting::Validator::new(body),
+        &mut crate::nesting::Validator::new(body),
     )
 }
 
@@ -331,7 +331,7 @@ const _: fn() = || {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::frame::EntityFrame;
+    use crate::value::frame::EntityFrame;
     use crate::value::{Octets, Value};
 
     fn sample() -> EntityStructure {

@@ -39,8 +39,8 @@ pub fn restamp(bytes: &mut [u8], valid_time: Time, create_time: Time) -> Result<
 mod tests {
     use super::*;
     use crate::codec::{access, decode, encode};
-    use crate::frame::{EntityFrame, EntityStructure};
     use crate::value::Octets;
+    use crate::value::frame::{EntityFrame, EntityStructure};
 
     #[test]
     fn a_restamped_archive_is_the_structure_with_new_times() {

@@ -7,7 +7,7 @@ use rkyv::ser::writer::Buffer;
 use rkyv::ser::{Positional, Serializer, Writer};
 use rkyv::util::AlignedVec;
 
-use super::octets::PlaceOctets;
+use crate::octets::archive::PlaceOctets;
 
 /// A writer that only counts: serializing through it measures an archive without
 /// allocating or copying a byte (octet sequences are counted, not read).

@@ -1,10 +1,10 @@
 //! The interfaces users implement: pull sensors (`SensorInterface`) and
 //! computational units (`CompUnit`), with closures accepted as either.
 
-use crate::frame::EntityStructure;
 use crate::pixel_buffer::OctetsAllocator;
 use crate::sample::Sample;
 use crate::time::Time;
+use crate::value::frame::EntityStructure;
 
 /// A sensor failed to produce a value; the sampler counts it and carries on.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

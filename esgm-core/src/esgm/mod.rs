@@ -29,7 +29,6 @@ pub use typed_unit::{Stamped, TypedUnit, TypedUnitAdapter, UnitInputs};
 use std::sync::Arc;
 
 use crate::approximation::ValueApproximation;
-use crate::frame::{AttributeList, EntityStructure};
 use crate::policy::FluentStreamPolicy;
 use crate::sample::Sample;
 use crate::store::{
@@ -39,6 +38,7 @@ use crate::store::{
 use crate::time::Time;
 use crate::type_registry::TypeRegistryError;
 use crate::types::EntityStructureType;
+use crate::value::frame::{AttributeList, EntityStructure};
 
 /// A handle on a named trajectory (the seed's `EntityTrajectoryStructure` interface).
 ///

@@ -56,9 +56,9 @@
 
 use crate::entity::{Entity, FromEntityError};
 use crate::esgm::{CompUnit, ComputeError, InputType};
-use crate::frame::EntityStructure;
 use crate::sample::Sample;
 use crate::time::Time;
+use crate::value::frame::EntityStructure;
 
 /// A value of a unit's input or output with its structure's name and times: what a
 /// typed unit receives for each input, and returns.

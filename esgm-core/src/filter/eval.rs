@@ -10,7 +10,7 @@
 
 use super::ast::{Arith, Cmp};
 use super::typed::{BoolExpr, FloatExpr, IntExpr, StrExpr};
-use crate::frame::AttributeValuePair;
+use crate::value::frame::AttributeValuePair;
 
 impl Cmp {
     fn test<T: PartialOrd + ?Sized>(self, a: &T, b: &T) -> bool {
@@ -103,7 +103,7 @@ impl StrExpr {
 #[cfg(test)]
 mod tests {
     use super::super::fixtures::{blob, compile, eval, sample};
-    use crate::frame::EntityFrame;
+    use crate::value::frame::EntityFrame;
 
     fn all_true(filters: &[&str]) {
         for f in filters {

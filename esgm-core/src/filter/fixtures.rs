@@ -2,10 +2,10 @@
 //! differently, and a structure of that type.
 
 use super::{Filter, FilterError};
-use crate::frame::EntityFrame;
 use crate::type_check::TypeChecker;
 use crate::type_registry::TypeRegistry;
 use crate::types::{Attr, EntityStructureType};
+use crate::value::frame::EntityFrame;
 use crate::value::{
     Octets, Pos2, Position, PositionAltitude, PositionAltitudeRotation, Rotation, Value, ValueSort,
     Vec3,

@@ -72,8 +72,8 @@ use std::fmt;
 
 pub use error::FilterError;
 
-use crate::frame::AttributeValuePair;
 use crate::type_check::TypeChecker;
+use crate::value::frame::AttributeValuePair;
 use typed::BoolExpr;
 
 /// A compiled filter: its source text and the checked expression that evaluates it.
@@ -124,10 +124,10 @@ mod fixtures;
 mod tests {
     use super::*;
     use crate::Entity;
-    use crate::frame::{EntityFrame, EntityStructure};
     use crate::library::{Blob, BlobSeq, Image};
     use crate::type_registry::TypeRegistry;
     use crate::value::Octets;
+    use crate::value::frame::{EntityFrame, EntityStructure};
 
     #[test]
     fn library_blob_filters_and_suggests() {

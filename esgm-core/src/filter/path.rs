@@ -2,7 +2,7 @@
 //! statically (which fields a value sort has) and at run time (walking a structure's
 //! attributes without allocating).
 
-use crate::frame::AttributeValuePair;
+use crate::value::frame::AttributeValuePair;
 use crate::value::{Position, Rotation, Value, ValueSort};
 
 /// A checked attribute path: an attribute, then attributes of nested frames and

@@ -250,7 +250,7 @@ impl Stamped for Time {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::frame::EntityStructure;
+    use crate::value::frame::EntityStructure;
     use std::sync::Arc;
 
     #[test]

@@ -5,7 +5,6 @@ use std::sync::Arc;
 use super::cell::{Descriptor, TrajectoryCell};
 use crate::approximation::ValueApproximation;
 use crate::esgm::EntityTrajectoryStructure;
-use crate::frame::{AttributeList, EntityStructure};
 use crate::pixel_buffer::PixelBuffer;
 use crate::policy::FluentStreamPolicy;
 use crate::sample::Sample;
@@ -15,6 +14,7 @@ use crate::store::{
 };
 use crate::time::Time;
 use crate::types::EntityStructureType;
+use crate::value::frame::{AttributeList, EntityStructure};
 
 /// A handle on a trajectory of the in-process runtime: a proxy for its name.
 #[derive(Debug, Clone)]

@@ -323,7 +323,8 @@ impl InProcessEsgm {
                     continue;
                 }
                 let ticket = cell.counters.flush_asked.fetch_add(1, Ordering::AcqRel) + 1;
-                let marker = Sample::new(Arc::new(crate::frame::EntityStructure::default()), 0, 0);
+                let marker =
+                    Sample::new(Arc::new(crate::value::frame::EntityStructure::default()), 0, 0);
                 if sender.send_deadline((inputs::FLUSH_MARKER, marker), deadline).is_err() {
                     return Err(FlushError::DeadlinePassed { waiting_for: cell.info.name.clone() });
                 }

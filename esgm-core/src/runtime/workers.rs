@@ -13,7 +13,6 @@ use super::cell::{Descriptor, TrajectoryCell, Worker, WorkerCounters};
 use super::{inputs, periodic};
 use crate::clock::SharedClock;
 use crate::esgm::{CompUnit, ComputeError, SensorError, SensorInterface};
-use crate::frame::{AttributeValuePair, EntityFrame, EntityStructure};
 use crate::generator::GeneratorPolicy;
 use crate::operators::sync::{MEMBER_CREATE_TIMES, MEMBER_VALID_TIMES, SyncPolicy};
 use crate::pixel_buffer::{HeapAllocator, OctetsAllocator};
@@ -21,6 +20,7 @@ use crate::sample::Sample;
 use crate::store::{AddError, AddOutcome, FanIn};
 use crate::time::Time;
 use crate::value::Value;
+use crate::value::frame::{AttributeValuePair, EntityFrame, EntityStructure};
 
 /// Starts `body` on a named thread and returns the handle that stops it.
 pub(crate) fn spawn(

@@ -11,8 +11,8 @@ use std::collections::{BTreeMap, VecDeque};
 use std::ops::Bound;
 use std::sync::Arc;
 
-use crate::frame::EntityStructure;
 use crate::time::Time;
+use crate::value::frame::EntityStructure;
 
 /// One stored sample: the shared structure, when it entered, and its add sequence
 /// number (strictly increasing; ties in valid time are broken by it).

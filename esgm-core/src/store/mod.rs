@@ -34,8 +34,6 @@ use std::sync::Arc;
 
 use crate::clock::SharedClock;
 use crate::filter::Filter;
-use crate::frame::AttributeList;
-use crate::frame::EntityStructure;
 use crate::pixel_buffer::OctetsAllocator;
 use crate::policy::{
     CacheConstraint, ChangeConstraint, Constraint, DelayConstraint, DurationConstraint,
@@ -45,6 +43,8 @@ use crate::sample::Sample;
 use crate::time::Time;
 use crate::type_check::TypeChecker;
 use crate::types::EntityStructureType;
+use crate::value::frame::AttributeList;
+use crate::value::frame::EntityStructure;
 use history::{Entry, History};
 use stats::StatsRecorder;
 use subscription::Subscribers;

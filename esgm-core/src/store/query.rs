@@ -8,10 +8,10 @@ use std::sync::Arc;
 use super::TrajectoryStore;
 use super::history::Entry;
 use crate::approximation::{ValueApproximation, interpolated};
-use crate::frame::EntityStructure;
 use crate::sample::Sample;
 use crate::time::Time;
 use crate::type_check::InvalidType;
+use crate::value::frame::EntityStructure;
 
 /// Errors of the query operations.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error, serde::Serialize, serde::Deserialize)]

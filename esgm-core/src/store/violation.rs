@@ -5,10 +5,10 @@ use std::fmt;
 
 use std::sync::Arc;
 
-use crate::frame::EntityStructure;
 use crate::policy::Constraint;
 use crate::time::Time;
 use crate::type_check::InvalidType;
+use crate::value::frame::EntityStructure;
 
 /// A structure broke a constraint of a trajectory's policy (the seed's
 /// `PolicyViolation`). Returned by the blocking add forms, delivered to violation

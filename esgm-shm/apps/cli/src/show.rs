@@ -1,6 +1,6 @@
 //! How samples and tables look on the terminal and in `--json`.
 
-use esgm_core::frame::{AttributeValuePair, EntityFrame};
+use esgm_core::value::frame::{AttributeValuePair, EntityFrame};
 use esgm_core::{Sample, Value};
 use serde_json::{Map, json};
 

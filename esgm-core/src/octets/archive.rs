@@ -4,7 +4,7 @@
 //! copying the bytes, or — for a deserializer that can keep the archive's buffer alive
 //! ([`HoldOctets`]) — by pointing at them where they lie.
 //!
-//! The second case is why this is not rkyv's own `Arc` support. [`super::image`] needs
+//! The second case is why this is not rkyv's own `Arc` support. [`crate::codec`]'s image decoding needs
 //! the archived `image_data` vector to point at bytes it never writes. The only hook
 //! rkyv gives inside the archived [`crate::value::ArchivedValue`] is this field
 //! wrapper (the octets' archived field is private to `value.rs`, and the archived enum
@@ -19,7 +19,7 @@ use rkyv::ser::{Allocator, Writer};
 use rkyv::vec::{ArchivedVec, VecResolver};
 use rkyv::with::{ArchiveWith, DeserializeWith, SerializeWith};
 
-use crate::octets::{OctetBytes, Octets};
+use super::{OctetBytes, Octets};
 
 /// Archives an octet sequence's bytes as a plain byte vector: the archived form has no
 /// shared pointer bookkeeping, and readers see a `&[u8]` in place.
@@ -103,7 +103,7 @@ where
 /// A deserializer's say in where decoded octet sequences live: keep them where they
 /// lie in the archive's buffer (which it must be able to keep alive), or copy them.
 ///
-/// rkyv's own [`Pool`] copies; [`super::decode_holding`]'s deserializer holds.
+/// rkyv's own [`Pool`] copies; [`crate::codec::decode_holding`]'s deserializer holds.
 pub trait HoldOctets {
     /// `Some` to keep `bytes` (a slice of the archive being decoded) where they are;
     /// `None` to copy them onto the heap.

@@ -163,8 +163,8 @@ where
 mod tests {
     use super::MAX_NESTING;
     use crate::codec::{CodecError, access, decode, encode};
-    use crate::frame::{EntityFrame, EntityStructure};
     use crate::value::Value;
+    use crate::value::frame::{EntityFrame, EntityStructure};
 
     /// A structure whose one attribute nests `depth` levels (aggregates and frames
     /// alternating).
