@@ -46,6 +46,30 @@ fn start(domain: &str) -> Running {
     Running { stop, thread: Some(thread) }
 }
 
+/// A coordinator that saves its registry in a scratch directory (kept while the first
+/// value lives), and a client of it.
+fn saving(
+    prefix: &str,
+) -> (
+    tempfile::TempDir,
+    esgm_shm::control::StateDir,
+    esgm_shm::control::CoordinatorThread,
+    ControlClient,
+) {
+    let domain = unique_domain(prefix);
+    let dir = tempfile::tempdir().unwrap();
+    let state = esgm_shm::control::StateDir::at(dir.path());
+    let (coordinator, _) = Coordinator::spawn_recovering(
+        &domain,
+        TypeRegistry::with_library(),
+        state.clone(),
+        esgm_shm::data_plane::capacity::DomainLimits::default(),
+    )
+    .unwrap();
+    let client = ControlClient::connect(&domain, DEADLINE).unwrap();
+    (dir, state, coordinator, client)
+}
+
 #[test]
 fn seed_operations_and_errors_cross_the_process_boundary() {
     let domain = unique_domain("control_ops");
@@ -113,17 +137,7 @@ fn a_second_coordinator_for_the_same_domain_is_refused() {
 /// (`esgm ps`), and the next change that can be saved is saved (issue 24).
 #[test]
 fn a_change_that_cannot_be_saved_is_undone_refused_and_counted() {
-    let domain = unique_domain("control_unsaved");
-    let dir = tempfile::tempdir().unwrap();
-    let state = esgm_shm::control::StateDir::at(dir.path());
-    let (_coordinator, _) = Coordinator::spawn_recovering(
-        &domain,
-        TypeRegistry::with_library(),
-        state.clone(),
-        esgm_shm::data_plane::capacity::DomainLimits::default(),
-    )
-    .unwrap();
-    let client = ControlClient::connect(&domain, DEADLINE).unwrap();
+    let (dir, state, _coordinator, client) = saving("control_unsaved");
     let create = |name: &str| Request::CreateEntityStructureType {
         type_name: name.into(),
         entity_type: EntityStructureType::new(name).attr("x", ValueSort::Double),
@@ -201,17 +215,7 @@ fn system_calls_without_a_coordinator_are_errors_not_a_partial_view() {
 /// change, made or undone because it could not be saved, shows in the next listing.
 #[test]
 fn every_listing_shows_the_registry_as_it_stands() {
-    let domain = unique_domain("control_listing");
-    let dir = tempfile::tempdir().unwrap();
-    let state = esgm_shm::control::StateDir::at(dir.path());
-    let (_coordinator, _) = Coordinator::spawn_recovering(
-        &domain,
-        TypeRegistry::with_library(),
-        state,
-        esgm_shm::data_plane::capacity::DomainLimits::default(),
-    )
-    .unwrap();
-    let client = ControlClient::connect(&domain, DEADLINE).unwrap();
+    let (dir, _state, _coordinator, client) = saving("control_listing");
     let listed = || match client.call(&Request::ListTrajectories).unwrap() {
         Response::Trajectories(t) => t.into_iter().map(|i| i.name).collect::<Vec<_>>(),
         other => panic!("{other:?}"),
