@@ -6,8 +6,8 @@
 //!
 //! This is the data plane ([`data_plane`]): [`TrajectoryPublisher`], [`TrajectorySubscriber`], the
 //! sample layout ([`payload`](data_plane::payload)), service naming ([`service_name`](data_plane::service_name)), waiting
-//! ([`wait`](data_plane::wait)), structures encoded ahead of sending ([`structure_loan`](data_plane::structure_loan)) and in-place
-//! images ([`image_loan`](data_plane::image_loan)), and the violations of a trajectory ([`violations`](data_plane::violations)). The
+//! ([`wait`](data_plane::wait)), structures encoded ahead of sending (`structure_loan`) and in-place
+//! images (`image_loan`), and the violations of a trajectory (`violations`). The
 //! control plane (coordinator, registry) and [`connect`], the `Esgm` interface across
 //! processes, build on it: policy, history and queries are esgm-core's.
 //!
@@ -45,11 +45,11 @@
 //!   time lookups never touch the payload; the header is plain integers, so a corrupt
 //!   one is rejected by comparison, never undefined behaviour.
 //! - **Encode once, into the loan.** The publisher sizes the loan with a cheap walk of
-//!   the structure ([`size_hint`](data_plane::size_hint)) instead of a trial encode, and the codec writes
+//!   the structure (`size_hint`) instead of a trial encode, and the codec writes
 //!   straight into shared memory. A producer that knows its structure early encodes it
 //!   into a loan beforehand and only re-stamps its times and sends when the moment
-//!   comes ([`structure_loan`](data_plane::structure_loan)). Images go further: the camera writes the pixels into
-//!   the loan and the codec completes the archive around them ([`image_loan`](data_plane::image_loan)).
+//!   comes (`structure_loan`). Images go further: the camera writes the pixels into
+//!   the loan and the codec completes the archive around them (`image_loan`).
 //! - **Validate where bytes cross a process boundary.** Every received archive is
 //!   validated before it is handed out ([`Validation::InPlace`]); a trusted setup may
 //!   defer or skip it, explicitly and unsafely. Bad samples are typed errors and
@@ -69,7 +69,7 @@
 //! hold-and-reorder of late samples — gates every add, from that process or forwarded
 //! from others, and the add forms return the in-process outcomes and errors. The
 //! store's tap publishes what it admits inline, stamped with the gate's add time, and
-//! what it drops on the trajectory's violations service ([`violations`](data_plane::violations)), so every
+//! what it drops on the trajectory's violations service (`violations`), so every
 //! reader receives exactly the stream, already checked, in order.
 //!
 //! ## Where the history lives
@@ -147,7 +147,10 @@ pub use data_plane::service_name::{
 pub use data_plane::structure_loan::StructureLoan;
 pub use data_plane::subscriber::{ReceiveError, SubscriberStats, TrajectorySubscriber, Validation};
 pub use data_plane::type_id::type_id;
-pub use data_plane::violations::{ViolationPublisher, ViolationRecord, ViolationSubscriber};
+pub use data_plane::violations::{
+    ViolationPublisher, ViolationRecord, ViolationSubscriber, ViolationSubscriberBuilder,
+    ViolationSubscriberStats,
+};
 pub use data_plane::wait::WaitStrategy;
 pub use data_plane::writer_check::{Decided, WriterCheck};
 

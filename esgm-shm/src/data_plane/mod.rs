@@ -1,31 +1,31 @@
 //! The data plane: one trajectory's samples in shared memory, without policy or
-//! history — its iceoryx2 services and their names ([`service`], [`service_name`]),
+//! history — its iceoryx2 services and their names (`service`, [`service_name`]),
 //! the sample layout ([`payload`]), the writing end ([`publisher`], with structures
-//! encoded ahead of sending in [`structure_loan`] and images written in place in
-//! [`image_loan`]) and the reading end ([`subscriber`], [`received`], [`wait`], woken through
-//! [`wake_word`], and every sample's checks in [`sample_check`]), and the violations service.
+//! encoded ahead of sending in `structure_loan` and images written in place in
+//! `image_loan`) and the reading end ([`subscriber`], `received`, [`wait`], woken through
+//! [`wake_word`], and every sample's checks in `sample_check`), and the violations service.
 //! Trajectories with policy and history are built on it by the client
 //! ([`crate::client`]).
 
 pub mod capacity;
 pub mod image_layout;
-pub mod image_loan;
+pub(crate) mod image_loan;
 pub mod kept_history;
 pub mod payload;
 pub mod publisher;
-pub mod qos;
-pub mod received;
-pub mod sample_check;
+pub(crate) mod qos;
+pub(crate) mod received;
+pub(crate) mod sample_check;
 pub(crate) mod sequence_gaps;
-pub mod service;
+pub(crate) mod service;
 pub mod service_name;
 pub(crate) mod shm_access;
-pub mod size_hint;
-pub mod structure_loan;
+pub(crate) mod size_hint;
+pub(crate) mod structure_loan;
 pub mod subscriber;
-pub mod type_id;
-pub mod violations;
+pub(crate) mod type_id;
+pub(crate) mod violations;
 pub mod wait;
 pub(crate) mod wake_protocol;
 pub mod wake_word;
-pub mod writer_check;
+pub(crate) mod writer_check;

@@ -3,7 +3,7 @@
 //!
 //! # One write, no heap buffer
 //! [`TrajectoryPublisher::publish`] loans a slice sized by
-//! [`crate::data_plane::size_hint::archived_size_hint`] (a walk over the structure, no encode) and
+//! `crate::data_plane::size_hint::archived_size_hint` (a walk over the structure, no encode) and
 //! has the codec encode straight into the uninitialised loan
 //! ([`codec::encode_into_uninit`]); the header carries the archive length, times and
 //! type id. The codec initialises exactly the bytes it reports (rkyv writes padding
@@ -20,7 +20,7 @@
 //! that actually fits.
 //!
 //! [`TrajectoryPublisher::loan_structure`] splits `publish` in two: encode into the
-//! loan now, send later ([`crate::data_plane::structure_loan`]).
+//! loan now, send later (`crate::data_plane::structure_loan`).
 //!
 //! # The next loan, made ahead
 //! After each structure it sends, the publisher loans the slice for the next one (of
@@ -34,7 +34,7 @@
 //! larger) loans its own.
 //!
 //! Images written by a camera go through [`TrajectoryPublisher::loan_image`] instead,
-//! which lets the camera fill the pixels in place (see [`crate::data_plane::image_loan`]).
+//! which lets the camera fill the pixels in place (see `crate::data_plane::image_loan`).
 //!
 //! # Late joiners
 //! iceoryx2 keeps the last `history_size` samples in the publisher and hands them to a
@@ -153,7 +153,7 @@ impl TrajectoryPublisherBuilder {
         self
     }
 
-    /// All service settings at once (see [`crate::data_plane::qos`]).
+    /// All service settings at once (see `crate::data_plane::qos`).
     pub fn qos(mut self, qos: TrajectoryQos) -> Self {
         self.qos = qos;
         self
@@ -512,7 +512,7 @@ impl TrajectoryPublisher {
     }
 
     /// Encodes `es` into loaned shared memory now, for sending later with
-    /// [`StructureLoan::send`] (see [`crate::data_plane::structure_loan`]): the encoding is done
+    /// [`StructureLoan::send`] (see `crate::data_plane::structure_loan`): the encoding is done
     /// before the moment the structure has to go.
     pub fn loan_structure(&self, es: &EntityStructure) -> Result<StructureLoan<'_>, PublishError> {
         let mut want = archived_size_hint(es);

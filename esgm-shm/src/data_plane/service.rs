@@ -50,7 +50,7 @@ pub enum Cleanup {
     /// Never: every other node. A cleanup reads every node of the host (about 0.3 ms
     /// each), so a connect that cleaned took 80 ms in a domain of 60 processes. The
     /// room a crashed process's ports hold is reclaimed by whoever needs it
-    /// ([`with_room`]), and the rest by the coordinator now and then.
+    /// (`with_room`), and the rest by the coordinator now and then.
     None,
 }
 
@@ -245,7 +245,7 @@ fn chosen_root(env: Option<&str>, own_default: bool) -> Option<String> {
 
 /// The iceoryx2 configuration of every esgm node: [`iceoryx2_config`] (its paths and
 /// prefix, so that every process meets on the same files), with a subscriber's
-/// room for expired connections cut to [`EXPIRED_CONNECTIONS`] (128 per subscriber
+/// room for expired connections cut to `EXPIRED_CONNECTIONS` (128 per subscriber
 /// made a process reading 300 trajectories hold 140 MiB), dead-node cleanup when the
 /// node is made as `cleanup` says, and none when a service is opened.
 pub fn node_config(cleanup: Cleanup) -> iceoryx2::config::Config {
@@ -347,7 +347,7 @@ impl OpenError {
     }
 
     /// True if this failure is for lack of room ([`Self::exceeded`], or a limit esgm
-    /// checked itself), which [`with_room`] retries after cleaning up.
+    /// checked itself), which `with_room` retries after cleaning up.
     pub fn lacks_room(&self) -> bool {
         matches!(self, Self::LimitReached(_)) || self.exceeded().is_some()
     }

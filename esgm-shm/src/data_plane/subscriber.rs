@@ -3,7 +3,7 @@
 //!
 //! Every sample goes through [`check_sample`] (the header's type id, kind and archive
 //! length, then with [`Validation::InPlace`], the default, the archive itself); see
-//! [`crate::data_plane::sample_check`] for the order and why it is one pure function.
+//! `crate::data_plane::sample_check` for the order and why it is one pure function.
 //!
 //! A sample failing any check is returned to iceoryx2 at once and reported as a typed
 //! [`ReceiveError`]; the counters in [`SubscriberStats`] say how often. Nothing a peer
@@ -165,7 +165,7 @@ impl TrajectorySubscriberBuilder {
     }
 
     /// The service settings, used if this subscriber creates the service (see
-    /// [`crate::data_plane::qos`]); default [`TrajectoryQos::default`].
+    /// `crate::data_plane::qos`); default [`TrajectoryQos::default`].
     pub fn qos(mut self, qos: TrajectoryQos) -> Self {
         self.qos = qos;
         self

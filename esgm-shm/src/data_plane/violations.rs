@@ -64,7 +64,7 @@ pub struct ViolationRecord {
     pub add_time: Time,
     /// Per-writer counter, +1 per record; a gap means records were overwritten.
     pub sequence: u64,
-    /// The constraint broken: [`constraint_code`]; 0 is never written.
+    /// The constraint broken: `constraint_code`; 0 is never written.
     pub constraint: u32,
     /// Zero; room to grow.
     pub reserved: u32,

@@ -43,7 +43,7 @@ pub enum Decided<T> {
         /// Samples of the writer's skipped just before this one.
         lost: u64,
     },
-    /// Not the writer's (another port, or held past [`MAX_HELD`]): refused, to be
+    /// Not the writer's (another port, or held past `MAX_HELD`): refused, to be
     /// counted as not the writer's.
     NotWriter {
         /// The port it came from.
@@ -81,7 +81,7 @@ impl<T> WriterCheck<T> {
     }
 
     /// This check holding at most `max_held` arrivals (at least one) instead of
-    /// [`MAX_HELD`]: [`MAX_HELD_IMAGES`] for a trajectory of images.
+    /// `MAX_HELD`: `MAX_HELD_IMAGES` for a trajectory of images.
     #[must_use]
     pub fn holding(mut self, max_held: usize) -> Self {
         self.max_held = max_held.max(1);
