@@ -17,7 +17,7 @@ use anyhow::Context;
 use esgm_core::library::Image;
 use esgm_core::{Esgm, Time};
 use esgm_shm::ShmEsgm;
-use esgm_shm::client::attach::serve_while_system_lives;
+use esgm_shm::attach::serve_while_system_lives;
 
 use crate::camera_sensor::CameraSensor;
 use crate::frame_source::{FrameSource, RenderError};
@@ -26,7 +26,7 @@ use crate::scene::SyntheticScene;
 
 /// How long a stopped system's coordinator may stay gone before a serving camera
 /// leaves (a slow or crashed coordinator is waited for: see
-/// [`esgm_shm::client::attach`]).
+/// [`esgm_shm::attach`]).
 pub const COORDINATOR_PATIENCE: Duration = Duration::from_millis(500);
 
 /// The name a camera serving sensor `sensor` goes by in the registry and in logs

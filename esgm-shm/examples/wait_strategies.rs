@@ -20,7 +20,7 @@ use anyhow::{Context, Result, bail};
 use esgm_core::EntityStructure;
 use esgm_core::codec::ArchivedValue;
 use esgm_core::library::Image;
-use esgm_shm::data_plane::wait::DEFAULT_SPIN;
+use esgm_shm::unstable::DEFAULT_SPIN;
 use esgm_shm::{ShmNode, TrajectoryPublisher, TrajectorySubscriber, WaitStrategy, unique_domain};
 use iceoryx2::prelude::{LogLevel, NodeBuilder, set_log_level};
 

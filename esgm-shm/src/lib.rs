@@ -4,10 +4,10 @@
 //! publish-subscribe service whose samples are codec-encoded entity structures
 //! ([`esgm_core::codec`]) that readers use in place.
 //!
-//! This is the data plane ([`data_plane`]): [`TrajectoryPublisher`], [`TrajectorySubscriber`], the
-//! sample layout ([`payload`](data_plane::payload)), service naming ([`service_name`](data_plane::service_name)), waiting
-//! ([`wait`](data_plane::wait)), structures encoded ahead of sending (`structure_loan`) and in-place
-//! images (`image_loan`), and the violations of a trajectory (`violations`). The
+//! This is the data plane: [`TrajectoryPublisher`], [`TrajectorySubscriber`], the
+//! sample layout ([`SampleHeader`]), service naming ([`TrajectoryServiceNames`]), waiting
+//! ([`WaitStrategy`]), structures encoded ahead of sending ([`StructureLoan`]) and in-place
+//! images ([`ImageLoan`]), and the violations of a trajectory ([`ViolationSubscriber`]). The
 //! control plane (coordinator, registry) and [`connect`], the `Esgm` interface across
 //! processes, build on it: policy, history and queries are esgm-core's.
 //!
@@ -39,7 +39,7 @@
 //! ## Design decisions
 //! - **A payload of 16-byte blocks, not bytes.** The archive needs 16-byte alignment;
 //!   iceoryx2's `[u8]` is only 8-aligned, and asking for 16 pads every byte to 16
-//!   (a 385 MB segment for one image publisher). See [`payload`](data_plane::payload).
+//!   (a 385 MB segment for one image publisher). See `payload`.
 //! - **Everything a filter needs is in the header.** Times, archive length, type id and
 //!   sequence travel in the iceoryx2 user header ([`SampleHeader`]), so type checks and
 //!   time lookups never touch the payload; the header is plain integers, so a corrupt
@@ -55,12 +55,12 @@
 //!   defer or skip it, explicitly and unsafely. Bad samples are typed errors and
 //!   counters ([`SubscriberStats`]), never panics.
 //! - **Spin briefly, then sleep on a futex.** A blocking reader sleeps on its
-//!   trajectory's futex word in shared memory ([`wake_word`](data_plane::wake_word)), half the cost of
+//!   trajectory's futex word in shared memory ([`wake_word`](crate::unstable::WakeWord)), half the cost of
 //!   iceoryx2's event (a Unix datagram), which stays for waits over many trajectories.
 //!   The default [`WaitStrategy`] still spins 25 µs before sleeping; every wait has a
-//!   deadline because a dead publisher is not signalled. See [`wait`](data_plane::wait).
+//!   deadline because a dead publisher is not signalled. See `wait`.
 //! - **One namespace per system, and per test.** Service names carry a domain
-//!   ([`service_name`](data_plane::service_name)), so parallel tests and independent systems never meet.
+//!   (`service_name`), so parallel tests and independent systems never meet.
 //!
 //! ## One writer per trajectory, and it gates
 //! Exactly one process writes a trajectory (the coordinator places it, see
@@ -90,7 +90,7 @@
 //! A replica's small fields are decoded (cheaper than bookkeeping); its images are
 //! not: each octet sequence of a large sample stays in the writer's chunk, kept
 //! borrowed until the last value reading it — in the cache, a unit's input, a
-//! subscriber's queue, a query answer — is dropped ([`holdings`](client::holdings)). A process that keeps
+//! subscriber's queue, a query answer — is dropped ([`holdings`](crate::HoldingStats)). A process that keeps
 //! more images than its subscriber may borrow (cache bound + a slack of 8) gets copies
 //! of the later ones, counted in [`ShmEsgm::holding_stats`].
 //!
@@ -103,7 +103,7 @@
 //! writer's sequence numbers.
 //!
 //! How a sample crosses with one wake-up, and how images are written once, by their
-//! producer, where every reader reads them: see [`client`].
+//! producer, where every reader reads them: see `client`.
 //!
 //! ## The coordinator is not a single point of failure
 //! The coordinator ([`control`]) is a registry and a supervisor; samples never pass
@@ -115,22 +115,29 @@
 //! with pids and restarts) and each trajectory's generation, which every process
 //! compares with what it mirrors once a second — a registry rebuilt piecemeal would
 //! make readers drop what they read. The file is replaced atomically after every
-//! change, in a per-domain directory ([`control::state`] says where and why).
+//! change, in a per-domain directory ([`crate::control::StateDir`] says where and why).
 #![deny(missing_docs)]
 
-pub mod client;
+pub(crate) mod client;
 pub mod control;
-pub mod data_plane;
+pub(crate) mod data_plane;
 pub mod process;
 
 // `use esgm_shm::prelude::*;`: connect, ShmEsgm and esgm_core's prelude.
 pub use client::prelude;
 
+pub use client::attach;
+
 pub use client::holdings::HoldingStats;
+pub use data_plane::capacity::{
+    DEFAULT_MAX_PROCESSES, DEFAULT_READERS, DomainLimits, EventCapacity, IllegalLimit, Readers,
+};
 pub use data_plane::image_layout::ImageError;
 pub use data_plane::image_loan::ImageLoan;
 pub use data_plane::payload::{Block16, SampleHeader};
-pub use data_plane::publisher::{PublishError, Published, SampleSizing, TrajectoryPublisher};
+pub use data_plane::publisher::{
+    PublishError, Published, SampleSizing, TrajectoryPublisher, TrajectoryPublisherBuilder,
+};
 pub use data_plane::qos::{
     DEFAULT_MAX_HISTORY, Delivery, TrajectoryQos, history_bound, history_qos,
 };
@@ -142,19 +149,24 @@ pub use data_plane::service::{
     node_config,
 };
 pub use data_plane::service_name::{
-    NameError, TrajectoryServiceNames, node_name, nodes_of, processes_of, unique_domain,
+    DEFAULT_DOMAIN, NameError, SYSTEM_DOMAIN, TrajectoryServiceNames, node_name, nodes_of,
+    processes_of, unique_domain,
 };
 pub use data_plane::structure_loan::StructureLoan;
-pub use data_plane::subscriber::{ReceiveError, SubscriberStats, TrajectorySubscriber, Validation};
+pub use data_plane::subscriber::{
+    ReceiveError, SubscriberStats, TrajectorySubscriber, TrajectorySubscriberBuilder, Validation,
+};
 pub use data_plane::type_id::type_id;
 pub use data_plane::violations::{
     ViolationPublisher, ViolationRecord, ViolationSubscriber, ViolationSubscriberBuilder,
     ViolationSubscriberStats,
 };
-pub use data_plane::wait::WaitStrategy;
+pub use data_plane::wait::{WaitAnyError, WaitStrategy};
 pub use data_plane::writer_check::{Decided, WriterCheck};
 
+pub mod unstable;
+
 pub use client::{
-    ConnectError, CoordinatorWatch, DOMAIN_ENV, ShmEsgm, ShmEsgmBuilder, WORKER_ENV, connect,
-    trajectory_qos,
+    ConnectError, CoordinatorWatch, DEFAULT_TIMEOUT, DOMAIN_ENV, ShmEsgm, ShmEsgmBuilder,
+    WORKER_ENV, connect, trajectory_qos,
 };

@@ -142,9 +142,9 @@ pub fn print_json_lines<T: serde::Serialize>(lines: impl IntoIterator<Item = T>)
 
 /// Removes the files a domain keeps in `/dev/shm` beside iceoryx2's services, at the
 /// domain's end (`esgm down`, the end of `esgm up` and of `esgm demo`): the wake words
-/// ([`crate::data_plane::wake_word`]), which a process killed while it mapped one
+/// ([`crate::unstable::WakeWord`]), which a process killed while it mapped one
 /// leaves counted, and the trajectories' kept histories
-/// ([`crate::data_plane::kept_history`]), which outlive every process while the domain
+/// ([`crate::unstable::KeptHistory`]), which outlive every process while the domain
 /// runs and not after. Returns how many files were removed.
 pub fn remove_domain_files(domain: &str) -> usize {
     crate::data_plane::wake_word::remove_domain(domain)

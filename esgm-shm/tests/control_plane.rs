@@ -63,7 +63,7 @@ fn saving(
         &domain,
         TypeRegistry::with_library(),
         state.clone(),
-        esgm_shm::data_plane::capacity::DomainLimits::default(),
+        esgm_shm::DomainLimits::default(),
     )
     .unwrap();
     let client = ControlClient::connect(&domain, DEADLINE).unwrap();

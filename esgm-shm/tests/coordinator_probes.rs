@@ -10,10 +10,10 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use esgm_core::TypeRegistry;
-use esgm_shm::control::processes::{ProcessSpec, ProcessStatus};
 use esgm_shm::control::{
     ControlClient, ControlClientError, ControlError, Coordinator, Registry, Request, Response,
 };
+use esgm_shm::control::{ProcessSpec, ProcessStatus};
 use esgm_shm::unique_domain;
 use iceoryx2::prelude::{AllocationStrategy, NodeBuilder};
 
@@ -164,7 +164,7 @@ fn a_huge_unknown_name_is_refused_while_others_are_served() {
     match c.call(&Request::GetEntityStructureType { type_name: long }) {
         Err(ControlClientError::Remote(ControlError::IllegalName { reason, .. })) => {
             assert!(
-                matches!(reason, esgm_shm::control::limits::NameRule::TooLong { len: 200_000, .. }),
+                matches!(reason, esgm_shm::control::NameRule::TooLong { len: 200_000, .. }),
                 "{reason}"
             );
         }
@@ -191,7 +191,7 @@ fn a_request_in_another_protocol_is_named_a_protocol_mismatch() {
         .create::<esgm_shm::ShmService>()
         .unwrap();
     let service = node
-        .service_builder(&esgm_shm::data_plane::service_name::control_service(&d).unwrap())
+        .service_builder(&esgm_shm::unstable::control_service(&d).unwrap())
         .request_response::<[u8], [u8]>()
         .max_active_requests_per_client(4)
         .open()
@@ -209,7 +209,7 @@ fn a_request_in_another_protocol_is_named_a_protocol_mismatch() {
     let deadline = Instant::now() + DEADLINE;
     let answer = loop {
         if let Some(a) = pending.receive().unwrap() {
-            break esgm_shm::control::protocol::decode::<Response>(a.payload()).unwrap();
+            break esgm_shm::control::decode::<Response>(a.payload()).unwrap();
         }
         assert!(Instant::now() < deadline, "no answer within {DEADLINE:?}");
         std::thread::sleep(Duration::from_millis(1));

@@ -11,8 +11,8 @@ use std::time::{Duration, Instant};
 
 use common::{TIMEOUT, coordinator, location, state, wait_for, x};
 use esgm_core::{EntityTrajectoryStructure, Esgm, SubscribeOptions};
-use esgm_shm::data_plane::service_name::wake_service_name;
-use esgm_shm::data_plane::wake_word::{WakeWord, path_for};
+use esgm_shm::unstable::wake_service_name;
+use esgm_shm::unstable::{WakeWord, path_for};
 
 /// Samples sent while the reader's thread sleeps.
 const SAMPLES: usize = 20;
@@ -48,7 +48,7 @@ fn a_reader_asleep_covers_its_receiver_and_an_uncovered_receiver_is_still_notifi
 
     // The reader's thread sleeps on the word between samples: each one finds its
     // receiver covered, and wakes the thread, which feeds the replica.
-    let spared = esgm_shm::data_plane::publisher::notifies_spared_here();
+    let spared = esgm_shm::unstable::notifies_spared_here();
     std::thread::scope(|s| {
         let got = s.spawn(|| {
             (0..SAMPLES).map(|_| x(&stream.recv_timeout(TIMEOUT).unwrap())).collect::<Vec<_>>()
@@ -70,10 +70,7 @@ fn a_reader_asleep_covers_its_receiver_and_an_uncovered_receiver_is_still_notifi
     });
     // Not every one: a ring that finds the thread between its count and its sleep
     // notifies, to be sure.
-    assert!(
-        esgm_shm::data_plane::publisher::notifies_spared_here() > spared,
-        "the writer skipped notifies"
-    );
+    assert!(esgm_shm::unstable::notifies_spared_here() > spared, "the writer skipped notifies");
     assert!(wait_for(|| word.receivers() == (1, 0)), "nobody asleep: {:?}", word.receivers());
 
     // A second reading process, whose thread slept once and now never waits: only its

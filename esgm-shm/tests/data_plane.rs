@@ -14,7 +14,7 @@ use common::*;
 use esgm_core::codec::{self, CodecError, ENVELOPE_LEN};
 use esgm_core::library::Image;
 use esgm_core::{Entity, EntityFrame, EntityStructure, Octets, Pos2, Value, Vec3};
-use esgm_shm::data_plane::image_layout::{IMAGE_NAME_MAX, IMAGE_PIXELS_OFFSET};
+use esgm_shm::unstable::{IMAGE_NAME_MAX, IMAGE_PIXELS_OFFSET};
 use esgm_shm::{
     Delivery, ImageError, OpenError, PublishError, ReceiveError, SampleHeader, SampleSizing,
     SubscriberStats, TrajectoryPublisher, TrajectoryQos, TrajectorySubscriber, Validation,
@@ -26,7 +26,7 @@ fn publisher(
     domain: &str,
     trajectory: &str,
     type_name: &str,
-) -> esgm_shm::data_plane::publisher::TrajectoryPublisherBuilder {
+) -> esgm_shm::TrajectoryPublisherBuilder {
     TrajectoryPublisher::builder(trajectory, type_name).domain(domain)
 }
 
@@ -34,7 +34,7 @@ fn subscriber(
     domain: &str,
     trajectory: &str,
     type_name: &str,
-) -> esgm_shm::data_plane::subscriber::TrajectorySubscriberBuilder {
+) -> esgm_shm::TrajectorySubscriberBuilder {
     TrajectorySubscriber::builder(trajectory, type_name).domain(domain)
 }
 
@@ -561,9 +561,8 @@ fn every_wait_strategy_delivers_and_times_out() {
 #[test]
 fn blocked_readers_sleep_on_the_trajectorys_word_and_are_all_woken() {
     let domain = unique_domain("word");
-    let word = esgm_shm::data_plane::wake_word::path_for(
-        &esgm_shm::data_plane::service_name::wake_service_name(&domain, "robot"),
-    );
+    let word =
+        esgm_shm::unstable::path_for(&esgm_shm::unstable::wake_service_name(&domain, "robot"));
     let readers: Vec<_> = (0..3)
         .map(|_| {
             let n = node();

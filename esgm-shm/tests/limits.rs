@@ -11,8 +11,8 @@ mod common;
 use common::{TIMEOUT, robot, wait_for};
 use esgm_core::esgm::{Limit, LimitReached, LookupError, TrajectorySpec};
 use esgm_core::{AddOutcome, EntityTrajectoryStructure, Esgm};
+use esgm_shm::DomainLimits;
 use esgm_shm::control::{Coordinator, CoordinatorThread, Registry};
-use esgm_shm::data_plane::capacity::DomainLimits;
 use esgm_shm::{ConnectError, ShmEsgm};
 
 fn coordinator(prefix: &str, limits: DomainLimits) -> CoordinatorThread {

@@ -241,7 +241,7 @@ fn a_trajectory_whose_writer_exited_is_taken_over_by_the_next_adder() {
     let xs: Vec<f64> = made.get_between(0, 10).unwrap().iter().map(x).collect();
     assert_eq!(xs, [1.0, 2.0, 3.0]);
     // The registry names this process as the writer, and readers elsewhere follow.
-    use esgm_shm::control::protocol::{Request, Response};
+    use esgm_shm::control::{Request, Response};
     let Ok(Response::Placements(placements)) = app.control(Request::ListPlacements) else {
         panic!("no placements")
     };

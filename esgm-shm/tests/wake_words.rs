@@ -8,9 +8,9 @@ mod common;
 use std::time::{Duration, Instant};
 
 use common::{reap, spawn_child};
-use esgm_shm::data_plane::service_name::wake_service_name;
-use esgm_shm::data_plane::wake_word::{FRUITLESS_RINGS, WakeWord};
 use esgm_shm::unique_domain;
+use esgm_shm::unstable::wake_service_name;
+use esgm_shm::unstable::{FRUITLESS_RINGS, WakeWord};
 
 const ROLE: &str = "ESGM_TEST_WAKE_ROLE";
 const SERVICE: &str = "ESGM_TEST_WAKE_SERVICE";
@@ -81,7 +81,7 @@ impl Word {
 
     /// Ends the domain and checks that its word's file is gone.
     fn end(self) {
-        let path = esgm_shm::data_plane::wake_word::path_for(&self.service);
+        let path = esgm_shm::unstable::path_for(&self.service);
         drop(self);
         assert!(!path.exists(), "the domain's end removed the word");
     }
@@ -93,7 +93,7 @@ struct DomainEnd(String);
 
 impl Drop for DomainEnd {
     fn drop(&mut self) {
-        esgm_shm::data_plane::wake_word::remove_domain(&self.0);
+        esgm_shm::unstable::remove_domain(&self.0);
     }
 }
 

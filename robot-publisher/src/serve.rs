@@ -17,13 +17,13 @@ use esgm_core::esgm::{CreateError, TrajectorySpec};
 use esgm_core::library::RobotState;
 use esgm_core::{Entity, Esgm, FluentStreamPolicy, SharedClock, Time, millis};
 use esgm_shm::ShmEsgm;
-use esgm_shm::client::attach::serve_while_system_lives;
+use esgm_shm::attach::serve_while_system_lives;
 
 use crate::publisher::RobotPublisher;
 
 /// How long a stopped system's coordinator may stay gone before a running robot
 /// leaves (a slow or crashed coordinator is waited for, publishing on: see
-/// [`esgm_shm::client::attach`]).
+/// [`esgm_shm::attach`]).
 pub const COORDINATOR_PATIENCE: Duration = Duration::from_millis(500);
 
 /// How long [`start`] waits for the trajectory it follows to be created (a system
@@ -150,8 +150,8 @@ mod tests {
     use super::*;
     use clap::Parser;
     use esgm_core::{EntityTrajectoryStructure, InProcessEsgm};
-    use esgm_shm::control::protocol::{Request, Response};
     use esgm_shm::control::{Coordinator, Registry};
+    use esgm_shm::control::{Request, Response};
 
     fn parse(args: &[&str]) -> Result<RobotArgs, clap::Error> {
         RobotArgs::try_parse_from(std::iter::once("robot").chain(args.iter().copied()))

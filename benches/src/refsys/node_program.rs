@@ -21,7 +21,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
-use esgm_shm::client::attach::serve_while_system_lives;
+use esgm_shm::attach::serve_while_system_lives;
 use esgm_shm::prelude::*;
 
 use super::processes::sleep_until;

@@ -179,7 +179,7 @@ pub fn ping_pong(
         let made = making.elapsed();
 
         if i == warmup + 1 {
-            spared_before = esgm_shm::data_plane::publisher::notifies_spared_here();
+            spared_before = esgm_shm::unstable::notifies_spared_here();
         }
         ctx.before_hop(mode.wait());
         let start = Instant::now();
@@ -189,11 +189,11 @@ pub fn ping_pong(
         black_box(value);
         let round_trip = start.elapsed();
         if let Some(done) = &done {
-            let before = esgm_shm::data_plane::publisher::notifies_spared_here();
+            let before = esgm_shm::unstable::notifies_spared_here();
             add(done, stamped(Kind::Small.make(i), seq))?;
             // Counted out below: the row counts the measured pings' notifies.
             if i > warmup {
-                dones_spared += esgm_shm::data_plane::publisher::notifies_spared_here() - before;
+                dones_spared += esgm_shm::unstable::notifies_spared_here() - before;
             }
         }
 
@@ -206,8 +206,7 @@ pub fn ping_pong(
     }
     // Every publisher of this process is the measuring connection's: its pings, and a
     // paced row's `done` signals.
-    run.notifies_spared =
-        esgm_shm::data_plane::publisher::notifies_spared_here() - spared_before - dones_spared;
+    run.notifies_spared = esgm_shm::unstable::notifies_spared_here() - spared_before - dones_spared;
     add(&ping, stamped(hello, STOP))?;
     run.peer_notes = peer.finish(FINISH_TIMEOUT)?;
     // The connection goes before its coordinator.

@@ -29,7 +29,7 @@
 use std::time::Duration;
 
 use anyhow::{Context as _, bail};
-use esgm_shm::data_plane::wait::DEFAULT_SPIN;
+use esgm_shm::unstable::DEFAULT_SPIN;
 use esgm_shm::{TrajectoryPublisher, TrajectorySubscriber, WaitStrategy, unique_domain};
 
 use super::ipc_esgm_echo::{Encode, EsgmRun, echo, ping_pong};

@@ -16,7 +16,7 @@ use std::os::unix::net::UnixStream;
 
 use anyhow::{Context as _, bail};
 use esgm_shm::Block16;
-use esgm_shm::data_plane::payload::blocks_for;
+use esgm_shm::unstable::blocks_for;
 
 use crate::patience::{Patience, SLICE};
 

@@ -282,7 +282,7 @@ pub enum AdminError {
         /// The name asked for.
         name: String,
     },
-    /// The domain has as many processes as it admits ([`crate::data_plane::capacity`]).
+    /// The domain has as many processes as it admits ([`crate::DomainLimits`]).
     #[error(transparent)]
     LimitReached(LimitReached),
     /// The administration channel is not running in this process.

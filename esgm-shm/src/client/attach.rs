@@ -7,7 +7,7 @@
 //! - **slow**: the coordinator's service is there but an answer overstays its
 //!   deadline (a busy machine). The worker keeps serving.
 //! - **gone, the system kept**: no coordinator serves, but the domain's registry is
-//!   kept on disk ([`crate::control::state`]) — the coordinator crashed. The worker keeps
+//!   kept on disk ([`crate::control::StateDir`]) — the coordinator crashed. The worker keeps
 //!   serving and waits; a new `esgm up` takes over the control service this worker
 //!   still holds, restores the registry, and the worker's control calls reach it
 //!   again (re-attached, with nothing to re-register).

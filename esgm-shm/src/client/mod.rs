@@ -65,7 +65,7 @@ mod blocking_add;
 mod coordinator_watch;
 mod coverage;
 mod export;
-pub mod holdings;
+pub(crate) mod holdings;
 mod image_loans;
 mod import;
 mod location;
@@ -96,9 +96,7 @@ use crate::control::protocol::{ControlError, Request, Response};
 use crate::control::{ControlClient, ControlClientError};
 pub use admin::AdminError;
 use admin::{Admin, AdminAnswer, AdminOp, DomainReset};
-#[doc(hidden)]
 pub use admin::{AdminRead, AdminReader};
-#[doc(hidden)]
 pub use blocking_add::{
     read_answer as read_blocking_add_answer, serve_request as serve_blocking_add,
 };
@@ -119,7 +117,7 @@ pub const DEFAULT_TIMEOUT: Duration = Duration::from_secs(5);
 #[non_exhaustive]
 pub enum ConnectError {
     /// The domain has as many processes as it admits (`esgm up --max-processes`; see
-    /// [`crate::data_plane::capacity`]): this process was refused, every other is served.
+    /// [`crate::DomainLimits`]): this process was refused, every other is served.
     #[error(transparent)]
     LimitReached(esgm_core::esgm::LimitReached),
     /// No coordinator answered (see the reason; start one with `esgm up`).
@@ -204,7 +202,7 @@ impl ShmEsgmBuilder {
 
     /// Connects as a short-lived tool (a command such as `esgm latest`): it may use the
     /// ports every domain-wide and trajectory service keeps beyond its limits
-    /// ([`crate::data_plane::capacity`]), so a domain whose processes or a trajectory whose
+    /// ([`crate::DomainLimits`]), so a domain whose processes or a trajectory whose
     /// readers reached their limit can still be looked at and added to. A long-lived
     /// process must not: it would take the room the tools need.
     #[must_use]
@@ -213,7 +211,7 @@ impl ShmEsgmBuilder {
         self
     }
 
-    /// How long a control call may take ([`DEFAULT_TIMEOUT`]).
+    /// How long a control call may take (`DEFAULT_TIMEOUT`).
     #[must_use]
     pub fn timeout(mut self, timeout: Duration) -> Self {
         self.timeout = Some(timeout);
@@ -435,7 +433,7 @@ impl ShmEsgm {
     /// Images (octet sequences) received from other processes that this process reads
     /// in shared memory, and those it had to copy: a replica's cache, its units, its
     /// subscribers and query answers share the writer's chunk, borrowed until the last
-    /// value reading it is dropped (see [`crate::client::holdings`]). `None` if this
+    /// value reading it is dropped (see [`crate::HoldingStats`]). `None` if this
     /// process's location thread has stopped (never, since values own what they
     /// hold; kept for callers that match on it).
     pub fn holding_stats(&self) -> Option<HoldingStats> {

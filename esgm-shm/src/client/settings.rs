@@ -39,7 +39,7 @@ pub(crate) const HOLD_SLACK: usize = 8;
 /// removed by iceoryx2's dead-node cleanup when its successor's node is made.)
 ///
 /// The trajectory's `readers` (its record's [`crate::control::TrajectoryRecord::readers`])
-/// size its subscribers and nodes ([`crate::data_plane::capacity`]).
+/// size its subscribers and nodes ([`crate::DomainLimits`]).
 pub fn bridge_qos(
     policy: &FluentStreamPolicy,
     entity_type: &EntityStructureType,

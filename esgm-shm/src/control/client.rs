@@ -68,7 +68,7 @@ pub enum ControlClientError {
         domain: String,
     },
     /// The domain's control service has as many clients as it admits (one per
-    /// process; see [`crate::data_plane::capacity`]).
+    /// process; see [`crate::DomainLimits`]).
     #[error(transparent)]
     LimitReached(LimitReached),
     /// The client port could not be created.

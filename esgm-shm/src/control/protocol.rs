@@ -131,7 +131,7 @@ pub enum Request {
         /// The asking process.
         host: String,
     },
-    /// Keep a process running (see [`super::processes`]); the same declaration again
+    /// Keep a process running (see [`crate::control::ProcessSpec`]); the same declaration again
     /// changes nothing, another under the same name replaces it.
     DeclareProcess {
         /// What to run.
@@ -236,7 +236,7 @@ pub struct TrajectoryRecord {
     #[serde(default)]
     pub released: bool,
     /// How many processes may read it at once: the capacity every process opens its
-    /// services with ([`crate::data_plane::capacity`]); the spec's `readers`, else the domain's
+    /// services with ([`crate::DomainLimits`]); the spec's `readers`, else the domain's
     /// default.
     #[serde(default)]
     pub readers: crate::data_plane::capacity::Readers,
@@ -344,7 +344,7 @@ pub enum ControlError {
         reason: String,
     },
     /// A name is refused (empty, too long, or with `/`, spaces or control characters);
-    /// rename it (see [`super::limits`]).
+    /// rename it (see `super::limits`).
     #[error("illegal {what} name `{name}`: {reason}")]
     IllegalName {
         /// What it names (`trajectory`, `type`, `process`…).

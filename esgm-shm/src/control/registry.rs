@@ -92,7 +92,7 @@ impl Registry {
     }
 
     /// Carries out one request from `origin`: its names are checked first
-    /// ([`super::limits`]), and a process report is accepted only from the
+    /// (`super::limits`), and a process report is accepted only from the
     /// coordinator's own process (the supervisor) or from the reported process itself.
     pub fn handle_from(&mut self, request: Request, origin: Origin) -> Response {
         let changes = changes_registry(&request);
@@ -146,7 +146,7 @@ impl Registry {
     }
 
     /// Everything a new coordinator needs to answer as this one does
-    /// ([`super::state`]).
+    /// ([`crate::control::StateDir`]).
     pub fn snapshot(&self) -> Snapshot {
         let types = self
             .catalog

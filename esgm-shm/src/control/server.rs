@@ -281,7 +281,7 @@ impl Coordinator {
     }
 
     /// Starts the coordinator of `domain` whose registry is kept in `state` (see
-    /// [`super::state`]): takes the domain's lock, restores the registry a crashed
+    /// [`crate::control::StateDir`]): takes the domain's lock, restores the registry a crashed
     /// coordinator left there (else starts one with `types`), takes over the control
     /// service if the crashed one's clients still hold it, and saves the registry
     /// after every change. Returns how many trajectories were recovered, too.
@@ -920,7 +920,7 @@ impl Drop for CoordinatorThread {
     }
 }
 
-pub use crate::data_plane::service::cleanup_dead_nodes;
+use crate::data_plane::service::cleanup_dead_nodes;
 
 /// Logs the outcome of a [`cleanup_dead_nodes`] that runs in the background, as
 /// `reporter` should ([`DeadNodeCleanup::log`](crate::data_plane::service::DeadNodeCleanup::log)).

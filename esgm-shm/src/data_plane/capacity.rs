@@ -78,7 +78,7 @@ pub fn check_limit(setting: &'static str, value: usize, max: usize) -> Result<()
 }
 
 impl DomainLimits {
-    /// Checks both settings: between 1 and [`MAX_LIMIT`], and readers no more than
+    /// Checks both settings: between 1 and `MAX_LIMIT`, and readers no more than
     /// processes (a trajectory cannot be read by more processes than the domain has).
     pub fn check(&self) -> Result<(), IllegalLimit> {
         check_limit("max-processes", self.max_processes, MAX_LIMIT)?;

@@ -130,7 +130,7 @@ pub struct SampleHeader {
     /// Properties of the payload; see the `FLAG_*` constants. Unknown bits are ignored.
     pub flags: u32,
     /// The structure's index in its trajectory's kept history, plus one
-    /// ([`crate::data_plane::kept_history`]; 0: not kept). A primitive trajectory's
+    /// ([`crate::unstable::KeptHistory`]; 0: not kept). A primitive trajectory's
     /// writer keeps each structure it admits and numbers it there; a reader that
     /// already holds an index (its history came from the kept file, or from the
     /// writer before it restarted) skips it, so a history handed over again is never

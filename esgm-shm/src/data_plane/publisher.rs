@@ -179,14 +179,14 @@ impl TrajectoryPublisherBuilder {
     }
 
     /// How long a [`Delivery::Lossless`] publish waits for a full subscriber before
-    /// giving up on it; default [`DEFAULT_LOSSLESS_TIMEOUT`].
+    /// giving up on it; default `DEFAULT_LOSSLESS_TIMEOUT`.
     pub fn lossless_timeout(mut self, timeout: Duration) -> Self {
         self.lossless_timeout = timeout;
         self
     }
 
     /// Initial maximum sample size in bytes (codec envelope included); default
-    /// [`DEFAULT_INITIAL_MAX_LEN`]. Size it for the largest sample (e.g. an image) to
+    /// `DEFAULT_INITIAL_MAX_LEN`. Size it for the largest sample (e.g. an image) to
     /// avoid growth after start-up.
     pub fn max_len(mut self, bytes: usize) -> Self {
         self.initial_max_len = bytes;
@@ -207,7 +207,7 @@ impl TrajectoryPublisherBuilder {
 
     /// Has no effect: image loans no longer depend on the entity name (any name of up
     /// to [`crate::data_plane::image_layout::IMAGE_NAME_MAX`] bytes is sent in place, see
-    /// [`crate::data_plane::image_layout`]). Kept so that existing callers compile.
+    /// `crate::data_plane::image_layout`). Kept so that existing callers compile.
     pub fn image_name(self, _name: impl Into<String>) -> Self {
         self
     }
@@ -413,7 +413,7 @@ impl TrajectoryPublisher {
 
     /// How many sends skipped the iceoryx2 notify because every connection listening
     /// to it was counted as covered by a thread asleep on the futex word, which feeds
-    /// it once woken (see [`crate::data_plane::wake_word`]): for diagnostics and tests.
+    /// it once woken (see [`crate::unstable::WakeWord`]): for diagnostics and tests.
     pub fn notifies_spared(&self) -> u64 {
         self.notifies_spared.get()
     }

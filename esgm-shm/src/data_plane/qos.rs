@@ -91,7 +91,7 @@ impl Default for TrajectoryQos {
 }
 
 impl TrajectoryQos {
-    /// Room for `readers` reader processes ([`crate::data_plane::capacity`]): their subscribers and
+    /// Room for `readers` reader processes ([`crate::DomainLimits`]): their subscribers and
     /// nodes, with the tools' reserve.
     #[must_use]
     pub fn readers(self, readers: Readers) -> Self {

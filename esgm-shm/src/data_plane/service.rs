@@ -308,7 +308,7 @@ pub enum OpenError {
     /// [`crate::WaitStrategy::BusySpin`], which needs none, or raise the limit.
     #[error("cannot create the wake-up listener: {0}")]
     Listener(#[source] ListenerCreateError),
-    /// A limit of the trajectory's services was reached ([`crate::data_plane::capacity`]); the
+    /// A limit of the trajectory's services was reached ([`crate::DomainLimits`]); the
     /// error names the setting that raises it.
     #[error(transparent)]
     LimitReached(#[from] LimitReached),

@@ -151,7 +151,7 @@ impl TrajectorySubscriberBuilder {
     /// Refuses to subscribe, with [`esgm_core::esgm::LimitReached`], when the
     /// trajectory already has `limit` subscribers: a long-lived reader counts itself
     /// against the trajectory's `readers`, and leaves the ports beyond them to
-    /// short-lived tools ([`crate::data_plane::capacity`]). Default: no count (iceoryx2's own
+    /// short-lived tools ([`crate::DomainLimits`]). Default: no count (iceoryx2's own
     /// limit alone).
     pub fn reader_limit(mut self, limit: usize) -> Self {
         self.reader_limit = Some(limit);

@@ -81,7 +81,7 @@ pub enum WaitStrategy {
     /// busy for the whole wait. For a dedicated, pinned reader.
     BusySpin,
     /// Poll for `spin` (bounded by the timeout, yielding the CPU between polls after
-    /// [`PURE_SPIN`]), then sleep on the trajectory's wake-up word.
+    /// `PURE_SPIN`), then sleep on the trajectory's wake-up word.
     SpinThenBlock {
         /// How long to poll before sleeping.
         spin: Duration,

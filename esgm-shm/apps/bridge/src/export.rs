@@ -17,7 +17,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use esgm_core::EntityStructureType;
-use esgm_shm::control::protocol::{Request, Response, TrajectoryRecord};
+use esgm_shm::control::{Request, Response, TrajectoryRecord};
 use esgm_shm::{Decided, ReceiveError, ShmEsgm, ShmService, TrajectorySubscriber, WriterCheck};
 use iceoryx2::prelude::NodeBuilder;
 use parking_lot::Mutex;

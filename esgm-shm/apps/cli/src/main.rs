@@ -24,7 +24,7 @@ use clap::{Parser, Subcommand};
 #[command(name = "esgm", version, about, propagate_version = true)]
 struct Cli {
     /// The system to talk to (one coordinator per domain).
-    #[arg(long, global = true, env = "ESGM_DOMAIN", default_value = esgm_shm::data_plane::service_name::SYSTEM_DOMAIN)]
+    #[arg(long, global = true, env = "ESGM_DOMAIN", default_value = esgm_shm::SYSTEM_DOMAIN)]
     domain: String,
     /// Print data as JSON (one object per line for streams).
     #[arg(long, global = true)]

@@ -11,10 +11,11 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use esgm_core::TypeRegistry;
+use esgm_shm::DomainLimits;
 use esgm_shm::ShmEsgm;
-use esgm_shm::control::server::{cleanup_dead_nodes, log_cleanup};
+use esgm_shm::cleanup_dead_nodes;
+use esgm_shm::control::log_cleanup;
 use esgm_shm::control::{ControlClient, Coordinator, Request, Response, StateDir};
-use esgm_shm::data_plane::capacity::DomainLimits;
 use esgm_shm::process::access::{ShmAccess, Widener, widen_domain};
 
 use crate::config::Plan;

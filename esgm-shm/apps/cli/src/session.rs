@@ -20,7 +20,7 @@ pub fn connect(domain: &str) -> anyhow::Result<ShmEsgm> {
 
 /// Connects as a short-lived command (`esgm latest`, `esgm push`, `esgm stats`…),
 /// which may use the room every service keeps beyond its limits: a domain whose
-/// limit is reached can still be looked at ([`esgm_shm::data_plane::capacity`]).
+/// limit is reached can still be looked at ([`esgm_shm::DomainLimits`]).
 pub fn connect_tool(domain: &str) -> anyhow::Result<ShmEsgm> {
     connect_with(domain, true)
 }

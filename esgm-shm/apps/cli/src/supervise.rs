@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use esgm_shm::control::state::STATE_DIR_ENV;
+use esgm_shm::control::STATE_DIR_ENV;
 use esgm_shm::control::{ProcessRecord, ProcessSpec, ProcessStatus, StateDir};
 use esgm_shm::process::access::{ACCESS_ENV, ShmAccess};
 use esgm_shm::{DOMAIN_ENV, WORKER_ENV};

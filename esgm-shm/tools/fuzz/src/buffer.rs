@@ -4,7 +4,7 @@
 //! [`ARCHIVE_ALIGNMENT`]: esgm_core::codec::ARCHIVE_ALIGNMENT
 
 use esgm_shm::Block16;
-use esgm_shm::data_plane::payload::{BLOCK_LEN, as_bytes, blocks_for};
+use esgm_shm::unstable::{BLOCK_LEN, as_bytes, blocks_for};
 
 /// A copy of some bytes in blocks, starting `shift` bytes into the first block.
 #[derive(Debug, Clone)]

@@ -15,10 +15,10 @@
 //! - **The code under test is the code that runs.** Each target calls the function a
 //!   reader, the coordinator, a client or `esgm apply` calls
 //!   ([`esgm_core::codec::access`], [`esgm_shm::check_sample`],
-//!   [`esgm_shm::control::protocol::decode`] and the coordinator's
-//!   [`esgm_shm::control::Registry`], [`esgm_shm::client::AdminReader`],
-//!   [`esgm_shm::client::serve_blocking_add`] and
-//!   [`esgm_shm::client::read_blocking_add_answer`], [`esgm_bridge::wire::decode`],
+//!   [`esgm_shm::control::decode`] and the coordinator's
+//!   [`esgm_shm::control::Registry`], [`esgm_shm::unstable::AdminReader`],
+//!   [`esgm_shm::unstable::serve_blocking_add`] and
+//!   [`esgm_shm::unstable::read_blocking_add_answer`], [`esgm_bridge::wire::decode`],
 //!   [`esgm_recording::Recording`], [`esgm_cli::config::parse`]), never a copy. Where
 //!   that code was private it is public and `#[doc(hidden)]` for this crate alone.
 //! - **Inputs** start from valid ones (encodings of the library's types, a compound of

@@ -27,8 +27,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use esgm_shm::control::{ControlClient, ProcessSpec, Request, Response, StateDir};
-use esgm_shm::data_plane::capacity::{DEFAULT_MAX_PROCESSES, DEFAULT_READERS, DomainLimits};
 use esgm_shm::unique_domain;
+use esgm_shm::{DEFAULT_MAX_PROCESSES, DEFAULT_READERS, DomainLimits};
 use serde::Serialize;
 
 use super::scale::profile::Profile;
@@ -147,11 +147,8 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
             .duration_since(std::time::UNIX_EPOCH)
             .map_or(1, |d| d.as_nanos() as u64)
     });
-    let domain = if domain == esgm_shm::data_plane::service_name::SYSTEM_DOMAIN {
-        unique_domain("chaos")
-    } else {
-        domain.to_owned()
-    };
+    let domain =
+        if domain == esgm_shm::SYSTEM_DOMAIN { unique_domain("chaos") } else { domain.to_owned() };
     let run_dir = a.out.join("chaos-run");
     if run_dir.exists() {
         std::fs::remove_dir_all(&run_dir)

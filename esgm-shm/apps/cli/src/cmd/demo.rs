@@ -20,9 +20,9 @@ use esgm_core::{
     Entity, EntityTrajectoryStructure, Esgm, InProcessTrajectory, Sample, SubscribeOptions, Time,
     ValueApproximation, millis,
 };
-use esgm_shm::control::protocol::{Request, Response};
-use esgm_shm::control::server::cleanup_dead_nodes;
+use esgm_shm::cleanup_dead_nodes;
 use esgm_shm::control::{ProcessRecord, StateDir};
+use esgm_shm::control::{Request, Response};
 use esgm_shm::{ShmEsgm, unique_domain};
 
 use crate::config::{self, Plan, Serves};

@@ -9,7 +9,7 @@
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
-use esgm_shm::control::server::cleanup_dead_nodes;
+use esgm_shm::cleanup_dead_nodes;
 use esgm_shm::control::{
     ControlClient, ControlClientError, ProcessRecord, Request, Response, StateDir,
 };

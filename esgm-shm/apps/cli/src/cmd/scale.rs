@@ -32,8 +32,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use esgm_shm::control::StateDir;
-use esgm_shm::data_plane::capacity::{DEFAULT_MAX_PROCESSES, DEFAULT_READERS, DomainLimits};
 use esgm_shm::unique_domain;
+use esgm_shm::{DEFAULT_MAX_PROCESSES, DEFAULT_READERS, DomainLimits};
 use serde::Serialize;
 
 use super::soak::probe;
@@ -158,11 +158,8 @@ pub fn run(domain: &str, a: &Args) -> anyhow::Result<()> {
     if !a.settle_seconds.is_finite() || a.settle_seconds < 0.0 {
         bail!("--settle-seconds must be zero or more seconds, got {}", a.settle_seconds);
     }
-    let domain = if domain == esgm_shm::data_plane::service_name::SYSTEM_DOMAIN {
-        unique_domain("scale")
-    } else {
-        domain.to_owned()
-    };
+    let domain =
+        if domain == esgm_shm::SYSTEM_DOMAIN { unique_domain("scale") } else { domain.to_owned() };
     let run_dir = a.out.join("scale-run");
     std::fs::create_dir_all(run_dir.join("logs"))
         .with_context(|| format!("cannot create {}", run_dir.display()))?;

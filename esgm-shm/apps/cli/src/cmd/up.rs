@@ -10,7 +10,7 @@
 //! is cleaned.
 //!
 //! The registry is kept in the domain's state directory (`--state-dir`, else
-//! `$XDG_STATE_HOME/esgm/<domain>`; see `esgm_shm::control::state` for why a file).
+//! `$XDG_STATE_HOME/esgm/<domain>`; see `esgm_shm::control::StateDir` for why a file).
 //! If the coordinator crashes, its workers keep running and exchanging data; the next
 //! `esgm up` starts at once, restores the registry, takes over the control service,
 //! and adopts the running workers (same pids, no restart).
@@ -27,9 +27,9 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use esgm_cli::serve::Serve;
 use esgm_shm::control::{ControlClient, Request, StateDir};
-use esgm_shm::data_plane::capacity::{DEFAULT_MAX_PROCESSES, DEFAULT_READERS, DomainLimits};
 use esgm_shm::process::access::{ACCESS_ENV, ShmAccess};
 use esgm_shm::process::cpu_latency::{self, CPU_LATENCY_ENV, CpuLatency};
+use esgm_shm::{DEFAULT_MAX_PROCESSES, DEFAULT_READERS, DomainLimits};
 
 use crate::config::{self, Plan};
 pub use esgm_cli::serve::shutdown;

@@ -2,7 +2,7 @@
 //! connects under a stable name (a restarted worker takes its place and its
 //! trajectories back), registers what it serves, and serves while its system lives:
 //! through a slow or crashed coordinator, leaving only once the system was stopped
-//! (`esgm_shm::client::attach`).
+//! (`esgm_shm::attach`).
 //!
 //! The camera and the robot are their publishers' own code
 //! ([`camera_publisher::serve`], [`robot_publisher::serve`]): `esgm worker camera` and
@@ -19,7 +19,7 @@ use cu_workers::{BlobDetectionUnit, BlobSelectionUnit, DrivingDirectionUnit, Mov
 use esgm_core::Esgm;
 use esgm_core::esgm::{CompUnit, InputType, TypedUnitAdapter};
 use esgm_shm::ShmEsgm;
-use esgm_shm::client::attach::serve_while_system_lives;
+use esgm_shm::attach::serve_while_system_lives;
 use robot_publisher::RobotArgs;
 
 use crate::config;

@@ -1,4 +1,4 @@
-//! The admin channel ([`esgm_shm::client::AdminReader`]): what a process does with the
+//! The admin channel ([`esgm_shm::unstable::AdminReader`]): what a process does with the
 //! bytes any other process of the domain publishes on it. A question is decoded and
 //! answered (the reply encoded and read back, as the asker reads it); the answers to
 //! this process's question are collected and combined as `domain_stats`,
@@ -13,7 +13,7 @@ use std::sync::LazyLock;
 
 use esgm_core::esgm::{Esgm, MemoryStats, TrajectorySpec};
 use esgm_core::{DropCause, InProcessEsgm};
-use esgm_shm::client::AdminReader;
+use esgm_shm::unstable::AdminReader;
 use serde_json::json;
 
 use crate::json::{json_tokens, mutate_json};

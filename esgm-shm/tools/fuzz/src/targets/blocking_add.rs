@@ -1,7 +1,7 @@
 //! Blocking adds across processes: the writer's end
-//! ([`esgm_shm::client::serve_blocking_add`]: a request's bytes decoded, added through
+//! ([`esgm_shm::unstable::serve_blocking_add`]: a request's bytes decoded, added through
 //! a real trajectory's gate, the outcome encoded) and the replica's
-//! ([`esgm_shm::client::read_blocking_add_answer`]: the writer's answer decoded).
+//! ([`esgm_shm::unstable::read_blocking_add_answer`]: the writer's answer decoded).
 //!
 //! An input is a tag byte and a payload: `A` an answer as the replica reads it,
 //! anything else a request as the writer serves it. The writer's trajectory is a
@@ -18,8 +18,8 @@ use esgm_core::{
     AddError, AddOutcome, CacheConstraint, DelayConstraint, FluentStreamPolicy, InProcessEsgm,
     InProcessTrajectory, OrderConstraint,
 };
-use esgm_shm::client::{read_blocking_add_answer, serve_blocking_add};
-use esgm_shm::control::protocol::{decode, encode};
+use esgm_shm::control::{decode, encode};
+use esgm_shm::unstable::{read_blocking_add_answer, serve_blocking_add};
 
 use crate::json::{json_tokens, mutate_json};
 use crate::mutate::mutate;

@@ -19,7 +19,7 @@ use esgm_core::library::{Blob, BlobSeq, DrivingDirection, Image, Pose, RobotStat
 use esgm_core::value::Octets;
 use esgm_core::{Entity, EntityStructure, TypeChecker, TypeRegistry, ViewError};
 use esgm_shm::Block16;
-use esgm_shm::data_plane::payload::blocks_for;
+use esgm_shm::unstable::blocks_for;
 
 use crate::buffer::Blocks;
 use crate::mutate::mutate;

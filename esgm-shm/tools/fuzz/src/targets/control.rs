@@ -1,5 +1,5 @@
 //! The control protocol: requests as the coordinator decodes and carries them out,
-//! and answers as a client decodes them ([`esgm_shm::control::protocol`]).
+//! and answers as a client decodes them ([`esgm_shm::control::Request`]).
 //!
 //! A decoded request goes to a real [`Registry`] (the coordinator's state and rules,
 //! transport-free), kept for [`crate::target::RESET_EVERY`] cases so requests meet
@@ -18,13 +18,13 @@ use esgm_core::TypeRegistry;
 use esgm_core::esgm::InputType;
 use esgm_core::library::predefined_types;
 use esgm_shm::HoldingStats;
-use esgm_shm::control::limits::MAX_REQUEST_BYTES;
-use esgm_shm::control::protocol::{decode, encode};
-use esgm_shm::control::registry::changes_registry;
-use esgm_shm::control::state::Snapshot;
+use esgm_shm::control::MAX_REQUEST_BYTES;
 use esgm_shm::control::{
     ControlError, Origin, ProcessStatus, Registry, Request, Response, SaveHealth,
 };
+use esgm_shm::control::{decode, encode};
+use esgm_shm::unstable::Snapshot;
+use esgm_shm::unstable::changes_registry;
 
 use crate::json::{json_tokens, mutate_json};
 use crate::mutate::mutate;
@@ -257,7 +257,7 @@ impl Responses {
         answers.push(Response::Error(ControlError::IllegalName {
             what: "trajectory".into(),
             name: "a/b".into(),
-            reason: esgm_shm::control::limits::NameRule::BadCharacter('/'),
+            reason: esgm_shm::control::NameRule::BadCharacter('/'),
         }));
         let seeds = answers.iter().map(response_bytes).collect::<Result<_, _>>()?;
         Ok(Self { seeds })

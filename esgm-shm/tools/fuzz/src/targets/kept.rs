@@ -13,7 +13,7 @@
 
 use esgm_core::Entity;
 use esgm_core::library::{Image, RobotState};
-use esgm_shm::data_plane::kept_history::{KeptHistory, Retention};
+use esgm_shm::unstable::{KeptHistory, Retention};
 
 use crate::mutate::mutate;
 use crate::rng::Rng;

@@ -9,7 +9,7 @@
 //! see first; a reset is accepted only as a reset; every seed is accepted.
 
 use esgm_core::codec;
-use esgm_shm::data_plane::subscriber::{ReceiveError, Validation};
+use esgm_shm::{ReceiveError, Validation};
 use esgm_shm::{SampleHeader, SampleVerdict, check_sample, type_id};
 
 use crate::buffer::Blocks;

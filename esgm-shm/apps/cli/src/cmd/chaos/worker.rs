@@ -117,7 +117,7 @@ pub fn run(domain: &str, a: &WorkerArgs) -> anyhow::Result<()> {
         std::fs::write(stopped_file(&run, index), std::process::id().to_string())
             .context("cannot say stopped")
     });
-    esgm_shm::client::attach::serve_while_system_lives(&esgm, None, Duration::from_millis(500));
+    esgm_shm::attach::serve_while_system_lives(&esgm, None, Duration::from_millis(500));
     leaving.store(true, Ordering::Release);
     let written = writer.join().map_err(|_| anyhow::anyhow!("the writing thread panicked"))?;
     drop(subscriptions);
