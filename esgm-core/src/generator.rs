@@ -34,20 +34,30 @@ impl TrajectoryStore {
 }
 
 impl FluentGenerator<'_> {
-    /// The merged structure of the samples valid exactly at `t`, if any.
-    fn group_at(&self, t: Time) -> Option<EntityStructure> {
+    /// The merged structure of the samples valid exactly at `t`, if any, and the
+    /// (valid time, add time) of each.
+    fn group_at(&self, t: Time) -> Option<(EntityStructure, Sources)> {
         let group = self.store.history.exactly_at(t);
         let refs: Vec<&EntityStructure> = group.iter().map(|e| e.es.as_ref()).collect();
-        merge(&refs, self.policy.merge)
+        let sources = group.iter().map(|e| (e.vt, e.add_time)).collect();
+        merge(&refs, self.policy.merge).map(|es| (es, sources))
     }
 
     /// The value at `t`: the merged samples valid at `t`, or else the approximation of
     /// the merged neighbours. The answer is stamped with the query time.
     pub fn value_at(&self, t: Time) -> Result<Sample, QueryError> {
+        self.value_at_from(t).map(|(sample, _)| sample)
+    }
+
+    /// [`Self::value_at`], and the stored samples the value was taken or interpolated
+    /// from, each as its (valid time, add time): what a generated structure's lineage
+    /// names ([`crate::lineage`]).
+    pub fn value_at_from(&self, t: Time) -> Result<(Sample, Sources), QueryError> {
         let now = self.store.clock().now();
-        let wrap = |es: EntityStructure| Sample::new(Arc::new(es), now, now);
-        if let Some(es) = self.group_at(t) {
-            return Ok(wrap(es));
+        let wrap =
+            |(es, from): (EntityStructure, Sources)| (Sample::new(Arc::new(es), now, now), from);
+        if let Some(group) = self.group_at(t) {
+            return Ok(wrap(group));
         }
         let h = &self.store.history;
         let before = h.before(t).and_then(|e| self.group_at(e.vt));
@@ -56,7 +66,12 @@ impl FluentGenerator<'_> {
         match &self.policy.approximation {
             rule @ (ValueApproximation::Linear | ValueApproximation::LinearStrict) => {
                 match (before, after) {
-                    (Some(b), Some(a)) => interpolated(&b, &a, t, now, rule).map_err(|w| fail(&w)),
+                    (Some((b, mut from)), Some((a, after_from))) => {
+                        from.extend(after_from);
+                        interpolated(&b, &a, t, now, rule)
+                            .map(|sample| (sample, from))
+                            .map_err(|w| fail(&w))
+                    }
                     _ => Err(fail("linear needs samples on both sides")),
                 }
             }
@@ -65,8 +80,8 @@ impl FluentGenerator<'_> {
             }
             ValueApproximation::Closest => match (before, after) {
                 (Some(b), Some(a)) => Ok(wrap(
-                    if i128::from(t) - i128::from(b.valid_time)
-                        <= i128::from(a.valid_time) - i128::from(t)
+                    if i128::from(t) - i128::from(b.0.valid_time)
+                        <= i128::from(a.0.valid_time) - i128::from(t)
                     {
                         b
                     } else {
@@ -76,8 +91,16 @@ impl FluentGenerator<'_> {
                 (Some(x), None) | (None, Some(x)) => Ok(wrap(x)),
                 (None, None) => Err(fail("the trajectory is empty")),
             },
-            // Default and none do not depend on neighbours: reuse the query's rules.
-            other => self.store.get_at_approximating(t, other),
+            // Default and none do not depend on neighbours: reuse the query's rules,
+            // whose answer is a stored sample.
+            other => self.store.get_at_approximating(t, other).map(|sample| {
+                let from = vec![(sample.valid_time, sample.add_time)];
+                (sample, from)
+            }),
         }
     }
 }
+
+/// The stored samples a generator's value came from, each as its (valid time, add
+/// time).
+pub type Sources = Vec<(Time, Time)>;

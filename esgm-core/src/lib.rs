@@ -40,6 +40,7 @@ pub mod filter;
 pub mod generator;
 pub mod generator_entry;
 pub mod library;
+pub mod lineage;
 mod nesting;
 pub mod octets;
 pub mod operators;
@@ -65,6 +66,7 @@ pub use esgm::{
 };
 pub use filter::{Filter, FilterError};
 pub use generator::{FluentGenerator, GeneratorPolicy};
+pub use lineage::{InputRef, Lineage};
 pub use pixel_buffer::{HeapAllocator, OctetsAllocator, PixelBuffer, PixelStorage};
 pub use policy::{
     CacheConstraint, ChangeConstraint, Constraint, DelayConstraint, DurationConstraint,

@@ -3,6 +3,7 @@
 use std::ops::Deref;
 use std::sync::Arc;
 
+use crate::lineage::Lineage;
 use crate::time::Time;
 use crate::value::frame::EntityStructure;
 
@@ -28,13 +29,24 @@ pub struct Sample {
     /// and for an answer interpolated throughout, so a caller can tell the two apart;
     /// [`crate::ValueApproximation::LinearStrict`] refuses such an answer instead.
     pub not_interpolated: Option<Arc<[String]>>,
+    /// The input structures this one was made from, for a structure a computed, sync,
+    /// merge or generated trajectory added ([`crate::lineage`]); `None` for a pushed or
+    /// sampled structure, and for an answer interpolated from several.
+    pub lineage: Option<Arc<Lineage>>,
 }
 
 impl Sample {
     /// A stored (or delivered) structure: added at `add_time`, answering a query asked
     /// at `query_time`.
     pub fn new(structure: Arc<EntityStructure>, add_time: Time, query_time: Time) -> Self {
-        Self { structure, add_time, query_time, not_interpolated: None }
+        Self { structure, add_time, query_time, not_interpolated: None, lineage: None }
+    }
+
+    /// The same sample, naming the inputs it was made from.
+    #[must_use]
+    pub fn with_lineage(mut self, lineage: Option<Arc<Lineage>>) -> Self {
+        self.lineage = lineage;
+        self
     }
 
     /// Delay between the valid time and the add time: what a delay constraint bounds.

@@ -5,7 +5,8 @@
 //! memory is read where its producer wrote it. Nobody outside this module names rkyv's
 //! functions; everything goes through [`encode`], [`encode_into`],
 //! [`encode_into_uninit`], [`encoded_len`], [`encode_image_into`], [`restamp`],
-//! [`access`], [`access_unchecked`], [`decode`] and [`decode_holding`].
+//! [`access`], [`access_unchecked`], [`decode`] and [`decode_holding`]; a structure's
+//! lineage through [`encode_lineage_into`] and [`decode_lineage`] (`lineage.rs`).
 //!
 //! Bytes that come from another process must go through [`access`], which validates
 //! them (bounds, alignment, enum tags, UTF-8) before any field is read. The unchecked
@@ -24,6 +25,7 @@
 //! image layout, `restamp.rs` the in-place change of an archive's times.
 
 mod image;
+mod lineage;
 mod restamp;
 mod writer;
 
@@ -45,6 +47,10 @@ pub use crate::value::frame::{
 pub use crate::value::{ArchivedOctets, ArchivedValue, ArchivedValueSort};
 pub use image::{
     IMAGE_NAME_MAX, IMAGE_OVERHEAD_MAX, IMAGE_PIXELS_MAX, IMAGE_PIXELS_OFFSET, encode_image_into,
+};
+pub use lineage::{
+    LINEAGE_VERSION, MAX_LINEAGE_INPUTS, MAX_LINEAGE_NAME, decode_lineage, encode_lineage,
+    encode_lineage_into, lineage_len,
 };
 pub use restamp::restamp;
 use writer::CountingWriter;

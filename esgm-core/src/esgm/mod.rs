@@ -17,6 +17,7 @@ mod errors;
 mod interfaces;
 mod report;
 mod spec;
+mod trace;
 mod typed_unit;
 
 pub use crate::failures::{Limit, LimitReached, Peer, Unreachable};
@@ -24,6 +25,7 @@ pub use errors::{CreateError, FlushError, InputType, LookupError, RegistrationEr
 pub use interfaces::{CompUnit, ComputeError, SensorError, SensorInterface};
 pub use report::{EsgmStats, LogLevel, MemoryStats, TrajectoryInfo, TrajectoryReport, WorkerStats};
 pub use spec::{TrajectoryKind, TrajectorySource, TrajectorySpec};
+pub use trace::{Found, MAX_TRACE_DEPTH, MAX_TRACE_NODES, TraceNode, trace};
 pub use typed_unit::{Stamped, TypedUnit, TypedUnitAdapter, UnitInputs};
 
 use std::sync::Arc;

@@ -400,11 +400,11 @@ impl InProcessEsgm {
         let states = inputs
             .iter()
             .enumerate()
-            .map(|(i, (_, cell))| {
+            .map(|(i, (d, cell))| {
                 let mut store = cell.store.lock();
                 store.subscribe_tagged(&fan_in, i);
                 // An empty input has no latest sample, the only error here.
-                workers::InputState::new(store.get_latest().ok(), store.reset_counter())
+                workers::InputState::new(store.get_latest().ok(), &store, &d.name)
             })
             .collect();
         (fan_in, states)
@@ -448,9 +448,9 @@ impl InProcessEsgm {
                 Some(workers::sync(cell, clock, policy.clone(), names, fan_in, states))
             }
             TrajectorySource::Merge { .. } => {
-                let (fan_in, _) = self.subscribe_inputs(inputs);
+                let (fan_in, states) = self.subscribe_inputs(inputs);
                 *cell.counters.flush_sender.lock() = Some(fan_in.sender());
-                Some(workers::merge(cell, fan_in))
+                Some(workers::merge(cell, fan_in, states))
             }
             TrajectorySource::SampledGenerators {
                 inputs: gens,

@@ -14,6 +14,7 @@ use super::{inputs, periodic};
 use crate::clock::SharedClock;
 use crate::esgm::{CompUnit, ComputeError, SensorError, SensorInterface};
 use crate::generator::GeneratorPolicy;
+use crate::lineage::{InputRef, Lineage};
 use crate::operators::sync::{MEMBER_CREATE_TIMES, MEMBER_VALID_TIMES, SyncPolicy};
 use crate::pixel_buffer::{HeapAllocator, OctetsAllocator};
 use crate::sample::Sample;
@@ -56,10 +57,11 @@ fn guarded<R>(cell: &TrajectoryCell, what: &str, f: impl FnOnce() -> R) -> Optio
     }
 }
 
-/// Adds a produced structure to the worker's own trajectory.
-fn emit(cell: &TrajectoryCell, es: Arc<EntityStructure>) {
+/// Adds a produced structure to the worker's own trajectory, with the inputs it was
+/// made from (none for a sensor's).
+fn emit(cell: &TrajectoryCell, es: Arc<EntityStructure>, lineage: Option<Lineage>) {
     WorkerCounters::bump(&cell.counters.outputs);
-    let result = cell.store.lock().add_shared(es, false);
+    let result = cell.store.lock().add_produced(es, lineage.map(Arc::new), false);
     match result {
         Ok(AddOutcome::Held { .. }) => cell.kick_releaser(),
         Ok(_) => {}
@@ -99,7 +101,7 @@ pub(crate) fn sampler(
             };
             match guarded(&c, "get_current_value", || sensor.get_current_value_with(qtime, images))
             {
-                Some(Ok(es)) => emit(&c, Arc::new(es)),
+                Some(Ok(es)) => emit(&c, Arc::new(es), None),
                 Some(Err(SensorError::ValueNotAvailable)) => {
                     WorkerCounters::bump(&c.counters.no_value)
                 }
@@ -115,18 +117,37 @@ pub(crate) fn sampler(
 
 /// What a worker remembers of one input: its latest sample, and the input's reset count
 /// when that sample arrived (a reset of the input makes the sample forgotten: after a
-/// reset the input has no latest sample until it gets a new one).
+/// reset the input has no latest sample until it gets a new one), and how to name the
+/// input's structures in an output's lineage.
 #[derive(Debug)]
 pub(crate) struct InputState {
     latest: Option<Sample>,
     seen_resets: u64,
     resets: Arc<std::sync::atomic::AtomicU64>,
+    trajectory: String,
+    generation: Arc<std::sync::atomic::AtomicU64>,
 }
 
 impl InputState {
-    pub(crate) fn new(latest: Option<Sample>, resets: Arc<std::sync::atomic::AtomicU64>) -> Self {
+    pub(crate) fn new(
+        latest: Option<Sample>,
+        store: &crate::store::TrajectoryStore,
+        trajectory: &str,
+    ) -> Self {
+        let resets = store.reset_counter();
         let seen_resets = resets.load(std::sync::atomic::Ordering::Relaxed);
-        Self { latest, seen_resets, resets }
+        let generation = store.generation();
+        Self { latest, seen_resets, resets, trajectory: trajectory.to_owned(), generation }
+    }
+
+    /// Names `sample`, read from this input, in an output's lineage.
+    fn input_ref(&self, sample: &Sample) -> InputRef {
+        InputRef {
+            trajectory: self.trajectory.clone(),
+            generation: self.generation.load(std::sync::atomic::Ordering::Relaxed),
+            valid_time: sample.valid_time,
+            add_time: sample.add_time,
+        }
     }
 
     /// True (and forgets the latest sample) if the input was reset since it was seen.
@@ -180,7 +201,12 @@ pub(crate) fn unit(
                 };
                 WorkerCounters::bump(&c.counters.calls);
                 let qtime = clock.now();
-                emit_computed(&c, "unit", guarded(&c, "compute", || cu.compute(&args, qtime)));
+                let lineage = || {
+                    let inputs = states.iter().zip(&args).map(|(s, a)| s.input_ref(a)).collect();
+                    Lineage::of(inputs).with_unrecorded_reads()
+                };
+                let result = guarded(&c, "compute", || cu.compute(&args, qtime));
+                emit_computed(&c, "unit", result, lineage);
             },
         );
     })
@@ -192,9 +218,10 @@ fn emit_computed(
     cell: &TrajectoryCell,
     what: &str,
     result: Option<Result<EntityStructure, ComputeError>>,
+    lineage: impl FnOnce() -> Lineage,
 ) {
     match result {
-        Some(Ok(es)) => emit(cell, Arc::new(es)),
+        Some(Ok(es)) => emit(cell, Arc::new(es), Some(lineage())),
         Some(Err(ComputeError::ValueNotAvailable)) => WorkerCounters::bump(&cell.counters.no_value),
         Some(Err(e)) => {
             WorkerCounters::bump(&cell.counters.failures);
@@ -289,7 +316,9 @@ pub(crate) fn sync(
                                 name: MEMBER_CREATE_TIMES.to_owned(),
                                 value: Value::LongSeq(times(|s| s.structure.create_time)),
                             });
-                            emit(&c, Arc::new(es));
+                            let inputs =
+                                states.iter().zip(&set).map(|(s, a)| s.input_ref(a)).collect();
+                            emit(&c, Arc::new(es), Some(Lineage::of(inputs)));
                         }
                     }
                     Err(e) => {
@@ -303,7 +332,11 @@ pub(crate) fn sync(
 }
 
 /// A merged trajectory (G3): every sample of every input, shared, not copied.
-pub(crate) fn merge(cell: &Arc<TrajectoryCell>, fan_in: FanIn<Sample>) -> Worker {
+pub(crate) fn merge(
+    cell: &Arc<TrajectoryCell>,
+    fan_in: FanIn<Sample>,
+    states: Vec<InputState>,
+) -> Worker {
     let c = Arc::clone(cell);
     spawn("merge", cell, move |stop, wake| {
         inputs::run(
@@ -312,9 +345,10 @@ pub(crate) fn merge(cell: &Arc<TrajectoryCell>, fan_in: FanIn<Sample>) -> Worker
             &stop,
             &c.counters.input_overflow,
             &c.counters.flush_done,
-            |_, sample| {
+            |i, sample| {
                 WorkerCounters::bump(&c.counters.calls);
-                emit(&c, sample.structure);
+                let from = states.get(i).map(|s| Lineage::of(vec![s.input_ref(&sample)]));
+                emit(&c, sample.structure, from);
             },
         );
     })
@@ -337,14 +371,26 @@ pub(crate) fn sampled_generators(
             let t = sample_time.saturating_sub(lag);
             WorkerCounters::bump(&c.counters.calls);
             let mut values = Vec::with_capacity(inputs.len());
+            let mut from = Vec::with_capacity(inputs.len());
             for (d, policy) in &inputs {
                 let Some(input) = d.get() else {
                     WorkerCounters::bump(&c.counters.failures);
                     return;
                 };
-                let value = input.store.lock().generator(policy).value_at(t);
+                let store = input.store.lock();
+                let generation = store.generation().load(std::sync::atomic::Ordering::Relaxed);
+                let value = store.generator(policy).value_at_from(t);
+                drop(store);
                 match value {
-                    Ok(s) => values.push(s),
+                    Ok((s, sources)) => {
+                        values.push(s);
+                        from.extend(sources.into_iter().map(|(valid_time, add_time)| InputRef {
+                            trajectory: d.name.clone(),
+                            generation,
+                            valid_time,
+                            add_time,
+                        }));
+                    }
                     // Every `value_at` error means no value at `t`: counted as such.
                     Err(_) => {
                         WorkerCounters::bump(&c.counters.no_value);
@@ -354,11 +400,10 @@ pub(crate) fn sampled_generators(
             }
             if let Some(cu) = &cu {
                 // A temporal function: the unit estimates the value at exactly `t`.
-                emit_computed(
-                    &c,
-                    "compute_at",
-                    guarded(&c, "compute_at", || cu.compute_at(&values, t)),
-                );
+                let result = guarded(&c, "compute_at", || cu.compute_at(&values, t));
+                emit_computed(&c, "compute_at", result, || {
+                    Lineage::of(from).with_unrecorded_reads()
+                });
                 return;
             }
             let es = match values.as_slice() {
@@ -377,7 +422,7 @@ pub(crate) fn sampled_generators(
                     state(&c.info.name, t, clock.now(), &parts)
                 }
             };
-            emit(&c, Arc::new(es));
+            emit(&c, Arc::new(es), Some(Lineage::of(from)));
         });
     })
 }

@@ -25,6 +25,8 @@ pub(crate) struct Entry {
     pub es: Arc<EntityStructure>,
     pub add_time: Time,
     pub seq: u64,
+    /// The inputs it was made from (a produced structure's; see [`crate::lineage`]).
+    pub lineage: Option<Arc<crate::lineage::Lineage>>,
 }
 
 impl Entry {
@@ -206,7 +208,13 @@ mod tests {
     use super::*;
 
     fn entry(vt: Time, seq: u64) -> Entry {
-        Entry { vt, es: Arc::new(EntityStructure::new("e", vt, vt)), add_time: seq as Time, seq }
+        Entry {
+            vt,
+            es: Arc::new(EntityStructure::new("e", vt, vt)),
+            add_time: seq as Time,
+            seq,
+            lineage: None,
+        }
     }
 
     fn vts(v: &[&Entry]) -> Vec<(Time, u64)> {

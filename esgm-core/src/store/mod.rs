@@ -34,6 +34,7 @@ use std::sync::Arc;
 
 use crate::clock::SharedClock;
 use crate::filter::Filter;
+use crate::lineage::Lineage;
 use crate::pixel_buffer::OctetsAllocator;
 use crate::policy::{
     CacheConstraint, ChangeConstraint, Constraint, DelayConstraint, DurationConstraint,
@@ -63,6 +64,7 @@ pub use violation::{
 #[derive(Debug)]
 struct Held {
     es: Arc<EntityStructure>,
+    lineage: Option<Arc<Lineage>>,
     seq: u64,
     release_at: Time,
 }
@@ -87,6 +89,13 @@ impl Held {
     fn key(&self) -> (Time, u64) {
         (self.es.valid_time, self.seq)
     }
+}
+
+/// A generation for a store built in this process: distinct from every other store's
+/// here, so a trajectory destroyed and created again under its name is told apart.
+fn next_generation() -> u64 {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+    NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
 }
 
 /// Builds a [`TrajectoryStore`].
@@ -153,6 +162,7 @@ impl TrajectoryStoreBuilder {
             violation_subscribers: Subscribers::default(),
             stats: StatsRecorder::default(),
             resets: Arc::default(),
+            generation: Arc::new(std::sync::atomic::AtomicU64::new(next_generation())),
             tap: None,
             forward: None,
             adopted: false,
@@ -185,6 +195,9 @@ pub struct TrajectoryStore {
     /// Bumped by every reset, so readers that remember samples (units' latest inputs)
     /// know to forget them.
     resets: Arc<std::sync::atomic::AtomicU64>,
+    /// The trajectory's generation, named in the lineage of what is made from it
+    /// ([`crate::lineage::InputRef::generation`]).
+    generation: Arc<std::sync::atomic::AtomicU64>,
     /// Everything that happens to the stream, in order, for one observer (a bridge
     /// that mirrors the stream into another process), told inline.
     tap: Option<(TapId, Box<dyn StoreTap>)>,
@@ -338,6 +351,18 @@ impl TrajectoryStore {
         self.offer(es, blocking)
     }
 
+    /// [`Self::add_shared`] for a structure made from other structures: `lineage` names
+    /// them, and is stored and delivered with it ([`Sample::lineage`]). A store that
+    /// forwards its adds to a writer elsewhere forwards the structure only.
+    pub fn add_produced(
+        &mut self,
+        es: Arc<EntityStructure>,
+        lineage: Option<Arc<Lineage>>,
+        blocking: bool,
+    ) -> Result<AddOutcome, AddError> {
+        self.offer_with(es, lineage, blocking)
+    }
+
     /// Creates a structure valid at `valid_time`, created now, and adds it.
     pub fn create_at(
         &mut self,
@@ -413,6 +438,19 @@ impl TrajectoryStore {
         Arc::clone(&self.resets)
     }
 
+    /// The trajectory's generation: a number each store gets when it is built, unless
+    /// its owner says otherwise ([`Self::set_generation`]). Shared with whoever names
+    /// this trajectory's structures as inputs (lineage), so they follow a change.
+    pub fn generation(&self) -> Arc<std::sync::atomic::AtomicU64> {
+        Arc::clone(&self.generation)
+    }
+
+    /// Sets the trajectory's generation: across processes, the coordinator's registry
+    /// generation, so every process names the same stream the same way.
+    pub fn set_generation(&self, generation: u64) {
+        self.generation.store(generation, std::sync::atomic::Ordering::Relaxed);
+    }
+
     /// The same as [`TrajectoryStore::reset`]: in process, every reset completes
     /// before it returns.
     pub fn reset_blocking(&mut self) {
@@ -437,7 +475,10 @@ impl TrajectoryStore {
         let backlog: Vec<Sample> = self
             .history
             .last_n(options.last)
-            .map(|e| Sample::new(Arc::clone(&e.es), e.add_time, e.add_time))
+            .map(|e| {
+                Sample::new(Arc::clone(&e.es), e.add_time, e.add_time)
+                    .with_lineage(e.lineage.clone())
+            })
             .collect();
         // A replay longer than the buffer keeps its newest samples; the rest count as
         // overflow, like any sample a subscriber had no room for.
@@ -507,7 +548,7 @@ impl TrajectoryStore {
         held.sort();
         for h in held {
             // Outcomes are counted in this store's stats.
-            let _ = self.offer(h.es, false);
+            let _ = self.offer_with(h.es, h.lineage, false);
         }
     }
 
@@ -563,6 +604,15 @@ impl TrajectoryStore {
     }
 
     fn offer(&mut self, es: Arc<EntityStructure>, blocking: bool) -> Result<AddOutcome, AddError> {
+        self.offer_with(es, None, blocking)
+    }
+
+    fn offer_with(
+        &mut self,
+        es: Arc<EntityStructure>,
+        lineage: Option<Arc<Lineage>>,
+        blocking: bool,
+    ) -> Result<AddOutcome, AddError> {
         let now = self.clock.now();
         self.release_due_at(now);
         if let Err(source) = self.checker.check(&es.attributes) {
@@ -581,18 +631,18 @@ impl TrajectoryStore {
             if release_at > now {
                 let seq = self.next_seq;
                 self.next_seq += 1;
-                self.held.push(Reverse(Held { es, seq, release_at }));
+                self.held.push(Reverse(Held { es, lineage, seq, release_at }));
                 return Ok(AddOutcome::Held { release_at });
             }
         }
-        self.enter(es, now, blocking)
+        self.enter(es, lineage, now, blocking)
     }
 
     fn release_due_at(&mut self, now: Time) -> usize {
         let mut released = 0;
         while self.held.peek().is_some_and(|Reverse(h)| h.release_at <= now) {
             let Some(Reverse(h)) = self.held.pop() else { break };
-            if let Ok(AddOutcome::Added) = self.enter(h.es, now, false) {
+            if let Ok(AddOutcome::Added) = self.enter(h.es, h.lineage, now, false) {
                 released += 1;
             }
         }
@@ -686,6 +736,7 @@ impl TrajectoryStore {
     fn enter(
         &mut self,
         es: Arc<EntityStructure>,
+        lineage: Option<Arc<Lineage>>,
         now: Time,
         blocking: bool,
     ) -> Result<AddOutcome, AddError> {
@@ -698,19 +749,19 @@ impl TrajectoryStore {
                 self.stats.record_missed_sample_points(skipped as u64);
             }
         }
-        self.admit(es, now);
+        self.admit(es, lineage, now);
         Ok(AddOutcome::Added)
     }
 
     /// Stores a structure that passed every check, added at `add_time`: evicts as the
     /// cache says and tells subscribers and the tap.
-    fn admit(&mut self, es: Arc<EntityStructure>, add_time: Time) {
+    fn admit(&mut self, es: Arc<EntityStructure>, lineage: Option<Arc<Lineage>>, add_time: Time) {
         let now = add_time;
         // The tap first: mirrors publish before this process delivers, and may hand
         // back the structure to keep instead (see `StoreTap::entering`).
         let es = match &mut self.tap {
             Some((_, tap)) => {
-                let entering = Sample::new(es, now, now);
+                let entering = Sample::new(es, now, now).with_lineage(lineage.clone());
                 let kept = tap.entering(&entering).unwrap_or(entering.structure);
                 self.stats.record_dropped_n(DropCause::Unpublished, tap.take_unpublished());
                 kept
@@ -721,7 +772,13 @@ impl TrajectoryStore {
         self.next_seq += 1;
         self.stats.record_added(now, es.valid_time);
         self.last = Some(Arc::clone(&es));
-        self.history.push(Entry { vt: es.valid_time, es: Arc::clone(&es), add_time: now, seq });
+        self.history.push(Entry {
+            vt: es.valid_time,
+            es: Arc::clone(&es),
+            add_time: now,
+            seq,
+            lineage: lineage.clone(),
+        });
         let evicted = match self.policy.cache {
             CacheConstraint::All | CacheConstraint::Elements(0) => 0,
             CacheConstraint::Elements(n) => {
@@ -739,7 +796,7 @@ impl TrajectoryStore {
             },
         };
         self.stats.record_evicted(evicted);
-        let sample = Sample::new(es, now, now);
+        let sample = Sample::new(es, now, now).with_lineage(lineage);
         let overflow = self.subscribers.publish(&sample);
         self.stats.record_overflow(overflow);
     }
@@ -747,9 +804,15 @@ impl TrajectoryStore {
     /// Enters a structure that another store's gate already admitted — this store is a
     /// replica of a trajectory written in another process. No type check and no
     /// constraint but the cache apply (the writer applied them), and the writer's add
-    /// time is kept, so queries, subscribers and stats agree with the writer's.
-    pub fn replicate(&mut self, es: Arc<EntityStructure>, add_time: Time) {
-        self.admit(es, add_time);
+    /// time is kept, so queries, subscribers and stats agree with the writer's, and so
+    /// is the lineage the writer stored with it.
+    pub fn replicate(
+        &mut self,
+        es: Arc<EntityStructure>,
+        add_time: Time,
+        lineage: Option<Arc<Lineage>>,
+    ) {
+        self.admit(es, lineage, add_time);
     }
 
     /// Counts `n` messages a bridge to another middleware lost on their way into or

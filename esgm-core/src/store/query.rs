@@ -58,7 +58,7 @@ impl TrajectoryStore {
     }
 
     pub(crate) fn sample_of(&self, e: &Entry, now: Time) -> Sample {
-        Sample::new(Arc::clone(&e.es), e.add_time, now)
+        Sample::new(Arc::clone(&e.es), e.add_time, now).with_lineage(e.lineage.clone())
     }
 
     /// Number of stored samples.

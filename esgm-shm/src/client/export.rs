@@ -286,10 +286,9 @@ impl Outlet {
 
     /// Publishes a structure kept at `kept` (or not kept: `None`).
     fn publish_entry(&mut self, sample: &Sample, kept: Option<u64>) {
-        let sent = match kept {
-            Some(index) => self.publisher.publish_kept(&sample.structure, sample.add_time, index),
-            None => self.publisher.publish_added(&sample.structure, sample.add_time),
-        };
+        let lineage = sample.lineage.as_deref();
+        let sent =
+            self.publisher.publish_produced(&sample.structure, sample.add_time, kept, lineage);
         if let Err(e) = sent {
             self.entry_failed(&e);
         }
@@ -402,6 +401,8 @@ impl Export {
         let (type_name, policy) = (&record.info.type_name, &record.info.policy);
         let primitive = record.info.kind == TrajectoryKind::Primitive;
         let generation = record.generation;
+        // Lineage names the registry's generation, the same in every process.
+        let _destroyed = handle.with_store(|s| s.set_generation(generation));
         let domain = &generation_domain(domain, generation);
         let readers = record.readers;
         let qos = handle_qos(handle, policy, readers);
@@ -483,7 +484,7 @@ impl Export {
                 if let Some(former) = &former {
                     for entry in &former.entries {
                         if start.known().is_none_or(|k| entry.index > k) {
-                            s.replicate(Arc::new(entry.structure.clone()), entry.add_time);
+                            s.replicate(Arc::new(entry.structure.clone()), entry.add_time, None);
                         }
                     }
                 }

@@ -26,7 +26,7 @@ use std::time::Duration;
 use esgm_core::esgm::{Peer, TrajectoryKind, Unreachable};
 use esgm_core::{
     AddError, AddForwarder, AddOutcome, EntityStructure, EntityStructureType,
-    EntityTrajectoryStructure, FeedWaiter, InProcessTrajectory, Rejection, ReplicaFeed,
+    EntityTrajectoryStructure, FeedWaiter, InProcessTrajectory, Lineage, Rejection, ReplicaFeed,
     TypeChecker,
 };
 use iceoryx2::identifiers::UniquePublisherId;
@@ -178,7 +178,8 @@ impl Import {
 enum Arrival {
     /// A structure, decoded (its images stay in shared memory, held), with its index
     /// in the kept history (`None`: not kept).
-    Entry { es: EntityStructure, add_time: i64, kept: Option<u64> },
+    /// And the lineage the writer sent with it.
+    Entry { es: EntityStructure, add_time: i64, kept: Option<u64>, lineage: Option<Arc<Lineage>> },
     /// A reset marker.
     Reset,
 }
@@ -195,6 +196,8 @@ impl Import {
         let (type_name, policy) = (&record.info.type_name, &record.info.policy);
         let primitive = record.info.kind == TrajectoryKind::Primitive;
         let generation = record.generation;
+        // Lineage names the registry's generation, the same in every process.
+        let _destroyed = replica.with_store(|s| s.set_generation(generation));
         let domain = &generation_domain(domain, generation);
         let name = replica.name().to_owned();
         let checker = match TypeChecker::from_definitions(type_name, record.types.clone()) {
@@ -340,6 +343,8 @@ impl Import {
                 es: entry.structure,
                 add_time: entry.add_time,
                 kept: Some(entry.index),
+                // Kept histories are primitive trajectories': pushed, no lineage.
+                lineage: None,
             };
             let before = self.last_kept;
             self.enter(arrival);
@@ -388,9 +393,17 @@ impl Import {
                     let header = sample.header();
                     let (sequence, add_time) = (header.sequence, header.add_time);
                     let kept = header.kept.checked_sub(1);
+                    let lineage = match sample.lineage() {
+                        Ok(lineage) => lineage.map(Arc::new),
+                        Err(e) => {
+                            self.reject(&ReceiveError::Malformed(e));
+                            continue;
+                        }
+                    };
                     match self.owner.decode(sample) {
                         Ok(es) => {
-                            self.arrive(publisher, sequence, Arrival::Entry { es, add_time, kept })
+                            let entry = Arrival::Entry { es, add_time, kept, lineage };
+                            self.arrive(publisher, sequence, entry)
                         }
                         Err(e) => self.reject(&ReceiveError::Malformed(e)),
                     }
@@ -454,7 +467,7 @@ impl Import {
     /// match the trajectory's type.
     fn enter(&mut self, arrival: Arrival) {
         match arrival {
-            Arrival::Entry { es, add_time, kept } => {
+            Arrival::Entry { es, add_time, kept, lineage } => {
                 if let Some(index) = kept {
                     if self.last_kept.is_some_and(|last| index <= last) {
                         // Held already: the history handed over again.
@@ -468,7 +481,8 @@ impl Import {
                     self.last_kept = kept;
                 }
                 // A replica destroyed meanwhile needs nothing more.
-                let _destroyed = self.replica.with_store(|s| s.replicate(Arc::new(es), add_time));
+                let _destroyed =
+                    self.replica.with_store(|s| s.replicate(Arc::new(es), add_time, lineage));
             }
             Arrival::Reset => {
                 let _destroyed = self.replica.with_store(|s| s.reset());

@@ -105,6 +105,40 @@ pub(crate) fn copy_into(dst: &mut [MaybeUninit<u8>], src: &[u8]) -> bool {
     true
 }
 
+/// Bytes before a lineage in a sample's trailer: its length (`u64`, little endian),
+/// then zeros to the archive alignment.
+pub(crate) const TRAILER_HEAD: usize = 16;
+
+/// Where a sample's lineage trailer starts: the first 16-byte boundary after the
+/// archive (`archive_len` bytes).
+pub(crate) fn trailer_start(archive_len: usize) -> usize {
+    archive_len.next_multiple_of(BLOCK_LEN)
+}
+
+/// Payload bytes a structure of `archive_len` bytes with a lineage of `lineage_len`
+/// bytes needs.
+pub(crate) fn with_trailer_len(archive_len: usize, lineage_len: usize) -> usize {
+    trailer_start(archive_len) + TRAILER_HEAD + lineage_len
+}
+
+/// The lineage bytes of a payload whose header has [`SampleHeader::FLAG_LINEAGE`]: at
+/// [`trailer_start`], a length, then that many bytes ([`esgm_core::codec::decode_lineage`]
+/// reads them). An error says what is wrong with a trailer another process wrote.
+pub(crate) fn lineage_trailer(payload: &[u8], archive_len: usize) -> Result<&[u8], String> {
+    let at = trailer_start(archive_len);
+    let head = payload
+        .get(at..at + TRAILER_HEAD)
+        .ok_or_else(|| format!("no lineage trailer at byte {at} of {}", payload.len()))?;
+    let mut len = [0; 8];
+    len.copy_from_slice(&head[..8]);
+    let len = u64::from_le_bytes(len);
+    let start = at + TRAILER_HEAD;
+    usize::try_from(len)
+        .ok()
+        .and_then(|len| payload.get(start..start.checked_add(len)?))
+        .ok_or_else(|| format!("a lineage of {len} bytes at byte {start} of {}", payload.len()))
+}
+
 /// The iceoryx2 user header of every trajectory sample (layout in the module docs).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Pod, Zeroable, ZeroCopySend)]
 #[repr(C)]
@@ -152,6 +186,12 @@ impl SampleHeader {
     /// The structure is an `Image` whose pixels the producer wrote straight into shared
     /// memory: a cache can keep the sample itself instead of copying the bytes out.
     pub const FLAG_IMAGE_IN_PLACE: u32 = 1;
+
+    /// The payload carries the structure's lineage after the archive: from the first
+    /// 16-byte boundary after it, its length (`u64`), 8 zero bytes, then the bytes
+    /// [`esgm_core::codec::decode_lineage`] reads. Readers that do not know the flag
+    /// read the archive alone.
+    pub const FLAG_LINEAGE: u32 = 2;
 
     /// True if `flag` is set.
     pub fn has_flag(&self, flag: u32) -> bool {

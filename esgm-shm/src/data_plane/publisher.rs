@@ -47,7 +47,7 @@ use std::cell::Cell;
 use std::time::Duration;
 
 use esgm_core::codec::{self, CodecError};
-use esgm_core::{EntityStructure, SharedClock, SystemClock, Time};
+use esgm_core::{EntityStructure, Lineage, SharedClock, SystemClock, Time};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::update_connections::{ConnectionFailure, UpdateConnections};
@@ -59,7 +59,8 @@ use iceoryx2::service::port_factory::PortFactory;
 use crate::data_plane::image_layout::{ImageError, image_loan_len, pixel_len};
 use crate::data_plane::image_loan::{ImageChunk, ImageLoan};
 use crate::data_plane::payload::{
-    BLOCK_LEN, Block16, SampleHeader, as_uninit_bytes, blocks_for, zero_fill,
+    BLOCK_LEN, Block16, SampleHeader, TRAILER_HEAD, as_uninit_bytes, blocks_for, trailer_start,
+    with_trailer_len, zero_fill,
 };
 use crate::data_plane::qos::{Delivery, TrajectoryQos};
 use crate::data_plane::service::{
@@ -467,6 +468,26 @@ impl TrajectoryPublisher {
         sent
     }
 
+    /// [`Self::publish_added`] (or [`Self::publish_kept`] with `kept`) for a structure
+    /// made from others: `lineage` names them, and travels after the archive in the
+    /// same sample ([`SampleHeader::FLAG_LINEAGE`]), so every reader's replica holds it.
+    pub fn publish_produced(
+        &self,
+        es: &EntityStructure,
+        add_time: Time,
+        kept: Option<u64>,
+        lineage: Option<&Lineage>,
+    ) -> Result<Published, PublishError> {
+        let loan = self.loan_structure_traced(es, lineage)?;
+        let blocks = loan.blocks();
+        let sent = match kept {
+            Some(kept) => loan.send_kept(add_time, kept),
+            None => loan.send_added(add_time),
+        };
+        self.loan_spare(blocks);
+        sent
+    }
+
     fn publish_inner(
         &self,
         es: &EntityStructure,
@@ -515,17 +536,43 @@ impl TrajectoryPublisher {
     /// [`StructureLoan::send`] (see `crate::data_plane::structure_loan`): the encoding is done
     /// before the moment the structure has to go.
     pub fn loan_structure(&self, es: &EntityStructure) -> Result<StructureLoan<'_>, PublishError> {
+        self.loan_structure_traced(es, None)
+    }
+
+    /// [`Self::loan_structure`] with the structure's lineage after the archive.
+    fn loan_structure_traced(
+        &self,
+        es: &EntityStructure,
+        lineage: Option<&Lineage>,
+    ) -> Result<StructureLoan<'_>, PublishError> {
         let mut want = archived_size_hint(es);
         if want > self.max_len {
             want = codec::encoded_len(es).map_err(PublishError::Encode)?;
         }
+        let lineage_len = lineage.map(codec::lineage_len);
         let mut retried = false;
         loop {
-            let mut sample = self.loan_blocks(blocks_for(want)).map_err(PublishError::Loan)?;
+            let total = lineage_len.map_or(want, |l| with_trailer_len(want, l));
+            let mut sample = self.loan_blocks(blocks_for(total)).map_err(PublishError::Loan)?;
             let bytes = as_uninit_bytes(sample.payload_mut());
             match codec::encode_into_uninit(es, bytes) {
                 Ok(len) => {
-                    zero_fill(&mut bytes[len..]);
+                    let bytes = zero_fill(&mut bytes[len..]);
+                    let mut flags = 0;
+                    if let (Some(lineage), Some(lineage_len)) = (lineage, lineage_len) {
+                        let at = trailer_start(len) - len;
+                        let Some(trailer) = bytes.get_mut(at..at + TRAILER_HEAD + lineage_len)
+                        else {
+                            // The archive took more than its hint: loan for what it took.
+                            want = len;
+                            retried = true;
+                            continue;
+                        };
+                        trailer[..8].copy_from_slice(&(lineage_len as u64).to_le_bytes());
+                        codec::encode_lineage_into(lineage, &mut trailer[TRAILER_HEAD..])
+                            .map_err(PublishError::Encode)?;
+                        flags |= SampleHeader::FLAG_LINEAGE;
+                    }
                     // SAFETY: the encoder initialised `..len` (it promises every byte it
                     // reports) and `zero_fill` the rest of the payload.
                     let sample = unsafe { sample.assume_init() };
@@ -534,7 +581,7 @@ impl TrajectoryPublisher {
                         sample,
                         len,
                         (es.valid_time, es.create_time),
-                        0,
+                        flags,
                     ));
                 }
                 Err(CodecError::BufferTooSmall { needed, .. }) if !retried => {

@@ -98,6 +98,20 @@ impl ReceivedSample {
         bytes.get(..self.archive_len).unwrap_or(bytes)
     }
 
+    /// The lineage the writer sent with the structure ([`esgm_core::lineage`]), read
+    /// from the payload after the archive; `None` for a structure without one (pushed
+    /// or sampled). Bytes another process wrote that do not make a lineage are an
+    /// error that says what is wrong.
+    pub fn lineage(&self) -> Result<Option<esgm_core::Lineage>, CodecError> {
+        if !self.header().has_flag(SampleHeader::FLAG_LINEAGE) {
+            return Ok(None);
+        }
+        let payload = as_bytes(self.sample.payload());
+        let bytes = crate::data_plane::payload::lineage_trailer(payload, self.archive_len)
+            .map_err(|reason| CodecError::Malformed { len: payload.len(), reason })?;
+        codec::decode_lineage(bytes).map(Some)
+    }
+
     /// True if the producer wrote an image's pixels straight into shared memory.
     pub fn is_image_in_place(&self) -> bool {
         self.header().has_flag(SampleHeader::FLAG_IMAGE_IN_PLACE)

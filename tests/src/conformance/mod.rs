@@ -16,6 +16,7 @@ pub mod api;
 pub mod computed;
 pub mod domain;
 pub mod lifecycle;
+pub mod lineage;
 pub mod operators;
 pub mod primitive;
 pub mod queries;
@@ -155,6 +156,9 @@ macro_rules! conformance_tests {
             operators::merge_keeps_add_order_across_inputs,
             operators::sampled_generator_and_state,
             operators::sampled_temporal_function,
+            lineage::a_three_stage_pipeline_names_its_inputs,
+            lineage::operators_name_their_inputs,
+            lineage::a_trace_names_what_is_gone,
         );
     };
     (@each $runtime:ident, $make:expr;
