@@ -25,7 +25,7 @@ pub use errors::{CreateError, FlushError, InputType, LookupError, RegistrationEr
 pub use interfaces::{CompUnit, ComputeError, SensorError, SensorInterface};
 pub use report::{EsgmStats, LogLevel, MemoryStats, TrajectoryInfo, TrajectoryReport, WorkerStats};
 pub use spec::{TrajectoryKind, TrajectorySource, TrajectorySpec};
-pub use trace::{Found, MAX_TRACE_DEPTH, MAX_TRACE_NODES, TraceNode, trace};
+pub use trace::{Found, MAX_TRACE_DEPTH, MAX_TRACE_NODES, TraceNode, trace, trace_with};
 pub use typed_unit::{Stamped, TypedUnit, TypedUnitAdapter, UnitInputs};
 
 use std::sync::Arc;

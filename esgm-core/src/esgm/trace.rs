@@ -83,12 +83,23 @@ impl TraceNode {
 /// Traces `sample`, read from `trajectory`, back through the lineage of every
 /// structure it was made from.
 pub fn trace<E: Esgm>(esgm: &E, trajectory: &str, sample: &Sample) -> TraceNode {
-    let mut budget = MAX_TRACE_NODES;
-    node(esgm, trajectory, None, sample, 0, &mut budget)
+    trace_with(|name| esgm.get_entity_trajectory_structure(name).ok(), trajectory, sample)
 }
 
-fn node<E: Esgm>(
-    esgm: &E,
+/// [`trace`], opening each input trajectory with `open` (`None`: it does not exist
+/// or cannot be reached): a tool that connects late waits there for each history to
+/// arrive, and may keep the handles it opened.
+pub fn trace_with<T: EntityTrajectoryStructure>(
+    mut open: impl FnMut(&str) -> Option<T>,
+    trajectory: &str,
+    sample: &Sample,
+) -> TraceNode {
+    let mut budget = MAX_TRACE_NODES;
+    node(&mut open, trajectory, None, sample, 0, &mut budget)
+}
+
+fn node<T: EntityTrajectoryStructure>(
+    open: &mut impl FnMut(&str) -> Option<T>,
     trajectory: &str,
     generation: Option<u64>,
     sample: &Sample,
@@ -113,9 +124,9 @@ fn node<E: Esgm>(
         let child = if depth + 1 >= MAX_TRACE_DEPTH || *budget == 0 {
             leaf(input, Found::CutOff)
         } else {
-            match find(esgm, input) {
+            match find(open, input) {
                 Ok(found) => {
-                    node(esgm, &input.trajectory, Some(input.generation), &found, depth + 1, budget)
+                    node(open, &input.trajectory, Some(input.generation), &found, depth + 1, budget)
                 }
                 Err(why) => leaf(input, why),
             }
@@ -141,10 +152,15 @@ fn leaf(input: &InputRef, found: Found) -> TraceNode {
 
 /// The structure `input` names, looked up by valid time and told apart from others
 /// valid then by its add time.
-fn find<E: Esgm>(esgm: &E, input: &InputRef) -> Result<Sample, Found> {
-    let handle =
-        esgm.get_entity_trajectory_structure(&input.trajectory).map_err(|_| Found::NoTrajectory)?;
+fn find<T: EntityTrajectoryStructure>(
+    open: &mut impl FnMut(&str) -> Option<T>,
+    input: &InputRef,
+) -> Result<Sample, Found> {
+    let handle = open(&input.trajectory).ok_or(Found::NoTrajectory)?;
     let candidates =
-        handle.get_between(input.valid_time, input.valid_time).map_err(|_| Found::Evicted)?;
+        handle.get_between(input.valid_time, input.valid_time).map_err(|e| match e {
+            crate::store::QueryError::NoSuchEntityStructure { .. } => Found::NoTrajectory,
+            _ => Found::Evicted,
+        })?;
     candidates.into_iter().find(|s| s.add_time == input.add_time).ok_or(Found::Evicted)
 }

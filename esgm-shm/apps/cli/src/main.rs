@@ -96,6 +96,9 @@ enum Command {
     Approx(cmd::query::Approx),
     /// Print samples as they arrive.
     Echo(cmd::echo::Args),
+    /// The input structures behind one structure, back to its sources, with the
+    /// time each hop took (its lineage).
+    Trace(cmd::trace::Args),
     /// Rate and add-delay percentiles of a trajectory.
     Hz(cmd::hz::Args),
     /// Statistics of every trajectory.

@@ -51,6 +51,9 @@ pub fn sample_json(trajectory: &str, s: &Sample) -> serde_json::Value {
     if let Some(held) = &s.not_interpolated {
         v["not_interpolated"] = json!(held.as_ref());
     }
+    if let Some(lineage) = &s.lineage {
+        v["lineage"] = json!(lineage.as_ref());
+    }
     v
 }
 

@@ -227,6 +227,95 @@ fn every_query_command_against_a_running_system() {
     assert!(coordinator_is_gone(&d));
 }
 
+/// `esgm trace` follows lineage across three processes: two pushed trajectories and a
+/// unit in this process, a merge and a sync written by the system's own process, and
+/// the CLI reading the trees, with every hop's writer and time.
+#[test]
+fn trace_follows_lineage_across_processes() {
+    let _one = one_system();
+    let d = domain("cli-trace");
+    ok(&["--domain", &d, "up", "--detach"]);
+    let _stop = StopOnDrop(d.clone());
+    let system = esgm_shm::ShmEsgm::builder().domain(&d).host("pusher").connect().unwrap();
+    let a = system.create_primitive_entity_trajectory_structure("a", "RobotState").unwrap();
+    let b = system.create_primitive_entity_trajectory_structure("b", "RobotState").unwrap();
+    ok(&["--domain", &d, "traj", "create", "pair", "--sync", "a,b", "--tolerance", "20ms"]);
+    ok(&["--domain", &d, "traj", "create", "ab", "--merge", "a,b"]);
+    let copy = |i: &[esgm_core::Sample], _: i64| Ok((*i[0].structure).clone());
+    let types = vec!["RobotState".into()];
+    system.add_comp_unit("copy", "RobotState", types, std::sync::Arc::new(copy)).unwrap();
+    system.create_computed_entity_trajectory_structure("out", "copy", &["ab"]).unwrap();
+    let state =
+        |t: i64| EntityStructure::new("r", t, t).with("x", 1.0).with("y", 2.0).with("dir", 0.0);
+    let t0 = 1_700_000_000_000_000_000_i64;
+    let out = system.get_entity_trajectory_structure("out").unwrap();
+    let pair = system.get_entity_trajectory_structure("pair").unwrap();
+    for k in 0..3 {
+        let t = t0 + k * 100_000_000;
+        a.add(state(t)).unwrap();
+        b.add(state(t + 1_000_000)).unwrap();
+    }
+    let deadline = Instant::now() + Duration::from_secs(20);
+    let produced = || {
+        out.stats().map(|s| s.added).unwrap_or(0) >= 6
+            && pair.stats().map(|s| s.added).unwrap_or(0) >= 2
+    };
+    while !produced() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(produced(), "the pipeline never produced");
+    let last = t0 + 200_000_000;
+
+    // out <- ab <- b: a unit in this process, over a merge in the system's process.
+    let json = ok(&["--domain", &d, "--json", "trace", "out", "--latest"]);
+    let tree: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert_eq!(
+        (tree["trajectory"].as_str(), tree["writer"].as_str()),
+        (Some("out"), Some("pusher")),
+        "{json}"
+    );
+    assert_eq!(tree["complete"], false, "a unit's lineage says what it cannot know");
+    let ab = &tree["inputs"][0];
+    assert_eq!(
+        (ab["trajectory"].as_str(), ab["found"].as_str()),
+        (Some("ab"), Some("stored")),
+        "{json}"
+    );
+    assert_ne!(ab["writer"], "pusher", "the merge is the system's: {json}");
+    assert!(ab["hop_ns"].as_i64().is_some_and(|h| h >= 0), "{json}");
+    let source = &ab["inputs"][0];
+    assert_eq!(
+        (source["trajectory"].as_str(), source["valid_time"].as_i64()),
+        (Some("b"), Some(last + 1_000_000))
+    );
+    assert_eq!(source["add_time"], b.get_latest().unwrap().add_time, "as stored in b");
+
+    // pair <- a, b: a sync's members.
+    let json = ok(&["--domain", &d, "--json", "trace", "pair"]);
+    let tree: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let members: Vec<_> = tree["inputs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|n| (n["trajectory"].as_str().unwrap().to_owned(), n["valid_time"].as_i64().unwrap()))
+        .collect();
+    let vt = tree["inputs"][0]["valid_time"].as_i64().unwrap();
+    assert_eq!(members, [("a".to_owned(), vt), ("b".to_owned(), vt + 1_000_000)], "{json}");
+    assert_eq!(tree["complete"], true);
+
+    let text = ok(&["--domain", &d, "trace", "out", "--at", &(last + 1_000_000).to_string()]);
+    let lines: Vec<&str> = text.lines().collect();
+    assert!(lines[0].starts_with("out (*)") && lines[0].contains("[pusher]"), "{text}");
+    assert!(lines[1].starts_with("└─ ab") && lines[1].contains("hop"), "{text}");
+    assert!(lines[2].starts_with("   └─ b") && lines[2].contains("source  [pusher]"), "{text}");
+    assert!(lines[3].starts_with("end to end: "), "{text}");
+    let o = esgm(&["--domain", &d, "trace", "nope"], Duration::from_secs(30));
+    assert_eq!(o.code, Some(1));
+    assert!(o.stderr.contains("no entity trajectory structure `nope`"), "{}", o.stderr);
+    drop((a, b, out, pair));
+    drop(system);
+}
+
 /// Reads the demo's output as it comes.
 fn lines_of(child: &mut Child) -> mpsc::Receiver<String> {
     let (tx, rx) = mpsc::channel();

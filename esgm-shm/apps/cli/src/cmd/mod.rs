@@ -27,6 +27,7 @@ pub mod scale;
 pub mod soak;
 pub mod stats;
 pub mod top;
+pub mod trace;
 pub mod traj;
 pub mod types;
 pub mod up;
@@ -75,6 +76,7 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Closest(a) => query::at(domain, json, a, true),
         Command::Approx(a) => query::approx(domain, json, a),
         Command::Echo(a) => echo::run(domain, json, a),
+        Command::Trace(a) => trace::run(domain, json, a),
         Command::Hz(a) => hz::run(domain, json, a),
         Command::Stats => stats::run(domain, json),
         Command::Reset(a) => reset::run(domain, json, a),
