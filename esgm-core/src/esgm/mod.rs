@@ -19,6 +19,7 @@ mod report;
 mod spec;
 mod trace;
 mod typed_unit;
+mod why;
 
 pub use crate::failures::{Limit, LimitReached, Peer, Unreachable};
 pub use errors::{CreateError, FlushError, InputType, LookupError, RegistrationError, SystemError};
@@ -27,6 +28,7 @@ pub use report::{EsgmStats, LogLevel, MemoryStats, TrajectoryInfo, TrajectoryRep
 pub use spec::{TrajectoryKind, TrajectorySource, TrajectorySpec};
 pub use trace::{Found, MAX_TRACE_DEPTH, MAX_TRACE_NODES, TraceNode, trace, trace_with};
 pub use typed_unit::{Stamped, TypedUnit, TypedUnitAdapter, UnitInputs};
+pub use why::{CallOutcome, CallRecord, DropSummary, InputHealth, RECENT_CALLS, SyncWait, Why};
 
 use std::sync::Arc;
 
@@ -228,6 +230,13 @@ pub trait Esgm: Send + Sync {
     fn destroy_entity_trajectory_structure(&self, name: &str) -> Result<(), LookupError>;
     /// Every trajectory, for listings and graphs.
     fn trajectories(&self) -> Result<Vec<TrajectoryInfo>, SystemError>;
+
+    /// Why `trajectory` has not produced since `since` (SPEC X2): its producer's last
+    /// calls and what came of them, each input's latest structure and age, what a
+    /// sync waits for, each constraint's drops with the last structure dropped, and
+    /// whether the writer is alive, with the reasons in words ([`Why::reasons`]).
+    /// Answered by the process that writes it. An esgm extension; not in the seed.
+    fn why(&self, trajectory: &str, since: Time) -> Result<Why, LookupError>;
 
     /// E6: registers a pull sensor producing structures of `type_name`.
     fn add_sensor_interface(

@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use parking_lot::{Mutex, RwLock};
 
-use crate::esgm::{TrajectoryInfo, WorkerStats};
+use crate::esgm::{CallOutcome, CallRecord, RECENT_CALLS, TrajectoryInfo, WorkerStats};
 use crate::store::TrajectoryStore;
 
 /// Counters a worker bumps; read as a [`WorkerStats`] snapshot.
@@ -27,11 +27,24 @@ pub(crate) struct WorkerCounters {
     /// before a marker has been processed once the marker is reached.
     pub flush_asked: AtomicU64,
     pub flush_done: AtomicU64,
+    /// The producer's most recent calls and their outcomes (for `why`).
+    pub recent_calls: Mutex<std::collections::VecDeque<CallRecord>>,
+    /// A sync's policy (for `why`: its tolerance).
+    pub sync: Mutex<Option<crate::operators::sync::SyncPolicy>>,
 }
 
 impl WorkerCounters {
     pub fn bump(counter: &AtomicU64) {
         counter.fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Remembers one call's outcome, forgetting the oldest past [`RECENT_CALLS`].
+    pub fn called(&self, at: crate::time::Time, outcome: CallOutcome) {
+        let mut calls = self.recent_calls.lock();
+        if calls.len() == RECENT_CALLS {
+            calls.pop_front();
+        }
+        calls.push_back(CallRecord { at, outcome });
     }
 
     pub fn snapshot(&self) -> WorkerStats {

@@ -16,6 +16,7 @@ mod handle;
 mod inputs;
 mod periodic;
 mod releaser;
+mod why;
 mod workers;
 
 pub use handle::InProcessTrajectory;
@@ -442,6 +443,7 @@ impl InProcessEsgm {
             TrajectorySource::Sync { policy, .. } => {
                 // Validated here so the worker can re-create it after a reset.
                 policy.create::<Sample>(inputs.len())?;
+                *cell.counters.sync.lock() = Some(policy.clone());
                 let (fan_in, states) = self.subscribe_inputs(inputs);
                 *cell.counters.flush_sender.lock() = Some(fan_in.sender());
                 let names = inputs.iter().map(|(d, _)| d.name.clone()).collect();
@@ -541,6 +543,14 @@ impl Esgm for InProcessEsgm {
 
     fn trajectories(&self) -> Result<Vec<TrajectoryInfo>, SystemError> {
         Ok(self.inner.catalog.read().trajectories().cloned().collect())
+    }
+
+    fn why(
+        &self,
+        trajectory: &str,
+        since: crate::time::Time,
+    ) -> Result<crate::esgm::Why, LookupError> {
+        self.why_here(trajectory, since)
     }
 
     fn add_sensor_interface(

@@ -12,7 +12,7 @@ use crossbeam_channel::Receiver;
 use super::cell::{Descriptor, TrajectoryCell, Worker, WorkerCounters};
 use super::{inputs, periodic};
 use crate::clock::SharedClock;
-use crate::esgm::{CompUnit, ComputeError, SensorError, SensorInterface};
+use crate::esgm::{CallOutcome, CompUnit, ComputeError, SensorError, SensorInterface};
 use crate::generator::GeneratorPolicy;
 use crate::lineage::{InputRef, Lineage};
 use crate::operators::sync::{MEMBER_CREATE_TIMES, MEMBER_VALID_TIMES, SyncPolicy};
@@ -52,6 +52,7 @@ fn guarded<R>(cell: &TrajectoryCell, what: &str, f: impl FnOnce() -> R) -> Optio
                 .or_else(|| payload.downcast_ref::<String>().cloned())
                 .unwrap_or_else(|| "non-string panic".into());
             tracing::error!(trajectory = %cell.info.name, %what, panic = %msg, "user code panicked; isolated");
+            cell.counters.called(now(cell), CallOutcome::Panicked(msg));
             None
         }
     }
@@ -61,19 +62,36 @@ fn guarded<R>(cell: &TrajectoryCell, what: &str, f: impl FnOnce() -> R) -> Optio
 /// made from (none for a sensor's).
 fn emit(cell: &TrajectoryCell, es: Arc<EntityStructure>, lineage: Option<Lineage>) {
     WorkerCounters::bump(&cell.counters.outputs);
-    let result = cell.store.lock().add_produced(es, lineage.map(Arc::new), false);
-    match result {
-        Ok(AddOutcome::Held { .. }) => cell.kick_releaser(),
-        Ok(_) => {}
+    let (result, at) = {
+        let mut store = cell.store.lock();
+        (store.add_produced(es, lineage.map(Arc::new), false), store.clock().now())
+    };
+    let outcome = match result {
+        Ok(AddOutcome::Held { .. }) => {
+            cell.kick_releaser();
+            CallOutcome::Produced
+        }
+        Ok(AddOutcome::Dropped(v)) => {
+            CallOutcome::Dropped(format!("{}: {}", v.constraint, v.detail))
+        }
+        Ok(_) => CallOutcome::Produced,
         Err(AddError::InvalidType { source, .. }) => {
             WorkerCounters::bump(&cell.counters.invalid_outputs);
             tracing::warn!(trajectory = %cell.info.name, error = %source, "worker output has the wrong type");
+            CallOutcome::InvalidOutput(source.to_string())
         }
         Err(e) => {
             WorkerCounters::bump(&cell.counters.failures);
             tracing::warn!(trajectory = %cell.info.name, error = %e, "worker output refused");
+            CallOutcome::Failed(e.to_string())
         }
-    }
+    };
+    cell.counters.called(at, outcome);
+}
+
+/// The trajectory's clock, now.
+fn now(cell: &TrajectoryCell) -> Time {
+    cell.store.lock().clock().now()
 }
 
 fn missed(cell: &TrajectoryCell) -> impl FnMut(u64) + '_ {
@@ -103,11 +121,13 @@ pub(crate) fn sampler(
             {
                 Some(Ok(es)) => emit(&c, Arc::new(es), None),
                 Some(Err(SensorError::ValueNotAvailable)) => {
-                    WorkerCounters::bump(&c.counters.no_value)
+                    WorkerCounters::bump(&c.counters.no_value);
+                    c.counters.called(now(&c), CallOutcome::NoValue);
                 }
                 Some(Err(e)) => {
                     WorkerCounters::bump(&c.counters.failures);
                     tracing::warn!(trajectory = %c.info.name, error = %e, "sensor failed");
+                    c.counters.called(now(&c), CallOutcome::Failed(e.to_string()));
                 }
                 None => {}
             }
@@ -222,10 +242,14 @@ fn emit_computed(
 ) {
     match result {
         Some(Ok(es)) => emit(cell, Arc::new(es), Some(lineage())),
-        Some(Err(ComputeError::ValueNotAvailable)) => WorkerCounters::bump(&cell.counters.no_value),
+        Some(Err(ComputeError::ValueNotAvailable)) => {
+            WorkerCounters::bump(&cell.counters.no_value);
+            cell.counters.called(now(cell), CallOutcome::NoValue);
+        }
         Some(Err(e)) => {
             WorkerCounters::bump(&cell.counters.failures);
             tracing::warn!(trajectory = %cell.info.name, error = %e, "{what} failed");
+            cell.counters.called(now(cell), CallOutcome::Failed(e.to_string()));
         }
         None => {}
     }

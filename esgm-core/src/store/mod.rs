@@ -29,7 +29,7 @@ mod subscription;
 mod violation;
 
 use std::cmp::Reverse;
-use std::collections::BinaryHeap;
+use std::collections::{BinaryHeap, VecDeque};
 use std::sync::Arc;
 
 use crate::clock::SharedClock;
@@ -57,7 +57,8 @@ pub use subscription::{
     Subscription, SubscriptionId,
 };
 pub use violation::{
-    AddError, AddForwarder, AddOutcome, BridgeLoss, DropCause, PolicyViolation, Rejection,
+    AddError, AddForwarder, AddOutcome, BridgeLoss, DropCause, DropRecord, PolicyViolation,
+    RECENT_DROPS, Rejection,
 };
 
 /// A sample waiting in the reorder buffer, ordered by (valid time, add sequence).
@@ -163,6 +164,7 @@ impl TrajectoryStoreBuilder {
             stats: StatsRecorder::default(),
             resets: Arc::default(),
             generation: Arc::new(std::sync::atomic::AtomicU64::new(next_generation())),
+            recent_drops: VecDeque::new(),
             tap: None,
             forward: None,
             adopted: false,
@@ -198,6 +200,9 @@ pub struct TrajectoryStore {
     /// The trajectory's generation, named in the lineage of what is made from it
     /// ([`crate::lineage::InputRef::generation`]).
     generation: Arc<std::sync::atomic::AtomicU64>,
+    /// The gate's most recent drops with their details, for "why did it not
+    /// produce?" (bounded: [`RECENT_DROPS`]).
+    recent_drops: VecDeque<DropRecord>,
     /// Everything that happens to the stream, in order, for one observer (a bridge
     /// that mirrors the stream into another process), told inline.
     tap: Option<(TapId, Box<dyn StoreTap>)>,
@@ -451,6 +456,24 @@ impl TrajectoryStore {
         self.generation.store(generation, std::sync::atomic::Ordering::Relaxed);
     }
 
+    /// The gate's most recent drops, oldest first, with what each broke.
+    pub fn recent_drops(&self) -> Vec<DropRecord> {
+        self.recent_drops.iter().cloned().collect()
+    }
+
+    /// When a structure last entered the stream (`None`: never), and how many of the
+    /// last adds remembered (128) entered at or after `since`.
+    pub fn adds_since(&self, since: Time) -> (Option<Time>, u64) {
+        self.stats.adds_since(since)
+    }
+
+    fn remember_drop(&mut self, at: Time, cause: DropCause, valid_time: Time, detail: String) {
+        if self.recent_drops.len() == RECENT_DROPS {
+            self.recent_drops.pop_front();
+        }
+        self.recent_drops.push_back(DropRecord { at, cause, valid_time, detail });
+    }
+
     /// The same as [`TrajectoryStore::reset`]: in process, every reset completes
     /// before it returns.
     pub fn reset_blocking(&mut self) {
@@ -617,6 +640,7 @@ impl TrajectoryStore {
         self.release_due_at(now);
         if let Err(source) = self.checker.check(&es.attributes) {
             self.stats.record_dropped(DropCause::InvalidType);
+            self.remember_drop(now, DropCause::InvalidType, es.valid_time, source.to_string());
             tracing::debug!(trajectory = %self.name, error = %source, "structure refused");
             return Err(AddError::InvalidType { trajectory: self.name.clone(), source });
         }
@@ -877,6 +901,7 @@ impl TrajectoryStore {
         blocking: bool,
     ) -> Result<AddOutcome, AddError> {
         self.stats.record_dropped(DropCause::Violation(constraint));
+        self.remember_drop(now, DropCause::Violation(constraint), es.valid_time, detail.clone());
         let v = PolicyViolation {
             trajectory: self.name.clone(),
             constraint,

@@ -71,6 +71,12 @@ impl StatsRecorder {
         }
     }
 
+    /// The last add time, and how many of the remembered adds are at or after `since`.
+    pub fn adds_since(&self, since: Time) -> (Option<Time>, u64) {
+        let n = self.recent_adds.iter().rev().take_while(|t| **t >= since).count();
+        (self.recent_adds.back().copied(), n as u64)
+    }
+
     pub fn record_dropped(&mut self, cause: DropCause) {
         self.record_dropped_n(cause, 1);
     }

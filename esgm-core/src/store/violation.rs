@@ -259,3 +259,20 @@ pub trait AddForwarder: Send + Sync + std::fmt::Debug {
         Err(AddError::WriterGone { trajectory: trajectory.to_owned(), pid: 0 })
     }
 }
+
+/// How many of a trajectory's most recent drops its store remembers, with their
+/// details ([`crate::esgm::Why`]).
+pub const RECENT_DROPS: usize = 32;
+
+/// One structure a trajectory dropped.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct DropRecord {
+    /// When.
+    pub at: Time,
+    /// Why.
+    pub cause: DropCause,
+    /// The structure's valid time.
+    pub valid_time: Time,
+    /// The rule it broke, in words.
+    pub detail: String,
+}

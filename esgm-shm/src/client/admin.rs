@@ -97,6 +97,13 @@ pub(crate) enum AdminOp {
         /// How long the process may wait.
         timeout: Duration,
     },
+    /// Why `trajectory` has not produced since `since`: answered by its writer.
+    Why {
+        /// The trajectory.
+        trajectory: String,
+        /// The time asked about.
+        since: esgm_core::Time,
+    },
 }
 
 /// A process's answer.
@@ -120,6 +127,8 @@ pub(crate) enum AdminAnswer {
         /// True if its tracing filter was replaced.
         filter: bool,
     },
+    /// The writer's answer to [`AdminOp::Why`].
+    Why(Box<esgm_core::esgm::Why>),
     /// The question failed here.
     Failed {
         /// Why.
@@ -659,6 +668,21 @@ fn answer(host: &str, local: &InProcessEsgm, mirrors: &SharedMirrors, op: AdminO
         AdminOp::CatchUp => {
             mirrors.pump();
             AdminAnswer::Done { reset: 0 }
+        }
+        AdminOp::Why { trajectory, since } => {
+            if !mirrors.lock().exports.contains_key(&trajectory) {
+                // Only the writer knows its producer's calls and its gate's drops.
+                return AdminAnswer::Done { reset: 0 };
+            }
+            match local.why_here(&trajectory, since) {
+                Ok(mut why) => {
+                    why.writer_alive = Some(true);
+                    super::why::inputs_alive(&mut why, mirrors);
+                    why.explain();
+                    AdminAnswer::Why(Box::new(why))
+                }
+                Err(e) => AdminAnswer::Failed { reason: e.to_string() },
+            }
         }
         AdminOp::Stats => {
             let figures = local.figures_here();

@@ -76,6 +76,7 @@ mod settings;
 mod shared_node;
 mod stats_row;
 mod takeover;
+mod why;
 
 use crate::data_plane::service::ShmService;
 use std::sync::Arc;
@@ -775,6 +776,14 @@ impl Esgm for ShmEsgm {
             Ok(Response::Trajectories(t)) => Ok(t),
             other => Err(unanswered("list the trajectories", other)),
         }
+    }
+
+    fn why(
+        &self,
+        trajectory: &str,
+        since: esgm_core::Time,
+    ) -> Result<esgm_core::esgm::Why, LookupError> {
+        self.why_anywhere(trajectory, since)
     }
 
     fn add_sensor_interface(

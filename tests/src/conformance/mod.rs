@@ -21,6 +21,7 @@ pub mod operators;
 pub mod primitive;
 pub mod queries;
 pub mod sampled;
+pub mod why;
 
 use std::time::Duration;
 
@@ -159,6 +160,11 @@ macro_rules! conformance_tests {
             lineage::a_three_stage_pipeline_names_its_inputs,
             lineage::operators_name_their_inputs,
             lineage::a_trace_names_what_is_gone,
+            why::why_names_what_the_unit_returned,
+            why::why_names_the_input_it_waits_for,
+            why::why_names_the_constraint_that_dropped,
+            why::why_names_what_a_sync_waits_for,
+            why::why_names_what_the_sensor_returned,
         );
     };
     (@each $runtime:ident, $make:expr;

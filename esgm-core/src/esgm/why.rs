@@ -1,0 +1,245 @@
+//! Why a trajectory has not produced (SPEC X2): what esgm knows of a silent pipeline,
+//! in one answer. A producer's calls and their outcomes, each input's latest structure
+//! and age, what a sync waits for, each constraint's drops with the last structure it
+//! dropped, missed sample points, and whether the writer is alive: the counters esgm
+//! always kept, joined with the recent events behind them, and read as reasons.
+
+use crate::store::{DropCause, DropRecord};
+use crate::time::Time;
+
+use super::{TrajectoryKind, WorkerStats};
+
+/// How many of a producer's most recent calls are remembered, with their outcomes.
+pub const RECENT_CALLS: usize = 16;
+
+/// The answer to "why has this trajectory not produced since `since`?".
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Why {
+    /// The trajectory.
+    pub trajectory: String,
+    /// Primitive, sampled, computed, sync, merge or generated.
+    pub kind: TrajectoryKind,
+    /// The time asked about.
+    pub since: Time,
+    /// When the answer was made (the writer's clock).
+    pub now: Time,
+    /// When a structure last entered the trajectory (`None`: never).
+    pub last_added: Option<Time>,
+    /// Structures that entered since `since`, as far as the recent adds remembered
+    /// reach back (the last 128).
+    pub added_since: u64,
+    /// Every input: its latest structure, its age, its writer.
+    pub inputs: Vec<InputHealth>,
+    /// The producer's (sensor's, unit's or operator's) counters, if it has one.
+    pub worker: Option<WorkerStats>,
+    /// Its most recent calls, oldest first.
+    pub recent_calls: Vec<CallRecord>,
+    /// A sync's wait: which input it waits for, and how far apart the inputs are.
+    pub sync: Option<SyncWait>,
+    /// The trajectory's drops since `since`, per cause, with the last one's detail.
+    pub drops: Vec<DropSummary>,
+    /// Whether the process that writes the trajectory is alive (`None`: this runtime
+    /// has one process, or it could not tell).
+    pub writer_alive: Option<bool>,
+    /// The reasons, most telling first, in words.
+    pub reasons: Vec<String>,
+}
+
+/// One input of a produced trajectory, as the producer sees it.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct InputHealth {
+    /// The input trajectory.
+    pub trajectory: String,
+    /// False if no trajectory of that name exists any more.
+    pub exists: bool,
+    /// Its latest structure's valid time (`None`: it holds none).
+    pub latest_valid_time: Option<Time>,
+    /// When that structure entered it.
+    pub latest_add_time: Option<Time>,
+    /// How long ago that was, at [`Why::now`].
+    pub age: Option<Time>,
+    /// Whether the process that writes it is alive (`None`: could not tell).
+    pub writer_alive: Option<bool>,
+}
+
+/// One call of a producer and what came of it.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct CallRecord {
+    /// When it returned.
+    pub at: Time,
+    /// What came of it.
+    pub outcome: CallOutcome,
+}
+
+/// What came of a producer's call.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case", tag = "outcome", content = "detail")]
+pub enum CallOutcome {
+    /// It produced a structure, and the trajectory took it in (or held it).
+    Produced,
+    /// It produced a structure that the trajectory's policy dropped.
+    Dropped(String),
+    /// It said it had no value (`ValueNotAvailable`).
+    NoValue,
+    /// It failed, with this error.
+    Failed(String),
+    /// It panicked (or raised), with this message; the trajectory went on.
+    Panicked(String),
+    /// Its output did not fit the trajectory's type.
+    InvalidOutput(String),
+}
+
+/// What a sync waits for.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct SyncWait {
+    /// The input whose latest structure is the oldest (or that holds none): the one a
+    /// set waits for.
+    pub waits_for: Option<String>,
+    /// The newest input's latest valid time minus the waited-for input's.
+    pub gap: Option<Time>,
+    /// How far apart a set's members may be (`None`: exact times, or unbounded).
+    pub tolerance: Option<Time>,
+    /// Structures the sync gave up on (ApproximateTime's drops and queue overflow, as
+    /// message_filters counts them), since the trajectory was made.
+    pub discarded: u64,
+}
+
+/// The drops of one cause since [`Why::since`].
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct DropSummary {
+    /// The cause (a constraint, a wrong type, …).
+    pub cause: DropCause,
+    /// How many the remembered drops hold since `since`.
+    pub since: u64,
+    /// How many in all, since the trajectory was made.
+    pub total: u64,
+    /// The last one.
+    pub last: Option<DropRecord>,
+}
+
+impl Why {
+    /// True if the trajectory produced since [`Why::since`].
+    pub fn produced(&self) -> bool {
+        self.last_added.is_some_and(|t| t >= self.since)
+    }
+
+    /// Works out [`Why::reasons`] from the rest: what a person debugging a silent
+    /// pipeline reads first.
+    pub fn explain(&mut self) {
+        let mut out = Vec::new();
+        if self.writer_alive == Some(false) {
+            out.push(
+                "its writer process is gone: nothing writes it until one takes it over".into(),
+            );
+        }
+        match self.last_added {
+            Some(t) if t >= self.since => out.push(format!(
+                "it produced: {} structure(s) since the time asked, the last {} ago",
+                self.added_since,
+                seconds(self.now - t)
+            )),
+            Some(t) => out.push(format!(
+                "nothing since the time asked; the last {} ago",
+                seconds(self.now - t)
+            )),
+            None => out.push("it has never produced".into()),
+        }
+        for input in &self.inputs {
+            let name = &input.trajectory;
+            if !input.exists {
+                out.push(format!("input `{name}` does not exist any more"));
+            } else if input.writer_alive == Some(false) {
+                out.push(format!("input `{name}`'s writer process is gone"));
+            }
+            match (input.latest_add_time, input.age) {
+                (None, _) if input.exists => {
+                    out.push(format!("input `{name}` holds no structure: the producer waits for it"))
+                }
+                (Some(t), Some(age)) if t < self.since => out.push(format!(
+                    "input `{name}` has had nothing new since the time asked (its latest entered {} ago)",
+                    seconds(age)
+                )),
+                _ => {}
+            }
+        }
+        if let Some(sync) = &self.sync {
+            if let Some(input) = &sync.waits_for {
+                let gap = sync.gap.map(|g| format!(", {} behind the newest input", seconds(g)));
+                let tolerance = sync
+                    .tolerance
+                    .map(|t| format!(" (tolerance {})", seconds(t)))
+                    .unwrap_or_default();
+                out.push(format!(
+                    "the sync waits for `{input}`{}{tolerance}",
+                    gap.unwrap_or_default()
+                ));
+            }
+            if sync.discarded > 0 {
+                out.push(format!(
+                    "the sync gave up on {} structure(s) that found no set",
+                    sync.discarded
+                ));
+            }
+        }
+        if let Some(w) = &self.worker {
+            if w.calls == 0
+                && matches!(self.kind, TrajectoryKind::Sampled | TrajectoryKind::Computed)
+            {
+                out.push("its producer was never called".into());
+            }
+            if w.missed_periods > 0 {
+                out.push(format!(
+                    "{} sample point(s) were missed (the sampler fell behind its period)",
+                    w.missed_periods
+                ));
+            }
+        }
+        let since: Vec<&CallRecord> =
+            self.recent_calls.iter().filter(|c| c.at >= self.since).collect();
+        if let Some(last) = since.last() {
+            let n = since.iter().filter(|c| c.outcome == last.outcome).count();
+            match &last.outcome {
+                CallOutcome::Produced => {}
+                CallOutcome::NoValue => out.push(format!("its last {n} call(s) returned no value")),
+                CallOutcome::Failed(e) => out.push(format!("its last call failed: {e}")),
+                CallOutcome::Panicked(e) => out.push(format!("its last call raised: {e}")),
+                CallOutcome::InvalidOutput(e) => {
+                    out.push(format!("its last output did not fit the type: {e}"))
+                }
+                CallOutcome::Dropped(e) => {
+                    out.push(format!("its last output was dropped by the policy: {e}"))
+                }
+            }
+        } else if self.worker.as_ref().is_some_and(|w| w.calls > 0) && !self.produced() {
+            out.push("its producer was not called since the time asked".into());
+        }
+        for d in &self.drops {
+            if d.since == 0 {
+                continue;
+            }
+            let last =
+                d.last.as_ref().map(|l| format!("; the last: {}", l.detail)).unwrap_or_default();
+            out.push(format!(
+                "{} dropped {} structure(s) since the time asked{last}",
+                cause_words(d.cause),
+                d.since
+            ));
+        }
+        self.reasons = out;
+    }
+}
+
+/// A duration for people.
+fn seconds(ns: Time) -> String {
+    let ms = ns as f64 / 1e6;
+    if ms.abs() < 1_000.0 { format!("{ms:.1} ms") } else { format!("{:.2} s", ms / 1e3) }
+}
+
+/// What dropped a structure, as a subject.
+fn cause_words(cause: DropCause) -> String {
+    match cause {
+        DropCause::Violation(c) => format!("the {c} constraint"),
+        DropCause::InvalidType => "the type check".into(),
+        other => format!("{other:?}"),
+    }
+}

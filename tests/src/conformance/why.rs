@@ -1,0 +1,192 @@
+//! Why a trajectory did not produce (X2): each cause of silence made on purpose, and
+//! named by `why` asked from the reader (on the shared-memory runtime another process
+//! than the writer, which answers).
+
+use std::sync::Arc;
+
+use esgm_core::esgm::{CallOutcome, Why};
+use esgm_core::operators::sync::{EpsilonConfig, SyncPolicy};
+use esgm_core::{
+    ComputeError, Constraint, DropCause, EntityStructure, EntityTrajectoryStructure, Esgm,
+    FluentStreamPolicy, Sample, SensorError, Time, TrajectorySpec, millis,
+};
+
+use super::{WAIT, read, reading, register_reading, wait_stored, x_of};
+use crate::{Harness, wait_for};
+
+/// The reader's answer for `name` since `since`, once `done` holds (the writer's
+/// worker runs asynchronously); fails the test with the last answer otherwise.
+fn why_when<H: Harness>(h: &H, name: &str, since: Time, done: impl Fn(&Why) -> bool) -> Why {
+    let mut last = None;
+    let ok = wait_for(WAIT, || {
+        let why = h.reader().why(name, since).expect("why answers");
+        let ok = done(&why);
+        last = Some(why);
+        ok
+    });
+    let why = last.expect("asked at least once");
+    assert!(ok, "`why {name}` never said what was expected: {why:#?}");
+    why
+}
+
+fn says(why: &Why, words: &str) -> bool {
+    why.reasons.iter().any(|r| r.contains(words))
+}
+
+/// A unit that answers "no value", one that fails and one that panics: each is named
+/// with its last calls, and the message of the failure.
+pub fn why_names_what_the_unit_returned<H: Harness>(h: &H) {
+    register_reading(h);
+    let e = h.esgm();
+    let nothing = |_: &[Sample], _: Time| -> Result<EntityStructure, ComputeError> {
+        Err(ComputeError::ValueNotAvailable)
+    };
+    let failing = |_: &[Sample], _: Time| -> Result<EntityStructure, ComputeError> {
+        Err(ComputeError::Failed { reason: "calibration missing".into() })
+    };
+    let panicking = |_: &[Sample], _: Time| -> Result<EntityStructure, ComputeError> {
+        panic!("index out of bounds in the blob finder")
+    };
+    let one = || vec!["Reading".into()];
+    e.add_comp_unit("nothing", "Reading", one(), Arc::new(nothing)).unwrap();
+    e.add_comp_unit("failing", "Reading", one(), Arc::new(failing)).unwrap();
+    e.add_comp_unit("panicking", "Reading", one(), Arc::new(panicking)).unwrap();
+    let a = e.create_primitive_entity_trajectory_structure("a", "Reading").unwrap();
+    for (name, unit) in [("n", "nothing"), ("f", "failing"), ("p", "panicking")] {
+        e.create_computed_entity_trajectory_structure(name, unit, &["a"]).unwrap();
+    }
+    let t0 = h.now();
+    a.add(reading(t0, 1.0)).unwrap();
+    a.add(reading(t0 + 1, 2.0)).unwrap();
+    let since = t0 - 1;
+    let n = why_when(h, "n", since, |w| w.recent_calls.len() >= 2);
+    assert!(n.recent_calls.iter().all(|c| c.outcome == CallOutcome::NoValue), "{n:#?}");
+    assert!(says(&n, "its last 2 call(s) returned no value"), "{:?}", n.reasons);
+    assert!(says(&n, "it has never produced"), "{:?}", n.reasons);
+    assert_eq!(n.worker.map(|w| w.no_value), Some(2));
+    let f = why_when(h, "f", since, |w| w.recent_calls.len() >= 2);
+    assert!(says(&f, "failed: computation failed: calibration missing"), "{:?}", f.reasons);
+    let p = why_when(h, "p", since, |w| w.recent_calls.len() >= 2);
+    assert!(says(&p, "raised: index out of bounds in the blob finder"), "{:?}", p.reasons);
+    assert_eq!(p.inputs.len(), 1);
+    assert_eq!(p.inputs[0].latest_valid_time, Some(t0 + 1));
+}
+
+/// A unit over two inputs, one of which never got a structure: never called, and the
+/// empty input is named; an input with nothing new since the time asked is named too.
+pub fn why_names_the_input_it_waits_for<H: Harness>(h: &H) {
+    register_reading(h);
+    let e = h.esgm();
+    let sum = |i: &[Sample], _: Time| -> Result<EntityStructure, ComputeError> {
+        Ok(reading(i[0].valid_time, i.iter().filter_map(|s| x_of(s)).sum()))
+    };
+    e.add_comp_unit("sum", "Reading", vec!["Reading".into(); 2], Arc::new(sum)).unwrap();
+    e.add_comp_unit("copy", "Reading", vec!["Reading".into()], Arc::new(sum)).unwrap();
+    let a = e.create_primitive_entity_trajectory_structure("a", "Reading").unwrap();
+    e.create_primitive_entity_trajectory_structure("silent", "Reading").unwrap();
+    e.create_computed_entity_trajectory_structure("both", "sum", &["a", "silent"]).unwrap();
+    e.create_computed_entity_trajectory_structure("copy_a", "copy", &["a"]).unwrap();
+    let t0 = h.now();
+    a.add(reading(t0, 1.0)).unwrap();
+    let both =
+        why_when(h, "both", t0 - 1, |w| w.inputs.iter().any(|i| i.latest_add_time.is_some()));
+    assert!(says(&both, "input `silent` holds no structure"), "{:?}", both.reasons);
+    assert!(says(&both, "its producer was never called"), "{:?}", both.reasons);
+    assert_eq!(both.worker.map(|w| w.calls), Some(0));
+    // copy_a produced once; asked about a later time, a is what went quiet.
+    wait_stored(&read(h, "copy_a"), 1);
+    h.advance(millis(100));
+    let later = h.now();
+    let copy = why_when(h, "copy_a", later, |w| w.last_added.is_some());
+    assert!(!copy.produced(), "{copy:#?}");
+    assert!(
+        says(&copy, "input `a` has had nothing new since the time asked"),
+        "{:?}",
+        copy.reasons
+    );
+    assert!(says(&copy, "nothing since the time asked"), "{:?}", copy.reasons);
+    a.add(reading(later + 1, 2.0)).unwrap();
+    let produced = why_when(h, "copy_a", later, Why::produced);
+    assert!(says(&produced, "it produced: 1 structure(s)"), "{:?}", produced.reasons);
+}
+
+/// Outputs a constraint drops are named with the constraint and the last detail, and
+/// a primitive trajectory's gate names what it dropped the same way.
+pub fn why_names_the_constraint_that_dropped<H: Harness>(h: &H) {
+    register_reading(h);
+    let e = h.esgm();
+    let copy = |i: &[Sample], _: Time| -> Result<EntityStructure, ComputeError> {
+        Ok((*i[0].structure).clone())
+    };
+    e.add_comp_unit("copy", "Reading", vec!["Reading".into()], Arc::new(copy)).unwrap();
+    let a = e.create_primitive_entity_trajectory_structure("a", "Reading").unwrap();
+    let big_only = FluentStreamPolicy::default().filter("x > 10");
+    e.create_trajectory(TrajectorySpec::computed("big", "copy", ["a"]).policy(big_only)).unwrap();
+    let ordered = FluentStreamPolicy::default().order(esgm_core::OrderConstraint::Monotone);
+    let o = e
+        .create_trajectory(TrajectorySpec::primitive("ordered", "Reading").policy(ordered))
+        .unwrap();
+    let t0 = h.now();
+    a.add(reading(t0, 1.0)).unwrap();
+    a.add(reading(t0 + 1, 2.0)).unwrap();
+    let big = why_when(h, "big", t0 - 1, |w| w.recent_calls.len() >= 2);
+    assert!(
+        matches!(&big.recent_calls[1].outcome, CallOutcome::Dropped(d) if d.contains("filter")),
+        "{big:#?}"
+    );
+    let filter = big.drops.iter().find(|d| d.cause == DropCause::Violation(Constraint::Filter));
+    let filter = filter.unwrap_or_else(|| panic!("no filter drops: {big:#?}"));
+    assert_eq!((filter.since, filter.total), (2, 2));
+    assert_eq!(filter.last.as_ref().map(|l| l.valid_time), Some(t0 + 1));
+    assert!(says(&big, "the filter constraint dropped 2 structure(s)"), "{:?}", big.reasons);
+    o.add(reading(t0 + 10, 1.0)).unwrap();
+    let _dropped = o.add(reading(t0 + 5, 1.0)).unwrap();
+    let ordered = why_when(h, "ordered", t0, |w| !w.drops.is_empty());
+    let order = &ordered.drops[0];
+    assert_eq!(order.cause, DropCause::Violation(Constraint::Order));
+    assert_eq!(order.last.as_ref().map(|l| l.valid_time), Some(t0 + 5));
+    assert!(says(&ordered, "the order constraint dropped 1"), "{:?}", ordered.reasons);
+}
+
+/// A sync names the input it waits for, how far behind it is against its tolerance,
+/// and what it gave up on.
+pub fn why_names_what_a_sync_waits_for<H: Harness>(h: &H) {
+    register_reading(h);
+    let e = h.esgm();
+    let a = e.create_primitive_entity_trajectory_structure("a", "Reading").unwrap();
+    let b = e.create_primitive_entity_trajectory_structure("b", "Reading").unwrap();
+    let policy = SyncPolicy::Epsilon(EpsilonConfig::default().tolerance(5));
+    e.create_trajectory(TrajectorySpec::sync("ab", ["a", "b"], policy)).unwrap();
+    let t0 = h.now();
+    a.add(reading(t0, 1.0)).unwrap();
+    b.add(reading(t0 + 4, 2.0)).unwrap();
+    wait_stored(&read(h, "ab"), 1);
+    a.add(reading(t0 + 100, 3.0)).unwrap();
+    a.add(reading(t0 + 200, 3.0)).unwrap();
+    let since = t0 + 50;
+    let why = why_when(h, "ab", since, |w| {
+        w.inputs.iter().any(|i| i.latest_valid_time == Some(t0 + 200))
+    });
+    let sync = why.sync.as_ref().expect("a sync says what it waits for");
+    assert_eq!(sync.waits_for.as_deref(), Some("b"), "{why:#?}");
+    assert_eq!((sync.gap, sync.tolerance), (Some(196), Some(5)));
+    assert!(says(&why, "the sync waits for `b`"), "{:?}", why.reasons);
+}
+
+/// A sampled trajectory whose sensor has no value names its sensor's answers.
+pub fn why_names_what_the_sensor_returned<H: Harness>(h: &H) {
+    register_reading(h);
+    let e = h.esgm();
+    let blind =
+        |_: Time| -> Result<EntityStructure, SensorError> { Err(SensorError::ValueNotAvailable) };
+    e.add_sensor_interface("blind", "Reading", Arc::new(blind)).unwrap();
+    e.create_trajectory(TrajectorySpec::sampled("dark", "blind", millis(10)).unwrap()).unwrap();
+    let since = h.now();
+    let why = why_when(h, "dark", since, |w| !w.recent_calls.is_empty());
+    assert_eq!(why.recent_calls[0].outcome, CallOutcome::NoValue);
+    assert!(says(&why, "returned no value"), "{:?}", why.reasons);
+    assert!(matches!(
+        h.reader().why("drak", since),
+        Err(esgm_core::LookupError::NoSuchEntityStructure { .. })
+    ));
+}
