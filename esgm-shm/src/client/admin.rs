@@ -463,6 +463,23 @@ impl Admin {
 
     /// Asks every connected process `op` and waits up to `timeout` for all of them.
     pub fn ask(&self, op: AdminOp, timeout: Duration) -> Result<Answers, AdminError> {
+        let (collected, expected) = self.ask_until(op, timeout, |_| false)?;
+        if collected.len() < expected {
+            return Err(AdminError::Incomplete { answered: collected.len(), expected, timeout });
+        }
+        Ok(collected)
+    }
+
+    /// Asks every connected process `op`, and returns what was answered when every
+    /// process answered, when `enough` says the answers so far suffice, or at
+    /// `timeout`, with how many answers were expected: a question one process answers
+    /// (the writer's `why`) does not wait for a stopped process that will not.
+    pub fn ask_until(
+        &self,
+        op: AdminOp,
+        timeout: Duration,
+        enough: impl Fn(&Answers) -> bool,
+    ) -> Result<(Answers, usize), AdminError> {
         let started = Instant::now();
         let deadline = started + timeout;
         let send = |reason: String| AdminError::Send {
@@ -509,7 +526,7 @@ impl Admin {
         // host, and a loaded machine's processes may take a while to answer.)
         let mut cleaned = false;
         let clean_after = Instant::now() + timeout / 2;
-        while collected.len() < expected {
+        while collected.len() < expected && !enough(&collected) {
             if !cleaned && Instant::now() >= clean_after {
                 cleaned = true;
                 crate::control::server::log_cleanup(
@@ -543,10 +560,7 @@ impl Admin {
             }
         }
         drop(publisher);
-        if collected.len() < expected {
-            return Err(AdminError::Incomplete { answered: collected.len(), expected, timeout });
-        }
-        Ok(collected)
+        Ok((collected, expected))
     }
 }
 

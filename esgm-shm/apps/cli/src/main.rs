@@ -99,6 +99,9 @@ enum Command {
     /// The input structures behind one structure, back to its sources, with the
     /// time each hop took (its lineage).
     Trace(cmd::trace::Args),
+    /// Why a trajectory has not produced: its inputs, its producer's last calls, a
+    /// sync's wait, the constraints' drops, its writer.
+    Why(cmd::why::Args),
     /// Rate and add-delay percentiles of a trajectory.
     Hz(cmd::hz::Args),
     /// Statistics of every trajectory.

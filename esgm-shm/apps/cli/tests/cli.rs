@@ -316,6 +316,88 @@ fn trace_follows_lineage_across_processes() {
     drop(system);
 }
 
+/// `esgm why` across processes: the writer of a unit's trajectory answers with its
+/// unit's calls, and a writer stopped with SIGSTOP is named as stopped, while the
+/// trajectory computed from it names the input that went quiet.
+#[test]
+fn why_names_a_stopped_writer_and_the_input_that_went_quiet() {
+    let _one = one_system();
+    let d = domain("cli-why");
+    ok(&["--domain", &d, "up", "--detach"]);
+    let _stop = StopOnDrop(d.clone());
+    let system = esgm_shm::ShmEsgm::builder().domain(&d).host("pusher").connect().unwrap();
+    let steer =
+        system.create_primitive_entity_trajectory_structure("steer", "DrivingDirection").unwrap();
+    let now = esgm_core::Clock::now(&esgm_core::SystemClock);
+    steer.add(EntityStructure::new("dd", now, now).with("dir", 0.0).with("speed", 0.0)).unwrap();
+    let mut robot = Command::new(ESGM)
+        .args([
+            "--domain",
+            &d,
+            "worker",
+            "robot",
+            "--trajectory",
+            "rs",
+            "--follow",
+            "steer",
+            "--period",
+            "20ms",
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while system.get_entity_trajectory_structure("rs").is_err() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let slow =
+        |i: &[esgm_core::Sample], _: i64| -> Result<EntityStructure, esgm_core::ComputeError> {
+            if i[0].get("x").and_then(|v| v.as_double()).is_some_and(|x| x >= 0.0) {
+                Err(esgm_core::ComputeError::ValueNotAvailable)
+            } else {
+                Ok((*i[0].structure).clone())
+            }
+        };
+    let types = vec!["RobotState".into()];
+    system.add_comp_unit("slow", "RobotState", types, std::sync::Arc::new(slow)).unwrap();
+    system.create_computed_entity_trajectory_structure("c", "slow", &["rs"]).unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+
+    // The unit's writer (this process) answers: no value, with its calls.
+    let json = ok(&["--domain", &d, "--json", "why", "c", "--since", "-200ms"]);
+    let why: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let reasons = why["reasons"].to_string();
+    assert!(reasons.contains("call(s) returned no value"), "{json}");
+    assert_eq!(why["writer_alive"], true);
+    assert_eq!(why["inputs"][0]["trajectory"], "rs");
+    assert_eq!(why["inputs"][0]["writer_alive"], true, "{json}");
+
+    // The robot stops: its trajectory's writer is named stopped, and `c` names `rs`.
+    let pid = robot.id().to_string();
+    Command::new("kill").args(["-STOP", &pid]).status().unwrap();
+    std::thread::sleep(Duration::from_millis(300));
+    let text = ok(&["--domain", &d, "why", "rs", "--since", "-200ms"]);
+    assert!(
+        text.lines().nth(1).is_some_and(|l| l.contains("its writer process is stopped")),
+        "{text}"
+    );
+    let text = ok(&["--domain", &d, "why", "c", "--since", "-200ms"]);
+    assert!(text.contains("input `rs` has had nothing new since the time asked"), "{text}");
+    Command::new("kill").args(["-CONT", &pid]).status().unwrap();
+    let _ = robot.kill();
+    let _ = robot.wait();
+    let o = esgm(&["--domain", &d, "why", "cc"], Duration::from_secs(30));
+    assert_eq!(o.code, Some(1));
+    assert!(
+        o.stderr.contains("no entity trajectory structure `cc`; did you mean `c`?"),
+        "{}",
+        o.stderr
+    );
+    drop(steer);
+    drop(system);
+}
+
 /// Reads the demo's output as it comes.
 fn lines_of(child: &mut Child) -> mpsc::Receiver<String> {
     let (tx, rx) = mpsc::channel();

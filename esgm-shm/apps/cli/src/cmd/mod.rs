@@ -33,6 +33,7 @@ pub mod types;
 pub mod up;
 pub mod view;
 pub mod violations;
+pub mod why;
 pub mod worker;
 
 use crate::{Cli, Command};
@@ -77,6 +78,7 @@ pub fn run(cli: &Cli) -> anyhow::Result<()> {
         Command::Approx(a) => query::approx(domain, json, a),
         Command::Echo(a) => echo::run(domain, json, a),
         Command::Trace(a) => trace::run(domain, json, a),
+        Command::Why(a) => why::run(domain, json, a),
         Command::Hz(a) => hz::run(domain, json, a),
         Command::Stats => stats::run(domain, json),
         Command::Reset(a) => reset::run(domain, json, a),
