@@ -202,7 +202,9 @@ impl TypeSchema {
 /// The fixed part of every lossless message, before the archive.
 ///
 /// Little-endian: magic `ESGM`, version `u16`, flags `u16`, add time `i64`, recorded
-/// time `i64`, sequence `u64`, view channel `u16`, 6 bytes of zeros: 40 bytes.
+/// time `i64`, sequence `u64`, view channel `u16`, lineage length `u32`, 2 bytes of
+/// zeros: 40 bytes. With the lineage flag, the structure's lineage
+/// ([`esgm_core::codec::decode_lineage`]'s bytes, that many) comes before the archive.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct RecordHeader {
     /// When the structure entered its trajectory (Definition 3.3.9).
@@ -217,6 +219,9 @@ pub struct RecordHeader {
     pub pixels_in_view: bool,
     /// The view channel holding the pixels (0 when `pixels_in_view` is false).
     pub view_channel: u16,
+    /// Bytes of the structure's lineage between the header and the archive (0: none,
+    /// a pushed or sampled structure's).
+    pub lineage_len: u32,
 }
 
 /// Length of an encoded [`RecordHeader`].
@@ -224,24 +229,51 @@ pub const HEADER_LEN: usize = 40;
 const MAGIC: &[u8; 4] = b"ESGM";
 const HEADER_VERSION: u16 = 1;
 const FLAG_PIXELS_IN_VIEW: u16 = 1;
+const FLAG_LINEAGE: u16 = 2;
 
 impl RecordHeader {
     /// Appends the header to `out`.
     pub fn encode(&self, out: &mut Vec<u8>) {
         out.extend_from_slice(MAGIC);
         out.extend_from_slice(&HEADER_VERSION.to_le_bytes());
-        let flags = if self.pixels_in_view { FLAG_PIXELS_IN_VIEW } else { 0 };
+        let mut flags = if self.pixels_in_view { FLAG_PIXELS_IN_VIEW } else { 0 };
+        if self.lineage_len > 0 {
+            flags |= FLAG_LINEAGE;
+        }
         out.extend_from_slice(&flags.to_le_bytes());
         out.extend_from_slice(&self.add_time.to_le_bytes());
         out.extend_from_slice(&self.recorded_time.to_le_bytes());
         out.extend_from_slice(&self.sequence.to_le_bytes());
         out.extend_from_slice(&self.view_channel.to_le_bytes());
-        out.extend_from_slice(&[0; 6]);
+        out.extend_from_slice(&self.lineage_len.to_le_bytes());
+        out.extend_from_slice(&[0; 2]);
     }
 
-    /// Splits a lossless message into its header and archive; the error says what is
-    /// wrong with the header.
+    /// Splits a lossless message into its header, its lineage bytes (if any) and its
+    /// archive; the error says what is wrong.
+    pub fn decode_with_lineage(data: &[u8]) -> Result<(Self, Option<&[u8]>, &[u8]), String> {
+        let (header, rest) = Self::decode_header(data)?;
+        if header.lineage_len == 0 {
+            return Ok((header, None, rest));
+        }
+        let len = header.lineage_len as usize;
+        if rest.len() < len {
+            return Err(format!(
+                "a lineage of {len} bytes in {} bytes after the header",
+                rest.len()
+            ));
+        }
+        let (lineage, archive) = rest.split_at(len);
+        Ok((header, Some(lineage), archive))
+    }
+
+    /// Splits a lossless message into its header and archive (past any lineage); the
+    /// error says what is wrong with the header.
     pub fn decode(data: &[u8]) -> Result<(Self, &[u8]), String> {
+        Self::decode_with_lineage(data).map(|(header, _, archive)| (header, archive))
+    }
+
+    fn decode_header(data: &[u8]) -> Result<(Self, &[u8]), String> {
         if data.len() < HEADER_LEN {
             return Err(format!(
                 "message of {} bytes is shorter than the {HEADER_LEN}-byte header",
@@ -263,7 +295,7 @@ impl RecordHeader {
             return Err(format!("header version {version}, this reader knows {HEADER_VERSION}"));
         }
         let flags = u16_at(6);
-        if flags & !FLAG_PIXELS_IN_VIEW != 0 {
+        if flags & !(FLAG_PIXELS_IN_VIEW | FLAG_LINEAGE) != 0 {
             return Err(format!("unknown header flags {flags:#06x}"));
         }
         let header = Self {
@@ -272,7 +304,15 @@ impl RecordHeader {
             sequence: u64_at(24),
             pixels_in_view: flags & FLAG_PIXELS_IN_VIEW != 0,
             view_channel: u16_at(32),
+            lineage_len: if flags & FLAG_LINEAGE != 0 {
+                u32::from_le_bytes([h[34], h[35], h[36], h[37]])
+            } else {
+                0
+            },
         };
+        if flags & FLAG_LINEAGE != 0 && header.lineage_len == 0 {
+            return Err("the lineage flag is set and its length is 0".into());
+        }
         Ok((header, archive))
     }
 }
@@ -345,6 +385,7 @@ mod tests {
             sequence: 42,
             pixels_in_view: true,
             view_channel: 7,
+            lineage_len: 0,
         };
         let mut out = Vec::new();
         h.encode(&mut out);
@@ -360,6 +401,29 @@ mod tests {
         let mut flags = out;
         flags[6] = 0x80;
         assert!(RecordHeader::decode(&flags).unwrap_err().contains("flags"));
+    }
+
+    #[test]
+    fn a_lineage_sits_between_header_and_archive() {
+        let h = RecordHeader {
+            add_time: 1,
+            recorded_time: 2,
+            sequence: 3,
+            pixels_in_view: false,
+            view_channel: 0,
+            lineage_len: 4,
+        };
+        let mut out = Vec::new();
+        h.encode(&mut out);
+        out.extend_from_slice(b"LINEarchive");
+        let (back, lineage, archive) = RecordHeader::decode_with_lineage(&out).expect("decodes");
+        assert_eq!((back, lineage, archive), (h, Some(&b"LINE"[..]), &b"archive"[..]));
+        assert_eq!(RecordHeader::decode(&out).unwrap().1, b"archive");
+        let short = &out[..HEADER_LEN + 2];
+        assert!(RecordHeader::decode(short).unwrap_err().contains("a lineage of 4 bytes"));
+        let mut zero = out.clone();
+        zero[34..38].copy_from_slice(&0u32.to_le_bytes());
+        assert!(RecordHeader::decode(&zero).unwrap_err().contains("length is 0"));
     }
 
     #[test]

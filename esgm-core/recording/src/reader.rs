@@ -197,6 +197,8 @@ pub struct RecordedSample {
     pub structure: EntityStructure,
     /// Add time, recorded time and sequence.
     pub header: RecordHeader,
+    /// The input structures it was made from, as recorded (a produced structure's).
+    pub lineage: Option<esgm_core::Lineage>,
 }
 
 impl Recording {
@@ -500,8 +502,10 @@ impl Decoder {
                                 sequence,
                                 pixels_in_view: false,
                                 view_channel: 0,
+                                lineage_len: 0,
                             };
-                            Some(RecordedSample { trajectory: *index, structure, header })
+                            let lineage = None;
+                            Some(RecordedSample { trajectory: *index, structure, header, lineage })
                         }
                         Err(e) => {
                             // A bag is another tool's file: a message esgm cannot read
@@ -522,8 +526,12 @@ impl Decoder {
                     sequence,
                     reason,
                 };
-                let (h, archive) = RecordHeader::decode(&data)
+                let (h, lineage, archive) = RecordHeader::decode_with_lineage(&data)
                     .map_err(|r| malformed(u64::from(header.sequence), r))?;
+                let lineage = lineage
+                    .map(codec::decode_lineage)
+                    .transpose()
+                    .map_err(|e| malformed(h.sequence, e.to_string()))?;
                 let mut structure = codec::decode_bytes(archive)
                     .map_err(|e| malformed(h.sequence, e.to_string()))?;
                 let mut view_len = 0;
@@ -549,7 +557,12 @@ impl Decoder {
                     structure.set(PIXELS_ATTRIBUTE, Octets::new(pixels));
                 }
                 t.bytes = t.bytes.saturating_add(data.len() as u64).saturating_add(view_len);
-                return Ok(Some(RecordedSample { trajectory: index, structure, header: h }));
+                return Ok(Some(RecordedSample {
+                    trajectory: index,
+                    structure,
+                    header: h,
+                    lineage,
+                }));
             }
             _ => {}
         }

@@ -347,7 +347,7 @@ fn record_one<T: EntityTrajectoryStructure>(
             let mut written = 0;
             shared.with_writer(|w| {
                 for (s, recorded) in &batch {
-                    w.write(id, &s.structure, s.add_time, *recorded)?;
+                    w.write_sample(id, s, *recorded)?;
                     written += 1;
                 }
                 Ok(())

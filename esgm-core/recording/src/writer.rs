@@ -402,6 +402,29 @@ impl RecordingWriter {
         add_time: Time,
         recorded_time: Time,
     ) -> Result<(), RecordError> {
+        self.write_traced(id, es, add_time, recorded_time, None)
+    }
+
+    /// [`Self::write`] of a sample as a trajectory delivered it: its lineage is
+    /// recorded with it ([`crate::RecordedSample::lineage`]).
+    pub fn write_sample(
+        &mut self,
+        id: TrajectoryId,
+        sample: &esgm_core::Sample,
+        recorded_time: Time,
+    ) -> Result<(), RecordError> {
+        let lineage = sample.lineage.as_deref();
+        self.write_traced(id, &sample.structure, sample.add_time, recorded_time, lineage)
+    }
+
+    fn write_traced(
+        &mut self,
+        id: TrajectoryId,
+        es: &EntityStructure,
+        add_time: Time,
+        recorded_time: Time,
+        lineage: Option<&esgm_core::Lineage>,
+    ) -> Result<(), RecordError> {
         self.rotate_if_due()?;
         let bag = self.options.bag;
         let t = &mut self.trajectories[id.0];
@@ -502,6 +525,11 @@ impl RecordingWriter {
             codec::encode(es)
         }
         .map_err(|source| RecordError::Encode { trajectory: name.clone(), source })?;
+        let lineage = lineage
+            .map(codec::encode_lineage)
+            .transpose()
+            .map_err(|source| RecordError::Encode { trajectory: name.clone(), source })?
+            .unwrap_or_default();
         self.scratch.clear();
         RecordHeader {
             add_time,
@@ -509,8 +537,10 @@ impl RecordingWriter {
             sequence,
             pixels_in_view,
             view_channel: if pixels_in_view { t.view_channel } else { 0 },
+            lineage_len: u32::try_from(lineage.len()).unwrap_or(u32::MAX),
         }
         .encode(&mut self.scratch);
+        self.scratch.extend_from_slice(&lineage);
         self.scratch.extend_from_slice(&archive);
         let header = MessageHeader {
             channel_id: t.lossless_channel,

@@ -355,6 +355,57 @@ fn a_recorder_that_waited_records_what_the_trajectory_held_and_one_that_did_not_
     assert_eq!(read, (0..5).map(robot).collect::<Vec<_>>(), "in order");
 }
 
+/// A recorded pipeline keeps each produced structure's lineage: read back, it names
+/// the recorded input structures (X1), and a pushed one has none.
+#[test]
+fn lineage_is_recorded_and_read_back() {
+    let esgm = InProcessEsgm::default();
+    let t = esgm
+        .create_primitive_entity_trajectory_structure("robot_state", "RobotState")
+        .expect("create");
+    let copy = |i: &[esgm_core::Sample], _: i64| Ok((*i[0].structure).clone());
+    esgm.add_comp_unit("copy", "RobotState", vec!["RobotState".into()], std::sync::Arc::new(copy))
+        .expect("unit");
+    esgm.create_computed_entity_trajectory_structure("copied", "copy", &["robot_state"])
+        .expect("computed");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let path = dir.path().join("lineage.mcap");
+    let writer = RecordingWriter::create(&path, RecordOptions::default()).expect("create");
+    let names = ["robot_state".to_owned(), "copied".to_owned()];
+    let recorder = Recorder::start(&esgm, &names, writer, 1024).expect("start");
+    for i in 0..3 {
+        t.add(robot(i)).expect("add");
+    }
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while recorder.stats().recorded() < 6 {
+        assert!(Instant::now() < deadline, "not recorded: {:?}", recorder.stats());
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    recorder.stop().expect("stop");
+    let recording = Recording::open(&path).expect("open");
+    let mut added = std::collections::HashMap::new();
+    let mut lineages = Vec::new();
+    for s in recording.samples().expect("samples") {
+        let s = s.expect("readable");
+        let name = recording.trajectories[s.trajectory].info.name.clone();
+        if name == "robot_state" {
+            assert!(s.lineage.is_none(), "a pushed structure has no lineage");
+            added.insert(s.structure.valid_time, s.header.add_time);
+        } else {
+            lineages
+                .push((s.structure.valid_time, s.lineage.expect("a computed structure's lineage")));
+        }
+    }
+    assert_eq!(lineages.len(), 3);
+    for (vt, lineage) in lineages {
+        assert_eq!(lineage.inputs.len(), 1);
+        let input = &lineage.inputs[0];
+        assert_eq!((input.trajectory.as_str(), input.valid_time), ("robot_state", vt));
+        assert_eq!(Some(&input.add_time), added.get(&vt), "the recorded input, by its add time");
+        assert!(!lineage.complete);
+    }
+}
+
 #[test]
 fn a_trajectory_destroyed_while_recorded_ends_its_recording_and_keeps_what_it_held() {
     let esgm = InProcessEsgm::default();
