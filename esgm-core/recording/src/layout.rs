@@ -224,6 +224,9 @@ pub struct RecordHeader {
     pub lineage_len: u32,
 }
 
+/// A lossless message split: its header, its lineage bytes (if any) and its archive.
+pub type Split<'a> = (RecordHeader, Option<&'a [u8]>, &'a [u8]);
+
 /// Length of an encoded [`RecordHeader`].
 pub const HEADER_LEN: usize = 40;
 const MAGIC: &[u8; 4] = b"ESGM";
@@ -251,7 +254,7 @@ impl RecordHeader {
 
     /// Splits a lossless message into its header, its lineage bytes (if any) and its
     /// archive; the error says what is wrong.
-    pub fn decode_with_lineage(data: &[u8]) -> Result<(Self, Option<&[u8]>, &[u8]), String> {
+    pub fn decode_with_lineage(data: &[u8]) -> Result<Split<'_>, String> {
         let (header, rest) = Self::decode_header(data)?;
         if header.lineage_len == 0 {
             return Ok((header, None, rest));
