@@ -67,7 +67,8 @@ pub struct InputHealth {
 pub struct CallRecord {
     /// When it returned.
     pub at: Time,
-    /// What came of it.
+    /// What came of it (in JSON beside `at`: `"outcome": "failed", "detail": "…"`).
+    #[serde(flatten)]
     pub outcome: CallOutcome,
 }
 

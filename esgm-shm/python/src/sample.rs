@@ -21,12 +21,18 @@ pub struct Sample {
     pub(crate) structure: Arc<EntityStructure>,
     pub(crate) add_time: i64,
     pub(crate) query_time: i64,
+    pub(crate) lineage: Option<Arc<esgm_core::Lineage>>,
 }
 
 impl Sample {
     /// From esgm's sample.
     pub fn new(s: esgm_core::Sample) -> Self {
-        Self { structure: s.structure, add_time: s.add_time, query_time: s.query_time }
+        Self {
+            structure: s.structure,
+            add_time: s.add_time,
+            query_time: s.query_time,
+            lineage: s.lineage,
+        }
     }
 
     fn long(&self, name: &str) -> Option<i64> {
@@ -87,6 +93,15 @@ impl Sample {
     #[getter]
     fn query_time(&self) -> i64 {
         self.query_time
+    }
+    /// The input structures it was made from, as a dict (`inputs`: each input's
+    /// `trajectory`, `generation`, `valid_time` and `add_time`; `complete`: False for
+    /// a unit, which may have read more), or None for a pushed or sampled structure.
+    #[getter]
+    fn lineage<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let v = serde_json::to_value(self.lineage.as_deref())
+            .map_err(|e| pyo3::exceptions::PyTypeError::new_err(e.to_string()))?;
+        crate::runtime::json_to_py(py, &v)
     }
     fn __getitem__<'py>(&self, py: Python<'py>, key: &str) -> PyResult<Bound<'py, PyAny>> {
         self.value(py, key)

@@ -203,6 +203,26 @@ impl Trajectory {
         )
     }
 
+    /// Why the trajectory has not produced since `since` (ns; None: since it was
+    /// made), as a dict: `reasons` in words, then `inputs`, the producer's `worker`
+    /// counters and `recent_calls`, a sync's `sync`, `drops` per cause with the last
+    /// one, and `writer_alive`. Answered by the process that writes it.
+    #[pyo3(signature = (since=None))]
+    fn why<'py>(&self, py: Python<'py>, since: Option<i64>) -> PyResult<Bound<'py, PyAny>> {
+        let (rt, name) = (Arc::clone(&self.runtime), self.handle.name().to_owned());
+        let since = since.unwrap_or(i64::MIN);
+        let why = py
+            .detach(move || match &*rt {
+                Runtime::Local(e) => esgm_core::Esgm::why(e, &name, since),
+                Runtime::Shm(e) => esgm_core::Esgm::why(e, &name, since),
+            })
+            .map_err(|e| to_py(&e))?;
+        crate::runtime::json_to_py(
+            py,
+            &serde_json::to_value(why).map_err(|e| PyTypeError::new_err(e.to_string()))?,
+        )
+    }
+
     fn __repr__(&self) -> String {
         format!("Trajectory({:?})", self.handle.name())
     }

@@ -63,3 +63,30 @@ def test_a_python_sensor_is_sampled(system, unique):
         time.sleep(0.02)
     xs = [s["x"] for s in sampled.get_between(0, 2**62)]
     assert xs[:3] == [1.0, 2.0, 3.0] and counter.calls >= 3
+
+
+def test_lineage_and_why_from_python(system, unique):
+    """A unit's output names the input it was made from (X1), and `why` says what the
+    unit did when it stopped producing (X2): here, raised."""
+    source = system.create_primitive_entity_trajectory_structure(unique, "RobotState")
+    system.add_comp_unit(unique + "Doubler", "RobotState", ["RobotState"], Doubler())
+    doubled = system.create_computed_entity_trajectory_structure(unique + "d", unique + "Doubler", [unique])
+    sub = doubled.subscribe()
+    source.add("robot", 1, robot(1))
+    out = sub.recv(20)
+    inputs = out.lineage["inputs"]
+    assert [(i["trajectory"], i["valid_time"]) for i in inputs] == [(unique, 1)]
+    assert inputs[0]["add_time"] == source.get_latest().add_time
+    assert out.lineage["complete"] is False
+    assert source.get_latest().lineage is None
+    since = out.add_time + 1
+    source.add("robot", 2, robot(-1))
+    deadline = time.monotonic() + 20
+    while True:
+        why = doubled.why(since)
+        if any("a negative x" in r for r in why["reasons"]):
+            break
+        assert time.monotonic() < deadline, why
+        time.sleep(0.05)
+    assert why["inputs"][0]["trajectory"] == unique
+    assert why["recent_calls"][-1]["outcome"] in ("failed", "panicked")
