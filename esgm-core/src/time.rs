@@ -33,6 +33,13 @@ pub const fn micros(n: i64) -> Time {
     n * TIMEUNITS_PER_MICRO_SECOND
 }
 
+/// A duration for people: milliseconds with one decimal below a second, seconds
+/// with two above (`12.3 ms`, `4.56 s`), as `esgm why` and `Why::reasons` say it.
+pub fn for_people(t: Time) -> String {
+    let ms = t as f64 / 1e6;
+    if ms.abs() < 1_000.0 { format!("{ms:.1} ms") } else { format!("{:.2} s", ms / 1e3) }
+}
+
 /// A [`Time`] duration as a `std::time::Duration`, saturating negative values to zero,
 /// for the places (thread sleeps, channel timeouts) where std needs one.
 pub fn to_std_duration(t: Time) -> std::time::Duration {

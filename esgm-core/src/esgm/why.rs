@@ -5,7 +5,7 @@
 //! always kept, joined with the recent events behind them, and read as reasons.
 
 use crate::store::{DropCause, DropRecord};
-use crate::time::Time;
+use crate::time::{Time, for_people as seconds};
 
 use super::{TrajectoryKind, WorkerStats};
 
@@ -228,12 +228,6 @@ impl Why {
         }
         self.reasons = out;
     }
-}
-
-/// A duration for people.
-fn seconds(ns: Time) -> String {
-    let ms = ns as f64 / 1e6;
-    if ms.abs() < 1_000.0 { format!("{ms:.1} ms") } else { format!("{:.2} s", ms / 1e3) }
 }
 
 /// What dropped a structure, as a subject.

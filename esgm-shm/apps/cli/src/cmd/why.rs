@@ -6,7 +6,8 @@
 use std::fmt::Write as _;
 
 use esgm_core::esgm::{CallOutcome, Why};
-use esgm_core::{Clock, Esgm, SystemClock, Time};
+use esgm_core::time::for_people as ago;
+use esgm_core::{Clock, Esgm, SystemClock};
 
 use crate::session::connect_tool as connect;
 use crate::time_arg::{TimeArg, display};
@@ -33,12 +34,6 @@ pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
         print!("{}", render(&why));
     }
     Ok(())
-}
-
-/// Nanoseconds as milliseconds or seconds, for people.
-fn ago(ns: Time) -> String {
-    let ms = ns as f64 / 1e6;
-    if ms.abs() < 1_000.0 { format!("{ms:.1} ms") } else { format!("{:.2} s", ms / 1e3) }
 }
 
 fn alive(a: Option<bool>) -> &'static str {
