@@ -53,6 +53,17 @@ impl InProcessTrajectory {
         self.with_store(|s| f(s))?
     }
 
+    /// [`EntityTrajectoryStructure::add`] of a structure made from others, named by
+    /// `lineage`: what a bridge enters when it carries a produced structure from
+    /// another host, with the inputs it was made from there.
+    pub fn add_produced(
+        &self,
+        es: EntityStructure,
+        lineage: Option<Arc<crate::lineage::Lineage>>,
+    ) -> Result<AddOutcome, AddError> {
+        self.add_with("add", |s| s.add_produced(Arc::new(es), lineage, false))
+    }
+
     fn add_with(
         &self,
         operation: &'static str,

@@ -333,6 +333,15 @@ impl Flow {
                 return;
             }
         };
+        // A lineage the sample carries crosses with it; one that does not read is left
+        // behind, said once per sample (the structure itself was validated).
+        let lineage = match &received {
+            Ok(Some(sample)) => sample.lineage().unwrap_or_else(|e| {
+                tracing::warn!(error = %e, "a sample's lineage does not read; sent without it");
+                None
+            }),
+            _ => None,
+        };
         let header = Header {
             session: self.session,
             writer,
@@ -342,6 +351,7 @@ impl Flow {
             type_hash: self.type_hash,
             type_name: self.type_name.clone(),
             kind,
+            lineage,
         };
         let message = wire::encode(&header, bytes);
         if let Some(decided) = self.check.arrive(port, sequence, message) {

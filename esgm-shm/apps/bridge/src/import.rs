@@ -432,7 +432,10 @@ fn apply(
         });
         return;
     };
-    let outcome = imported.handle.add(es);
+    // Entered with the lineage it had where it was made: its inputs are named as the
+    // exporting domain names them.
+    let lineage = header.lineage.clone().map(Arc::new);
+    let outcome = imported.handle.add_produced(es, lineage);
     stats.with("import", domain, name, |c| {
         c.messages += 1;
         // Gaps come from the network: two hostile messages must not overflow the sums.

@@ -137,6 +137,7 @@ fn answer(
                     type_hash: 0,
                     type_name: type_name.clone(),
                     kind: wire::Kind::Structure,
+                    lineage: s.lineage.as_deref().cloned(),
                 };
                 let bytes = codec::encode(&s.structure).map_err(|e| e.to_string())?;
                 send(query, &k, wire::encode(&header, &bytes))?;

@@ -16,9 +16,12 @@
 //!     48     8  type hash: of the type's definition (see [`type_hash`])
 //!     56     2  type name length
 //!     58     1  kind: 0 a structure, 1 a reset of the trajectory (no codec bytes)
-//!     59     5  reserved (zero)
+//!     59     1  reserved (zero)
+//!     60     4  lineage length: bytes of the structure's lineage (0: none)
 //!     64     n  type name (UTF-8), zero-padded to a multiple of 16
-//!  64+n'     …  codec bytes
+//!  64+n'     l  lineage ([`esgm_core::codec::decode_lineage`]'s bytes), zero-padded to a
+//!               multiple of 16
+//!     …      …  codec bytes
 //! ```
 //!
 //! Integers are little-endian. Everything here is plain integers and a name: a
@@ -77,6 +80,9 @@ pub struct Header {
     pub type_name: String,
     /// What the message carries.
     pub kind: Kind,
+    /// The input structures it was made from, in the exporting domain (a produced
+    /// structure's; see [`esgm_core::lineage`]).
+    pub lineage: Option<esgm_core::Lineage>,
 }
 
 /// What a message carries.
@@ -128,9 +134,14 @@ fn header_len(type_name: &str) -> usize {
 }
 
 /// The message of `header` and `codec_bytes` (envelope + archive, as in shared memory).
+///
+/// A lineage that cannot be encoded (more inputs than [`esgm_core::codec::MAX_LINEAGE_INPUTS`])
+/// is left out, and the structure crosses without it.
 pub fn encode(header: &Header, codec_bytes: &[u8]) -> Vec<u8> {
     let hlen = header_len(&header.type_name);
-    let mut out = Vec::with_capacity(hlen + codec_bytes.len());
+    let lineage =
+        header.lineage.as_ref().and_then(|l| codec::encode_lineage(l).ok()).unwrap_or_default();
+    let mut out = Vec::with_capacity(hlen + lineage.len() + 16 + codec_bytes.len());
     out.extend_from_slice(&MAGIC);
     out.extend_from_slice(&WIRE_VERSION.to_le_bytes());
     out.extend_from_slice(&(hlen as u16).to_le_bytes());
@@ -145,9 +156,12 @@ pub fn encode(header: &Header, codec_bytes: &[u8]) -> Vec<u8> {
         Kind::Structure => 0,
         Kind::Reset => 1,
     });
-    out.extend_from_slice(&[0u8; 5]);
+    out.push(0);
+    out.extend_from_slice(&(lineage.len() as u32).to_le_bytes());
     out.extend_from_slice(header.type_name.as_bytes());
     out.resize(hlen, 0);
+    out.extend_from_slice(&lineage);
+    out.resize(hlen + lineage.len().next_multiple_of(16), 0);
     out.extend_from_slice(codec_bytes);
     out
 }
@@ -197,6 +211,17 @@ pub fn split(bytes: &[u8]) -> Result<(Header, &[u8]), WireError> {
         1 => Kind::Reset,
         k => return Err(bad(bytes, format!("unknown message kind {k}"))),
     };
+    let lineage_len = u32::from_le_bytes([bytes[60], bytes[61], bytes[62], bytes[63]]) as usize;
+    let body_at = hlen
+        .checked_add(lineage_len.next_multiple_of(16))
+        .filter(|end| *end <= bytes.len())
+        .ok_or_else(|| {
+            bad(bytes, format!("a lineage of {lineage_len} bytes in a shorter message"))
+        })?;
+    let lineage = match lineage_len {
+        0 => None,
+        n => Some(codec::decode_lineage(&bytes[hlen..hlen + n])?),
+    };
     let header = Header {
         kind,
         session: u64_at(bytes, 8),
@@ -206,8 +231,9 @@ pub fn split(bytes: &[u8]) -> Result<(Header, &[u8]), WireError> {
         skipped: u64_at(bytes, 40),
         type_hash: u64_at(bytes, 48),
         type_name,
+        lineage,
     };
-    Ok((header, &bytes[hlen..]))
+    Ok((header, &bytes[body_at..]))
 }
 
 /// Splits a message and validates and decodes its structure
@@ -251,6 +277,7 @@ mod tests {
             type_hash: 0xdead_beef,
             type_name: "RobotState".into(),
             kind: Kind::Structure,
+            lineage: None,
         }
     }
 
@@ -275,5 +302,25 @@ mod tests {
         let mut version = good;
         version[4] = 9;
         assert!(matches!(decode(&version), Err(WireError::Header { .. })));
+    }
+
+    #[test]
+    fn a_lineage_crosses_and_a_damaged_one_is_an_error() {
+        let es = EntityStructure::new("robot1", 10, 11).with("x", 1.5);
+        let lineage = esgm_core::Lineage::of(vec![esgm_core::InputRef {
+            trajectory: "camera".into(),
+            generation: 4,
+            valid_time: 9,
+            add_time: 10,
+        }]);
+        let with = Header { lineage: Some(lineage), ..header() };
+        let bytes = encode(&with, &codec::encode(&es).unwrap());
+        assert_eq!(decode(&bytes).unwrap(), (with, Some(es)));
+        let mut long = bytes.clone();
+        long[60..64].copy_from_slice(&u32::MAX.to_le_bytes());
+        assert!(decode(&long).unwrap_err().to_string().contains("a lineage of"));
+        let mut bad = bytes;
+        bad[FIXED_LEN + 16] = 7;
+        assert!(matches!(decode(&bad), Err(WireError::Codec(_))), "a wrong lineage version");
     }
 }

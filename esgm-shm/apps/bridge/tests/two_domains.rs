@@ -218,6 +218,7 @@ fn malformed_payloads_are_counted_and_a_type_conflict_names_the_attribute() {
         skipped: 0,
         type_hash: 0,
         type_name: "RobotState".into(),
+        lineage: None,
         kind: esgm_bridge::wire::Kind::Structure,
     };
     let good = esgm_core::codec::encode(&robot(1, base)).unwrap();
@@ -399,4 +400,42 @@ fn the_exporter_sends_the_writers_samples_alone() {
     let times: Vec<i64> = got.iter().map(|s| s.valid_time).collect();
     let want: Vec<i64> = (0..3).map(|i| robot(i, base).valid_time).collect();
     assert_eq!(times, want, "the writer's three, not the forged one an hour ahead");
+}
+
+/// A structure computed in one domain crosses to another with its lineage: the input
+/// it names is the exporting domain's, exactly as stored there (X1 across hosts).
+#[test]
+fn lineage_crosses_the_bridge() {
+    let _one = one_at_a_time();
+    let a = Domain::start("bridge-lin-a");
+    let b = Domain::start("bridge-lin-b");
+    primitive(a.esgm(), "robot_state", "RobotState", 100);
+    let copy = |inputs: &[Sample], _t: i64| Ok((*inputs[0].structure).clone());
+    let types = vec![InputType::Type("RobotState".into())];
+    a.esgm().add_comp_unit("Copy", "RobotState", types, Arc::new(copy)).unwrap();
+    a.esgm()
+        .create_computed_entity_trajectory_structure("copied", "Copy", &["robot_state"])
+        .unwrap();
+    let port = free_port();
+    let listen = format!("tcp/127.0.0.1:{port}");
+    let import = format!("{}/copied", a.name);
+    let _bridge_b = Bridge::start(&b.name, &["--listen", &listen, "--import", &import]);
+    let _bridge_a = Bridge::start(&a.name, &["--connect", &listen, "--export", "copied"]);
+    let states = a.esgm().get_entity_trajectory_structure("robot_state").unwrap();
+    let base = now();
+    for i in 0..3 {
+        states.add_blocking(robot(i, base)).unwrap();
+    }
+    let got = samples(b.esgm(), "copied", 3);
+    for s in &got {
+        let lineage = s.lineage.as_ref().unwrap_or_else(|| panic!("no lineage crossed: {s:?}"));
+        let input = &lineage.inputs[0];
+        let there = states.get_at(s.valid_time).unwrap();
+        assert_eq!(
+            (input.trajectory.as_str(), input.valid_time, input.add_time),
+            ("robot_state", there.valid_time, there.add_time),
+            "named as the exporting domain stores it"
+        );
+        assert!(!lineage.complete);
+    }
 }

@@ -43,6 +43,14 @@ impl Wire {
                 type_hash: 0xfeed_f00d,
                 type_name: names[n % names.len()].to_owned(),
                 kind: Kind::Structure,
+                lineage: (n % 2 == 1).then(|| {
+                    esgm_core::Lineage::of(vec![esgm_core::InputRef {
+                        trajectory: "camera".into(),
+                        generation: n as u64,
+                        valid_time: n as i64,
+                        add_time: n as i64 + 1,
+                    }])
+                }),
             };
             seeds.push(wire::encode(&header, &bytes));
         }
@@ -55,6 +63,7 @@ impl Wire {
             type_hash: 0,
             type_name: "RobotState".into(),
             kind: Kind::Reset,
+            lineage: None,
         };
         seeds.push(wire::encode(&reset, &[]));
         Ok(Self { seeds })
