@@ -149,9 +149,13 @@ def test_a_python_unit_in_a_system_file_is_supervised(cli, tmp_path):
     (tmp_path / "system.toml").write_text(SYSTEM.format(examples=EXAMPLES, python=sys.executable))
     cli("apply", str(tmp_path / "system.toml"))
 
-    # The numpy unit finds the blobs the Rust unit finds, on the same image.
-    ours = until("a blob sequence from the Python unit", lambda: latest(cli, "blobs"))
-    theirs = until("the Rust unit's blobs at the same time", lambda: at(cli, "rust_blobs", ours["valid_time"]))
+    # The numpy unit finds the blobs the Rust unit finds, on the same image: one the
+    # Rust unit computed, which the Python unit computes too (it runs on every image
+    # since it started; the Rust unit may have started later, and never computed the
+    # Python unit's first images).
+    until("a blob sequence from the Python unit", lambda: latest(cli, "blobs"))
+    theirs = until("a blob sequence from the Rust unit", lambda: latest(cli, "rust_blobs"))
+    ours = until("the Python unit's blobs at the same time", lambda: at(cli, "blobs", theirs["valid_time"]))
     assert len(sizes(ours)) > 0 and sizes(ours) == sizes(theirs), (ours, theirs)
 
     # A sensor written in Python is sampled as well.
