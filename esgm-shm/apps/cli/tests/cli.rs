@@ -385,8 +385,19 @@ fn why_names_a_stopped_writer_and_the_input_that_went_quiet() {
     let text = ok(&["--domain", &d, "why", "c", "--since", "-200ms"]);
     assert!(text.contains("input `rs` has had nothing new since the time asked"), "{text}");
     Command::new("kill").args(["-CONT", &pid]).status().unwrap();
+    // Killed (nobody supervises it here): gone, and `c`'s input names it.
     let _ = robot.kill();
     let _ = robot.wait();
+    let json = ok(&["--domain", &d, "--json", "why", "rs", "--since", "-200ms"]);
+    let why: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert_eq!(why["writer_alive"], false, "{json}");
+    assert!(
+        why["reasons"][0].as_str().is_some_and(|r| r.contains("its writer process is gone")),
+        "{json}"
+    );
+    let json = ok(&["--domain", &d, "--json", "why", "c"]);
+    let why: serde_json::Value = serde_json::from_str(&json).unwrap();
+    assert_eq!(why["inputs"][0]["writer_alive"], false, "{json}");
     let o = esgm(&["--domain", &d, "why", "cc"], Duration::from_secs(30));
     assert_eq!(o.code, Some(1));
     assert!(
