@@ -14,7 +14,8 @@ use std::time::{Duration, Instant};
 
 use common::{TIMEOUT, coordinator, location, reap, spawn_child, state, wait_for, x};
 use esgm_core::esgm::{
-    ComputeError, CreateError, InputType, LookupError, SensorError, TrajectorySpec,
+    ComputeError, CreateError, HowWriterChanged, InputType, LookupError, SensorError,
+    TrajectorySpec,
 };
 use esgm_core::{
     AddError, AddOutcome, EntityStructure, EntityTrajectoryStructure, Esgm, FluentStreamPolicy,
@@ -256,6 +257,19 @@ fn a_trajectory_whose_writer_exited_is_taken_over_by_the_next_adder() {
     // And its adds reach the new writer.
     assert_eq!(there.add(state(4, 4.0)).unwrap(), AddOutcome::Forwarded);
     assert!(wait_for(|| all(&made) == [1.0, 2.0, 3.0, 4.0]), "the writer holds {:?}", all(&made));
+    // `why`, asked from the new writer and from a reader, names the take-over: who
+    // writes it now (this process), instead of whom.
+    for asker in [&app, &reader] {
+        let why = asker.why("made_by_setup", 0).unwrap();
+        let change = why.writer_changed.as_ref().expect("the take-over is named");
+        assert_eq!(change.how, HowWriterChanged::TakenOver);
+        assert_eq!((change.from.as_str(), change.to.as_str()), ("setup", "app"));
+        assert_eq!(change.to_pid, Some(std::process::id()));
+        assert!(change.from_pid.is_some_and(|p| p != std::process::id()), "{change:?}");
+        let said = why.reasons.iter().find(|r| r.contains("taken over"));
+        let said = said.unwrap_or_else(|| panic!("no take-over among {:?}", why.reasons));
+        assert!(said.contains("`app`") && said.contains("instead of `setup`"), "{said}");
+    }
 }
 
 /// The same when the writer closes its connection while its process lives on (it

@@ -28,7 +28,10 @@ pub use report::{EsgmStats, LogLevel, MemoryStats, TrajectoryInfo, TrajectoryRep
 pub use spec::{TrajectoryKind, TrajectorySource, TrajectorySpec};
 pub use trace::{Found, MAX_TRACE_DEPTH, MAX_TRACE_NODES, TraceNode, trace, trace_with};
 pub use typed_unit::{Stamped, TypedUnit, TypedUnitAdapter, UnitInputs};
-pub use why::{CallOutcome, CallRecord, DropSummary, InputHealth, RECENT_CALLS, SyncWait, Why};
+pub use why::{
+    CallOutcome, CallRecord, DropSummary, HowWriterChanged, InputHealth, RECENT_CALLS, SyncWait,
+    Why, WriterChange,
+};
 
 use std::sync::Arc;
 

@@ -41,8 +41,42 @@ pub struct Why {
     /// Whether the process that writes the trajectory is alive (`None`: this runtime
     /// has one process, or it could not tell).
     pub writer_alive: Option<bool>,
+    /// The last time another process became the writer (a restart, or a take-over
+    /// of a trajectory whose writer was gone): what the trajectory holds since then is
+    /// the new writer's. `None`: one writer since it was made, or one process.
+    #[serde(default)]
+    pub writer_changed: Option<WriterChange>,
     /// The reasons, most telling first, in words.
     pub reasons: Vec<String>,
+}
+
+/// Another process became a trajectory's writer.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct WriterChange {
+    /// How it came to write it.
+    pub how: HowWriterChanged,
+    /// The process (by its registry name) that wrote it before.
+    pub from: String,
+    /// That process's id, if it had reported one.
+    pub from_pid: Option<u32>,
+    /// The process that writes it now.
+    pub to: String,
+    /// Its id, once it has reported its publisher.
+    pub to_pid: Option<u32>,
+    /// When the registry recorded the change (the coordinator's clock).
+    pub at: Time,
+}
+
+/// How a trajectory's writer changed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum HowWriterChanged {
+    /// The writer's process ended and a new process of the same name (the supervisor's
+    /// restart, or a program run again) reported itself as the writer.
+    Restarted,
+    /// The writer's process was gone (or had released it), and another process took
+    /// the trajectory over to add to it.
+    TakenOver,
 }
 
 /// One input of a produced trajectory, as the producer sees it.
@@ -132,6 +166,9 @@ impl Why {
             out.push(
                 "its writer process is gone: nothing writes it until one takes it over".into(),
             );
+        }
+        if let Some(change) = &self.writer_changed {
+            out.push(change.words(self.now, self.since));
         }
         match self.last_added {
             Some(t) if t >= self.since => out.push(format!(
@@ -227,6 +264,30 @@ impl Why {
             ));
         }
         self.reasons = out;
+    }
+}
+
+impl WriterChange {
+    /// The change as a reason: who writes it now, instead of whom, since when.
+    fn words(&self, now: Time, since: Time) -> String {
+        let pid = |p: Option<u32>| p.map(|p| format!(" (pid {p})")).unwrap_or_default();
+        let when = if self.at >= since { "since the time asked" } else { "before the time asked" };
+        let ago = seconds(now.saturating_sub(self.at));
+        match self.how {
+            HowWriterChanged::Restarted => format!(
+                "its writer `{}` was restarted {ago} ago, {when}: process{} ended, process{} writes it now",
+                self.to,
+                pid(self.from_pid),
+                pid(self.to_pid)
+            ),
+            HowWriterChanged::TakenOver => format!(
+                "it was taken over {ago} ago, {when}: `{}`{} writes it now, instead of `{}`{}, which was gone; what it holds since is the new writer's",
+                self.to,
+                pid(self.to_pid),
+                self.from,
+                pid(self.from_pid)
+            ),
+        }
     }
 }
 

@@ -550,7 +550,9 @@ impl Esgm for InProcessEsgm {
         trajectory: &str,
         since: crate::time::Time,
     ) -> Result<crate::esgm::Why, LookupError> {
-        self.why_here(trajectory, since)
+        let mut why = self.why_evidence(trajectory, since)?;
+        why.explain();
+        Ok(why)
     }
 
     fn add_sensor_interface(

@@ -12,12 +12,13 @@ use super::InProcessEsgm;
 use super::cell::TrajectoryCell;
 
 impl InProcessEsgm {
-    /// Why `name` has (or has not) produced since `since`, as this process knows it
-    /// ([`crate::Esgm::why`]): from the trajectory's store here, its worker if it runs
-    /// here, and its inputs as this process holds them. The writer's process alive or
-    /// not is left unknown (`None`): across processes the runtime that knows fills it
-    /// in.
-    pub fn why_here(&self, name: &str, since: Time) -> Result<Why, LookupError> {
+    /// The evidence of why `name` has (or has not) produced since `since`, as this
+    /// process knows it: from the trajectory's store here, its worker if it runs here,
+    /// and its inputs as this process holds them. The reasons are left empty, and the
+    /// writer's process (alive, changed) unknown: across processes the runtime that
+    /// knows those fills them in, then calls [`Why::explain`] once.
+    /// [`crate::Esgm::why`] is this, explained.
+    pub fn why_evidence(&self, name: &str, since: Time) -> Result<Why, LookupError> {
         let cell = self
             .descriptor(name)
             .and_then(|d| d.get())
@@ -35,7 +36,7 @@ impl InProcessEsgm {
         let worker = has_worker.then(|| cell.counters.snapshot());
         let recent_calls = cell.counters.recent_calls.lock().iter().cloned().collect();
         let sync = (kind == TrajectoryKind::Sync).then(|| sync_wait(&cell, &inputs));
-        let mut why = Why {
+        Ok(Why {
             trajectory: name.to_owned(),
             kind,
             since,
@@ -48,10 +49,9 @@ impl InProcessEsgm {
             sync,
             drops,
             writer_alive: None,
+            writer_changed: None,
             reasons: Vec::new(),
-        };
-        why.explain();
-        Ok(why)
+        })
     }
 
     fn input_health(&self, name: &str, now: Time) -> InputHealth {

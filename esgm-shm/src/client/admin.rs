@@ -688,11 +688,11 @@ fn answer(host: &str, local: &InProcessEsgm, mirrors: &SharedMirrors, op: AdminO
                 // Only the writer knows its producer's calls and its gate's drops.
                 return AdminAnswer::Done { reset: 0 };
             }
-            match local.why_here(&trajectory, since) {
+            // The evidence only: the asker adds what the registry knows and explains.
+            match local.why_evidence(&trajectory, since) {
                 Ok(mut why) => {
                     why.writer_alive = Some(true);
                     super::why::inputs_alive(&mut why, mirrors);
-                    why.explain();
                     AdminAnswer::Why(Box::new(why))
                 }
                 Err(e) => AdminAnswer::Failed { reason: e.to_string() },

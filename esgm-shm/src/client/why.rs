@@ -55,9 +55,21 @@ impl ShmEsgm {
             .admin
             .ask_until(op, timeout, written)
             .map_err(|e| LookupError::Unavailable { reason: e.into() })?;
+        // What the registry says of the writer: who, its pid, and whether it changed.
+        let record = match self
+            .control(Request::GetEntityTrajectoryStructure { name: trajectory.to_owned() })
+        {
+            Ok(Response::Trajectory(record)) => Some(record),
+            _ => None,
+        };
+        let writer_changed = record.as_ref().and_then(|r| r.writer_changed.clone());
         for (host, answer) in answers {
             match answer {
-                AdminAnswer::Why(why) => return Ok(*why),
+                AdminAnswer::Why(mut why) => {
+                    why.writer_changed = writer_changed;
+                    why.explain();
+                    return Ok(*why);
+                }
                 AdminAnswer::Failed { reason } => {
                     let reason = Unreachable::refused(Peer::Processes, format!("{host}: {reason}"));
                     return Err(LookupError::Unavailable { reason });
@@ -67,7 +79,7 @@ impl ShmEsgm {
         }
         // No writer answered: what this process's replica holds, without the
         // producer's calls and the gate's drops, which only the writer knows.
-        let mut why = self.inner.local.why_here(trajectory, since)?;
+        let mut why = self.inner.local.why_evidence(trajectory, since)?;
         why.worker = None;
         why.recent_calls.clear();
         why.drops.retain(|d| {
@@ -76,14 +88,10 @@ impl ShmEsgm {
                 esgm_core::DropCause::Violation(_) | esgm_core::DropCause::InvalidType
             )
         });
-        let pid = match self
-            .control(Request::GetEntityTrajectoryStructure { name: trajectory.to_owned() })
-        {
-            Ok(Response::Trajectory(record)) => record.port.map(|p| p.pid),
-            _ => None,
-        };
+        let pid = record.as_ref().and_then(|r| r.port.map(|p| p.pid));
         let alive = pid.is_some_and(process_alive);
         why.writer_alive = Some(alive);
+        why.writer_changed = writer_changed;
         inputs_alive(&mut why, &self.inner.mirrors);
         why.explain();
         if !self.history_received(trajectory) && why.last_added.is_none() {

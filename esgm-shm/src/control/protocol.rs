@@ -243,6 +243,10 @@ pub struct TrajectoryRecord {
     /// Its history is not kept beyond its writer ([`TrajectorySpec::volatile`]).
     #[serde(default)]
     pub volatile: bool,
+    /// The last time another process became its writer, since the coordinator
+    /// started: a restart, or a take-over ([`Request::TakeOverTrajectory`]).
+    #[serde(default)]
+    pub writer_changed: Option<esgm_core::esgm::WriterChange>,
 }
 
 /// Where one trajectory is written ([`Request::ListPlacements`]).

@@ -5,10 +5,11 @@ use std::collections::BTreeMap;
 
 use esgm_core::catalog::Catalog;
 use esgm_core::esgm::{
-    CreateError, TrajectoryInfo, TrajectoryKind, TrajectorySource, TrajectorySpec,
+    CreateError, HowWriterChanged, TrajectoryInfo, TrajectoryKind, TrajectorySource,
+    TrajectorySpec, WriterChange,
 };
 use esgm_core::policy::PolicyError;
-use esgm_core::{EntityStructureType, TypeChecker, TypeRegistry};
+use esgm_core::{Clock, EntityStructureType, SystemClock, TypeChecker, TypeRegistry};
 
 use super::processes::ProcessTable;
 use super::protocol::{
@@ -30,6 +31,12 @@ struct Placement {
     /// another process may take it over. Not saved: after a coordinator restart, a
     /// writer whose process lives is taken to serve.
     released: bool,
+    /// The last time another process became the writer (`esgm why` names it). Not
+    /// saved: a coordinator restarted starts a new account.
+    changed: Option<WriterChange>,
+    /// The pid of the last process that reported the writer's port, kept when the
+    /// port is let go, so that the next one's report can say whom it replaced.
+    last_pid: Option<u32>,
 }
 
 /// Names, types, sensors, units and trajectories of one esgm system.
@@ -256,6 +263,8 @@ impl Registry {
                     spec: t.spec,
                     port: t.port,
                     released: false,
+                    changed: None,
+                    last_pid: t.port.map(|p| p.pid),
                 },
             );
         }
@@ -283,12 +292,14 @@ impl Registry {
             // process needs to check the states it receives.
             Err(_) => self.state_definitions(&info),
         };
-        let (writer, generation, port, asked, released, volatile) = self
+        let (writer, generation, port, asked, released, volatile, writer_changed) = self
             .placement
             .get(name)
             .map(|p| {
                 let spec = &p.spec;
-                (p.writer.clone(), p.generation, p.port, spec.readers, p.released, spec.volatile)
+                let changed = p.changed.clone();
+                let (readers, volatile) = (spec.readers, spec.volatile);
+                (p.writer.clone(), p.generation, p.port, readers, p.released, volatile, changed)
             })
             .unwrap_or_default();
         // Checked when it was created; a saved spec whose readers exceed a domain
@@ -296,7 +307,17 @@ impl Registry {
         let readers = self.limits.readers_of(asked).unwrap_or(Readers(
             asked.unwrap_or(self.limits.readers).min(self.limits.max_processes),
         ));
-        Ok(TrajectoryRecord { info, types, writer, generation, port, readers, released, volatile })
+        Ok(TrajectoryRecord {
+            info,
+            types,
+            writer,
+            generation,
+            port,
+            readers,
+            released,
+            volatile,
+            writer_changed,
+        })
     }
 
     /// The pid a process reported for `name`, if any.
@@ -390,7 +411,15 @@ impl Registry {
                 self.catalog.insert_trajectory(resolved.info);
                 self.placement.insert(
                     name.clone(),
-                    Placement { writer, generation, spec, port: None, released: false },
+                    Placement {
+                        writer,
+                        generation,
+                        spec,
+                        port: None,
+                        released: false,
+                        changed: None,
+                        last_pid: None,
+                    },
                 );
                 Response::Trajectory(Box::new(self.record(&name)?))
             }
@@ -525,7 +554,14 @@ impl Registry {
         if gone {
             if let Some(p) = self.placement.get_mut(trajectory) {
                 tracing::info!(%trajectory, from = %p.writer, to = %host, "writer taken over");
-                p.writer = host;
+                p.changed = Some(WriterChange {
+                    how: HowWriterChanged::TakenOver,
+                    from: std::mem::replace(&mut p.writer, host.clone()),
+                    from_pid: p.last_pid,
+                    to: host.clone(),
+                    to_pid: None,
+                    at: SystemClock.now(),
+                });
                 p.port = None;
                 p.released = false;
             }
@@ -578,6 +614,25 @@ impl Registry {
             }
         }
         placement.port = Some(WriterPort { publisher, pid });
+        let replaced = placement.last_pid.replace(pid).filter(|&former| former != pid);
+        match &mut placement.changed {
+            // The process that took it over reports its port: the change is complete.
+            Some(c) if c.how == HowWriterChanged::TakenOver && c.to_pid.is_none() => {
+                c.to_pid = Some(pid);
+            }
+            _ => {
+                if let Some(former) = replaced {
+                    placement.changed = Some(WriterChange {
+                        how: HowWriterChanged::Restarted,
+                        from: placement.writer.clone(),
+                        from_pid: Some(former),
+                        to: placement.writer.clone(),
+                        to_pid: Some(pid),
+                        at: SystemClock.now(),
+                    });
+                }
+            }
+        }
         Ok(())
     }
 

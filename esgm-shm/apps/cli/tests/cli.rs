@@ -330,19 +330,20 @@ fn why_names_a_stopped_writer_and_the_input_that_went_quiet() {
         system.create_primitive_entity_trajectory_structure("steer", "DrivingDirection").unwrap();
     let now = esgm_core::Clock::now(&esgm_core::SystemClock);
     steer.add(EntityStructure::new("dd", now, now).with("dir", 0.0).with("speed", 0.0)).unwrap();
+    let robot_args = [
+        "--domain",
+        &d,
+        "worker",
+        "robot",
+        "--trajectory",
+        "rs",
+        "--follow",
+        "steer",
+        "--period",
+        "20ms",
+    ];
     let mut robot = Command::new(ESGM)
-        .args([
-            "--domain",
-            &d,
-            "worker",
-            "robot",
-            "--trajectory",
-            "rs",
-            "--follow",
-            "steer",
-            "--period",
-            "20ms",
-        ])
+        .args(robot_args)
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
@@ -398,6 +399,36 @@ fn why_names_a_stopped_writer_and_the_input_that_went_quiet() {
     let json = ok(&["--domain", &d, "--json", "why", "c"]);
     let why: serde_json::Value = serde_json::from_str(&json).unwrap();
     assert_eq!(why["inputs"][0]["writer_alive"], false, "{json}");
+    // Run again, the robot writes `rs` anew: `why` names the restart, by both pids.
+    let gone = robot.id();
+    let mut robot = Command::new(ESGM)
+        .args(robot_args)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let restarted = loop {
+        let json = ok(&["--domain", &d, "--json", "why", "rs"]);
+        let why: serde_json::Value = serde_json::from_str(&json).unwrap();
+        if why["writer_changed"]["to_pid"] == robot.id() || Instant::now() > deadline {
+            break why;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let change = &restarted["writer_changed"];
+    assert_eq!(change["how"], "restarted", "{restarted}");
+    assert_eq!(
+        (change["from_pid"].as_u64(), change["to_pid"].as_u64()),
+        (Some(gone.into()), Some(robot.id().into()))
+    );
+    assert_eq!(restarted["writer_alive"], true, "{restarted}");
+    assert!(
+        restarted["reasons"][0].as_str().is_some_and(|r| r.contains("was restarted")),
+        "{restarted}"
+    );
+    let _ = robot.kill();
+    let _ = robot.wait();
     let o = esgm(&["--domain", &d, "why", "cc"], Duration::from_secs(30));
     assert_eq!(o.code, Some(1));
     assert!(
