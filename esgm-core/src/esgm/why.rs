@@ -4,6 +4,7 @@
 //! dropped, missed sample points, and whether the writer is alive: the counters esgm
 //! always kept, joined with the recent events behind them, and read as reasons.
 
+use crate::operators::sync::InputDrops;
 use crate::store::{DropCause, DropRecord};
 use crate::time::{Time, for_people as seconds};
 
@@ -137,6 +138,21 @@ pub struct SyncWait {
     /// Structures the sync gave up on (ApproximateTime's drops and queue overflow, as
     /// message_filters counts them), since the trajectory was made.
     pub discarded: u64,
+    /// The same, per input and reason: which input's structures found no set, and
+    /// why (its queue overflowed, no partner within the tolerance, passed over for a
+    /// better set, …), with the last one's valid time.
+    #[serde(default)]
+    pub dropped: Vec<SyncInputDrops>,
+}
+
+/// One sync input's discarded structures.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct SyncInputDrops {
+    /// The input.
+    pub input: String,
+    /// Its drops, by reason.
+    #[serde(flatten)]
+    pub drops: InputDrops,
 }
 
 /// The drops of one cause since [`Why::since`].
@@ -216,6 +232,25 @@ impl Why {
                 out.push(format!(
                     "the sync gave up on {} structure(s) that found no set",
                     sync.discarded
+                ));
+            }
+            for input in sync.dropped.iter().filter(|d| d.drops.total() > 0) {
+                let reasons: Vec<String> = input
+                    .drops
+                    .by_reason()
+                    .iter()
+                    .map(|(reason, n)| format!("{n} {}", reason.words()))
+                    .collect();
+                let last = input
+                    .drops
+                    .last
+                    .map(|(vt, _)| format!("; the last valid {} ago", seconds(self.now - vt)))
+                    .unwrap_or_default();
+                out.push(format!(
+                    "the sync dropped {} of `{}`'s structure(s): {}{last}",
+                    input.drops.total(),
+                    input.input,
+                    reasons.join(", ")
                 ));
             }
         }

@@ -23,7 +23,8 @@
 //! - **Generic over the item** through [`Stamped`], so the runtime syncs [`Sample`]s
 //!   (stamped by their valid time) and tests sync bare stamps.
 //! - **Nothing is lost silently.** Every item discarded without being part of an emitted
-//!   set is counted in [`Synchronizer::dropped`]; together with what was emitted and
+//!   set is counted in [`Synchronizer::dropped`], and by input and reason in
+//!   [`Synchronizer::drops`]; together with what was emitted and
 //!   [`Synchronizer::queued`] it accounts for every item pushed.
 //!
 //! ## Example
@@ -51,10 +52,12 @@
 //! ```
 
 mod approximate;
+mod drops;
 mod epsilon;
 mod exact;
 
 pub use approximate::{ApproximateConfig, ApproximateSync};
+pub use drops::{InputDrops, SyncDropReason};
 pub use epsilon::{EpsilonConfig, EpsilonSync};
 pub use exact::{ExactConfig, ExactSync};
 
@@ -150,8 +153,15 @@ pub trait Synchronizer<T> {
     /// How many items were discarded without being part of an emitted set.
     fn dropped(&self) -> u64;
 
+    /// The discarded items of each input (by input index), by reason: what `why`
+    /// says of a sync that does not produce. They sum to [`Synchronizer::dropped`].
+    fn drops(&self) -> &[InputDrops];
+
     /// How many items are held, waiting for a decision.
     fn queued(&self) -> usize;
+
+    /// How many items of input `input` are held (0 for an input it does not have).
+    fn queued_on(&self, input: usize) -> usize;
 }
 
 /// Which sync policy to use, with its settings: what a sync trajectory declares.

@@ -31,6 +31,9 @@ pub(crate) struct WorkerCounters {
     pub recent_calls: Mutex<std::collections::VecDeque<CallRecord>>,
     /// A sync's policy (for `why`: its tolerance).
     pub sync: Mutex<Option<crate::operators::sync::SyncPolicy>>,
+    /// A sync's discarded samples, per input and reason (for `why`), since the
+    /// trajectory was made: updated when a push discards.
+    pub sync_drops: Mutex<Vec<crate::operators::sync::InputDrops>>,
 }
 
 impl WorkerCounters {

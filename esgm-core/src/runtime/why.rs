@@ -4,7 +4,9 @@
 
 use std::sync::Arc;
 
-use crate::esgm::{DropSummary, InputHealth, LookupError, SyncWait, TrajectoryKind, Why};
+use crate::esgm::{
+    DropSummary, InputHealth, LookupError, SyncInputDrops, SyncWait, TrajectoryKind, Why,
+};
 use crate::operators::sync::SyncPolicy;
 use crate::time::Time;
 
@@ -107,5 +109,10 @@ fn sync_wait(cell: &Arc<TrajectoryCell>, inputs: &[InputHealth]) -> SyncWait {
         },
         tolerance,
         discarded: cell.counters.discarded.load(std::sync::atomic::Ordering::Relaxed),
+        dropped: inputs
+            .iter()
+            .zip(cell.counters.sync_drops.lock().iter())
+            .map(|(i, drops)| SyncInputDrops { input: i.trajectory.clone(), drops: drops.clone() })
+            .collect(),
     }
 }

@@ -15,7 +15,7 @@ use crate::clock::SharedClock;
 use crate::esgm::{CallOutcome, CompUnit, ComputeError, SensorError, SensorInterface};
 use crate::generator::GeneratorPolicy;
 use crate::lineage::{InputRef, Lineage};
-use crate::operators::sync::{MEMBER_CREATE_TIMES, MEMBER_VALID_TIMES, SyncPolicy};
+use crate::operators::sync::{InputDrops, MEMBER_CREATE_TIMES, MEMBER_VALID_TIMES, SyncPolicy};
 use crate::pixel_buffer::{HeapAllocator, OctetsAllocator};
 use crate::sample::Sample;
 use crate::store::{AddError, AddOutcome, FanIn};
@@ -293,6 +293,8 @@ pub(crate) fn sync(
     spawn("sync", cell, move |stop, wake| {
         let Ok(mut synchronizer) = policy.create::<Sample>(names.len()) else { return };
         let mut discarded = 0;
+        // What former synchronizers (before a reset) discarded, per input.
+        let mut former = vec![InputDrops::default(); names.len()];
         inputs::run(
             fan_in,
             wake,
@@ -308,18 +310,33 @@ pub(crate) fn sync(
                         synchronizer.queued() as u64,
                         std::sync::atomic::Ordering::Relaxed,
                     );
+                    for (input, drops) in former.iter_mut().enumerate() {
+                        drops.merge(
+                            synchronizer.drops().get(input).unwrap_or(&InputDrops::default()),
+                        );
+                        drops.reset += synchronizer.queued_on(input) as u64;
+                    }
+                    *c.counters.sync_drops.lock() = former.clone();
                     if let Ok(fresh) = policy.create::<Sample>(names.len()) {
                         synchronizer = fresh;
                         discarded = 0;
                     }
                 }
                 let result = synchronizer.push(i, sample);
-                // Samples the synchronizer gave up on are counted, never lost silently.
+                // Samples the synchronizer gave up on are counted, never lost silently,
+                // and by input and reason for `why`.
                 let now_discarded = synchronizer.dropped();
-                c.counters
-                    .discarded
-                    .fetch_add(now_discarded - discarded, std::sync::atomic::Ordering::Relaxed);
-                discarded = now_discarded;
+                if now_discarded != discarded {
+                    c.counters
+                        .discarded
+                        .fetch_add(now_discarded - discarded, std::sync::atomic::Ordering::Relaxed);
+                    discarded = now_discarded;
+                    let mut drops = former.clone();
+                    for (sum, now) in drops.iter_mut().zip(synchronizer.drops()) {
+                        sum.merge(now);
+                    }
+                    *c.counters.sync_drops.lock() = drops;
+                }
                 match result {
                     Ok(sets) => {
                         for set in sets {

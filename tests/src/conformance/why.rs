@@ -5,7 +5,7 @@
 use std::sync::Arc;
 
 use esgm_core::esgm::{CallOutcome, Why};
-use esgm_core::operators::sync::{EpsilonConfig, SyncPolicy};
+use esgm_core::operators::sync::{ApproximateConfig, EpsilonConfig, SyncDropReason, SyncPolicy};
 use esgm_core::{
     ComputeError, Constraint, DropCause, EntityStructure, EntityTrajectoryStructure, Esgm,
     FluentStreamPolicy, Sample, SensorError, Time, TrajectorySpec, millis,
@@ -171,6 +171,38 @@ pub fn why_names_what_a_sync_waits_for<H: Harness>(h: &H) {
     assert_eq!(sync.waits_for.as_deref(), Some("b"), "{why:#?}");
     assert_eq!((sync.gap, sync.tolerance), (Some(196), Some(5)));
     assert!(says(&why, "the sync waits for `b`"), "{:?}", why.reasons);
+}
+
+/// An ApproximateTime sync names, per input, what it dropped and why, with
+/// message_filters' semantics: `a` runs ahead of a silent `b`, so its queue (of 2)
+/// overflows twice; then `b`'s first item is too far from `a`'s (tolerance 10), and
+/// each of the two is dropped in turn, with no partner.
+pub fn why_names_each_inputs_sync_drops<H: Harness>(h: &H) {
+    register_reading(h);
+    let e = h.esgm();
+    let a = e.create_primitive_entity_trajectory_structure("a", "Reading").unwrap();
+    let b = e.create_primitive_entity_trajectory_structure("b", "Reading").unwrap();
+    let policy = SyncPolicy::Approximate(ApproximateConfig::default().queue_size(2).tolerance(10));
+    e.create_trajectory(TrajectorySpec::sync("ab", ["a", "b"], policy)).unwrap();
+    let t0 = h.now();
+    for k in 0..4 {
+        a.add(reading(t0 + 100 * k, 1.0)).unwrap();
+    }
+    b.add(reading(t0 + 250, 2.0)).unwrap();
+    let why = why_when(h, "ab", t0, |w| w.sync.as_ref().is_some_and(|s| s.discarded == 4));
+    let sync = why.sync.as_ref().expect("a sync says what it dropped");
+    let of = |name: &str| {
+        let input = sync.dropped.iter().find(|d| d.input == name);
+        input.unwrap_or_else(|| panic!("no drops of `{name}`: {why:#?}")).drops.clone()
+    };
+    let (from_a, from_b) = (of("a"), of("b"));
+    assert_eq!((from_a.queue_full, from_a.no_partner, from_a.total()), (2, 1, 3), "{why:#?}");
+    assert_eq!(from_a.last, Some((t0 + 200, SyncDropReason::NoPartner)));
+    assert_eq!((from_b.no_partner, from_b.total()), (1, 1), "{why:#?}");
+    assert_eq!(from_b.last, Some((t0 + 250, SyncDropReason::NoPartner)));
+    let said = "the sync dropped 3 of `a`'s structure(s): 2 pushed out of its full queue, 1 with no partner within the tolerance";
+    assert!(says(&why, said), "{:?}", why.reasons);
+    assert!(says(&why, "the sync dropped 1 of `b`'s structure(s)"), "{:?}", why.reasons);
 }
 
 /// A sampled trajectory whose sensor has no value names its sensor's answers.

@@ -34,7 +34,8 @@
 
 use std::collections::VecDeque;
 
-use super::{Stamped, SyncError, Synchronizer};
+use super::drops::DropTally;
+use super::{InputDrops, Stamped, SyncDropReason, SyncError, Synchronizer};
 use crate::Time;
 
 /// Settings of [`ApproximateSync`], named as in message_filters.
@@ -117,7 +118,7 @@ pub struct ApproximateSync<T> {
     max_interval: Option<Time>,
     age_penalty: f64,
     candidate: Option<Candidate>,
-    dropped: u64,
+    drops: DropTally,
 }
 
 /// One input's items and state.
@@ -266,7 +267,7 @@ impl<T: Stamped> ApproximateSync<T> {
             max_interval: config.tolerance,
             age_penalty: config.age_penalty,
             candidate: None,
-            dropped: 0,
+            drops: DropTally::new(inputs),
         })
     }
 
@@ -302,8 +303,8 @@ impl<T: Stamped> ApproximateSync<T> {
             // Any ongoing search is void: its steps assumed the item about to go.
             self.lanes.iter_mut().for_each(Lane::restore);
             if let Some(lane) = self.lanes.get_mut(input) {
-                if lane.waiting.pop_front().is_some() {
-                    self.dropped += 1;
+                if let Some(item) = lane.waiting.pop_front() {
+                    self.drops.count(input, SyncDropReason::QueueFull, item.stamp());
                 }
                 lane.dropped_recently = true;
             }
@@ -317,7 +318,12 @@ impl<T: Stamped> ApproximateSync<T> {
     /// Items discarded without being part of an emitted set: pushed out by the queue
     /// bound, part of no set within the tolerance, or passed over for a better set.
     pub fn dropped(&self) -> u64 {
-        self.dropped
+        self.drops.total()
+    }
+
+    /// Each input's discarded items, by reason (they sum to [`Self::dropped`]).
+    pub fn drops(&self) -> &[InputDrops] {
+        self.drops.per_input()
     }
 
     /// Items held, waiting for a decision.
@@ -381,8 +387,9 @@ impl<T: Stamped> ApproximateSync<T> {
                         self.lanes.get(heads.end_lane).is_some_and(|lane| lane.dropped_recently);
                     if too_wide || bad_pivot {
                         if let Some(lane) = self.lanes.get_mut(heads.start_lane) {
-                            if lane.waiting.pop_front().is_some() {
-                                self.dropped += 1;
+                            if let Some(item) = lane.waiting.pop_front() {
+                                let reason = SyncDropReason::NoPartner;
+                                self.drops.count(heads.start_lane, reason, item.stamp());
                             }
                         }
                         continue;
@@ -424,9 +431,10 @@ impl<T: Stamped> ApproximateSync<T> {
     /// Makes `candidate` the current one; the items stepped over so far are older than it
     /// in their lanes and can no longer be part of any set.
     fn adopt(&mut self, candidate: Candidate) -> Candidate {
-        for lane in &mut self.lanes {
-            self.dropped += lane.passed.len() as u64;
-            lane.passed.clear();
+        for (index, lane) in self.lanes.iter_mut().enumerate() {
+            for item in lane.passed.drain(..) {
+                self.drops.count(index, SyncDropReason::PassedOver, item.stamp());
+            }
         }
         self.candidate = Some(candidate);
         candidate
@@ -478,7 +486,11 @@ impl<T: Stamped> ApproximateSync<T> {
             sets.push(members.into_iter().flatten().collect());
         } else {
             // Unreachable while every lane holds its candidate item; never lose count.
-            self.dropped += members.iter().flatten().count() as u64;
+            for (index, item) in members.iter().enumerate() {
+                if let Some(item) = item {
+                    self.drops.count(index, SyncDropReason::NoPartner, item.stamp());
+                }
+            }
         }
     }
 }
@@ -520,8 +532,14 @@ impl<T: Stamped> Synchronizer<T> for ApproximateSync<T> {
     fn dropped(&self) -> u64 {
         ApproximateSync::dropped(self)
     }
+    fn drops(&self) -> &[InputDrops] {
+        ApproximateSync::drops(self)
+    }
     fn queued(&self) -> usize {
         ApproximateSync::queued(self)
+    }
+    fn queued_on(&self, input: usize) -> usize {
+        self.lanes.get(input).map_or(0, Lane::held)
     }
 }
 
@@ -605,7 +623,15 @@ mod tests {
     #[test]
     fn upstream_imperfect_match() -> Result<(), SyncError> {
         let pushes = [(0, 0), (1, 1), (0, 2), (0, 3), (1, 5), (0, 6), (1, 7)];
-        assert_eq!(sets(2, queue(10), &pushes)?, vec![vec![0, 1], vec![6, 5]]);
+        let (out, sync) = run(2, queue(10), &pushes)?;
+        assert_eq!(out.concat(), vec![vec![0, 1], vec![6, 5]]);
+        // x and b were passed over for the better set (c, B); B's input lost nothing.
+        let a = &sync.drops()[0];
+        assert_eq!(
+            (a.passed_over, a.total(), a.last),
+            (2, 2, Some((secs(3), SyncDropReason::PassedOver)))
+        );
+        assert_eq!(sync.drops()[1].total(), 0);
         Ok(())
     }
 
@@ -934,6 +960,11 @@ mod tests {
                 prop_assert!(pair[0].iter().zip(&pair[1]).all(|(x, y)| x < y), "sets cross: {:?}", pair);
             }
             prop_assert_eq!(a.len() * inputs + sync_a.queued() + sync_a.dropped() as usize, total);
+            // Each drop is counted once, on its input, for one reason.
+            let per_input: u64 = sync_a.drops().iter().map(InputDrops::total).sum();
+            prop_assert_eq!(per_input, sync_a.dropped());
+            let held: usize = (0..inputs).map(|i| Synchronizer::queued_on(&sync_a, i)).sum();
+            prop_assert_eq!(held, sync_a.queued());
             let common = a.len().min(b.len());
             prop_assert_eq!(&a[..common], &b[..common]);
         }

@@ -18,7 +18,8 @@
 
 use std::collections::VecDeque;
 
-use super::{Stamped, SyncError, Synchronizer};
+use super::drops::DropTally;
+use super::{InputDrops, Stamped, SyncDropReason, SyncError, Synchronizer};
 use crate::Time;
 
 /// Settings of [`EpsilonSync`].
@@ -61,7 +62,7 @@ impl EpsilonConfig {
 pub struct EpsilonSync<T> {
     queues: Vec<VecDeque<T>>,
     config: EpsilonConfig,
-    dropped: u64,
+    drops: DropTally,
 }
 
 impl<T: Stamped> EpsilonSync<T> {
@@ -83,7 +84,8 @@ impl<T: Stamped> EpsilonSync<T> {
                 value: config.tolerance,
             });
         }
-        Ok(Self { queues: (0..inputs).map(|_| VecDeque::new()).collect(), config, dropped: 0 })
+        let queues = (0..inputs).map(|_| VecDeque::new()).collect();
+        Ok(Self { queues, config, drops: DropTally::new(inputs) })
     }
 
     fn all_have_one(&self) -> bool {
@@ -100,10 +102,11 @@ impl<T: Stamped> EpsilonSync<T> {
             if self.queues.iter().all(within) {
                 sets.push(self.queues.iter_mut().filter_map(VecDeque::pop_front).collect());
             } else {
-                for q in &mut self.queues {
+                for (input, q) in self.queues.iter_mut().enumerate() {
                     if within(q) {
-                        q.pop_front();
-                        self.dropped += 1;
+                        if let Some(item) = q.pop_front() {
+                            self.drops.count(input, SyncDropReason::NoPartner, item.stamp());
+                        }
                     }
                 }
             }
@@ -125,15 +128,24 @@ impl<T: Stamped> Synchronizer<T> for EpsilonSync<T> {
             self.decide(&mut sets);
         } else if let Some(queue) = self.queues.get_mut(input) {
             if queue.len() > self.config.queue_size {
-                queue.pop_front();
-                self.dropped += 1;
+                if let Some(item) = queue.pop_front() {
+                    self.drops.count(input, SyncDropReason::QueueFull, item.stamp());
+                }
             }
         }
         Ok(sets)
     }
 
     fn dropped(&self) -> u64 {
-        self.dropped
+        self.drops.total()
+    }
+
+    fn drops(&self) -> &[InputDrops] {
+        self.drops.per_input()
+    }
+
+    fn queued_on(&self, input: usize) -> usize {
+        self.queues.get(input).map_or(0, VecDeque::len)
     }
 
     fn queued(&self) -> usize {
@@ -170,6 +182,9 @@ mod tests {
         // 120 is too late for 100: 100 and 103 (within 5 of it) are dropped; 120 waits.
         assert!(s.push(2, 120).unwrap().is_empty());
         assert_eq!((s.queued(), s.dropped()), (1, 2));
+        let partnerless: Vec<_> = s.drops().iter().map(|d| (d.no_partner, d.last)).collect();
+        let none = SyncDropReason::NoPartner;
+        assert_eq!(partnerless, [(1, Some((100, none))), (1, Some((103, none))), (0, None)]);
         s.push(0, 118).unwrap();
         assert_eq!(s.push(1, 121).unwrap(), vec![vec![118, 121, 120]]);
     }
@@ -195,6 +210,7 @@ mod tests {
             s.push(0, t).unwrap();
         }
         assert_eq!((s.queued(), s.dropped()), (2, 1));
+        assert_eq!((s.drops()[0].queue_full, s.queued_on(0), s.queued_on(1)), (1, 2, 0));
         assert_eq!(s.push(1, 2).unwrap(), vec![vec![2, 2]]);
     }
 

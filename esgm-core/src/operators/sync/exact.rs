@@ -12,7 +12,8 @@
 
 use std::collections::BTreeMap;
 
-use super::{Stamped, SyncError, Synchronizer};
+use super::drops::DropTally;
+use super::{InputDrops, Stamped, SyncDropReason, SyncError, Synchronizer};
 use crate::Time;
 
 /// Settings of [`ExactSync`].
@@ -52,7 +53,7 @@ pub struct ExactSync<T> {
     held: Vec<usize>,
     /// The valid time of the last emitted set: nothing at or before it can be emitted.
     last_emitted: Option<Time>,
-    dropped: u64,
+    drops: DropTally,
 }
 
 impl<T: Stamped> ExactSync<T> {
@@ -74,7 +75,7 @@ impl<T: Stamped> ExactSync<T> {
             pending: BTreeMap::new(),
             held: vec![0; inputs],
             last_emitted: None,
-            dropped: 0,
+            drops: DropTally::new(inputs),
         })
     }
 
@@ -98,7 +99,7 @@ impl<T: Stamped> ExactSync<T> {
         let stamp = item.stamp();
         if self.last_emitted.is_some_and(|last| stamp <= last) {
             // Its set could only come out after a later one, breaking valid-time order.
-            self.dropped += 1;
+            self.drops.count(input, SyncDropReason::Late, stamp);
             return Ok(Vec::new());
         }
         let inputs = self.inputs;
@@ -108,7 +109,7 @@ impl<T: Stamped> ExactSync<T> {
             return Ok(Vec::new());
         };
         if slot.replace(item).is_some() {
-            self.dropped += 1;
+            self.drops.count(input, SyncDropReason::Replaced, stamp);
         } else {
             self.held[input] += 1;
         }
@@ -123,7 +124,12 @@ impl<T: Stamped> ExactSync<T> {
     /// Items discarded without being part of an emitted set: unmatched items pushed out by
     /// the queue bound, passed over by a later set, or arriving too late.
     pub fn dropped(&self) -> u64 {
-        self.dropped
+        self.drops.total()
+    }
+
+    /// Each input's discarded items, by reason (they sum to [`Self::dropped`]).
+    pub fn drops(&self) -> &[InputDrops] {
+        self.drops.per_input()
     }
 
     /// Items held, waiting for the rest of their set.
@@ -140,10 +146,10 @@ impl<T: Stamped> ExactSync<T> {
             }
         }
         let newer = self.pending.split_off(&stamp);
-        for (_, slots) in std::mem::replace(&mut self.pending, newer) {
+        for (older, slots) in std::mem::replace(&mut self.pending, newer) {
             for (input, slot) in slots.iter().enumerate() {
                 if slot.is_some() {
-                    self.dropped += 1;
+                    self.drops.count(input, SyncDropReason::PassedOver, older);
                     if let Some(held) = self.held.get_mut(input) {
                         *held = held.saturating_sub(1);
                     }
@@ -172,7 +178,7 @@ impl<T: Stamped> ExactSync<T> {
                 self.pending.remove(&stamp);
             }
             self.held[input] -= 1;
-            self.dropped += 1;
+            self.drops.count(input, SyncDropReason::QueueFull, stamp);
         }
     }
 }
@@ -186,6 +192,12 @@ impl<T: Stamped> Synchronizer<T> for ExactSync<T> {
     }
     fn dropped(&self) -> u64 {
         ExactSync::dropped(self)
+    }
+    fn drops(&self) -> &[InputDrops] {
+        ExactSync::drops(self)
+    }
+    fn queued_on(&self, input: usize) -> usize {
+        self.held.get(input).copied().unwrap_or(0)
     }
     fn queued(&self) -> usize {
         ExactSync::queued(self)
@@ -236,6 +248,13 @@ mod tests {
         assert_eq!(out.concat(), vec![vec![2, 2], vec![3, 3]]);
         // (0, 1) is passed over by the set at 2, (1, 1) arrives after it.
         assert_eq!((sync.queued(), sync.dropped()), (0, 2));
+        let drops = sync.drops();
+        assert_eq!(
+            (drops[0].passed_over, drops[0].last),
+            (1, Some((1, SyncDropReason::PassedOver)))
+        );
+        assert_eq!((drops[1].late, drops[1].last), (1, Some((1, SyncDropReason::Late))));
+        assert_eq!(drops[0].total() + drops[1].total(), 2);
         Ok(())
     }
 
@@ -244,6 +263,7 @@ mod tests {
         let mut sync = exact(2, 10)?;
         assert!(feed(&mut sync, &[(0, 4), (0, 4)])?.concat().is_empty());
         assert_eq!((sync.queued(), sync.dropped()), (1, 1));
+        assert_eq!(sync.drops()[0].replaced, 1);
         assert_eq!(sync.push(1, 4)?, vec![vec![4, 4]]);
         Ok(())
     }
@@ -253,6 +273,10 @@ mod tests {
         let mut sync = exact(2, 2)?;
         assert!(feed(&mut sync, &[(0, 1), (0, 2), (0, 3), (0, 4)])?.concat().is_empty());
         assert_eq!((sync.queued(), sync.dropped()), (2, 2));
+        assert_eq!(
+            (sync.drops()[0].queue_full, sync.drops()[0].last),
+            (2, Some((2, SyncDropReason::QueueFull)))
+        );
         // 1 and 2 are gone, 3 still matches; input 1's own bound is untouched.
         assert!(sync.push(1, 1)?.is_empty());
         assert_eq!(sync.push(1, 3)?, vec![vec![3, 3]]);

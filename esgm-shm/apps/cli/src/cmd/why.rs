@@ -108,6 +108,13 @@ pub fn render(why: &Why) -> String {
             s.tolerance.map_or("none".into(), ago),
             s.discarded
         );
+        for d in s.dropped.iter().filter(|d| d.drops.total() > 0) {
+            let reasons: Vec<String> =
+                d.drops.by_reason().iter().map(|(r, n)| format!("{n} {}", r.words())).collect();
+            let last = d.drops.last.map(|(vt, _)| format!("; last valid {}", display(vt)));
+            let _ =
+                writeln!(out, "  {}: {}{}", d.input, reasons.join(", "), last.unwrap_or_default());
+        }
     }
     for d in &why.drops {
         let last = d
