@@ -29,8 +29,8 @@ pub use spec::{TrajectoryKind, TrajectorySource, TrajectorySpec};
 pub use trace::{Found, MAX_TRACE_DEPTH, MAX_TRACE_NODES, TraceNode, trace, trace_with};
 pub use typed_unit::{Stamped, TypedUnit, TypedUnitAdapter, UnitInputs};
 pub use why::{
-    CallOutcome, CallRecord, DropSummary, HowWriterChanged, InputHealth, RECENT_CALLS,
-    SyncInputDrops, SyncWait, Why, WriterChange,
+    CallOutcome, CallRecord, DropSummary, HowWriterChanged, InputHealth, MissCause, MissedPoints,
+    RECENT_CALLS, SyncInputDrops, SyncWait, Why, WriterChange,
 };
 
 use std::sync::Arc;

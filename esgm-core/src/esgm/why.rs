@@ -37,6 +37,10 @@ pub struct Why {
     pub recent_calls: Vec<CallRecord>,
     /// A sync's wait: which input it waits for, and how far apart the inputs are.
     pub sync: Option<SyncWait>,
+    /// A sampled (or sampled generator) trajectory's recent skips of sample points,
+    /// oldest first, each with its cause.
+    #[serde(default)]
+    pub missed: Vec<MissedPoints>,
     /// The trajectory's drops since `since`, per cause, with the last one's detail.
     pub drops: Vec<DropSummary>,
     /// Whether the process that writes the trajectory is alive (`None`: this runtime
@@ -123,6 +127,40 @@ pub enum CallOutcome {
     Panicked(String),
     /// Its output did not fit the trajectory's type.
     InvalidOutput(String),
+}
+
+/// Sample points a sampler skipped at once, and why.
+#[derive(Debug, Clone, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct MissedPoints {
+    /// When the sampler woke and found them past.
+    pub at: Time,
+    /// How many sample points it skipped.
+    pub missed: u64,
+    /// Why.
+    pub cause: MissCause,
+}
+
+/// Why a sampler skipped sample points.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum MissCause {
+    /// The producer's previous call (the sensor's `get_current_value`, or a
+    /// generator's unit) took `took`, a period or more: the calls cannot keep up.
+    SlowCall {
+        /// How long it took.
+        took: Time,
+        /// The trajectory's period.
+        period: Time,
+    },
+    /// The calls took less than the period, but the sampler's thread woke `late` after
+    /// the sample time: the machine was busy, or the process was held (stopped,
+    /// swapped, debugged).
+    LateWakeUp {
+        /// How late it woke.
+        late: Time,
+        /// The trajectory's period.
+        period: Time,
+    },
 }
 
 /// What a sync waits for.
@@ -260,9 +298,13 @@ impl Why {
             {
                 out.push("its producer was never called".into());
             }
-            if w.missed_periods > 0 {
+            let misses: Vec<&MissedPoints> =
+                self.missed.iter().filter(|m| m.at >= self.since).collect();
+            if let Some(words) = missed_words(&misses) {
+                out.push(words);
+            } else if w.missed_periods > 0 {
                 out.push(format!(
-                    "{} sample point(s) were missed (the sampler fell behind its period)",
+                    "{} sample point(s) were missed since it was made, none since the time asked",
                     w.missed_periods
                 ));
             }
@@ -324,6 +366,44 @@ impl WriterChange {
             ),
         }
     }
+}
+
+/// The skips of sample points since the time asked, as one reason: how many, and the
+/// cause of the worst of each kind.
+fn missed_words(misses: &[&MissedPoints]) -> Option<String> {
+    let n: u64 = misses.iter().map(|m| m.missed).sum();
+    let slowest = misses
+        .iter()
+        .filter_map(|m| match m.cause {
+            MissCause::SlowCall { took, period } => Some((took, period)),
+            MissCause::LateWakeUp { .. } => None,
+        })
+        .max();
+    let latest_wake = misses
+        .iter()
+        .filter_map(|m| match m.cause {
+            MissCause::LateWakeUp { late, period } => Some((late, period)),
+            MissCause::SlowCall { .. } => None,
+        })
+        .max();
+    let mut causes = Vec::new();
+    if let Some((took, period)) = slowest {
+        causes.push(format!(
+            "its producer's calls took up to {}, longer than its {} period",
+            seconds(took),
+            seconds(period)
+        ));
+    }
+    if let Some((late, period)) = latest_wake {
+        causes.push(format!(
+            "its sampler woke up to {} late with calls shorter than its {} period (the machine was busy, or the process held)",
+            seconds(late),
+            seconds(period)
+        ));
+    }
+    (n > 0).then(|| {
+        format!("{n} sample point(s) were missed since the time asked: {}", causes.join("; "))
+    })
 }
 
 /// What dropped a structure, as a subject.

@@ -6,7 +6,9 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 use parking_lot::{Mutex, RwLock};
 
-use crate::esgm::{CallOutcome, CallRecord, RECENT_CALLS, TrajectoryInfo, WorkerStats};
+use crate::esgm::{
+    CallOutcome, CallRecord, MissedPoints, RECENT_CALLS, TrajectoryInfo, WorkerStats,
+};
 use crate::store::TrajectoryStore;
 
 /// Counters a worker bumps; read as a [`WorkerStats`] snapshot.
@@ -34,6 +36,8 @@ pub(crate) struct WorkerCounters {
     /// A sync's discarded samples, per input and reason (for `why`), since the
     /// trajectory was made: updated when a push discards.
     pub sync_drops: Mutex<Vec<crate::operators::sync::InputDrops>>,
+    /// A sampler's most recent skips of sample points, with their causes (for `why`).
+    pub recent_misses: Mutex<std::collections::VecDeque<MissedPoints>>,
 }
 
 impl WorkerCounters {
@@ -48,6 +52,16 @@ impl WorkerCounters {
             calls.pop_front();
         }
         calls.push_back(CallRecord { at, outcome });
+    }
+
+    /// Remembers one skip of sample points, forgetting the oldest past
+    /// [`RECENT_CALLS`].
+    pub fn missed(&self, points: MissedPoints) {
+        let mut misses = self.recent_misses.lock();
+        if misses.len() == RECENT_CALLS {
+            misses.pop_front();
+        }
+        misses.push_back(points);
     }
 
     pub fn snapshot(&self) -> WorkerStats {

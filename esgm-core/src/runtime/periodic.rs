@@ -11,6 +11,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use crate::clock::SharedClock;
+use crate::esgm::{MissCause, MissedPoints};
 use crate::time::Time;
 
 /// How long a sleeping worker waits before re-checking its stop flag.
@@ -41,16 +42,24 @@ fn precise_wake_ups() {
 }
 
 /// Runs `tick(sample_time)` at every sample time until `stop` is set or the schedule
-/// ends. `missed(n)` is told about skipped sample times.
+/// ends. `missed` is told about skipped sample times, and why they were skipped: the
+/// previous call took a period or more, or the thread woke that late on its own.
+///
+/// A tick may set `call_ended` to when its producer's call returned, before it stores
+/// the result: the call's duration is then measured to there, not to after the store
+/// (which a reader may see first). Left unset, it is measured to the tick's end.
 pub(crate) fn run(
     clock: &SharedClock,
     stop: &Arc<AtomicBool>,
     schedule: Schedule,
-    mut missed: impl FnMut(u64),
+    call_ended: &std::cell::Cell<Option<Time>>,
+    mut missed: impl FnMut(MissedPoints),
     mut tick: impl FnMut(Time),
 ) {
     precise_wake_ups();
     let mut next = schedule.from;
+    // How long the last call took (the clock read after it, minus the wake-up).
+    let mut last_call: Time = 0;
     while !stop.load(Ordering::Relaxed) {
         if schedule.to.is_some_and(|to| next > to) {
             break;
@@ -61,7 +70,13 @@ pub(crate) fn run(
         }
         let late = now.saturating_sub(next) / schedule.period;
         if late > 0 {
-            missed(late as u64);
+            let period = schedule.period;
+            let cause = if last_call >= period {
+                MissCause::SlowCall { took: last_call, period }
+            } else {
+                MissCause::LateWakeUp { late: now.saturating_sub(next), period }
+            };
+            missed(MissedPoints { at: now, missed: late as u64, cause });
             next = next.saturating_add(late.saturating_mul(schedule.period));
             if schedule.to.is_some_and(|to| next > to) {
                 break;
@@ -70,7 +85,9 @@ pub(crate) fn run(
         if stop.load(Ordering::Relaxed) {
             break;
         }
+        call_ended.set(None);
         tick(next);
+        last_call = call_ended.get().unwrap_or_else(|| clock.now()).saturating_sub(now);
         match next.checked_add(schedule.period) {
             Some(n) => next = n,
             // The end of time: nothing more to sample.

@@ -35,8 +35,11 @@ impl InProcessEsgm {
             cell.info.inputs.iter().map(|input| self.input_health(input, now)).collect();
         let kind = cell.info.kind;
         let has_worker = !matches!(kind, TrajectoryKind::Primitive);
-        let worker = has_worker.then(|| cell.counters.snapshot());
+        // The calls before the counters: a worker bumps its counter, then records the
+        // call, so the counters read after include every call listed.
         let recent_calls = cell.counters.recent_calls.lock().iter().cloned().collect();
+        let missed = cell.counters.recent_misses.lock().iter().cloned().collect();
+        let worker = has_worker.then(|| cell.counters.snapshot());
         let sync = (kind == TrajectoryKind::Sync).then(|| sync_wait(&cell, &inputs));
         Ok(Why {
             trajectory: name.to_owned(),
@@ -49,6 +52,7 @@ impl InProcessEsgm {
             worker,
             recent_calls,
             sync,
+            missed,
             drops,
             writer_alive: None,
             writer_changed: None,

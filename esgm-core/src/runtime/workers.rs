@@ -94,9 +94,11 @@ fn now(cell: &TrajectoryCell) -> Time {
     cell.store.lock().clock().now()
 }
 
-fn missed(cell: &TrajectoryCell) -> impl FnMut(u64) + '_ {
-    move |n| {
+fn missed(cell: &TrajectoryCell) -> impl FnMut(crate::esgm::MissedPoints) + '_ {
+    move |points| {
+        let n = points.missed;
         cell.counters.missed_periods.fetch_add(n, std::sync::atomic::Ordering::Relaxed);
+        cell.counters.missed(points);
     }
 }
 
@@ -109,7 +111,8 @@ pub(crate) fn sampler(
 ) -> Worker {
     let c = Arc::clone(cell);
     spawn("sampler", cell, move |stop, _wake| {
-        periodic::run(&clock, &stop, schedule, missed(&c), |qtime| {
+        let call_ended = std::cell::Cell::new(None);
+        periodic::run(&clock, &stop, schedule, &call_ended, missed(&c), |qtime| {
             WorkerCounters::bump(&c.counters.calls);
             // The trajectory's own image buffers (shared memory where it is published).
             let images = c.store.lock().octets_allocator();
@@ -117,8 +120,10 @@ pub(crate) fn sampler(
                 Some(a) => a.as_ref(),
                 None => &HeapAllocator,
             };
-            match guarded(&c, "get_current_value", || sensor.get_current_value_with(qtime, images))
-            {
+            let value =
+                guarded(&c, "get_current_value", || sensor.get_current_value_with(qtime, images));
+            call_ended.set(Some(clock.now()));
+            match value {
                 Some(Ok(es)) => emit(&c, Arc::new(es), None),
                 Some(Err(SensorError::ValueNotAvailable)) => {
                     WorkerCounters::bump(&c.counters.no_value);
@@ -408,7 +413,8 @@ pub(crate) fn sampled_generators(
 ) -> Worker {
     let c = Arc::clone(cell);
     spawn("generator", cell, move |stop, _wake| {
-        periodic::run(&clock, &stop, schedule, missed(&c), |sample_time| {
+        let call_ended = std::cell::Cell::new(None);
+        periodic::run(&clock, &stop, schedule, &call_ended, missed(&c), |sample_time| {
             let t = sample_time.saturating_sub(lag);
             WorkerCounters::bump(&c.counters.calls);
             let mut values = Vec::with_capacity(inputs.len());
@@ -442,6 +448,7 @@ pub(crate) fn sampled_generators(
             if let Some(cu) = &cu {
                 // A temporal function: the unit estimates the value at exactly `t`.
                 let result = guarded(&c, "compute_at", || cu.compute_at(&values, t));
+                call_ended.set(Some(clock.now()));
                 emit_computed(&c, "compute_at", result, || {
                     Lineage::of(from).with_unrecorded_reads()
                 });
@@ -463,6 +470,7 @@ pub(crate) fn sampled_generators(
                     state(&c.info.name, t, clock.now(), &parts)
                 }
             };
+            call_ended.set(Some(clock.now()));
             emit(&c, Arc::new(es), Some(Lineage::of(from)));
         });
     })

@@ -165,6 +165,7 @@ macro_rules! conformance_tests {
             why::why_names_the_constraint_that_dropped,
             why::why_names_what_a_sync_waits_for,
             why::why_names_each_inputs_sync_drops,
+            why::why_names_missed_sample_points,
             why::why_names_what_the_sensor_returned,
         );
     };

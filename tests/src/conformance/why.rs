@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use esgm_core::esgm::{CallOutcome, Why};
+use esgm_core::esgm::{CallOutcome, MissCause, Why};
 use esgm_core::operators::sync::{ApproximateConfig, EpsilonConfig, SyncDropReason, SyncPolicy};
 use esgm_core::{
     ComputeError, Constraint, DropCause, EntityStructure, EntityTrajectoryStructure, Esgm,
@@ -203,6 +203,64 @@ pub fn why_names_each_inputs_sync_drops<H: Harness>(h: &H) {
     let said = "the sync dropped 3 of `a`'s structure(s): 2 pushed out of its full queue, 1 with no partner within the tolerance";
     assert!(says(&why, said), "{:?}", why.reasons);
     assert!(says(&why, "the sync dropped 1 of `b`'s structure(s)"), "{:?}", why.reasons);
+}
+
+/// Skipped sample points, each cause made on purpose on the simulated clock and
+/// named by `why`: a sensor call that takes 35 ms of a 10 ms period (the clock moves
+/// while the sensor is held in its call), then a sampler that wakes 40 ms late with a
+/// quick sensor (the clock jumps while it sleeps).
+pub fn why_names_missed_sample_points<H: Harness>(h: &H) {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::sync::{Mutex, mpsc};
+    register_reading(h);
+    let e = h.esgm();
+    let hold = Arc::new(AtomicBool::new(true));
+    let (called, was_called) = mpsc::channel::<()>();
+    let (go, gone) = mpsc::channel::<()>();
+    let (called, gone) = (Mutex::new(called), Mutex::new(gone));
+    let held = Arc::clone(&hold);
+    let sensor = move |t: Time| -> Result<EntityStructure, SensorError> {
+        if held.swap(false, Ordering::SeqCst) {
+            let _ = called.lock().map(|c| c.send(()));
+            let _ = gone.lock().map(|g| g.recv_timeout(WAIT));
+        }
+        Ok(reading(t, 1.0))
+    };
+    e.add_sensor_interface("slow", "Reading", Arc::new(sensor)).unwrap();
+    let since = h.now();
+    e.create_trajectory(TrajectorySpec::sampled("lagging", "slow", millis(10)).unwrap()).unwrap();
+    was_called.recv_timeout(WAIT).expect("the sampler calls the sensor");
+    h.advance(millis(35));
+    go.send(()).unwrap();
+    let why = why_when(h, "lagging", since, |w| !w.missed.is_empty());
+    assert_eq!(
+        why.missed[0].cause,
+        MissCause::SlowCall { took: millis(35), period: millis(10) },
+        "{why:#?}"
+    );
+    assert_eq!(why.missed[0].missed, 2, "{why:#?}");
+    let said = "2 sample point(s) were missed since the time asked: its producer's calls took up to 35.0 ms, longer than its 10.0 ms period";
+    assert!(says(&why, said), "{:?}", why.reasons);
+
+    // The sampler sleeps until the next sample time; the clock jumps past four.
+    let before = why.missed[0].at + 1;
+    assert!(wait_for(WAIT, || e
+        .get_entity_trajectory_structure("lagging")
+        .is_ok_and(|t| t.get_latest().is_ok_and(|s| s.valid_time == since + millis(30)))));
+    h.advance(millis(45));
+    let why = why_when(h, "lagging", before, |w| w.missed.len() == 2);
+    assert_eq!(
+        why.missed[1].cause,
+        MissCause::LateWakeUp { late: millis(40), period: millis(10) },
+        "{why:#?}"
+    );
+    let said =
+        "4 sample point(s) were missed since the time asked: its sampler woke up to 40.0 ms late";
+    assert!(says(&why, said), "{:?}", why.reasons);
+    assert!(why.worker.as_ref().is_some_and(|w| w.missed_periods == 6), "{why:#?}");
+    // Asked from after the last skip, none are since; the total is still told.
+    let quiet = h.reader().why("lagging", why.missed[1].at + 1).unwrap();
+    assert!(says(&quiet, "6 sample point(s) were missed since it was made"), "{:?}", quiet.reasons);
 }
 
 /// A sampled trajectory whose sensor has no value names its sensor's answers.

@@ -5,7 +5,7 @@
 
 use std::fmt::Write as _;
 
-use esgm_core::esgm::{CallOutcome, Why};
+use esgm_core::esgm::{CallOutcome, MissCause, Why};
 use esgm_core::time::for_people as ago;
 use esgm_core::{Clock, Esgm, SystemClock};
 
@@ -98,6 +98,22 @@ pub fn render(why: &Why) -> String {
             };
             let _ = writeln!(out, "  {} ago  {what}", ago(why.now - c.at));
         }
+    }
+    for m in why.missed.iter().rev().take(5) {
+        let cause = match m.cause {
+            MissCause::SlowCall { took, period } => {
+                format!("the call before took {} (period {})", ago(took), ago(period))
+            }
+            MissCause::LateWakeUp { late, period } => {
+                format!("woke {} late (period {})", ago(late), ago(period))
+            }
+        };
+        let _ = writeln!(
+            out,
+            "missed {} sample point(s) {} ago: {cause}",
+            m.missed,
+            ago(why.now - m.at)
+        );
     }
     if let Some(s) = &why.sync {
         let _ = writeln!(
