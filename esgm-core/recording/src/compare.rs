@@ -21,6 +21,10 @@
 //! pass; each trajectory with images in a pass of its own, so at most one image
 //! trajectory's structures (from both files) are in memory at a time.
 
+mod by_lineage;
+
+pub use by_lineage::{DifferenceOrigin, InputComparison, InputVerdict, MAX_DEPTH};
+
 use std::collections::{BTreeMap, HashSet};
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -30,7 +34,7 @@ use esgm_core::clock::{SharedClock, SimClock};
 use esgm_core::store::{AddError, TrajectoryStore};
 use esgm_core::time::Time;
 use esgm_core::value::ValueSort;
-use esgm_core::{EntityStructure, PolicyError, Sample, TypeChecker, TypeRegistryError};
+use esgm_core::{EntityStructure, Lineage, PolicyError, Sample, TypeChecker, TypeRegistryError};
 
 use crate::reader::{Damage, ReadError, RecordedTrajectory, Recording};
 use crate::type_diff::{TypeDifference, schema_difference, schema_types};
@@ -201,6 +205,15 @@ pub struct FirstDifference {
     pub a: String,
     /// B's value, as text.
     pub b: String,
+    /// The inputs A's structure was made from (its lineage), each compared with the
+    /// one B's was made from, followed back while they differ: which recorded input
+    /// the output differs by. Empty for a structure without lineage.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub inputs: Vec<InputComparison>,
+    /// Where the difference comes from, as far as the lineage tells: a differing
+    /// source structure, a producer given the same inputs, inputs paired otherwise.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub origins: Vec<DifferenceOrigin>,
 }
 
 /// The largest numeric deviation over every pair.
@@ -343,6 +356,7 @@ pub fn compare(
     passes.extend(heavy.into_iter().map(|n| vec![n]));
 
     let mut results: BTreeMap<&str, TrajectoryComparison> = BTreeMap::new();
+    let mut differing: Vec<by_lineage::Differing> = Vec::new();
     for pass in passes {
         let mut from_a = read_pass(a, &pass)?;
         let mut from_b = read_pass(b, &pass)?;
@@ -356,11 +370,32 @@ pub fn compare(
             if options.overlap {
                 if let (Some((a_lo, a_hi)), Some((b_lo, b_hi))) = (ta.valid_range, tb.valid_range) {
                     let (lo, hi) = (a_lo.max(b_lo), a_hi.min(b_hi));
-                    sa.retain(|s| (lo..=hi).contains(&s.valid_time));
-                    sb.retain(|s| (lo..=hi).contains(&s.valid_time));
+                    sa.retain(|(s, _)| (lo..=hi).contains(&s.valid_time));
+                    sb.retain(|(s, _)| (lo..=hi).contains(&s.valid_time));
                 }
             }
-            results.insert(name, compare_one(options, (b, tb), ta, tb, sa, sb)?);
+            let (result, lineages) = compare_one(options, (b, tb), ta, tb, sa, sb)?;
+            if let (Some(first), Some((lineage_a, lineage_b))) =
+                (&result.first_difference, lineages)
+            {
+                differing.push(by_lineage::Differing {
+                    trajectory: name.to_owned(),
+                    valid_time: first.valid_time,
+                    lineage_a,
+                    lineage_b,
+                });
+            }
+            results.insert(name, result);
+        }
+    }
+    // Each first difference of a produced structure, followed back through its inputs.
+    let explained = by_lineage::explain(a, b, options, &differing)?;
+    for (out, (inputs, origins)) in differing.iter().zip(explained) {
+        let first =
+            results.get_mut(out.trajectory.as_str()).and_then(|r| r.first_difference.as_mut());
+        if let Some(first) = first {
+            first.inputs = inputs;
+            first.origins = origins;
         }
     }
     let trajectories = names
@@ -390,11 +425,14 @@ fn has_octets(t: &RecordedTrajectory) -> bool {
         .any(|(_, ty)| ty.attributes.iter().any(|a| a.sort == ValueSort::OctetSeq))
 }
 
-/// The structures of `names` in `rec`, in recorded order.
+/// A recorded structure and the lineage recorded with it.
+type Traced = (EntityStructure, Option<Arc<Lineage>>);
+
+/// The structures of `names` in `rec`, in recorded order, with their lineage.
 fn read_pass(
     rec: &Recording,
     names: &[&str],
-) -> Result<BTreeMap<String, Vec<EntityStructure>>, CompareError> {
+) -> Result<BTreeMap<String, Vec<Traced>>, CompareError> {
     let indexes: HashSet<usize> = rec
         .trajectories
         .iter()
@@ -402,12 +440,13 @@ fn read_pass(
         .filter(|(_, t)| names.contains(&t.info.name.as_str()))
         .map(|(i, _)| i)
         .collect();
-    let mut out: BTreeMap<String, Vec<EntityStructure>> = BTreeMap::new();
+    let mut out: BTreeMap<String, Vec<Traced>> = BTreeMap::new();
     for sample in rec.samples()? {
         let sample = sample?;
         if indexes.contains(&sample.trajectory) {
             let name = &rec.trajectories[sample.trajectory].info.name;
-            out.entry(name.clone()).or_default().push(sample.structure);
+            let lineage = sample.lineage.map(Arc::new);
+            out.entry(name.clone()).or_default().push((sample.structure, lineage));
         }
     }
     Ok(out)
@@ -417,7 +456,7 @@ fn read_pass(
 fn index(
     rec: &Recording,
     t: &RecordedTrajectory,
-    structures: Vec<EntityStructure>,
+    structures: Vec<Traced>,
 ) -> Result<TrajectoryStore, CompareError> {
     let name = &t.info.name;
     let definitions = schema_types(&t.info.type_name, &t.types)
@@ -440,11 +479,13 @@ fn index(
             source: Box::new(source),
         },
     )?;
-    for es in structures {
-        store.add(es).map_err(|source| CompareError::Structure {
-            path: rec.path.clone(),
-            trajectory: name.clone(),
-            source: Box::new(source),
+    for (es, lineage) in structures {
+        store.add_produced(Arc::new(es), lineage, false).map_err(|source| {
+            CompareError::Structure {
+                path: rec.path.clone(),
+                trajectory: name.clone(),
+                source: Box::new(source),
+            }
         })?;
     }
     Ok(store)
@@ -455,9 +496,9 @@ fn compare_one(
     (b_rec, b_traj): (&Recording, &RecordedTrajectory),
     ta: &RecordedTrajectory,
     tb: &RecordedTrajectory,
-    sa: Vec<EntityStructure>,
-    sb: Vec<EntityStructure>,
-) -> Result<TrajectoryComparison, CompareError> {
+    sa: Vec<Traced>,
+    sb: Vec<Traced>,
+) -> Result<(TrajectoryComparison, Option<Lineages>), CompareError> {
     let mut r = TrajectoryComparison::one_sided(&ta.info.name, Presence::Both, 0);
     r.count_a = sa.len() as u64;
     r.count_b = sb.len() as u64;
@@ -470,10 +511,10 @@ fn compare_one(
     let store = index(b_rec, b_traj, sb)?;
 
     // A in valid-time order; ties by create time, then recorded order.
-    let mut a_sorted: Vec<(usize, EntityStructure)> = sa.into_iter().enumerate().collect();
-    a_sorted.sort_by_key(|(i, e)| (e.valid_time, e.create_time, *i));
+    let mut a_sorted: Vec<(usize, Traced)> = sa.into_iter().enumerate().collect();
+    a_sorted.sort_by_key(|(i, (e, _))| (e.valid_time, e.create_time, *i));
     let mut used: HashSet<*const EntityStructure> = HashSet::new();
-    let mut pairs: Vec<(EntityStructure, Sample)> = Vec::new();
+    let mut pairs: Vec<(Traced, Sample)> = Vec::new();
     let unmatched_a = |r: &mut TrajectoryComparison, e: &EntityStructure| {
         r.only_in_a += 1;
         r.first_only_in_a.get_or_insert(e.valid_time);
@@ -482,10 +523,10 @@ fn compare_one(
         Alignment::Exact => {
             let mut i = 0;
             while i < a_sorted.len() {
-                let vt = a_sorted[i].1.valid_time;
+                let vt = a_sorted[i].1.0.valid_time;
                 let group_end = a_sorted[i..]
                     .iter()
-                    .position(|(_, e)| e.valid_time != vt)
+                    .position(|(_, (e, _))| e.valid_time != vt)
                     .map_or(a_sorted.len(), |k| i + k);
                 let mut partners = store.get_between(vt, vt);
                 // get_between keeps add order among ties; create time first.
@@ -497,7 +538,7 @@ fn compare_one(
                             used.insert(Arc::as_ptr(&s.structure));
                             pairs.push((e.clone(), s));
                         }
-                        None => unmatched_a(&mut r, e),
+                        None => unmatched_a(&mut r, &e.0),
                     }
                 }
                 i = group_end;
@@ -505,7 +546,7 @@ fn compare_one(
         }
         Alignment::Nearest { within } => {
             for (_, e) in &a_sorted {
-                let vt = e.valid_time;
+                let vt = e.0.valid_time;
                 match store.get_at_approximating(vt, &ValueApproximation::Closest) {
                     Ok(s)
                         if (i128::from(s.structure.valid_time) - i128::from(vt)).abs()
@@ -514,7 +555,7 @@ fn compare_one(
                         used.insert(Arc::as_ptr(&s.structure));
                         pairs.push((e.clone(), s));
                     }
-                    _ => unmatched_a(&mut r, e),
+                    _ => unmatched_a(&mut r, &e.0),
                 }
             }
         }
@@ -527,16 +568,22 @@ fn compare_one(
         }
     }
     r.matched = pairs.len() as u64;
-    for (ea, sb) in &pairs {
+    let mut lineages = None;
+    for ((ea, lineage_a), sb) in &pairs {
         let d = diff_structures(ea, &sb.structure, options.value_tolerance, options.create_time);
         if let Some(first) = d.first {
             r.differing += 1;
+            if r.first_difference.is_none() && (lineage_a.is_some() || sb.lineage.is_some()) {
+                lineages = Some((lineage_a.clone(), sb.lineage.clone()));
+            }
             r.first_difference.get_or_insert(FirstDifference {
                 valid_time: ea.valid_time,
                 valid_time_b: sb.structure.valid_time,
                 attribute: first.attribute,
                 a: first.a,
                 b: first.b,
+                inputs: Vec::new(),
+                origins: Vec::new(),
             });
         }
         if let Some(leaf) = d.largest {
@@ -545,5 +592,8 @@ fn compare_one(
             }
         }
     }
-    Ok(r)
+    Ok((r, lineages))
 }
+
+/// A's and B's lineage of a structure.
+type Lineages = (Option<Arc<Lineage>>, Option<Arc<Lineage>>);

@@ -19,8 +19,8 @@ use std::time::Duration;
 use esgm_core::esgm::{TrajectoryInfo, TrajectoryKind, TrajectorySource};
 use esgm_core::{
     AddOutcome, CompUnit, ComputeError, EntityStructureType, EntityTrajectoryStructure, Esgm,
-    InProcessEsgm, InProcessTrajectory, InputType, Sample, SimClock, SubscribeOptions,
-    Subscription, TrajectorySpec,
+    InProcessEsgm, InProcessTrajectory, InputRef, InputType, Lineage, Sample, SimClock,
+    SubscribeOptions, Subscription, TrajectorySpec,
 };
 
 use crate::layout::TypeSchema;
@@ -279,7 +279,7 @@ pub fn rerun(
         let sample = sample?;
         let Some(&node) = recorded_index.get(&sample.trajectory) else { continue };
         clock.set(sample.header.add_time);
-        offer(&mut nodes[node], sample.structure)?;
+        offer(&mut nodes[node], sample.structure, None)?;
         propagate(&mut nodes, node, &clock, &mut out)?;
     }
     let mut report = RerunReport::default();
@@ -293,10 +293,15 @@ pub fn rerun(
     Ok(report)
 }
 
-/// Adds a structure to a node's trajectory and counts how its policy took it.
-fn offer(node: &mut Node, es: esgm_core::EntityStructure) -> Result<(), RerunError> {
+/// Adds a structure to a node's trajectory (with the inputs it was made from, a unit's
+/// output) and counts how its policy took it.
+fn offer(
+    node: &mut Node,
+    es: esgm_core::EntityStructure,
+    lineage: Option<Arc<Lineage>>,
+) -> Result<(), RerunError> {
     node.counts.offered += 1;
-    match node.handle.add(es) {
+    match node.handle.add_produced(es, lineage) {
         Ok(AddOutcome::Added) => node.counts.added += 1,
         Ok(AddOutcome::Held { .. }) => node.counts.held += 1,
         Ok(AddOutcome::Dropped(_)) => node.counts.dropped += 1,
@@ -318,11 +323,12 @@ fn propagate(
     clock: &SimClock,
     out: &mut Option<RecordingWriter>,
 ) -> Result<(), RerunError> {
+    let names: Vec<String> = nodes.iter().map(|n| n.info.name.clone()).collect();
     let mut queue = VecDeque::from([first]);
     while let Some(i) = queue.pop_front() {
         while let Some(update) = nodes[i].updates.try_recv() {
             if let (Some(w), Some(id)) = (out.as_mut(), nodes[i].written) {
-                w.write(id, &update.structure, update.add_time, clock.now())?;
+                w.write_sample(id, &update, clock.now())?;
             }
             #[allow(clippy::needless_range_loop)] // `offer` below needs `nodes[d]` mutably
             for d in 0..nodes.len() {
@@ -341,13 +347,25 @@ fn propagate(
                     continue;
                 };
                 let unit = Arc::clone(unit);
+                // What the unit is given, named as the live runtime names it.
+                let from: Vec<InputRef> = inputs
+                    .iter()
+                    .zip(&args)
+                    .map(|(&input, s)| InputRef {
+                        trajectory: names.get(input).cloned().unwrap_or_default(),
+                        generation: 0,
+                        valid_time: s.valid_time,
+                        add_time: s.add_time,
+                    })
+                    .collect();
                 nodes[d].counts.calls += 1;
                 let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
                     unit.compute(&args, clock.now())
                 }));
                 match result {
                     Ok(Ok(es)) => {
-                        offer(&mut nodes[d], es)?;
+                        let lineage = Lineage::of(from).with_unrecorded_reads();
+                        offer(&mut nodes[d], es, Some(Arc::new(lineage)))?;
                         if !queue.contains(&d) {
                             queue.push_back(d);
                         }

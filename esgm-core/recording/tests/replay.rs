@@ -29,6 +29,11 @@ fn pose_type(sort: ValueSort) -> EntityStructureType {
 
 /// A recording of `robot_state` (10 structures) and `pose` (10), interleaved.
 fn record(path: &Path) {
+    record_with(path, |_, x| x);
+}
+
+/// [`record`], each pose's x passed through `pose_x(i, x)`.
+fn record_with(path: &Path, pose_x: impl Fn(i64, f64) -> f64) {
     let mut w = RecordingWriter::create(path, RecordOptions::default()).unwrap();
     let r = w
         .add_trajectory(
@@ -46,7 +51,7 @@ fn record(path: &Path) {
         let t = 1_000_000 + i * 1_000;
         let rs = RobotState { x: i as f64, y: 0.0, dir: 0.0 }.to_structure("robot", t, t);
         w.write(r, &rs, t + 10, t + 20).unwrap();
-        let pose = EntityStructure::new("pose", t + 5, t + 5).with("x", i as f64 * 2.0);
+        let pose = EntityStructure::new("pose", t + 5, t + 5).with("x", pose_x(i, i as f64 * 2.0));
         w.write(p, &pose, t + 15, t + 25).unwrap();
     }
     w.finish().unwrap();
@@ -181,20 +186,17 @@ impl CompUnit for Sum {
     }
 }
 
-#[test]
-fn a_rerun_is_deterministic_and_runs_units_as_the_runtime_does() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("in.mcap");
-    record(&path);
-    let rec = Recording::open(&path).unwrap();
-    let plan = RerunPlan {
+/// The pipeline the reruns run: `doubled` = `double`(pose), `sum` = Sum(robot_state,
+/// doubled).
+fn plan(double: Arc<dyn CompUnit>) -> RerunPlan {
+    RerunPlan {
         types: vec![("Marker".into(), pose_type(ValueSort::Double))],
         units: vec![
             RerunUnit {
                 name: "Double".into(),
                 output_type: "Marker".into(),
                 inputs: vec![InputType::Type("Marker".into())],
-                unit: Arc::new(Doubler),
+                unit: double,
             },
             RerunUnit {
                 name: "Sum".into(),
@@ -212,7 +214,93 @@ fn a_rerun_is_deterministic_and_runs_units_as_the_runtime_does() {
             TrajectorySpec::computed("doubled", "Double", ["pose"]),
             TrajectorySpec::computed("sum", "Sum", ["robot_state", "doubled"]),
         ],
+    }
+}
+
+/// The valid time of the fourth pose (i = 3), where the runs below differ.
+const POSE_3: Time = 1_003_005;
+
+/// [`Doubler`], one off at [`POSE_3`]: a unit changed between two runs.
+struct Skewed;
+
+impl CompUnit for Skewed {
+    fn compute(&self, inputs: &[Sample], qtime: Time) -> Result<EntityStructure, ComputeError> {
+        let mut out = Doubler.compute(inputs, qtime)?;
+        if out.valid_time == POSE_3 {
+            out = out.with("x", -1.0);
+        }
+        Ok(out)
+    }
+}
+
+/// `compare` follows a differing output's lineage through both recordings to where
+/// the difference comes from (X1): reruns of one pipeline, first on inputs that
+/// differ in one pose (the origin is that recorded pose), then with `doubled`'s unit
+/// changed (the origin is that unit: its inputs are the same in both).
+#[test]
+fn compare_follows_lineage_to_the_input_or_the_unit_a_difference_comes_from() {
+    use esgm_recording::compare::{DifferenceOrigin, InputVerdict};
+    use esgm_recording::{CompareOptions, compare};
+    let dir = tempfile::tempdir().unwrap();
+    let run = |input: &Path, double: Arc<dyn CompUnit>, out: &str| {
+        let out = dir.path().join(out);
+        let rec = Recording::open(input).unwrap();
+        let writer = RecordingWriter::create(&out, RecordOptions::default()).unwrap();
+        rerun(&rec, &plan(double), Some(writer)).unwrap();
+        Recording::open(&out).unwrap()
     };
+    let (same, other) = (dir.path().join("in.mcap"), dir.path().join("other.mcap"));
+    record(&same);
+    record_with(&other, |i, x| if i == 3 { x + 0.5 } else { x });
+    let a = run(&same, Arc::new(Doubler), "a.mcap");
+    let b = run(&other, Arc::new(Doubler), "b.mcap");
+    let c = run(&same, Arc::new(Skewed), "c.mcap");
+    let first = |report: &esgm_recording::CompareReport, name: &str| {
+        let t = report.trajectories.iter().find(|t| t.name == name).unwrap();
+        t.first_difference.clone().unwrap_or_else(|| panic!("`{name}` does not differ: {t:#?}"))
+    };
+    let pose_3 = DifferenceOrigin::Source { trajectory: "pose".into(), valid_time: POSE_3 };
+
+    // Other inputs: `sum` differs first where it took the differing pose's double.
+    let report = compare(&a, &b, &CompareOptions::default()).unwrap();
+    let sum = first(&report, "sum");
+    assert_eq!((sum.valid_time, sum.attribute.as_str()), (POSE_3, "x"), "{sum:#?}");
+    assert_eq!(sum.origins, vec![pose_3.clone()], "{sum:#?}");
+    let verdicts: Vec<(&str, bool)> = sum
+        .inputs
+        .iter()
+        .map(|i| (i.trajectory.as_str(), i.verdict == InputVerdict::Same))
+        .collect();
+    assert_eq!(verdicts, [("robot_state", true), ("doubled", false)]);
+    let doubled = &sum.inputs[1];
+    assert!(doubled.produced && doubled.inputs.len() == 1, "{doubled:#?}");
+    assert_eq!(doubled.inputs[0].trajectory, "pose");
+    assert!(
+        matches!(&doubled.inputs[0].verdict, InputVerdict::Differs { attribute, a, b }
+            if attribute == "x" && a == "6" && b == "6.5"),
+        "{doubled:#?}"
+    );
+    assert_eq!(first(&report, "doubled").origins, vec![pose_3]);
+
+    // The same inputs, another unit: the origin is the unit of `doubled`.
+    let report = compare(&a, &c, &CompareOptions::default()).unwrap();
+    let unit = DifferenceOrigin::Producer { trajectory: "doubled".into(), valid_time: POSE_3 };
+    assert_eq!(first(&report, "doubled").origins, vec![unit.clone()]);
+    let sum = first(&report, "sum");
+    assert_eq!(sum.origins, vec![unit], "{sum:#?}");
+    assert_eq!(sum.inputs[1].inputs[0].verdict, InputVerdict::Same);
+    // Identical runs: nothing differs, nothing to follow.
+    let again = run(&same, Arc::new(Doubler), "again.mcap");
+    assert!(!compare(&a, &again, &CompareOptions::default()).unwrap().differs());
+}
+
+#[test]
+fn a_rerun_is_deterministic_and_runs_units_as_the_runtime_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("in.mcap");
+    record(&path);
+    let rec = Recording::open(&path).unwrap();
+    let plan = plan(Arc::new(Doubler));
     let run = |out: &str| {
         let out = dir.path().join(out);
         let writer = RecordingWriter::create(

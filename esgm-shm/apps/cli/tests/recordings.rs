@@ -177,6 +177,30 @@ fn record_info_kill_rerun_replay_and_compare_the_tutorial() {
         long,
     );
     assert_eq!(code, Some(0), "the rerun's blobs differ from the live ones:\n{out}\n{err}");
+    // Every trajectory: where a live structure differs from the rerun's, its lineage
+    // says why, and never a recorded input (both ran on the same ones): the live
+    // multi-input unit paired other structures than the rerun, or computed otherwise.
+    let (_, out, err) = run(
+        &[
+            "--json",
+            "compare",
+            &path("live.mcap"),
+            &path("rerun1.mcap"),
+            "--ignore-create-time",
+            "--overlap",
+        ],
+        long,
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out}\n{err}"));
+    for t in report["trajectories"].as_array().unwrap() {
+        let Some(first) = t.get("first_difference").filter(|f| !f.is_null()) else { continue };
+        let origins = first["origins"].as_array().unwrap_or_else(|| panic!("no origins: {t:#}"));
+        assert!(!origins.is_empty(), "{t:#}");
+        for o in origins {
+            assert_ne!(o["origin"], "source", "the same inputs cannot differ: {t:#}");
+        }
+    }
 
     // Replay into a fresh domain while recording it there; the two recordings match.
     let b = esgm_shm::unique_domain("rec-b");

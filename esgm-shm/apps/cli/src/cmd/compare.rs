@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, bail};
 use esgm_core::Time;
+use esgm_recording::compare::InputComparison;
 use esgm_recording::{Alignment, CompareOptions, CompareReport, Presence, Recording, compare};
 
 /// `esgm compare` options.
@@ -99,6 +100,14 @@ pub fn run(json: bool, a: &Args) -> anyhow::Result<()> {
     if report.differs() { Err(Differ.into()) } else { Ok(()) }
 }
 
+/// A differing structure's inputs, compared, indented by depth.
+fn print_inputs(name: &str, inputs: &[InputComparison], depth: usize) {
+    for input in inputs {
+        println!("{name}: {:width$}{}", "", input.words(), width = depth * 2);
+        print_inputs(name, &input.inputs, depth + 1);
+    }
+}
+
 fn print_table(r: &CompareReport) {
     println!("A: {}", r.a.display());
     println!("B: {}", r.b.display());
@@ -140,6 +149,10 @@ fn print_table(r: &CompareReport) {
                 "{}: first difference at {at}: {} = {} in A, {} in B",
                 t.name, d.attribute, d.a, d.b
             );
+            print_inputs(&t.name, &d.inputs, 1);
+            for origin in &d.origins {
+                println!("{}: {}", t.name, origin.words());
+            }
         }
         if let Some(d) = &t.largest_deviation {
             println!(
