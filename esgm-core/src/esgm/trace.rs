@@ -78,6 +78,31 @@ impl TraceNode {
     pub fn sources(&self) -> Vec<&TraceNode> {
         self.walk().into_iter().map(|(_, n)| n).filter(|n| n.inputs.is_empty()).collect()
     }
+
+    /// The end-to-end latency: from the earliest found source entering its
+    /// trajectory to this structure entering its own, with that source. `None` if no
+    /// source was found.
+    pub fn end_to_end(&self) -> Option<(Time, &TraceNode)> {
+        let sources = self.sources();
+        let first =
+            sources.into_iter().filter(|n| n.found == Found::Stored).min_by_key(|n| n.add_time)?;
+        Some((self.add_time.saturating_sub(first.add_time), first))
+    }
+
+    /// Each produced trajectory's hop time in this trace, in the order first met
+    /// (depth first from this structure); where one appears more than once, its
+    /// longest hop: the per-stage split of [`TraceNode::end_to_end`].
+    pub fn stage_times(&self) -> Vec<(&str, Time)> {
+        let mut out: Vec<(&str, Time)> = Vec::new();
+        for (_, node) in self.walk() {
+            let Some(hop) = node.hop else { continue };
+            match out.iter_mut().find(|(t, _)| *t == node.trajectory) {
+                Some((_, longest)) => *longest = (*longest).max(hop),
+                None => out.push((&node.trajectory, hop)),
+            }
+        }
+        out
+    }
 }
 
 /// Traces `sample`, read from `trajectory`, back through the lineage of every

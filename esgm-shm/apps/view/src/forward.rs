@@ -6,8 +6,11 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
+use std::collections::HashMap;
+
+use esgm_core::esgm::trace_with;
 use esgm_core::store::RecvError;
-use esgm_core::{EntityTrajectoryStructure, Esgm, SubscribeOptions};
+use esgm_core::{EntityTrajectoryStructure, Esgm, InProcessTrajectory, SubscribeOptions};
 use esgm_shm::ShmEsgm;
 use foxglove::{PartialMetadata, RawChannel};
 
@@ -28,6 +31,16 @@ pub struct Counters {
     pub unencodable: AtomicU64,
 }
 
+/// What a channel shows of its trajectory.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Shown {
+    /// Its structures, in this encoding (topic `/<trajectory>`).
+    Structures(Encoding),
+    /// Each structure's trace: the inputs it was made from, hop by hop (topic
+    /// `/<trajectory>/trace`, [`crate::trace_view`]).
+    Trace,
+}
+
 /// A running forwarder; dropping it stops the thread and closes the subscription.
 #[derive(Debug)]
 pub struct Forwarder {
@@ -40,7 +53,7 @@ impl Forwarder {
     pub fn start(
         esgm: ShmEsgm,
         trajectory: String,
-        encoding: Encoding,
+        shown: Shown,
         channel: Arc<RawChannel>,
         counters: Arc<Counters>,
     ) -> Self {
@@ -48,7 +61,7 @@ impl Forwarder {
         let flag = Arc::clone(&stop);
         let thread = std::thread::Builder::new()
             .name(format!("esgm-view-{trajectory}"))
-            .spawn(move || run(&esgm, &trajectory, encoding, &channel, &counters, &flag));
+            .spawn(move || run(&esgm, &trajectory, shown, &channel, &counters, &flag));
         let thread = match thread {
             Ok(t) => Some(t),
             Err(e) => {
@@ -83,7 +96,7 @@ impl Drop for Forwarder {
 fn run(
     esgm: &ShmEsgm,
     name: &str,
-    encoding: Encoding,
+    shown: Shown,
     channel: &RawChannel,
     counters: &Counters,
     stop: &AtomicBool,
@@ -105,6 +118,9 @@ fn run(
         }
     };
     let mut buf = Vec::new();
+    // A trace's input trajectories, opened once (their replicas fill as they come).
+    let mut handles: HashMap<String, Option<InProcessTrajectory>> =
+        HashMap::from([(name.to_owned(), Some(t.clone()))]);
     while !stop.load(Ordering::Acquire) {
         let sample = match sub.recv_timeout(POLL) {
             Ok(s) => s,
@@ -119,7 +135,22 @@ fn run(
         }
         buf.clear();
         let es = &sample.structure;
-        if let Err(e) = encoding.encode(es, name, &mut buf) {
+        let encoded = match shown {
+            Shown::Structures(encoding) => {
+                encoding.encode(es, name, &mut buf).map_err(|e| e.to_string())
+            }
+            Shown::Trace => {
+                let open = |input: &str| {
+                    handles
+                        .entry(input.to_owned())
+                        .or_insert_with(|| esgm.get_entity_trajectory_structure(input).ok())
+                        .clone()
+                };
+                let tree = trace_with(open, name, &sample);
+                crate::trace_view::encode(&tree, &mut buf).map_err(|e| e.to_string())
+            }
+        };
+        if let Err(e) = encoded {
             if counters.unencodable.fetch_add(1, Ordering::Relaxed) == 0 {
                 tracing::warn!("a structure does not fit its Foxglove view (counted): {e}");
             }

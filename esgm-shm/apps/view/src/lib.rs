@@ -17,6 +17,9 @@
 //! - **Nothing flows unwatched.** The first subscriber of a channel opens the
 //!   trajectory and subscribes to it ([`forward`]); the last one leaving stops the
 //!   thread and drops the handle, so an unwatched image stream costs nothing here.
+//! - **Traces too.** A produced trajectory also has a channel `/<trajectory>/trace`:
+//!   each structure's inputs hop by hop, with the end-to-end latency and each stage's
+//!   share, to plot where a pipeline's time goes ([`trace_view`]).
 //! - **Both names of the protocol.** The spec's clients (Lichtblick, older Foxglove
 //!   Studio, `@foxglove/ws-protocol`) ask for `foxglove.websocket.v1`, the SDK's server
 //!   knows the same protocol as `foxglove.sdk.v1`: a front door translates the name in
@@ -27,5 +30,6 @@ pub mod door;
 pub mod encoding;
 pub mod forward;
 pub mod server;
+pub mod trace_view;
 
 pub use server::{ViewServer, ViewServerBuilder};

@@ -9,6 +9,7 @@ use std::time::Duration;
 
 use anyhow::Context as _;
 use esgm_core::Esgm;
+use esgm_core::esgm::TrajectoryKind;
 use esgm_shm::ShmEsgm;
 use foxglove::websocket::{Capability, ChannelView, Client, ServerListener};
 use foxglove::{
@@ -18,7 +19,8 @@ use parking_lot::Mutex;
 
 use crate::door::Door;
 use crate::encoding::Encoding;
-use crate::forward::{Counters, Forwarder};
+use crate::forward::{Counters, Forwarder, Shown};
+use crate::trace_view;
 
 /// How often the trajectory listing is read for trajectories that came or went.
 const DISCOVERY: Duration = Duration::from_millis(500);
@@ -120,11 +122,13 @@ impl ViewServer {
         self.door.port()
     }
 
-    /// The trajectories with a channel now, by name.
+    /// The trajectories with a channel now, by name (once, with or without a trace
+    /// channel).
     pub fn channels(&self) -> Vec<String> {
         let mut names: Vec<String> =
             self.state.channels.lock().values().map(|c| c.trajectory.clone()).collect();
         names.sort();
+        names.dedup();
         names
     }
 
@@ -164,10 +168,10 @@ impl Drop for ViewServer {
     }
 }
 
-/// One trajectory's channel.
+/// One channel of a trajectory: its structures, or their traces.
 struct Watched {
     trajectory: String,
-    encoding: Encoding,
+    shown: Shown,
     channel: Arc<RawChannel>,
     subscribers: usize,
     forwarder: Option<Forwarder>,
@@ -213,26 +217,52 @@ impl State {
             keep
         });
         for info in listed {
-            if channels.values().any(|w| w.trajectory == info.name) {
-                continue;
+            // Every trajectory's structures; a produced one's traces too.
+            let produced =
+                !matches!(info.kind, TrajectoryKind::Primitive | TrajectoryKind::Sampled);
+            let mut wanted = vec![false];
+            if produced {
+                wanted.push(true);
             }
-            match self.channel(&info.name, &info.type_name) {
-                Ok((encoding, channel)) => {
-                    tracing::info!(trajectory = %info.name, "channel created");
-                    channels.insert(
-                        channel.id(),
-                        Watched {
-                            trajectory: info.name,
-                            encoding,
-                            channel,
-                            subscribers: 0,
-                            forwarder: None,
-                        },
-                    );
+            for trace in wanted {
+                let has =
+                    |w: &Watched| w.trajectory == info.name && (w.shown == Shown::Trace) == trace;
+                if channels.values().any(has) {
+                    continue;
                 }
-                Err(e) => tracing::warn!(trajectory = %info.name, "no channel: {e:#}"),
+                let made = if trace {
+                    self.trace_channel(&info.name).map(|c| (Shown::Trace, c))
+                } else {
+                    self.channel(&info.name, &info.type_name)
+                        .map(|(e, c)| (Shown::Structures(e), c))
+                };
+                match made {
+                    Ok((shown, channel)) => {
+                        tracing::info!(trajectory = %info.name, trace, "channel created");
+                        channels.insert(
+                            channel.id(),
+                            Watched {
+                                trajectory: info.name.clone(),
+                                shown,
+                                channel,
+                                subscribers: 0,
+                                forwarder: None,
+                            },
+                        );
+                    }
+                    Err(e) => tracing::warn!(trajectory = %info.name, "no channel: {e:#}"),
+                }
             }
         }
+    }
+
+    /// The channel of a produced trajectory's traces ([`crate::trace_view`]).
+    fn trace_channel(&self, name: &str) -> anyhow::Result<Arc<RawChannel>> {
+        Ok(ChannelBuilder::new(trace_view::topic(name))
+            .message_encoding("json")
+            .schema(Schema::new(trace_view::SCHEMA_NAME, "jsonschema", trace_view::schema()))
+            .context(&self.context)
+            .build_raw()?)
     }
 
     fn channel(&self, name: &str, type_name: &str) -> anyhow::Result<(Encoding, Arc<RawChannel>)> {
@@ -290,7 +320,7 @@ impl ServerListener for Listener {
             w.forwarder = Some(Forwarder::start(
                 state.esgm.clone(),
                 w.trajectory.clone(),
-                w.encoding,
+                w.shown,
                 Arc::clone(&w.channel),
                 Arc::clone(&state.counters),
             ));

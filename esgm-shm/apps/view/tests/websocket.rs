@@ -186,3 +186,68 @@ fn foxglove_client_subscribes_receives_an_image_and_unsubscribes() {
     drop(server);
     wait_until("the port closes", || std::net::TcpStream::connect(("127.0.0.1", port)).is_err());
 }
+
+/// A produced trajectory has a trace channel: each structure's inputs hop by hop, with
+/// the end-to-end latency split by stage (issue 42), plottable in Foxglove.
+#[test]
+fn a_produced_trajectory_has_a_trace_channel_splitting_its_latency_by_stage() {
+    let domain = esgm_shm::unique_domain("view-trace");
+    let registry = esgm_shm::control::Registry::new(TypeRegistry::with_library());
+    let _coordinator = esgm_shm::control::Coordinator::spawn(&domain, registry).unwrap();
+    let writer = esgm_shm::ShmEsgm::builder().domain(&domain).connect().unwrap();
+    let robot = writer.create_trajectory(TrajectorySpec::primitive("robot", "RobotState")).unwrap();
+    let copy = |i: &[esgm_core::Sample], _: i64| Ok((*i[0].structure).clone());
+    let types = vec!["RobotState".into()];
+    writer.add_comp_unit("copy", "RobotState", types.clone(), std::sync::Arc::new(copy)).unwrap();
+    writer.create_trajectory(TrajectorySpec::computed("near", "copy", ["robot"])).unwrap();
+    writer.create_trajectory(TrajectorySpec::computed("far", "copy", ["near"])).unwrap();
+
+    let server = ViewServer::builder(&domain).port(0).start().unwrap();
+    let mut socket = connect(server.port());
+    let mut seen = Vec::new();
+    let trace = advertised(&mut socket, &mut seen, "/far/trace");
+    assert_eq!(
+        (trace["schemaName"].as_str(), trace["encoding"].as_str()),
+        (Some("esgm.Trace"), Some("json"))
+    );
+    advertised(&mut socket, &mut seen, "/far");
+    assert!(
+        !seen.iter().any(|c| c["topic"] == "/robot/trace"),
+        "a pushed trajectory has no trace: {seen:?}"
+    );
+    send(
+        &mut socket,
+        json!({"op": "subscribe", "subscriptions": [{"id": 9, "channelId": trace["id"]}]}),
+    );
+    let t0 = 1_700_000_000_000_000_000_i64;
+    let mut k = 0;
+    let mut push = || {
+        let t = t0 + k * 1_000_000;
+        robot.add(RobotState { x: k as f64, y: 0.0, dir: 0.0 }.to_structure("r", t, t)).unwrap();
+        k += 1;
+    };
+    // The first traces may find an input's history not yet here; a later one is whole.
+    let deadline = Instant::now() + DEADLINE;
+    let v = loop {
+        let (time, payload) = message_data(&mut socket, 9, &mut push);
+        let v: Value = serde_json::from_slice(&payload).unwrap();
+        assert_eq!(v["valid_time"].as_u64(), Some(time), "log time is the valid time");
+        if v["hops"].as_array().is_some_and(|h| h.len() == 3) && v["source"] == "robot" {
+            break v;
+        }
+        assert!(Instant::now() < deadline, "no whole trace: {v:#}");
+    };
+    assert_eq!(v["trajectory"], "far");
+    let hops: Vec<(&str, u64)> = v["hops"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|h| (h["trajectory"].as_str().unwrap(), h["depth"].as_u64().unwrap()))
+        .collect();
+    assert_eq!(hops, [("far", 0), ("near", 1), ("robot", 2)]);
+    let stages = v["stages_ms"].as_object().unwrap();
+    let (far, near) = (stages["far"].as_f64().unwrap(), stages["near"].as_f64().unwrap());
+    let total = v["end_to_end_ms"].as_f64().unwrap();
+    assert!(far >= 0.0 && near >= 0.0 && (far + near - total).abs() < 1e-6, "{v:#}");
+    assert_eq!(server.forwarding(), ["far"]);
+}

@@ -101,13 +101,10 @@ fn ms(ns: Time) -> String {
 fn render(tree: &TraceNode, writers: &HashMap<String, String>) -> String {
     let mut out = String::new();
     line(&mut out, tree, writers, "", "");
-    let sources = tree.sources();
-    if let Some(first) =
-        sources.iter().filter(|n| n.found == Found::Stored).min_by_key(|n| n.add_time)
-    {
+    if let Some((latency, first)) = tree.end_to_end() {
         out.push_str(&format!(
             "end to end: {} from `{}` entering to `{}` entering\n",
-            ms(tree.add_time - first.add_time),
+            ms(latency),
             first.trajectory,
             tree.trajectory
         ));
