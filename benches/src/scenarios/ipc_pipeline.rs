@@ -492,6 +492,43 @@ fn payload_of(samples: &[Sample]) -> u64 {
         .map_or(0, |b| b.len() as u64)
 }
 
+/// What lineage adds to one hop of a two-input stage (driving_direction's), as the
+/// runtime does it: the writer names its inputs (`Lineage::of`, the names cloned) and
+/// encodes them after the sample's archive; one reader decodes them. Beside the
+/// `current_blob` stage's hop in the same run, the ratio is lineage's share of a hop.
+fn lineage_work(n: u64) -> anyhow::Result<Measurement> {
+    use esgm_core::codec::{decode_lineage, encode_lineage_into, lineage_len};
+    use esgm_core::{InputRef, Lineage};
+    let names = ["robot_state".to_owned(), "current_blob".to_owned()];
+    let mut latency = Latency::new()?;
+    let mut trailer = vec![0_u8; 256];
+    for i in 0..n.max(1_000) {
+        let t = i as Time * millis(IMAGE_PERIOD_MS);
+        let start = Instant::now();
+        let inputs = names
+            .iter()
+            .map(|trajectory| InputRef {
+                trajectory: trajectory.clone(),
+                generation: 7,
+                valid_time: t,
+                add_time: t + 1_000,
+            })
+            .collect();
+        let lineage = std::sync::Arc::new(Lineage::of(inputs).with_unrecorded_reads());
+        let len = lineage_len(&lineage);
+        let written = encode_lineage_into(&lineage, &mut trailer[..len])?;
+        let read = std::sync::Arc::new(decode_lineage(&trailer[..written])?);
+        latency.record(start.elapsed());
+        std::hint::black_box((lineage, read));
+    }
+    Ok(latency
+        .measurement("pipeline-lineage", Wait::Event)
+        .baseline("pipeline-current_blob")
+        .method(Method::Call)
+        .wait_strategy("none (in process)")
+        .note("a two-input output's lineage: named, encoded after the archive, decoded by one reader; the ratio is its share of the current_blob stage's hop"))
+}
+
 /// Each unit's computation alone, in this process, on the camera's frames.
 fn compute_rows(ctx: &Context) -> anyhow::Result<Vec<Measurement>> {
     let frames = ctx.samples(1_000, 50).min(10_000);
@@ -517,7 +554,9 @@ fn compute_rows(ctx: &Context) -> anyhow::Result<Vec<Measurement>> {
         steer.record(start.elapsed());
     }
     let bytes = (scene.frame_len()) as u64;
+    let lineage = lineage_work(frames)?;
     Ok(vec![
+        lineage,
         detect
             .measurement("pipeline-blobs-compute", Wait::Spin)
             .payload_bytes(bytes)

@@ -205,8 +205,10 @@ impl Trajectory {
 
     /// Why the trajectory has not produced since `since` (ns; None: since it was
     /// made), as a dict: `reasons` in words, then `inputs`, the producer's `worker`
-    /// counters and `recent_calls`, a sync's `sync`, `drops` per cause with the last
-    /// one, and `writer_alive`. Answered by the process that writes it.
+    /// counters and `recent_calls`, a sync's `sync` (with what it `dropped` per input
+    /// and reason), `missed` sample points with their cause, `drops` per cause with
+    /// the last one, `writer_alive` and `writer_changed` (a restart or take-over).
+    /// Answered by the process that writes it.
     #[pyo3(signature = (since=None))]
     fn why<'py>(&self, py: Python<'py>, since: Option<i64>) -> PyResult<Bound<'py, PyAny>> {
         let (rt, name) = (Arc::clone(&self.runtime), self.handle.name().to_owned());

@@ -46,6 +46,32 @@ def test_sync_pairs_samples_of_the_same_time(system, unique):
     assert [(s[unique + "a"]["x"], s[unique + "b"]["x"]) for s in states] == [(1.0, 2.0), (3.0, 4.0)]
 
 
+def test_why_names_each_sync_inputs_drops(system, unique):
+    """`why` says what a sync dropped, per input and reason (X2): a's 1000 is passed
+    over by the set at 2000, and b's 1500 comes after that set."""
+    a = system.create_primitive_entity_trajectory_structure(unique + "a", "RobotState")
+    b = system.create_primitive_entity_trajectory_structure(unique + "b", "RobotState")
+    ab = system.create_sync_entity_trajectory_structure(unique + "ab", [unique + "a", unique + "b"])
+    sub = ab.subscribe()
+    a.add("r", 1000, robot(1))
+    a.add("r", 2000, robot(2))
+    b.add("r", 2000, robot(3))
+    received(sub, 1)
+    b.add("r", 1500, robot(4))
+    deadline = time.monotonic() + 20
+    while True:
+        why = ab.why()
+        if why["sync"]["discarded"] == 2:
+            break
+        assert time.monotonic() < deadline, why
+        time.sleep(0.05)
+    dropped = {d["input"]: d for d in why["sync"]["dropped"]}
+    assert (dropped[unique + "a"]["passed_over"], dropped[unique + "a"]["last"]) == (1, [1000, "passed_over"])
+    assert (dropped[unique + "b"]["late"], dropped[unique + "b"]["last"]) == (1, [1500, "late"])
+    assert any(f"the sync dropped 1 of `{unique}b`'s structure(s): 1 arrived after a later set" in r
+               for r in why["reasons"]), why["reasons"]
+
+
 def test_sync_words_are_checked(system, unique):
     system.create_primitive_entity_trajectory_structure(unique + "a", "RobotState")
     inputs = [unique + "a", unique + "a"]
