@@ -372,20 +372,16 @@ impl WriterChange {
 /// cause of the worst of each kind.
 fn missed_words(misses: &[&MissedPoints]) -> Option<String> {
     let n: u64 = misses.iter().map(|m| m.missed).sum();
-    let slowest = misses
-        .iter()
-        .filter_map(|m| match m.cause {
-            MissCause::SlowCall { took, period } => Some((took, period)),
-            MissCause::LateWakeUp { .. } => None,
-        })
-        .max();
-    let latest_wake = misses
-        .iter()
-        .filter_map(|m| match m.cause {
-            MissCause::LateWakeUp { late, period } => Some((late, period)),
-            MissCause::SlowCall { .. } => None,
-        })
-        .max();
+    // The worst of each cause: (how long, the period).
+    let worst = |slow_call: bool| {
+        let of_cause = |m: &&&MissedPoints| match m.cause {
+            MissCause::SlowCall { took, period } if slow_call => Some((took, period)),
+            MissCause::LateWakeUp { late, period } if !slow_call => Some((late, period)),
+            _ => None,
+        };
+        misses.iter().filter_map(|m| of_cause(&m)).max()
+    };
+    let (slowest, latest_wake) = (worst(true), worst(false));
     let mut causes = Vec::new();
     if let Some((took, period)) = slowest {
         causes.push(format!(

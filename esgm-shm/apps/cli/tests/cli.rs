@@ -342,12 +342,12 @@ fn why_names_a_stopped_writer_and_the_input_that_went_quiet() {
         "--period",
         "20ms",
     ];
-    let mut robot = Command::new(ESGM)
-        .args(robot_args)
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
+    let robot_process = || {
+        let mut robot = Command::new(ESGM);
+        robot.args(robot_args).stdout(Stdio::null()).stderr(Stdio::null());
+        robot.spawn().unwrap()
+    };
+    let mut robot = robot_process();
     let deadline = Instant::now() + Duration::from_secs(30);
     while system.get_entity_trajectory_structure("rs").is_err() && Instant::now() < deadline {
         std::thread::sleep(Duration::from_millis(20));
@@ -401,12 +401,7 @@ fn why_names_a_stopped_writer_and_the_input_that_went_quiet() {
     assert_eq!(why["inputs"][0]["writer_alive"], false, "{json}");
     // Run again, the robot writes `rs` anew: `why` names the restart, by both pids.
     let gone = robot.id();
-    let mut robot = Command::new(ESGM)
-        .args(robot_args)
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
+    let mut robot = robot_process();
     let deadline = Instant::now() + Duration::from_secs(30);
     let restarted = loop {
         let json = ok(&["--domain", &d, "--json", "why", "rs"]);
