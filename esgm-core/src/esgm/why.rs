@@ -37,8 +37,8 @@ pub struct Why {
     pub recent_calls: Vec<CallRecord>,
     /// A sync's wait: which input it waits for, and how far apart the inputs are.
     pub sync: Option<SyncWait>,
-    /// A sampled (or sampled generator) trajectory's recent skips of sample points,
-    /// oldest first, each with its cause.
+    /// A sampled (or sampled generator) trajectory's recent skips of sample points
+    /// (the last [`RECENT_CALLS`]), oldest first, each with its cause.
     #[serde(default)]
     pub missed: Vec<MissedPoints>,
     /// The trajectory's drops since `since`, per cause, with the last one's detail.
@@ -300,7 +300,10 @@ impl Why {
             }
             let misses: Vec<&MissedPoints> =
                 self.missed.iter().filter(|m| m.at >= self.since).collect();
-            if let Some(words) = missed_words(&misses) {
+            // The remembered skips reach back far enough, or the count is a floor.
+            let all = self.missed.len() < RECENT_CALLS
+                || self.missed.first().is_some_and(|m| m.at < self.since);
+            if let Some(words) = missed_words(&misses, all) {
                 out.push(words);
             } else if w.missed_periods > 0 {
                 out.push(format!(
@@ -370,7 +373,7 @@ impl WriterChange {
 
 /// The skips of sample points since the time asked, as one reason: how many, and the
 /// cause of the worst of each kind.
-fn missed_words(misses: &[&MissedPoints]) -> Option<String> {
+fn missed_words(misses: &[&MissedPoints], all: bool) -> Option<String> {
     let n: u64 = misses.iter().map(|m| m.missed).sum();
     // The worst of each cause: (how long, the period).
     let worst = |slow_call: bool| {
@@ -397,8 +400,12 @@ fn missed_words(misses: &[&MissedPoints]) -> Option<String> {
             seconds(period)
         ));
     }
+    let floor = if all { "" } else { "at least " };
     (n > 0).then(|| {
-        format!("{n} sample point(s) were missed since the time asked: {}", causes.join("; "))
+        format!(
+            "{floor}{n} sample point(s) were missed since the time asked: {}",
+            causes.join("; ")
+        )
     })
 }
 
@@ -408,5 +415,29 @@ fn cause_words(cause: DropCause) -> String {
         DropCause::Violation(c) => format!("the {c} constraint"),
         DropCause::InvalidType => "the type check".into(),
         other => format!("{other:?}"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn missed_points_name_the_worst_of_each_cause_and_say_when_the_count_is_a_floor() {
+        let slow = MissedPoints {
+            at: 10,
+            missed: 2,
+            cause: MissCause::SlowCall { took: 30_000_000, period: 10_000_000 },
+        };
+        let late = MissedPoints {
+            at: 20,
+            missed: 4,
+            cause: MissCause::LateWakeUp { late: 40_000_000, period: 10_000_000 },
+        };
+        let words = missed_words(&[&slow, &late], true).unwrap_or_default();
+        assert!(words.starts_with("6 sample point(s) were missed since the time asked: its producer's calls took up to 30.0 ms, longer than its 10.0 ms period; its sampler woke up to 40.0 ms late"), "{words}");
+        let floor = missed_words(&[&slow], false).unwrap_or_default();
+        assert!(floor.starts_with("at least 2 sample point(s)"), "{floor}");
+        assert_eq!(missed_words(&[], true), None);
     }
 }
