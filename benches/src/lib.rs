@@ -53,6 +53,7 @@ pub mod args;
 pub mod config;
 pub mod cpu;
 pub mod domain_end;
+pub mod hop_steps;
 pub mod inbox;
 pub mod json;
 pub mod latency;

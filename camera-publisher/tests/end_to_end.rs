@@ -45,13 +45,17 @@ fn serves_the_scene_to_a_sampled_trajectory_and_leaves_with_the_coordinator() {
     // Each image is the scene's frame at its valid time, rendered in the camera process.
     let scene = SyntheticScene::builder().width(64).height(48).blobs(2).seed(7).create().unwrap();
     for sample in &samples {
-        assert_eq!(sample.name, "image");
-        let image = Image::from_structure(sample).unwrap();
+        assert_eq!(sample.name(), "image");
+        let image = Image::from_shared(sample).unwrap();
         assert_eq!((image.width, image.height, image.format), (64, 48, Image::FORMAT_RGB8));
         assert_eq!(image.image_data.len(), scene.frame_len());
-        assert!(image == scene.frame(sample.valid_time), "not the frame at {}", sample.valid_time);
+        assert!(
+            image == scene.frame(sample.valid_time()),
+            "not the frame at {}",
+            sample.valid_time()
+        );
     }
-    assert!(samples.windows(2).all(|w| w[0].valid_time < w[1].valid_time));
+    assert!(samples.windows(2).all(|w| w[0].valid_time() < w[1].valid_time()));
 
     drop((images, esgm, coordinator));
     let (status, stderr) = camera.wait_exit("after the coordinator was gone");

@@ -237,17 +237,17 @@ where
     let printed_by_callback = Arc::clone(&printed);
     let callback =
         driving_dir.subscribe(SubscribeOptions::default())?.spawn_callback(move |s| {
-            printed_by_callback.store(s.valid_time, Ordering::Relaxed);
-            let Ok(direction) = DrivingDirection::from_structure(&s) else { return };
+            printed_by_callback.store(s.valid_time(), Ordering::Relaxed);
+            let Ok(direction) = DrivingDirection::from_shared(&s) else { return };
             let heading = states
-                .get_at(s.valid_time)
+                .get_at(s.valid_time())
                 .ok()
-                .and_then(|r| RobotState::from_structure(&r).ok())
+                .and_then(|r| RobotState::from_shared(&r).ok())
                 .map_or(f64::NAN, |r| r.dir);
             let t = turn(heading, direction.dir);
             println!(
                 "  {:>7.3}  {:>11.2}  {:>9.2}  {:>6.2} {:<5}  {:>5.2}  {:>8.2}",
-                since(t0, s.valid_time),
+                since(t0, s.valid_time()),
                 heading,
                 direction.dir,
                 t,
@@ -268,8 +268,8 @@ where
         else {
             break;
         };
-        if last_dir.valid_time >= last_state.valid_time
-            && printed.load(Ordering::Relaxed) >= last_dir.valid_time
+        if last_dir.valid_time() >= last_state.valid_time()
+            && printed.load(Ordering::Relaxed) >= last_dir.valid_time()
         {
             break;
         }
@@ -279,10 +279,10 @@ where
 
     // 10.2: the seed's queries.
     let show = |s: &esgm_core::Sample| -> String {
-        match DrivingDirection::from_structure(s) {
+        match DrivingDirection::from_shared(s) {
             Ok(d) => format!(
                 "t={:.3} s  dir {:>6.2} deg  speed {:.2}",
-                since(t0, s.valid_time),
+                since(t0, s.valid_time()),
                 d.dir,
                 d.speed
             ),
@@ -306,8 +306,10 @@ where
         }
     };
     println!("  {:<52} {}", "get_latest", show(&latest));
-    let (t1, t2) =
-        (latest.valid_time - 5 * TIMEUNITS_PER_SECOND, latest.valid_time - TIMEUNITS_PER_SECOND);
+    let (t1, t2) = (
+        latest.valid_time() - 5 * TIMEUNITS_PER_SECOND,
+        latest.valid_time() - TIMEUNITS_PER_SECOND,
+    );
     let label = "get_between(latest - 5 s, latest - 1 s)";
     match driving_dir.get_between(t1, t2) {
         Ok(interval) if !interval.is_empty() => {
@@ -320,7 +322,7 @@ where
         Ok(_) => println!("  {label:<52} no samples (run longer than 1 s)"),
         Err(e) => println!("  {label:<52} {e}"),
     }
-    let t = latest.valid_time - 100 * TIMEUNITS_PER_MILLI_SECOND;
+    let t = latest.valid_time() - 100 * TIMEUNITS_PER_MILLI_SECOND;
     let label = "get_at_approximating(latest - 100 ms, most recent)";
     match driving_dir.get_at_approximating(t, &ValueApproximation::MostRecent) {
         Ok(at_t) => println!("  {label:<52} {}", show(&at_t)),
@@ -388,13 +390,13 @@ fn check(
     robot_state: &impl EntityTrajectoryStructure,
     current_blob: &impl EntityTrajectoryStructure,
 ) -> anyhow::Result<bool> {
-    let direction = DrivingDirection::from_structure(latest)?;
-    let state = robot_state.get_at(latest.valid_time)?;
-    let robot = RobotState::from_structure(&state)?;
+    let direction = DrivingDirection::from_shared(latest)?;
+    let state = robot_state.get_at(latest.valid_time())?;
+    let robot = RobotState::from_shared(&state)?;
     // The blob the unit used: the newest not newer than the robot state.
-    let blob_sample = current_blob.get_closest_at_or_before(latest.valid_time)?;
-    let blob = Blob::from_structure(&blob_sample)?;
-    let truth = scene.truth(blob_sample.valid_time);
+    let blob_sample = current_blob.get_closest_at_or_before(latest.valid_time())?;
+    let blob = Blob::from_shared(&blob_sample)?;
+    let truth = scene.truth(blob_sample.valid_time());
     let Some(largest) = truth.iter().max_by_key(|b| b.size).copied() else {
         bail!("the scene has no blobs, yet a direction was computed");
     };
@@ -413,7 +415,7 @@ fn check(
     println!("\ncheck against the scene's ground truth");
     println!(
         "  last direction     t={:.3} s: robot heading {:.2} deg, told {:.2} deg: turn {:.2} deg {}",
-        since(t0, latest.valid_time),
+        since(t0, latest.valid_time()),
         robot.dir,
         direction.dir,
         actual,
@@ -421,7 +423,7 @@ fn check(
     );
     println!(
         "  selected blob      image t={:.3} s: centre ({}, {}), {} px",
-        since(t0, blob_sample.valid_time),
+        since(t0, blob_sample.valid_time()),
         blob.x,
         blob.y,
         blob.size

@@ -44,7 +44,8 @@ impl MovingAverageUnit {
 impl CompUnit for MovingAverageUnit {
     fn compute(&self, inputs: &[Sample], qtime: Time) -> Result<EntityStructure, ComputeError> {
         let [input] = exactly(Self::BUILTIN, inputs).map_err(failed)?;
-        let mut out = self.average.lock().push_structure(&input.structure);
+        // The average is made of owned values: an archived input is converted for it.
+        let mut out = self.average.lock().push_structure(&input.structure.to_arc());
         out.create_time = qtime;
         Ok(out)
     }

@@ -97,14 +97,14 @@ fn finished(w: WorkerStats) -> u64 {
 }
 
 fn latest_time(t: &impl EntityTrajectoryStructure) -> Option<Time> {
-    t.get_latest().ok().map(|s| s.valid_time)
+    t.get_latest().ok().map(|s| s.valid_time())
 }
 
 fn all<T: Entity>(t: &impl EntityTrajectoryStructure) -> Vec<(Time, T)> {
     t.get_between(Time::MIN, Time::MAX)
         .unwrap()
         .iter()
-        .map(|s| (s.valid_time, T::from_structure(s).unwrap()))
+        .map(|s| (s.valid_time(), T::from_shared(s).unwrap()))
         .collect()
 }
 

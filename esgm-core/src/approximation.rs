@@ -14,6 +14,7 @@
 use std::sync::Arc;
 
 use crate::sample::Sample;
+use crate::structure::SharedStructure;
 use crate::time::Time;
 use crate::value::frame::{AttributeValuePair, EntityFrame, EntityStructure};
 use crate::value::{
@@ -101,13 +102,15 @@ pub fn interpolate_marked(
 /// The answer of a linear query between `a` and `b` at `t` under `rule` (`Linear` or
 /// `LinearStrict`), or why it is refused.
 pub fn interpolated(
-    a: &EntityStructure,
-    b: &EntityStructure,
+    a: &SharedStructure,
+    b: &SharedStructure,
     t: Time,
     query_time: Time,
     rule: &ValueApproximation,
 ) -> Result<Sample, String> {
-    let (es, held) = interpolate_marked(a, b, t, query_time);
+    // Interpolation makes a new structure of both sides' values: an archived side is
+    // converted for it (an interpolated answer is a value the asker computes).
+    let (es, held) = interpolate_marked(&a.to_arc(), &b.to_arc(), t, query_time);
     let mut sample = Sample::new(Arc::new(es), query_time, query_time);
     if !held.is_empty() {
         if *rule == ValueApproximation::LinearStrict {
@@ -259,12 +262,8 @@ fn lerp_frame(
 /// The result keeps the valid time; its create time is that of the sample it was
 /// chosen from or, for average and median, the latest create time.
 pub fn merge(group: &[&EntityStructure], rule: MergeRule) -> Option<EntityStructure> {
-    // Ties in create time go to the later-added sample for KeepLast, the earlier for
-    // KeepFirst.
-    let first =
-        group.iter().enumerate().min_by_key(|(i, e)| (e.create_time, *i)).map(|(_, e)| *e)?;
-    let last =
-        group.iter().enumerate().max_by_key(|(i, e)| (e.create_time, *i)).map(|(_, e)| *e)?;
+    let (first, last) = first_and_last(group.iter().map(|e| e.create_time))?;
+    let (first, last) = (group[first], group[last]);
     match rule {
         MergeRule::KeepFirst => Some(first.clone()),
         MergeRule::KeepLast => Some(last.clone()),
@@ -298,6 +297,31 @@ pub fn merge(group: &[&EntityStructure], rule: MergeRule) -> Option<EntityStruct
                 })
                 .collect();
             Some(with_attributes(last, attributes))
+        }
+    }
+}
+
+/// The positions of the first and the last structure of a group by create time, given
+/// their create times in add order: ties go to the later-added sample for the last,
+/// the earlier for the first. `None` for an empty group.
+fn first_and_last(create_times: impl Iterator<Item = Time> + Clone) -> Option<(usize, usize)> {
+    let first = create_times.clone().enumerate().min_by_key(|&(i, t)| (t, i))?.0;
+    let last = create_times.enumerate().max_by_key(|&(i, t)| (t, i))?.0;
+    Some((first, last))
+}
+
+/// [`merge`] of structures as trajectories hold them: keep-first and keep-last answer
+/// the chosen structure itself (an archived one stays read in place); average and
+/// median compute a new one from converted values.
+pub fn merge_shared(group: &[&SharedStructure], rule: MergeRule) -> Option<SharedStructure> {
+    let (first, last) = first_and_last(group.iter().map(|e| e.create_time()))?;
+    match rule {
+        MergeRule::KeepFirst => Some(group[first].clone()),
+        MergeRule::KeepLast => Some(group[last].clone()),
+        MergeRule::Average | MergeRule::Median => {
+            let owned: Vec<Arc<EntityStructure>> = group.iter().map(|e| e.to_arc()).collect();
+            let refs: Vec<&EntityStructure> = owned.iter().map(Arc::as_ref).collect();
+            merge(&refs, rule).map(SharedStructure::from)
         }
     }
 }

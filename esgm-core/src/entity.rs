@@ -18,9 +18,10 @@
 //! assert_eq!(Blob::from_structure(&es).unwrap(), Blob { x: 1, y: 2, size: 3 });
 //! ```
 
+use crate::structure::{Attributes, FrameRef, SharedStructure, ValueRef};
 use crate::time::Time;
 use crate::types::EntityStructureType;
-use crate::value::frame::{AttributeValuePair, EntityFrame, EntityStructure, find_attribute};
+use crate::value::frame::{AttributeValuePair, EntityFrame, EntityStructure};
 use crate::value::{
     Octets, Pos2, Position, PositionAltitude, PositionAltitudeRotation, Rotation, Value, ValueSort,
     Vec3,
@@ -64,8 +65,13 @@ pub trait AttributeField: Sized {
     }
     /// The field as a value.
     fn to_value(&self) -> Value;
-    /// The field from a value, or `None` if the value has another sort.
-    fn from_value(value: &Value) -> Option<Self>;
+    /// The field from a value read in place (owned, or archived where it arrived), or
+    /// `None` if the value has another sort.
+    fn from_value_ref(value: ValueRef<'_>) -> Option<Self>;
+    /// The field from an owned value, or `None` if the value has another sort.
+    fn from_value(value: &Value) -> Option<Self> {
+        Self::from_value_ref(value.into())
+    }
 }
 
 /// A plain struct that is an entity structure type. Derive it with
@@ -82,8 +88,14 @@ pub trait Entity: Sized {
     /// The struct's fields as attribute/value pairs, in declaration order.
     fn to_attributes(&self) -> Vec<AttributeValuePair>;
 
+    /// Builds the struct from attribute/value pairs read in place (an owned structure's
+    /// or an archived one's): the one conversion the others call.
+    fn from_attribute_refs(attributes: Attributes<'_>) -> Result<Self, FromEntityError>;
+
     /// Builds the struct from attribute/value pairs.
-    fn from_attributes(attributes: &[AttributeValuePair]) -> Result<Self, FromEntityError>;
+    fn from_attributes(attributes: &[AttributeValuePair]) -> Result<Self, FromEntityError> {
+        Self::from_attribute_refs(Attributes::owned(attributes))
+    }
 
     /// The struct as a frame named `name` (to nest it in another structure).
     fn to_frame(&self, name: impl Into<String>) -> EntityFrame {
@@ -114,18 +126,31 @@ pub trait Entity: Sized {
     fn from_structure(es: &EntityStructure) -> Result<Self, FromEntityError> {
         Self::from_attributes(&es.attributes)
     }
+
+    /// Reads the struct from a structure as a trajectory holds it (a sample's), in
+    /// place: an archived one from another process is read without decoding it first.
+    fn from_shared(structure: &SharedStructure) -> Result<Self, FromEntityError> {
+        Self::from_attribute_refs(structure.attributes())
+    }
+
+    /// Reads the struct from a nested frame read in place.
+    fn from_frame_ref(frame: FrameRef<'_>) -> Result<Self, FromEntityError> {
+        Self::from_attribute_refs(frame.attributes())
+    }
 }
 
 /// Reads one field; used by the derive macro's generated code.
 #[doc(hidden)]
 pub fn read_field<T: AttributeField>(
-    attributes: &[AttributeValuePair],
+    attributes: &Attributes<'_>,
     type_name: &'static str,
     attribute: &'static str,
 ) -> Result<T, FromEntityError> {
-    let value = find_attribute(attributes, attribute)
+    let (_, value) = attributes
+        .clone()
+        .find(|(name, _)| *name == attribute)
         .ok_or(FromEntityError::MissingAttribute { type_name, attribute })?;
-    T::from_value(value).ok_or(FromEntityError::WrongSort {
+    T::from_value_ref(value).ok_or(FromEntityError::WrongSort {
         type_name,
         attribute,
         expected: T::SORT,
@@ -133,49 +158,60 @@ pub fn read_field<T: AttributeField>(
     })
 }
 
+/// A field read by a `ValueRef` accessor, checked to be of exactly the field's sort
+/// (`as_long` also reads a `Time`, which an `i64` field does not take).
 macro_rules! field {
-    ($t:ty, $sort:ident, $variant:ident) => {
+    ($t:ty, $sort:ident, $variant:ident, |$v:ident| $read:expr) => {
         impl AttributeField for $t {
             const SORT: ValueSort = ValueSort::$sort;
             fn to_value(&self) -> Value {
                 Value::$variant(self.clone())
             }
-            fn from_value(value: &Value) -> Option<Self> {
-                match value {
-                    Value::$variant(v) => Some(v.clone()),
-                    _ => None,
+            fn from_value_ref($v: ValueRef<'_>) -> Option<Self> {
+                if $v.sort() != ValueSort::$sort {
+                    return None;
                 }
+                $read
             }
         }
     };
 }
 
-field!(i64, Long, Long);
-field!(f64, Double, Double);
-field!(bool, Bool, Bool);
-field!(String, String, String);
-field!(Octets, OctetSeq, OctetSeq);
-field!(Vec<i64>, LongSeq, LongSeq);
-field!(Vec<f64>, DoubleSeq, DoubleSeq);
-field!(Vec<String>, SymbolSeq, SymbolSeq);
-field!(Vec3, Vec, Vec);
-field!(Vec<Vec3>, VecSeq, VecSeq);
-field!(Pos2, Pos2, Pos2);
-field!(Vec<Pos2>, Pos2Seq, Pos2Seq);
-field!(Position, Position, Position);
-field!(Rotation, Rotation, Rotation);
-field!(PositionAltitude, PositionAltitude, PositionAltitude);
-field!(PositionAltitudeRotation, PositionAltitudeRotation, PositionAltitudeRotation);
-field!(Vec<EntityFrame>, EntityFrameSeq, EntityFrameSeq);
-field!(Vec<Value>, Agg, Agg);
+field!(i64, Long, Long, |v| v.as_long());
+field!(f64, Double, Double, |v| v.as_double());
+field!(bool, Bool, Bool, |v| v.as_bool());
+field!(String, String, String, |v| v.as_str().map(str::to_owned));
+field!(Octets, OctetSeq, OctetSeq, |v| v.as_octets());
+field!(Vec<i64>, LongSeq, LongSeq, |v| v.as_long_seq().map(|s| s.into_owned()));
+field!(Vec<f64>, DoubleSeq, DoubleSeq, |v| v.as_double_seq().map(|s| s.into_owned()));
+field!(Vec<String>, SymbolSeq, SymbolSeq, |v| v
+    .symbols()
+    .map(|s| s.into_iter().map(str::to_owned).collect()));
+field!(Vec3, Vec, Vec, |v| v.as_vec3());
+field!(Pos2, Pos2, Pos2, |v| v.as_pos2());
+field!(Position, Position, Position, |v| v.as_position());
+field!(Rotation, Rotation, Rotation, |v| v.as_rotation());
+field!(PositionAltitude, PositionAltitude, PositionAltitude, |v| v.as_position_altitude());
+field!(PositionAltitudeRotation, PositionAltitudeRotation, PositionAltitudeRotation, |v| v
+    .as_pose());
+field!(Vec<EntityFrame>, EntityFrameSeq, EntityFrameSeq, |v| v.as_frames().map(|f| f.to_frames()));
+field!(Vec<Value>, Agg, Agg, |v| v.elements().map(|e| e.map(ValueRef::to_value).collect()));
+field!(Vec<Vec3>, VecSeq, VecSeq, |v| match v.to_value() {
+    Value::VecSeq(s) => Some(s),
+    _ => None,
+});
+field!(Vec<Pos2>, Pos2Seq, Pos2Seq, |v| match v.to_value() {
+    Value::Pos2Seq(s) => Some(s),
+    _ => None,
+});
 
 impl AttributeField for EntityFrame {
     const SORT: ValueSort = ValueSort::EntityFrame;
     fn to_value(&self) -> Value {
         Value::EntityFrame(Box::new(self.clone()))
     }
-    fn from_value(value: &Value) -> Option<Self> {
-        value.as_frame().cloned()
+    fn from_value_ref(value: ValueRef<'_>) -> Option<Self> {
+        value.as_frame().map(FrameRef::to_frame)
     }
 }
 
@@ -184,8 +220,8 @@ impl AttributeField for Value {
     fn to_value(&self) -> Value {
         self.clone()
     }
-    fn from_value(value: &Value) -> Option<Self> {
-        Some(value.clone())
+    fn from_value_ref(value: ValueRef<'_>) -> Option<Self> {
+        Some(value.to_value())
     }
 }
 
@@ -198,8 +234,9 @@ impl<T: Entity> AttributeField for Vec<T> {
     fn to_value(&self) -> Value {
         Value::EntityFrameSeq(self.iter().map(|e| e.to_frame(T::TYPE_NAME)).collect())
     }
-    fn from_value(value: &Value) -> Option<Self> {
+    fn from_value_ref(value: ValueRef<'_>) -> Option<Self> {
         // One element of another shape makes the whole value not a `Vec<T>`: `None` says so.
-        value.as_frames()?.iter().map(|f| T::from_frame(f).ok()).collect()
+        let frames = value.as_frames()?;
+        (0..frames.len()).map(|i| frames.get(i).and_then(|f| T::from_frame_ref(f).ok())).collect()
     }
 }

@@ -26,6 +26,7 @@ use std::sync::Arc;
 use crate::codec::{ArchivedEntityStructure, ArchivedValue, decode_value};
 use crate::entity::AttributeField;
 use crate::sample::Sample;
+use crate::structure::{SharedStructure, StructureForm};
 use crate::value::frame::{EntityFrame, EntityStructure};
 use crate::value::{
     Octets, Pos2, Position, PositionAltitude, PositionAltitudeRotation, Rotation, Value, ValueSort,
@@ -64,9 +65,18 @@ impl<'a> From<&'a EntityStructure> for ViewSource<'a> {
     }
 }
 
+impl<'a> From<&'a SharedStructure> for ViewSource<'a> {
+    fn from(s: &'a SharedStructure) -> Self {
+        match s.form() {
+            StructureForm::Owned(es) => Self::Structure(es),
+            StructureForm::Archived { structure, .. } => Self::Archived(structure),
+        }
+    }
+}
+
 impl<'a> From<&'a Sample> for ViewSource<'a> {
     fn from(s: &'a Sample) -> Self {
-        Self::Structure(&s.structure)
+        (&s.structure).into()
     }
 }
 
@@ -118,10 +128,7 @@ pub fn view_field<'a, T: ViewField>(
     }
 }
 
-/// The sort of an archived value (decoded to find it: only on the error path).
-fn archived_sort(value: &ArchivedValue) -> ValueSort {
-    decode_value(value).map_or(ValueSort::AnyValue, |v| v.sort())
-}
+use crate::structure::value_ref_sort as archived_sort;
 
 /// Numbers and booleans: copied out of the archive.
 macro_rules! copied {

@@ -1,13 +1,11 @@
 //! Fluent generators over a trajectory (G1, seed 3.3.4): a total function from time to
 //! value, built from a stream by an approximation rule and a merge rule.
 
-use std::sync::Arc;
-
-use crate::approximation::{MergeRule, ValueApproximation, interpolated, merge};
+use crate::approximation::{MergeRule, ValueApproximation, interpolated, merge_shared};
 use crate::sample::Sample;
 use crate::store::{QueryError, TrajectoryStore};
+use crate::structure::SharedStructure;
 use crate::time::Time;
-use crate::value::frame::EntityStructure;
 
 /// The constraints of a fluent generator: how to approximate between samples and how
 /// to merge samples sharing a valid time.
@@ -36,11 +34,11 @@ impl TrajectoryStore {
 impl FluentGenerator<'_> {
     /// The merged structure of the samples valid exactly at `t`, if any, and the
     /// (valid time, add time) of each.
-    fn group_at(&self, t: Time) -> Option<(EntityStructure, Sources)> {
+    fn group_at(&self, t: Time) -> Option<(SharedStructure, Sources)> {
         let group = self.store.history.exactly_at(t);
-        let refs: Vec<&EntityStructure> = group.iter().map(|e| e.es.as_ref()).collect();
+        let refs: Vec<&SharedStructure> = group.iter().map(|e| &e.es).collect();
         let sources = group.iter().map(|e| (e.vt, e.add_time)).collect();
-        merge(&refs, self.policy.merge).map(|es| (es, sources))
+        merge_shared(&refs, self.policy.merge).map(|es| (es, sources))
     }
 
     /// The value at `t`: the merged samples valid at `t`, or else the approximation of
@@ -54,8 +52,7 @@ impl FluentGenerator<'_> {
     /// names ([`crate::lineage`]).
     pub fn value_at_from(&self, t: Time) -> Result<(Sample, Sources), QueryError> {
         let now = self.store.clock().now();
-        let wrap =
-            |(es, from): (EntityStructure, Sources)| (Sample::new(Arc::new(es), now, now), from);
+        let wrap = |(es, from): (SharedStructure, Sources)| (Sample::new(es, now, now), from);
         if let Some(group) = self.group_at(t) {
             return Ok(wrap(group));
         }
@@ -80,8 +77,8 @@ impl FluentGenerator<'_> {
             }
             ValueApproximation::Closest => match (before, after) {
                 (Some(b), Some(a)) => Ok(wrap(
-                    if i128::from(t) - i128::from(b.0.valid_time)
-                        <= i128::from(a.0.valid_time) - i128::from(t)
+                    if i128::from(t) - i128::from(b.0.valid_time())
+                        <= i128::from(a.0.valid_time()) - i128::from(t)
                     {
                         b
                     } else {
@@ -94,7 +91,7 @@ impl FluentGenerator<'_> {
             // Default and none do not depend on neighbours: reuse the query's rules,
             // whose answer is a stored sample.
             other => self.store.get_at_approximating(t, other).map(|sample| {
-                let from = vec![(sample.valid_time, sample.add_time)];
+                let from = vec![(sample.valid_time(), sample.add_time)];
                 (sample, from)
             }),
         }

@@ -47,9 +47,11 @@ pub mod operators;
 pub mod pixel_buffer;
 pub mod policy;
 pub mod prelude;
+pub mod probe;
 pub mod runtime;
 pub mod sample;
 pub mod store;
+mod structure;
 pub mod time;
 pub mod type_check;
 pub mod type_registry;
@@ -80,6 +82,7 @@ pub use store::{
     StoreEvent, StoreTap, SubscribeOptions, Subscription, SubscriptionId, TapId, TrajectoryStats,
     TrajectoryStore,
 };
+pub use structure::{Attributes, FrameRef, FramesRef, SharedStructure, StructureForm, ValueRef};
 pub use time::{TIMEUNITS_PER_MILLI_SECOND, TIMEUNITS_PER_SECOND, Time, micros, millis, secs};
 pub use type_check::{InvalidType, TypeChecker};
 pub use type_registry::{TypeRegistry, TypeRegistryError};

@@ -33,6 +33,13 @@ pub trait OctetsHolder: Send + Sync + 'static {
     fn as_any(&self) -> Option<&dyn std::any::Any> {
         None
     }
+
+    /// True if the held bytes are on this process's heap after all (an archive copied
+    /// there), so that [`Octets::is_held`] says where bytes really are; false by
+    /// default.
+    fn on_heap(&self) -> bool {
+        false
+    }
 }
 
 /// Where an [`Octets`]'s bytes are.
@@ -88,7 +95,7 @@ impl Octets {
     /// True if the bytes are held elsewhere (e.g. in shared memory another process
     /// wrote) rather than on this process's heap.
     pub fn is_held(&self) -> bool {
-        matches!(self.0, OctetBytes::Held { .. })
+        matches!(&self.0, OctetBytes::Held { holder, .. } if !holder.on_heap())
     }
 
     /// True if both handles read the same bytes in memory (no copy was made between

@@ -11,8 +11,8 @@
 //! t.add(EntityStructure::named("r").at(secs(1)).with("x", 1.0)).unwrap();
 //! t.add(EntityStructure::named("r").at(secs(3)).with("x", 3.0)).unwrap();
 //! t.add(EntityStructure::named("r").at(secs(2)).with("x", 2.0)).unwrap();
-//! assert_eq!(t.get_latest().unwrap().valid_time, secs(2)); // the last added
-//! assert_eq!(t.get_latest_vtime().unwrap().valid_time, secs(3)); // the most current
+//! assert_eq!(t.get_latest().unwrap().valid_time(), secs(2)); // the last added
+//! assert_eq!(t.get_latest_vtime().unwrap().valid_time(), secs(3)); // the most current
 //! ```
 
 pub use crate::approximation::{MergeRule, ValueApproximation};
@@ -25,6 +25,7 @@ pub use crate::policy::FluentStreamPolicy;
 pub use crate::runtime::{InProcessEsgm, InProcessTrajectory};
 pub use crate::sample::Sample;
 pub use crate::store::{AddOutcome, SubscribeOptions};
+pub use crate::structure::{SharedStructure, ValueRef};
 pub use crate::time::{Time, micros, millis, secs};
 pub use crate::types::EntityStructureType;
 pub use crate::value::frame::{EntityFrame, EntityStructure};

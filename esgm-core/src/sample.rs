@@ -4,19 +4,20 @@ use std::ops::Deref;
 use std::sync::Arc;
 
 use crate::lineage::Lineage;
+use crate::structure::SharedStructure;
 use crate::time::Time;
-use crate::value::frame::EntityStructure;
 
 /// An entity structure as stored in a trajectory or returned by a query.
 ///
-/// The structure itself is shared (`Arc`), never copied, between the store, its
-/// subscribers and computational units: a cached image exists once in memory however
-/// many readers hold it. `Sample` derefs to [`EntityStructure`], so
-/// `sample.valid_time` and `sample.get("x")` work directly.
+/// The structure is a [`SharedStructure`]: shared, never copied, between the store,
+/// its subscribers and computational units, and for a structure another process wrote,
+/// read in place where it arrived (P7): nothing is decoded until a reader asks for an
+/// owned [`crate::EntityStructure`] ([`SharedStructure::to_structure`]). `Sample` derefs
+/// to it, so `sample.valid_time()` and `sample.get("x")` work directly.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Sample {
     /// The structure (name, valid time, create time, attributes).
-    pub structure: Arc<EntityStructure>,
+    pub structure: SharedStructure,
     /// When the structure entered the trajectory (Definition 3.3.9's add time).
     pub add_time: Time,
     /// When the query this sample answers was asked (Definition 3.3.6). For a sample
@@ -38,8 +39,14 @@ pub struct Sample {
 impl Sample {
     /// A stored (or delivered) structure: added at `add_time`, answering a query asked
     /// at `query_time`.
-    pub fn new(structure: Arc<EntityStructure>, add_time: Time, query_time: Time) -> Self {
-        Self { structure, add_time, query_time, not_interpolated: None, lineage: None }
+    pub fn new(structure: impl Into<SharedStructure>, add_time: Time, query_time: Time) -> Self {
+        Self {
+            structure: structure.into(),
+            add_time,
+            query_time,
+            not_interpolated: None,
+            lineage: None,
+        }
     }
 
     /// The same sample, naming the inputs it was made from.
@@ -53,7 +60,7 @@ impl Sample {
     pub fn add_delay(&self) -> Time {
         // Both times come from writers, possibly other processes or hosts: an extreme
         // valid time saturates instead of overflowing.
-        self.add_time.saturating_sub(self.structure.valid_time)
+        self.add_time.saturating_sub(self.structure.valid_time())
     }
 
     /// The same sample answering a query asked at `query_time`.
@@ -65,8 +72,8 @@ impl Sample {
 }
 
 impl Deref for Sample {
-    type Target = EntityStructure;
-    fn deref(&self) -> &EntityStructure {
+    type Target = SharedStructure;
+    fn deref(&self) -> &SharedStructure {
         &self.structure
     }
 }
@@ -79,9 +86,9 @@ mod tests {
     /// shows the add delay (`esgm latest`, `echo`, `hz`, the demo).
     #[test]
     fn the_add_delay_of_an_extreme_valid_time_saturates() {
-        let es = Arc::new(EntityStructure::new("x", Time::MIN, 0));
+        let es = crate::EntityStructure::new("x", Time::MIN, 0);
         assert_eq!(Sample::new(es, 5, 5).add_delay(), Time::MAX);
-        let es = Arc::new(EntityStructure::new("x", Time::MAX, 0));
+        let es = crate::EntityStructure::new("x", Time::MAX, 0);
         assert_eq!(Sample::new(es, -5, -5).add_delay(), Time::MIN);
     }
 }

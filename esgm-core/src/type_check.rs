@@ -9,10 +9,11 @@
 use std::collections::HashMap;
 use std::sync::Arc;
 
+use crate::structure::{Attributes, SharedStructure};
 use crate::type_registry::{TypeRegistry, TypeRegistryError};
 use crate::types::EntityStructureType;
+use crate::value::ValueSort;
 use crate::value::frame::AttributeValuePair;
-use crate::value::{Value, ValueSort};
 
 /// A structure does not fit its type (the seed's `InvalidType`, with the attribute
 /// named). Attribute paths name nested positions, e.g. `items[2].size`.
@@ -123,6 +124,18 @@ impl TypeChecker {
 
     /// Checks a structure's (or frame's) attributes against the root type.
     pub fn check(&self, attributes: &[AttributeValuePair]) -> Result<(), InvalidType> {
+        self.check_attributes(Attributes::owned(attributes))
+    }
+
+    /// Checks a structure against the root type, read in place: an archived one (from
+    /// another process) is checked without decoding it.
+    pub fn check_structure(&self, structure: &SharedStructure) -> Result<(), InvalidType> {
+        self.check_attributes(structure.attributes())
+    }
+
+    /// Checks attribute/value pairs read in place against the root type: the one
+    /// implementation behind [`Self::check`] and [`Self::check_structure`].
+    pub fn check_attributes(&self, attributes: Attributes<'_>) -> Result<(), InvalidType> {
         let mut path = String::new();
         self.check_as(&self.root, attributes, &mut path)
     }
@@ -130,7 +143,7 @@ impl TypeChecker {
     fn check_as(
         &self,
         type_name: &str,
-        attributes: &[AttributeValuePair],
+        attributes: Attributes<'_>,
         path: &mut String,
     ) -> Result<(), InvalidType> {
         let ty = &self.types[type_name];
@@ -143,29 +156,36 @@ impl TypeChecker {
             path.push_str(name);
             path.clone()
         };
-        for (i, pair) in attributes.iter().enumerate() {
-            if attributes[..i].iter().any(|p| p.name == pair.name) {
+        // A structure's attributes, in the order the type declares them: matched in one
+        // pass when the structure lists them in that order (what every writer esgm
+        // makes does), by search otherwise.
+        for (i, (name, _)) in attributes.clone().enumerate() {
+            if attributes.clone().take(i).any(|(n, _)| n == name) {
                 return Err(InvalidType::DuplicateAttribute {
                     type_name: ty.name.clone(),
-                    attribute: at(path, &pair.name),
+                    attribute: at(path, name),
                 });
             }
-            if ty.attribute(&pair.name).is_none() {
+            let declared = ty.attributes.get(i).is_some_and(|a| a.name == name);
+            if !declared && ty.attribute(name).is_none() {
                 return Err(InvalidType::UnknownAttribute {
                     type_name: ty.name.clone(),
-                    attribute: at(path, &pair.name),
+                    attribute: at(path, name),
                 });
             }
         }
-        for attr in &ty.attributes {
-            let Some(pair) = attributes.iter().find(|p| p.name == attr.name) else {
+        for (k, attr) in ty.attributes.iter().enumerate() {
+            let in_order = attributes.clone().nth(k).filter(|(n, _)| *n == attr.name);
+            let Some((_, value)) =
+                in_order.or_else(|| attributes.clone().find(|(n, _)| *n == attr.name))
+            else {
                 return Err(InvalidType::MissingAttribute {
                     type_name: ty.name.clone(),
                     attribute: at(path, &attr.name),
                     expected: attr.sort,
                 });
             };
-            let actual = pair.value.sort();
+            let actual = value.sort();
             if attr.sort != ValueSort::AnyValue && actual != attr.sort {
                 return Err(InvalidType::WrongSort {
                     type_name: ty.name.clone(),
@@ -175,19 +195,16 @@ impl TypeChecker {
                 });
             }
             let Some(element) = attr.element_type.as_deref() else { continue };
-            match &pair.value {
-                Value::EntityFrame(f) => {
+            if let Some(frame) = value.as_frame() {
+                at(path, &attr.name);
+                self.check_as(element, frame.attributes(), path)?;
+            } else if let Some(frames) = value.as_frames() {
+                for k in 0..frames.len() {
+                    let Some(frame) = frames.get(k) else { break };
                     at(path, &attr.name);
-                    self.check_as(element, &f.attributes, path)?;
+                    path.push_str(&format!("[{k}]"));
+                    self.check_as(element, frame.attributes(), path)?;
                 }
-                Value::EntityFrameSeq(frames) => {
-                    for (k, f) in frames.iter().enumerate() {
-                        at(path, &attr.name);
-                        path.push_str(&format!("[{k}]"));
-                        self.check_as(element, &f.attributes, path)?;
-                    }
-                }
-                _ => {}
             }
         }
         path.truncate(base);
@@ -198,6 +215,7 @@ impl TypeChecker {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::value::Value;
     use crate::value::frame::{EntityFrame, EntityStructure};
 
     fn registry() -> TypeRegistry {

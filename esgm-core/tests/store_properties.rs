@@ -193,8 +193,8 @@ impl Harness {
     fn observe(&mut self, fresh: Option<Time>) -> usize {
         let received = self.sub.drain();
         for s in &received {
-            self.settle(s.create_time, Fate::Added, fresh);
-            self.epoch.push((s.valid_time, s.create_time));
+            self.settle(s.create_time(), Fate::Added, fresh);
+            self.epoch.push((s.valid_time(), s.create_time()));
         }
         for v in self.violations.drain() {
             self.settle(v.create_time, Fate::Dropped(DropCause::Violation(v.constraint)), fresh);
@@ -270,7 +270,7 @@ impl Harness {
         let policy = store.policy();
         let stats = store.stats();
         let samples = store.samples();
-        let vts: Vec<Time> = samples.iter().map(|s| s.valid_time).collect();
+        let vts: Vec<Time> = samples.iter().map(|s| s.valid_time()).collect();
 
         // Accounting: every offered structure has exactly one fate, and the stats agree.
         let offered = (self.next_tag - 1) as u64;
@@ -299,9 +299,9 @@ impl Harness {
         let mut delivered = self.epoch.iter();
         for s in &samples {
             assert!(
-                delivered.any(|(_, tag)| *tag == s.create_time),
+                delivered.any(|(_, tag)| *tag == s.create_time()),
                 "stored sample {} is not a subsequence of what was delivered",
-                s.create_time
+                s.create_time()
             );
         }
 
@@ -344,27 +344,30 @@ impl Harness {
     fn check_queries(&self, t: Time, span: Time) {
         let store = &self.store;
         let samples = store.samples();
-        let tags = |v: &[Sample]| v.iter().map(|s| (s.valid_time, s.create_time)).collect();
+        let tags = |v: &[Sample]| v.iter().map(|s| (s.valid_time(), s.create_time())).collect();
 
         let (a, b) = (t, t + span);
-        let mut expected: Vec<Sample> =
-            samples.iter().filter(|s| a <= s.valid_time && s.valid_time <= b).cloned().collect();
+        let mut expected: Vec<Sample> = samples
+            .iter()
+            .filter(|s| a <= s.valid_time() && s.valid_time() <= b)
+            .cloned()
+            .collect();
         // A stable sort keeps add order among equal valid times.
-        expected.sort_by_key(|s| s.valid_time);
+        expected.sort_by_key(|s| s.valid_time());
         let got: Vec<(Time, Time)> = tags(&store.get_between(a, b));
         assert_eq!(got, tags(&expected), "get_between({a}, {b})");
 
         // The largest valid time ≤ t, the latest added among equals.
         let closest =
-            samples.iter().filter(|s| s.valid_time <= t).fold(None::<&Sample>, |m, s| match m {
-                Some(m) if m.valid_time > s.valid_time => Some(m),
+            samples.iter().filter(|s| s.valid_time() <= t).fold(None::<&Sample>, |m, s| match m {
+                Some(m) if m.valid_time() > s.valid_time() => Some(m),
                 _ => Some(s),
             });
         let got = store.get_closest_at_or_before(t);
         match closest {
             Some(c) => assert_eq!(
-                got.as_ref().map(|s| (s.valid_time, s.create_time)).ok(),
-                Some((c.valid_time, c.create_time)),
+                got.as_ref().map(|s| (s.valid_time(), s.create_time())).ok(),
+                Some((c.valid_time(), c.create_time())),
                 "get_closest_at_or_before({t})"
             ),
             None => assert!(
@@ -373,11 +376,11 @@ impl Harness {
             ),
         }
 
-        let exact = samples.iter().rfind(|s| s.valid_time == t);
+        let exact = samples.iter().rfind(|s| s.valid_time() == t);
         let got = store.get_at(t);
         assert_eq!(
-            got.as_ref().map(|s| s.create_time).ok(),
-            exact.map(|s| s.create_time),
+            got.as_ref().map(|s| s.create_time()).ok(),
+            exact.map(|s| s.create_time()),
             "get_at({t})"
         );
     }
@@ -396,7 +399,7 @@ fn run(policy: FluentStreamPolicy, ops: &[Op], queries: &[(Time, Time)]) {
         }
     }
     // At the end, at and around every stored valid time.
-    for vt in h.store.samples().iter().map(|s| s.valid_time) {
+    for vt in h.store.samples().iter().map(|s| s.valid_time()) {
         for t in [vt - 1, vt, vt + 1] {
             h.check_queries(t, 0);
             h.check_queries(t, 15);

@@ -45,7 +45,7 @@ fn main() -> anyhow::Result<()> {
         here.add(es)?;
         let got = sub.recv_timeout(Duration::from_secs(5))?;
         hops.push(start.elapsed());
-        anyhow::ensure!(got.structure.valid_time == i, "sample {i} arrived out of turn");
+        anyhow::ensure!(got.structure.valid_time() == i, "sample {i} arrived out of turn");
     }
     hops.sort();
     let at = |q: f64| hops[((hops.len() - 1) as f64 * q) as usize];

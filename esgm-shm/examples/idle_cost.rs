@@ -53,7 +53,7 @@ fn main() -> anyhow::Result<()> {
             .create_trajectory(TrajectorySpec::primitive(name, type_name).policy(cache.clone()))?;
     }
     let unit = |inputs: &[Sample], _q: Time| -> Result<EntityStructure, ComputeError> {
-        Ok(inputs[0].structure.as_ref().clone())
+        Ok(inputs[0].structure.to_structure())
     };
     let input = vec![InputType::Type("RobotState".into())];
     reader.add_comp_unit("copy", "RobotState", input, Arc::new(unit))?;

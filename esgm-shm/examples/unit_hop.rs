@@ -40,7 +40,7 @@ fn main() -> anyhow::Result<()> {
             *at = Some(Instant::now());
         }
         let input = inputs.first().ok_or(ComputeError::ValueNotAvailable)?;
-        Ok(input.structure.as_ref().clone())
+        Ok(input.structure.to_structure())
     };
     let input = vec![InputType::Type("RobotState".into())];
     b.add_comp_unit("copy", "RobotState", input, Arc::new(unit))?;
@@ -56,7 +56,7 @@ fn main() -> anyhow::Result<()> {
             EntityStructure::new("robot1", i, i).with("x", 1.0).with("y", 0.0).with("dir", 0.0);
         let start = Instant::now();
         here.add(es)?;
-        while sub.recv_timeout(Duration::from_secs(5))?.structure.valid_time != i {}
+        while sub.recv_timeout(Duration::from_secs(5))?.structure.valid_time() != i {}
         let end = Instant::now();
         let at = called.lock().ok().and_then(|c| *c).context("the unit was not called")?;
         into.push(at - start);

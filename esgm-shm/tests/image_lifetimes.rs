@@ -38,7 +38,7 @@ fn image(vt: Time, frame: u64) -> EntityStructure {
         .with("image_data", Octets::from(pixels))
 }
 
-fn pixels(s: &Sample) -> &Octets {
+fn pixels(s: &Sample) -> Octets {
     s.structure.get("image_data").and_then(|v| v.as_octets()).unwrap()
 }
 
@@ -192,12 +192,12 @@ fn a_camera_behind_connect_writes_each_frame_once_in_shared_memory() {
     let sub = frames.subscribe(SubscribeOptions::default()).unwrap();
     for _ in 0..10 {
         let s = sub.recv_timeout(TIMEOUT).unwrap();
-        assert_frame(&s, s.structure.valid_time as u64, "a frame read in another process");
+        assert_frame(&s, s.structure.valid_time() as u64, "a frame read in another process");
     }
     // The camera's own process reads its frames through the sample it sent, too.
     let own = camera.get_entity_trajectory_structure("frames").unwrap();
     let latest = own.get_latest().unwrap();
-    assert_frame(&latest, latest.structure.valid_time as u64, "the writer's own cache");
+    assert_frame(&latest, latest.structure.valid_time() as u64, "the writer's own cache");
     let sent = camera.holding_stats().unwrap();
     assert!(sent.sent_in_place >= 10, "{sent:?}");
     assert_eq!(sent.copies(), 0, "no image copied by the camera's process: {sent:?}");

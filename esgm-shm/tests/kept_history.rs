@@ -162,13 +162,14 @@ fn images_outlive_their_killed_writer() {
     let later = tool(c.domain());
     let frames = later.get_entity_trajectory_structure("frames").unwrap();
     let kept = frames.get_between(i64::MIN, i64::MAX).unwrap();
-    assert_eq!(kept.iter().map(|s| s.structure.valid_time).collect::<Vec<_>>(), [7, 8, 9]);
+    assert_eq!(kept.iter().map(|s| s.structure.valid_time()).collect::<Vec<_>>(), [7, 8, 9]);
     for s in &kept {
-        let Some(esgm_core::value::Value::OctetSeq(pixels)) = s.structure.get("image_data") else {
+        let Some(esgm_core::value::Value::OctetSeq(pixels)) = s.structure.value("image_data")
+        else {
             panic!("no pixels in {s:?}")
         };
         assert_eq!(pixels.len(), 64 * 48 * 3);
-        common::check_pattern(pixels, s.structure.valid_time as u64);
+        common::check_pattern(&pixels, s.structure.valid_time() as u64);
     }
 }
 

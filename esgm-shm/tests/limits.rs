@@ -74,7 +74,7 @@ fn a_reader_past_a_trajectorys_readers_is_refused_and_the_trajectory_is_served_o
     let t = cli.get_entity_trajectory_structure("tf").unwrap();
     assert_eq!(t.add(robot(2)).unwrap(), AddOutcome::Forwarded);
     let added = |t: &esgm_core::InProcessTrajectory| {
-        t.get_latest().is_ok_and(|s| s.structure.valid_time == robot(2).valid_time)
+        t.get_latest().is_ok_and(|s| s.structure.valid_time() == robot(2).valid_time)
     };
     assert!(wait_for(|| added(&t)), "the tool reads what it added");
     assert!(wait_for(|| added(&tf)), "the writer has it");
@@ -113,7 +113,7 @@ fn a_process_past_the_domains_limit_is_refused_and_every_other_is_served() {
     assert_eq!(t.add(robot(2)).unwrap(), AddOutcome::Forwarded);
     assert!(wait_for(|| odom
         .get_nth_latest(0)
-        .is_ok_and(|s| s.structure.valid_time == robot(2).valid_time)));
+        .is_ok_and(|s| s.structure.valid_time() == robot(2).valid_time)));
     assert!(cli.stats().unwrap().trajectories.contains_key("odom"), "the domain answers stats");
     // A member leaving makes room.
     drop(members.pop());

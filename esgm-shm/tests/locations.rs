@@ -157,7 +157,7 @@ fn a_temporal_function_is_sampled_where_its_unit_runs() {
     assert!(writes(&planner));
     let s = drifting.get_latest().unwrap();
     // Interpolated along x = (t - (now - 1 s)) / 10 ms, then + 1 by the unit.
-    let expected = (s.structure.valid_time - (now - millis(1000))) as f64 / millis(10) as f64;
+    let expected = (s.structure.valid_time() - (now - millis(1000))) as f64 / millis(10) as f64;
     assert!((x(&s) - (expected + 1.0)).abs() < 1e-6, "{} vs {}", x(&s), expected + 1.0);
 }
 
@@ -179,7 +179,7 @@ fn sampling_runs_where_the_sensor_is_and_units_where_they_are() {
     // The unit lives in `planner`; it doubles x.
     let unit = |inputs: &[Sample], _q: Time| -> Result<EntityStructure, ComputeError> {
         let s = &inputs[0].structure;
-        Ok(state(s.valid_time, 2.0 * s.get("x").and_then(|v| v.as_double()).unwrap_or(0.0)))
+        Ok(state(s.valid_time(), 2.0 * s.get("x").and_then(|v| v.as_double()).unwrap_or(0.0)))
     };
     planner
         .add_comp_unit(
@@ -204,8 +204,8 @@ fn sampling_runs_where_the_sensor_is_and_units_where_they_are() {
         "odom at camera, doubled (+ odom replica) at planner"
     );
     let latest = doubled.get_latest().unwrap();
-    assert!(wait_for(|| sampled.get_at(latest.structure.valid_time).is_ok()));
-    let input = sampled.get_at(latest.structure.valid_time).unwrap();
+    assert!(wait_for(|| sampled.get_at(latest.structure.valid_time()).is_ok()));
+    let input = sampled.get_at(latest.structure.valid_time()).unwrap();
     assert_eq!(x(&latest), 2.0 * x(&input));
 
     // The seed's errors cross the boundary.
@@ -342,7 +342,7 @@ fn child_location() {
     esgm.add_sensor_interface("counter", "RobotState", Arc::new(sensor)).unwrap();
     let unit = |inputs: &[Sample], _q: Time| -> Result<EntityStructure, ComputeError> {
         let s = &inputs[0].structure;
-        Ok(state(s.valid_time, -s.get("x").and_then(|v| v.as_double()).unwrap_or(0.0)))
+        Ok(state(s.valid_time(), -s.get("x").and_then(|v| v.as_double()).unwrap_or(0.0)))
     };
     esgm.add_comp_unit(
         "negate",
@@ -385,8 +385,8 @@ fn a_child_process_serves_a_sensor_and_a_unit() {
         assert!(wait_for(|| negated.stats().map(|s| s.stored >= 3).unwrap_or(false)));
         let n = negated.get_latest().unwrap();
         // The input reaches this process on its own path; it may come a moment later.
-        assert!(wait_for(|| counter.get_at(n.structure.valid_time).is_ok()));
-        let input = counter.get_at(n.structure.valid_time).unwrap();
+        assert!(wait_for(|| counter.get_at(n.structure.valid_time()).is_ok()));
+        let input = counter.get_at(n.structure.valid_time()).unwrap();
         assert_eq!(x(&n), -x(&input));
         parent
             .create_primitive_entity_trajectory_structure("done", "RobotState")
@@ -433,7 +433,7 @@ fn image(vt: Time, fill: u8) -> EntityStructure {
         .with("image_data", esgm_core::value::Octets::from(vec![fill; 256 * 256]))
 }
 
-fn pixels(s: &Sample) -> &esgm_core::value::Octets {
+fn pixels(s: &Sample) -> esgm_core::value::Octets {
     s.structure.get("image_data").and_then(|v| v.as_octets()).unwrap()
 }
 
@@ -455,7 +455,7 @@ fn images_from_another_process_are_read_in_shared_memory_by_cache_units_and_subs
         if !px.is_held() {
             copies.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         }
-        let vt = inputs[0].structure.valid_time;
+        let vt = inputs[0].structure.valid_time();
         Ok(EntityStructure::new("px", vt, vt)
             .with("x", i64::from(px[0]))
             .with("y", i64::from(px[px.len() - 1]))
@@ -476,7 +476,7 @@ fn images_from_another_process_are_read_in_shared_memory_by_cache_units_and_subs
         assert!(pixels(&s).is_held(), "image {i} was copied");
         assert!(pixels(&s).iter().all(|p| *p == i), "image {i}'s pixels");
     }
-    assert!(wait_for(|| measured.get_latest().map(|s| s.structure.valid_time) == Ok(200)));
+    assert!(wait_for(|| measured.get_latest().map(|s| s.structure.valid_time()) == Ok(200)));
     let last = measured.get_latest().unwrap();
     assert_eq!(last.structure.get("y").and_then(|v| v.as_long()), Some(20));
     assert_eq!(unit_saw_copies.load(std::sync::atomic::Ordering::Relaxed), 0);
@@ -546,7 +546,7 @@ fn a_replica_accounts_for_every_sample_of_a_burst() {
         || there.stats().map(|s| s.added + s.dropped_for(esgm_core::DropCause::Lost)).unwrap_or(0);
     assert!(wait_for(|| accounted() == N), "reader stats {:?}", there.stats());
     let latest = there.get_latest().unwrap();
-    assert_eq!(latest.structure.valid_time, N as Time - 1, "the last one arrives");
+    assert_eq!(latest.structure.valid_time(), N as Time - 1, "the last one arrives");
 }
 
 /// A reader asleep in `recv` while the name is re-pointed is woken by the new

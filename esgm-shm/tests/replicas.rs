@@ -48,7 +48,7 @@ fn contents<T: EntityTrajectoryStructure>(
     t: &T,
 ) -> Result<Vec<(Time, EntityStructure)>, QueryError> {
     let all = t.get_between(Time::MIN, Time::MAX)?;
-    Ok(all.iter().map(|s| (s.add_time, (*s.structure).clone())).collect())
+    Ok(all.iter().map(|s| (s.add_time, s.structure.to_structure())).collect())
 }
 
 #[test]
@@ -159,13 +159,13 @@ impl Reference {
     }
 
     fn contents(&self) -> Vec<(Time, EntityStructure)> {
-        self.store.samples().iter().map(|s| (s.add_time, (*s.structure).clone())).collect()
+        self.store.samples().iter().map(|s| (s.add_time, s.structure.to_structure())).collect()
     }
 }
 
 /// The stream as it entered: structures and add times (a query time is the reader's).
 fn entered(stream: &[Sample]) -> Vec<(EntityStructure, Time)> {
-    stream.iter().map(|s| ((*s.structure).clone(), s.add_time)).collect()
+    stream.iter().map(|s| (s.structure.to_structure(), s.add_time)).collect()
 }
 
 fn key(v: &PolicyViolation) -> (esgm_core::Constraint, Time, Time, Time) {

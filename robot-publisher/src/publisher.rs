@@ -144,7 +144,7 @@ impl<T: EntityTrajectoryStructure + 'static> RobotPublisherBuilder<T> {
     #[must_use]
     pub fn follow<C: EntityTrajectoryStructure + 'static>(mut self, driving_direction: C) -> Self {
         self.commands = Some(Box::new(move || match driving_direction.get_latest() {
-            Ok(sample) => DrivingDirection::from_structure(&sample)
+            Ok(sample) => DrivingDirection::from_shared(&sample)
                 .map(Some)
                 .map_err(|e| format!("`{}`: {e}", driving_direction.name())),
             Err(QueryError::ValueNotAvailable { .. }) => Ok(None),
@@ -256,7 +256,7 @@ impl<T: EntityTrajectoryStructure + 'static> RobotPublisherBuilder<T> {
 ///     std::thread::sleep(std::time::Duration::from_millis(1));
 /// }
 /// robot.stop();
-/// assert_eq!(robot_state.get_latest()?.name, "robot1");
+/// assert_eq!(robot_state.get_latest()?.name(), "robot1");
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 #[derive(Debug)]
@@ -347,7 +347,7 @@ mod tests {
         t.get_between(0, Time::MAX)
             .unwrap()
             .iter()
-            .map(|s| (s.valid_time, RobotState::from_structure(s).unwrap()))
+            .map(|s| (s.valid_time(), RobotState::from_shared(s).unwrap()))
             .collect()
     }
 
@@ -364,7 +364,7 @@ mod tests {
         let expected: Vec<_> =
             (0..4).map(|k| (secs(100) + k * DEFAULT_PERIOD, seed_robot)).collect();
         assert_eq!(states(&trajectory), expected);
-        assert_eq!(trajectory.get_latest().unwrap().name, "robot1");
+        assert_eq!(trajectory.get_latest().unwrap().name(), "robot1");
         robot.stop();
         clock.advance(DEFAULT_PERIOD);
         assert_eq!(states(&trajectory).len(), 4, "published after stop");
@@ -393,7 +393,7 @@ mod tests {
         let (_, turned) = states(&trajectory)[1];
         assert!((turned.dir - 4.5).abs() < 1e-9, "{turned:?}");
         assert_eq!(robot.state(), turned);
-        assert_eq!(trajectory.get_latest().unwrap().name, "rover");
+        assert_eq!(trajectory.get_latest().unwrap().name(), "rover");
         assert_eq!(robot.stats().published, 2);
     }
 

@@ -82,7 +82,7 @@ impl RobotArgs {
 ///     std::thread::sleep(std::time::Duration::from_millis(1));
 /// }
 /// robot.stop();
-/// assert_eq!(esgm.get_entity_trajectory_structure("robot_state")?.get_latest()?.name, "robot1");
+/// assert_eq!(esgm.get_entity_trajectory_structure("robot_state")?.get_latest()?.name(), "robot1");
 /// # Ok::<(), anyhow::Error>(())
 /// ```
 pub fn start<E>(esgm: &E, clock: SharedClock, args: &RobotArgs) -> anyhow::Result<RobotPublisher>
@@ -218,7 +218,7 @@ mod tests {
         let first_port = port.expect("the first robot registered its publisher port");
         robot.stop();
         drop(first);
-        let last_before = states.get_latest().unwrap().structure.valid_time;
+        let last_before = states.get_latest().unwrap().structure.valid_time();
 
         // The restarted robot process, under the same name.
         let second = connect(&args.process_name());
@@ -231,7 +231,7 @@ mod tests {
         assert_ne!(port, first_port, "the registry still names the first robot's port");
         // Its adds arrive, at the reader that followed the first robot.
         wait_until("the observer received none of the restarted robot's states", || {
-            states.get_latest().is_ok_and(|s| s.structure.valid_time > last_before)
+            states.get_latest().is_ok_and(|s| s.structure.valid_time() > last_before)
         });
         let stats = robot.stats();
         robot.stop();

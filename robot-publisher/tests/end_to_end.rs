@@ -25,8 +25,8 @@ fn states(t: &impl EntityTrajectoryStructure) -> Vec<(Time, RobotState)> {
         .unwrap_or_default()
         .iter()
         .map(|s| {
-            assert_eq!(s.name, "robot1");
-            (s.valid_time, RobotState::from_structure(s).unwrap())
+            assert_eq!(s.name(), "robot1");
+            (s.valid_time(), RobotState::from_shared(s).unwrap())
         })
         .collect()
 }

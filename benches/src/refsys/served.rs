@@ -44,8 +44,8 @@ fn structure(m: &Message, valid: Time) -> EntityStructure {
 }
 
 fn message_of(s: &Sample) -> Result<Message, ComputeError> {
-    match s.structure.get(ATTRIBUTE) {
-        Some(Value::OctetSeq(o)) => Message::from_bytes(o)
+    match s.structure.get(ATTRIBUTE).and_then(|v| v.as_bytes()) {
+        Some(o) => Message::from_bytes(o)
             .map_err(|e| ComputeError::Failed { reason: format!("not a Message4kb: {e}") }),
         _ => Err(ComputeError::Failed { reason: format!("no `{ATTRIBUTE}` octets") }),
     }

@@ -255,7 +255,7 @@ impl Scenario for Bridge {
                 writer.add(es)?;
                 loop {
                     let s = next(&sub, mode, &mut patience, "the structure through the bridges")?;
-                    if s.valid_time == seq {
+                    if s.valid_time() == seq {
                         break;
                     }
                 }
@@ -325,10 +325,10 @@ impl Bridge {
         let quiet = Duration::from_secs(2);
         loop {
             match sub.recv_timeout(quiet) {
-                Ok(s) if (first..=last).contains(&s.valid_time) => {
+                Ok(s) if (first..=last).contains(&s.valid_time()) => {
                     arrived += 1;
                     last_at = Instant::now();
-                    if s.valid_time == last {
+                    if s.valid_time() == last {
                         break;
                     }
                 }

@@ -53,12 +53,14 @@ impl Scenario for InprocChain3 {
         let workers = ctx.worker_pin();
 
         let pin = workers.clone();
-        let copy = move |inputs: &[Sample],
-                         _qtime: Time|
-              -> Result<EntityStructure, ComputeError> {
-            pin.apply();
-            inputs.first().map(|s| (*s.structure).clone()).ok_or(ComputeError::ValueNotAvailable)
-        };
+        let copy =
+            move |inputs: &[Sample], _qtime: Time| -> Result<EntityStructure, ComputeError> {
+                pin.apply();
+                inputs
+                    .first()
+                    .map(|s| s.structure.to_structure())
+                    .ok_or(ComputeError::ValueNotAvailable)
+            };
         let robot = || vec![InputType::Type(Small::TYPE_NAME.into())];
         esgm.add_comp_unit(UNIT, Small::TYPE_NAME, robot(), Arc::new(copy))
             .context("could not register the copying unit")?;

@@ -84,8 +84,8 @@ impl Payload for Frames {
         .to_structure("camera", now, now)
     }
 
-    fn touch(es: &EntityStructure) -> u64 {
-        let Some(pixels) = es.get("image_data").and_then(|v| v.as_octets()) else { return 0 };
+    fn touch(es: &esgm_core::SharedStructure) -> u64 {
+        let Some(pixels) = es.get("image_data").and_then(|v| v.as_bytes()) else { return 0 };
         let first = pixels.first().copied().unwrap_or(0);
         let last = pixels.last().copied().unwrap_or(0);
         u64::from(first) + u64::from(last)

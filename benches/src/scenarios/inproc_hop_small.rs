@@ -63,7 +63,7 @@ impl Payload for Small {
         RobotState { x: f, y: 0.5 * f, dir: 90.0 }.to_structure("robot", now, now)
     }
 
-    fn touch(es: &EntityStructure) -> u64 {
+    fn touch(es: &esgm_core::SharedStructure) -> u64 {
         es.get("x").and_then(|v| v.as_double()).map_or(0, f64::to_bits)
     }
 }

@@ -68,11 +68,14 @@ impl Scenario for InprocSamplingJitter {
         for i in 0..WARMUP + samples {
             let sample = receive(&subscription, Wait::Event, "sample")?;
             if i == 0 {
-                payload_bytes = esgm_core::codec::encoded_len(&sample.structure)
+                payload_bytes = sample
+                    .structure
+                    .to_codec_bytes()
+                    .map(|b| b.len())
                     .context("could not measure the archived size of the payload")?;
             }
             if i >= WARMUP {
-                jitter.record_ns(u64::try_from(sample.add_time - sample.valid_time).unwrap_or(0));
+                jitter.record_ns(u64::try_from(sample.add_time - sample.valid_time()).unwrap_or(0));
             }
         }
         let stats = sampled.stats().context("could not read the trajectory's stats")?;

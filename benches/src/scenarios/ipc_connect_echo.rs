@@ -151,7 +151,7 @@ pub fn ping_pong(
     let mut ready_after = HELLO - 1;
     if let Some(ready) = &ready {
         for s in ready.drain() {
-            ready_after = ready_after.max(s.valid_time);
+            ready_after = ready_after.max(s.valid_time());
         }
     }
 
@@ -171,7 +171,7 @@ pub fn ping_pong(
             // Ready after answering the previous ping (or the start-up ones).
             while ready_after < seq - 1 {
                 let signal = next(ready, mode, &mut patience, "peer ready")?;
-                ready_after = ready_after.max(signal.valid_time);
+                ready_after = ready_after.max(signal.valid_time());
             }
         }
         let making = Instant::now();
@@ -242,7 +242,7 @@ pub fn echo(
             Some(sample) => (sample, true),
             None => (next(&ping, role.wait, &mut patience, "ping")?, false),
         };
-        let seq = sample.valid_time;
+        let seq = sample.valid_time();
         if seq == STOP {
             break;
         }
@@ -261,7 +261,7 @@ pub fn echo(
             while read_up_to < seq {
                 let signal = next(done, role.wait, &mut patience, "done")
                     .context("waiting for the reply to be read")?;
-                read_up_to = read_up_to.max(signal.valid_time);
+                read_up_to = read_up_to.max(signal.valid_time());
             }
         }
         pings += 1;
@@ -425,9 +425,9 @@ fn reply(
 ) -> anyhow::Result<Sample> {
     match mode {
         WaitMode::Spin => {
-            patience.spin("pong", || Ok(pong.try_recv().filter(|s| s.valid_time == seq)))
+            patience.spin("pong", || Ok(pong.try_recv().filter(|s| s.valid_time() == seq)))
         }
         WaitMode::Block | WaitMode::SpinThenBlock => patience
-            .block("pong", |slice| Ok(received(pong, slice)?.filter(|s| s.valid_time == seq))),
+            .block("pong", |slice| Ok(received(pong, slice)?.filter(|s| s.valid_time() == seq))),
     }
 }

@@ -119,7 +119,7 @@ impl Fanout {
                         }),
                     };
                     if let Some(s) = got {
-                        held.push((s.structure.valid_time, SystemClock.now()));
+                        held.push((s.structure.valid_time(), SystemClock.now()));
                     }
                 }
                 held

@@ -211,7 +211,7 @@ fn read(domain: &str, total: u64) -> anyhow::Result<Vec<String>> {
     let (mut seen, mut changed) = (0i64, Instant::now());
     while let Some(&mark) = marks.peek() {
         // The replica is fed on a thread of the connection; ask it what it holds.
-        let latest = small.get_latest().map(|s| s.structure.valid_time).unwrap_or(0);
+        let latest = small.get_latest().map(|s| s.structure.valid_time()).unwrap_or(0);
         if latest != seen {
             (seen, changed) = (latest, Instant::now());
         }

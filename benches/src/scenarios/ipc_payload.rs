@@ -101,17 +101,20 @@ impl Kind {
 /// at each end of an `Image`, checked as [`Kind::read`] checks an archive. Returns the
 /// value read and whether the pixels are held in shared memory rather than copied
 /// onto this process's heap ([`esgm_core::Octets::is_held`]; always false for a small structure).
-pub fn read_value(kind: Kind, es: &EntityStructure) -> anyhow::Result<(u64, bool)> {
+pub fn read_value(kind: Kind, es: &esgm_core::SharedStructure) -> anyhow::Result<(u64, bool)> {
     match kind {
         Kind::Small => match es.get("x").and_then(|v| v.as_double()) {
             Some(x) => Ok((x.to_bits(), false)),
             None => bail!("the RobotState has no double x"),
         },
         Kind::Image => {
-            let Some(pixels) = es.get("image_data").and_then(|v| v.as_octets()) else {
+            let Some(pixels) = es.get("image_data") else {
                 bail!("the Image has no octet sequence image_data")
             };
-            Ok((check_frame(pixels)?, pixels.is_held()))
+            let (Some(bytes), shared) = (pixels.as_bytes(), pixels.octets_are_shared()) else {
+                bail!("the Image's image_data is not an octet sequence")
+            };
+            Ok((check_frame(bytes)?, shared))
         }
     }
 }
@@ -178,7 +181,7 @@ mod tests {
             let bytes = codec::encode(&kind.make(7)).unwrap();
             assert!(bytes.len() <= kind.max_bytes());
             kind.read(codec::access(&bytes).unwrap()).unwrap();
-            assert!(!read_value(kind, &kind.make(7)).unwrap().1, "made on the heap");
+            assert!(!read_value(kind, &kind.make(7).into()).unwrap().1, "made on the heap");
         }
         assert_eq!(Kind::Image.make(7).name, IMAGE_NAME);
         let blank = Image {
@@ -190,7 +193,7 @@ mod tests {
         .to_structure(IMAGE_NAME, 1, 1);
         let bytes = codec::encode(&blank).unwrap();
         assert!(Kind::Image.read(codec::access(&bytes).unwrap()).is_err());
-        assert!(read_value(Kind::Image, &blank).is_err());
-        assert!(read_value(Kind::Image, &Kind::Small.make(1)).is_err());
+        assert!(read_value(Kind::Image, &blank.into()).is_err());
+        assert!(read_value(Kind::Image, &Kind::Small.make(1).into()).is_err());
     }
 }

@@ -203,7 +203,9 @@ fn serve(domain: &str, worker: &str) -> anyhow::Result<Vec<String>> {
             bail!("{worker}: still running after 10 minutes");
         }
     }
-    Ok(woken.map(|w| w.report(worker)).into_iter().collect())
+    let mut lines: Vec<String> = woken.map(|w| w.report(worker)).into_iter().collect();
+    lines.extend(crate::hop_steps::lines(worker));
+    Ok(lines)
 }
 
 /// What the measuring process saw of each trajectory.
@@ -352,11 +354,12 @@ fn stage_rows(c: &Collected, lines: &[String]) -> anyhow::Result<Vec<Measurement
         let mut untriggered = 0u64;
         for out in outputs {
             if inputs.is_empty() {
-                latency
-                    .record_ns(u64::try_from(out.add_time - out.structure.valid_time).unwrap_or(0));
+                latency.record_ns(
+                    u64::try_from(out.add_time - out.structure.valid_time()).unwrap_or(0),
+                );
                 continue;
             }
-            match trigger(c, inputs, out.structure.create_time) {
+            match trigger(c, inputs, out.structure.create_time()) {
                 Some((_, input)) => {
                     latency.record_ns(u64::try_from(out.add_time - input.add_time).unwrap_or(0));
                 }
@@ -389,10 +392,23 @@ fn stage_rows(c: &Collected, lines: &[String]) -> anyhow::Result<Vec<Measurement
         if let Some(note) = unit_of(stage).and_then(|unit| note_for(unit, lines)) {
             row = row.note(note);
         }
+        if let Some(note) = unit_of(stage).and_then(|unit| {
+            crate::hop_steps::note(writer_of(inputs.last().copied()?)?, unit, lines)
+        }) {
+            row = row.note(note);
+        }
         rows.push(row);
     }
     rows.push(end_to_end(c)?);
     Ok(rows)
+}
+
+/// The process that writes trajectory `stage`: the camera, or the unit computing it.
+fn writer_of(stage: &str) -> Option<&'static str> {
+    match stage {
+        "images" => Some("camera"),
+        other => unit_of(other),
+    }
 }
 
 /// The unit that computes `stage`.
@@ -427,9 +443,9 @@ fn end_to_end(c: &Collected) -> anyhow::Result<Measurement> {
         }
         counted = Some(i);
         let blob = &blobs[i];
-        e2e.record_ns(u64::try_from(out.add_time - blob.structure.valid_time).unwrap_or(0));
+        e2e.record_ns(u64::try_from(out.add_time - blob.structure.valid_time()).unwrap_or(0));
         let inputs = ["robot_state", "current_blob"];
-        if matches!(trigger(c, &inputs, out.structure.create_time), Some(("current_blob", _))) {
+        if matches!(trigger(c, &inputs, out.structure.create_time()), Some(("current_blob", _))) {
             at_once += 1;
         }
     }
@@ -464,8 +480,10 @@ fn end_to_end(c: &Collected) -> anyhow::Result<Measurement> {
 /// had not reached the unit yet.
 fn blob_of(blobs: &[Sample], direction: &Sample) -> Option<usize> {
     // Samples arrive in add order.
-    let added = blobs.partition_point(|b| b.add_time <= direction.structure.create_time);
-    blobs[..added].iter().rposition(|b| b.structure.valid_time <= direction.structure.valid_time)
+    let added = blobs.partition_point(|b| b.add_time <= direction.structure.create_time());
+    blobs[..added]
+        .iter()
+        .rposition(|b| b.structure.valid_time() <= direction.structure.valid_time())
 }
 
 /// The input sample added last at or before `at` among `inputs`.
@@ -486,10 +504,7 @@ fn trigger<'a>(
 }
 
 fn payload_of(samples: &[Sample]) -> u64 {
-    samples
-        .first()
-        .and_then(|s| esgm_core::codec::encode(&s.structure).ok())
-        .map_or(0, |b| b.len() as u64)
+    samples.first().and_then(|s| s.structure.to_codec_bytes().ok()).map_or(0, |b| b.len() as u64)
 }
 
 /// What lineage adds to one hop of a two-input stage (driving_direction's), as the

@@ -212,7 +212,7 @@ fn query(replica: &InProcessTrajectory, op: &str, t: Time) -> anyhow::Result<u64
         }
         _ => {
             let answer = replica.get_at_approximating(t + STEP / 2, &ValueApproximation::Linear)?;
-            answer.structure.valid_time.unsigned_abs()
+            answer.structure.valid_time().unsigned_abs()
         }
     })
 }

@@ -278,7 +278,7 @@ fn publish(role: &PeerRole) -> anyhow::Result<Vec<String>> {
     let (mut seq, mut batches) = (0u64, 0u64);
     loop {
         let signal = next(&go, WaitMode::Block, &mut patience, "go")?;
-        let (n, timed) = match signal.valid_time {
+        let (n, timed) = match signal.valid_time() {
             STOP => break,
             HELLO => (1, false),
             _ => (batch, true),

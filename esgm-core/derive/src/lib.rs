@@ -123,9 +123,10 @@ fn expand(input: &DeriveInput) -> syn::Result<proc_macro2::TokenStream> {
                 ::std::vec![#(#to),*]
             }
 
-            fn from_attributes(
-                attributes: &[::esgm_core::AttributeValuePair],
+            fn from_attribute_refs(
+                attributes: ::esgm_core::Attributes<'_>,
             ) -> ::std::result::Result<Self, ::esgm_core::FromEntityError> {
+                let attributes = &attributes;
                 ::std::result::Result::Ok(Self { #(#from),* })
             }
         }
@@ -176,8 +177,12 @@ fn expand(input: &DeriveInput) -> syn::Result<proc_macro2::TokenStream> {
                     ::esgm_core::Entity::to_frame(self, #type_name),
                 ))
             }
-            fn from_value(value: &::esgm_core::Value) -> ::std::option::Option<Self> {
-                value.as_frame().and_then(|f| <Self as ::esgm_core::Entity>::from_frame(f).ok())
+            fn from_value_ref(
+                value: ::esgm_core::ValueRef<'_>,
+            ) -> ::std::option::Option<Self> {
+                value
+                    .as_frame()
+                    .and_then(|f| <Self as ::esgm_core::Entity>::from_frame_ref(f).ok())
             }
         }
     })

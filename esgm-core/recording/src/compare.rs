@@ -513,7 +513,7 @@ fn compare_one(
     // A in valid-time order; ties by create time, then recorded order.
     let mut a_sorted: Vec<(usize, Traced)> = sa.into_iter().enumerate().collect();
     a_sorted.sort_by_key(|(i, (e, _))| (e.valid_time, e.create_time, *i));
-    let mut used: HashSet<*const EntityStructure> = HashSet::new();
+    let mut used: HashSet<*const ()> = HashSet::new();
     let mut pairs: Vec<(Traced, Sample)> = Vec::new();
     let unmatched_a = |r: &mut TrajectoryComparison, e: &EntityStructure| {
         r.only_in_a += 1;
@@ -530,12 +530,12 @@ fn compare_one(
                     .map_or(a_sorted.len(), |k| i + k);
                 let mut partners = store.get_between(vt, vt);
                 // get_between keeps add order among ties; create time first.
-                partners.sort_by_key(|s| s.structure.create_time);
+                partners.sort_by_key(|s| s.structure.create_time());
                 let mut partners = partners.into_iter();
                 for (_, e) in &a_sorted[i..group_end] {
                     match partners.next() {
                         Some(s) => {
-                            used.insert(Arc::as_ptr(&s.structure));
+                            used.insert(s.structure.identity());
                             pairs.push((e.clone(), s));
                         }
                         None => unmatched_a(&mut r, &e.0),
@@ -549,10 +549,10 @@ fn compare_one(
                 let vt = e.0.valid_time;
                 match store.get_at_approximating(vt, &ValueApproximation::Closest) {
                     Ok(s)
-                        if (i128::from(s.structure.valid_time) - i128::from(vt)).abs()
+                        if (i128::from(s.structure.valid_time()) - i128::from(vt)).abs()
                             <= i128::from(within) =>
                     {
-                        used.insert(Arc::as_ptr(&s.structure));
+                        used.insert(s.structure.identity());
                         pairs.push((e.clone(), s));
                     }
                     _ => unmatched_a(&mut r, &e.0),
@@ -561,16 +561,21 @@ fn compare_one(
         }
     }
     for s in store.samples() {
-        if !used.contains(&Arc::as_ptr(&s.structure)) {
+        if !used.contains(&s.structure.identity()) {
             r.only_in_b += 1;
-            let vt = s.structure.valid_time;
+            let vt = s.structure.valid_time();
             r.first_only_in_b = Some(r.first_only_in_b.map_or(vt, |f: Time| f.min(vt)));
         }
     }
     r.matched = pairs.len() as u64;
     let mut lineages = None;
     for ((ea, lineage_a), sb) in &pairs {
-        let d = diff_structures(ea, &sb.structure, options.value_tolerance, options.create_time);
+        let d = diff_structures(
+            ea,
+            &sb.structure.to_arc(),
+            options.value_tolerance,
+            options.create_time,
+        );
         if let Some(first) = d.first {
             r.differing += 1;
             if r.first_difference.is_none() && (lineage_a.is_some() || sb.lineage.is_some()) {
@@ -578,7 +583,7 @@ fn compare_one(
             }
             r.first_difference.get_or_insert(FirstDifference {
                 valid_time: ea.valid_time,
-                valid_time_b: sb.structure.valid_time,
+                valid_time_b: sb.structure.valid_time(),
                 attribute: first.attribute,
                 a: first.a,
                 b: first.b,

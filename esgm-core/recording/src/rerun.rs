@@ -354,7 +354,7 @@ fn propagate(
                     .map(|(&input, s)| InputRef {
                         trajectory: names.get(input).cloned().unwrap_or_default(),
                         generation: 0,
-                        valid_time: s.valid_time,
+                        valid_time: s.valid_time(),
                         add_time: s.add_time,
                     })
                     .collect();

@@ -414,7 +414,10 @@ impl RecordingWriter {
         recorded_time: Time,
     ) -> Result<(), RecordError> {
         let lineage = sample.lineage.as_deref();
-        self.write_traced(id, &sample.structure, sample.add_time, recorded_time, lineage)
+        // The views (image, JSON, ROS 2) are made of owned values: an archived structure
+        // is converted for them (its pixels stay where they are).
+        let es = sample.structure.to_arc();
+        self.write_traced(id, &es, sample.add_time, recorded_time, lineage)
     }
 
     fn write_traced(

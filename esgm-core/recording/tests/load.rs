@@ -104,12 +104,12 @@ fn loaded_trajectories_answer_latest_between_at_and_approximating() {
     }
     let robot_t = esgm.get_entity_trajectory_structure("robot_state").expect("loaded");
     let latest = robot_t.get_latest().expect("latest");
-    assert_eq!(*latest.structure, robot(9));
+    assert_eq!(latest.structure, robot(9));
     assert_eq!(latest.add_time, 1_000 + 900 + 50, "the recorded add time, on the simulated clock");
     let between: Vec<f64> =
         robot_t.get_between(1_200, 1_400).expect("between").iter().map(x).collect();
     assert_eq!(between, [2.0, 3.0, 4.0]);
-    assert_eq!(*robot_t.get_at(1_500).expect("at").structure, robot(5));
+    assert_eq!(robot_t.get_at(1_500).expect("at").structure, robot(5));
     let linear =
         robot_t.get_at_approximating(1_550, &ValueApproximation::Linear).expect("approximating");
     assert_eq!(x(&linear), 5.5);
@@ -118,7 +118,7 @@ fn loaded_trajectories_answer_latest_between_at_and_approximating() {
         .expect("approximating");
     assert_eq!(x(&recent), 5.0);
     let images = esgm.get_entity_trajectory_structure("images").expect("loaded");
-    assert_eq!(*images.get_at(1_300).expect("at").structure, image(3), "images exact");
+    assert_eq!(images.get_at(1_300).expect("at").structure, image(3), "images exact");
     // Loaded as primitive trajectories (a computed one is loaded as what it produced).
     let kinds: Vec<TrajectoryKind> = esgm.trajectories().unwrap().iter().map(|t| t.kind).collect();
     assert_eq!(kinds, [TrajectoryKind::Primitive, TrajectoryKind::Primitive]);

@@ -363,7 +363,7 @@ fn lineage_is_recorded_and_read_back() {
     let t = esgm
         .create_primitive_entity_trajectory_structure("robot_state", "RobotState")
         .expect("create");
-    let copy = |i: &[esgm_core::Sample], _: i64| Ok((*i[0].structure).clone());
+    let copy = |i: &[esgm_core::Sample], _: i64| Ok(i[0].structure.to_structure());
     esgm.add_comp_unit("copy", "RobotState", vec!["RobotState".into()], std::sync::Arc::new(copy))
         .expect("unit");
     esgm.create_computed_entity_trajectory_structure("copied", "copy", &["robot_state"])

@@ -83,7 +83,7 @@ fn a_replay_publishes_every_recorded_structure_in_add_order() {
     let all = t.get_between(0, Time::MAX).unwrap();
     assert_eq!(all.len(), 10);
     assert_eq!(all[3].structure.get("x").and_then(|v| v.as_double()), Some(6.0));
-    assert_eq!(all[3].structure.valid_time, 1_003_005, "times kept");
+    assert_eq!(all[3].structure.valid_time(), 1_003_005, "times kept");
 }
 
 #[test]
@@ -107,8 +107,12 @@ fn shifted_times_keep_their_spacing_and_start_now() {
         .get_between(0, Time::MAX)
         .unwrap();
     assert_eq!(all.len(), 10);
-    assert!(all[0].structure.valid_time >= before, "shifted to now");
-    assert_eq!(all[9].structure.valid_time - all[0].structure.valid_time, 9_000, "spacing kept");
+    assert!(all[0].structure.valid_time() >= before, "shifted to now");
+    assert_eq!(
+        all[9].structure.valid_time() - all[0].structure.valid_time(),
+        9_000,
+        "spacing kept"
+    );
 }
 
 #[test]
@@ -168,7 +172,7 @@ impl CompUnit for Doubler {
             .and_then(|s| s.get("x"))
             .and_then(|v| v.as_double())
             .ok_or(ComputeError::ValueNotAvailable)?;
-        Ok(EntityStructure::new("doubled", inputs[0].valid_time, qtime).with("x", x * 2.0))
+        Ok(EntityStructure::new("doubled", inputs[0].valid_time(), qtime).with("x", x * 2.0))
     }
 }
 
@@ -181,7 +185,7 @@ impl CompUnit for Sum {
         let x = |s: &Sample| {
             s.get("x").and_then(|v| v.as_double()).ok_or(ComputeError::ValueNotAvailable)
         };
-        let valid = inputs[0].valid_time.max(inputs[1].valid_time);
+        let valid = inputs[0].valid_time().max(inputs[1].valid_time());
         Ok(EntityStructure::new("sum", valid, qtime).with("x", x(&inputs[0])? + x(&inputs[1])?))
     }
 }

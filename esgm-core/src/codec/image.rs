@@ -42,8 +42,6 @@ use super::{
     ARCHIVE_ALIGNMENT, ArchivedAttributeValuePair, ArchivedEntityStructure, CodecError,
     ENVELOPE_LEN, write_envelope,
 };
-use crate::entity::Entity;
-use crate::library::Image;
 use crate::octets::archive::{ArchiveTooLarge, MAX_ARCHIVE_LEN, PlaceOctets};
 use crate::time::Time;
 use crate::value::Octets;
@@ -79,7 +77,7 @@ pub const IMAGE_OVERHEAD_MAX: usize = IMAGE_PIXELS_OFFSET
 pub const IMAGE_PIXELS_MAX: usize = MAX_ARCHIVE_LEN - IMAGE_OVERHEAD_MAX;
 
 /// Completes an `Image` entity structure (attributes `width`, `height`, `format`,
-/// `image_data`, as [`Image`] declares them) around `pixel_len` bytes already present
+/// `image_data`, as [`crate::library::Image`] declares them) around `pixel_len` bytes already present
 /// at `out[IMAGE_PIXELS_OFFSET..][..pixel_len]`, which are neither read nor written.
 /// Returns the bytes used, envelope included; every byte of `out[..n]` outside the
 /// pixels is written (padding as zeros), so nothing stale is left in the archive.
@@ -113,11 +111,13 @@ pub fn encode_image_into(
     if pixel_len > IMAGE_PIXELS_MAX {
         return Err(CodecError::TooLarge { len: pixel_len, max: IMAGE_PIXELS_MAX });
     }
-    let image = Image { width, height, format, image_data: Octets::default() }.to_structure(
-        name,
-        valid_time,
-        create_time,
-    );
+    // `Image`'s attributes in its type's order (a test holds the two together), built
+    // here without the typed struct: the codec sits under the typed layer.
+    let image = EntityStructure::new(name, valid_time, create_time)
+        .with("width", width)
+        .with("height", height)
+        .with("format", format)
+        .with("image_data", Octets::default());
     let too_small = |out: &[u8]| -> CodecError {
         match measure(&image, pixel_len) {
             Ok(needed) => CodecError::BufferTooSmall { available: out.len(), needed },
@@ -235,6 +235,8 @@ impl<E: Source> PlaceOctets<E> for ImageWriter<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::entity::Entity;
+    use crate::library::Image;
     use rkyv::util::AlignedVec;
 
     use crate::codec::{access, decode, encode};

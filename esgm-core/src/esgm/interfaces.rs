@@ -50,9 +50,9 @@ pub enum SensorError {
 /// let samples = volts.subscribe(SubscribeOptions::default()).unwrap();
 /// let first = samples.recv_timeout(std::time::Duration::from_secs(5)).unwrap();
 /// let next = samples.recv_timeout(std::time::Duration::from_secs(5)).unwrap();
-/// assert_eq!(first.get("volts"), Some(&Value::Double(24.1)));
+/// assert_eq!(first.get("volts").and_then(|v| v.as_double()), Some(24.1));
 /// // Stamped at their sample times, whole periods apart.
-/// let apart = next.valid_time - first.valid_time;
+/// let apart = next.valid_time() - first.valid_time();
 /// assert!(apart > 0 && apart % millis(10) == 0, "{apart} ns apart");
 /// ```
 pub trait SensorInterface: Send + Sync {
@@ -116,9 +116,10 @@ pub enum ComputeError {
 /// esgm.create_type(EntityStructureType::new("Reading").attr("x", ValueSort::Double)).unwrap();
 /// // Doubles its one input's `x`; no output while `x` is missing.
 /// let double = |inputs: &[Sample], _qtime: Time| -> Result<EntityStructure, ComputeError> {
-///     let x = inputs[0].get("x").and_then(Value::as_double);
+///     // Read where the input lies (in another process's memory, across processes).
+///     let x = inputs[0].get("x").and_then(|x| x.as_double());
 ///     let x = x.ok_or(ComputeError::ValueNotAvailable)?;
-///     Ok(EntityStructure::named("doubled").at(inputs[0].valid_time).with("x", 2.0 * x))
+///     Ok(EntityStructure::named("doubled").at(inputs[0].valid_time()).with("x", 2.0 * x))
 /// };
 /// let reading = vec![InputType::Type("Reading".into())];
 /// esgm.add_comp_unit("double", "Reading", reading, Arc::new(double)).unwrap();
@@ -128,7 +129,7 @@ pub enum ComputeError {
 /// raw.add(EntityStructure::named("r").at(secs(1)).with("x", 1.5)).unwrap();
 /// esgm.flush(Instant::now() + Duration::from_secs(5)).unwrap();
 /// let out = doubled.get_latest().unwrap();
-/// assert_eq!((out.valid_time, out.get("x")), (secs(1), Some(&Value::Double(3.0))));
+/// assert_eq!((out.valid_time(), out.value("x")), (secs(1), Some(Value::Double(3.0))));
 /// ```
 pub trait CompUnit: Send + Sync {
     /// Computes an output from `inputs` (one per input trajectory), asked at `qtime`.

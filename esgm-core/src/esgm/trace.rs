@@ -135,7 +135,7 @@ fn node<T: EntityTrajectoryStructure>(
     let mut out = TraceNode {
         trajectory: trajectory.to_owned(),
         generation,
-        valid_time: sample.valid_time,
+        valid_time: sample.valid_time(),
         add_time: sample.add_time,
         hop: None,
         found: Found::Stored,

@@ -50,7 +50,7 @@
 //! robot.add(RobotState { x: 0.0, y: 0.0, dir: 0.0 }.to_structure("r", secs(1), secs(1))).unwrap();
 //! blob.add(Blob { x: 1, y: 0, size: 9 }.to_structure("b", secs(1), secs(1))).unwrap();
 //! esgm.flush(Instant::now() + Duration::from_secs(5)).unwrap();
-//! let out = DrivingDirection::from_structure(&steer.get_latest().unwrap()).unwrap();
+//! let out = DrivingDirection::from_shared(&steer.get_latest().unwrap()).unwrap();
 //! assert_eq!(out.dir, 0.0);
 //! ```
 
@@ -90,14 +90,15 @@ impl<T: Entity> Stamped<T> {
 
     /// Input `position` of unit `unit` as a `T`, or why it is not one.
     fn read(unit: &'static str, position: usize, sample: &Sample) -> Result<Self, ComputeError> {
-        let value =
-            T::from_structure(sample).map_err(|source: FromEntityError| ComputeError::Failed {
+        let value = T::from_shared(&sample.structure).map_err(|source: FromEntityError| {
+            ComputeError::Failed {
                 reason: format!(
                     "input {position} of {unit} is not a readable `{}`: {source}",
                     T::TYPE_NAME
                 ),
-            })?;
-        Ok(Self::new(sample.name.clone(), sample.valid_time, sample.create_time, value))
+            }
+        })?;
+        Ok(Self::new(sample.name().to_owned(), sample.valid_time(), sample.create_time(), value))
     }
 }
 

@@ -72,6 +72,7 @@ use std::fmt;
 
 pub use error::FilterError;
 
+use crate::structure::SharedStructure;
 use crate::type_check::TypeChecker;
 use crate::value::frame::AttributeValuePair;
 use typed::BoolExpr;
@@ -108,6 +109,17 @@ impl Filter {
     /// filter was compiled against; see the module docs.
     pub fn matches(&self, attributes: &[AttributeValuePair]) -> bool {
         self.expr.eval(attributes).unwrap_or(false)
+    }
+
+    /// [`Self::matches`] on a structure as a trajectory holds it. An archived one (a
+    /// structure another process wrote, re-added by a merge in this one) is converted
+    /// for it: filters evaluate owned attributes, and only a filtered trajectory fed
+    /// from another process's structures pays for it.
+    pub fn matches_structure(&self, structure: &SharedStructure) -> bool {
+        match structure.as_owned() {
+            Some(es) => self.matches(&es.attributes),
+            None => self.matches(&structure.to_structure().attributes),
+        }
     }
 }
 

@@ -94,7 +94,7 @@ pub trait Stamped {
 impl Stamped for Sample {
     /// A sample is matched by the valid time of its structure (M3).
     fn stamp(&self) -> Time {
-        self.structure.valid_time
+        self.structure.valid_time()
     }
 }
 

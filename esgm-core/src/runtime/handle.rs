@@ -12,6 +12,7 @@ use crate::store::{
     AddError, AddOutcome, PolicyViolation, QueryError, SubscribeOptions, Subscription,
     SubscriptionId, TrajectoryStats, TrajectoryStore,
 };
+use crate::structure::SharedStructure;
 use crate::time::Time;
 use crate::types::EntityStructureType;
 use crate::value::frame::{AttributeList, EntityStructure};
@@ -111,8 +112,9 @@ impl InProcessTrajectory {
         self.with_store(|s| s.count_bridge_loss(loss, n))
     }
 
-    /// Adds an already shared structure without copying it (zero-copy push).
-    pub fn add_shared(&self, es: Arc<EntityStructure>) -> Result<AddOutcome, AddError> {
+    /// Adds an already shared structure without copying it (zero-copy push): owned, or
+    /// a sample's structure as received, archived in place.
+    pub fn add_shared(&self, es: impl Into<SharedStructure>) -> Result<AddOutcome, AddError> {
         self.add_with("add", |s| s.add_shared(es, false))
     }
 }

@@ -66,7 +66,7 @@ impl InProcessEsgm {
         InputHealth {
             trajectory: name.to_owned(),
             exists: cell.is_some(),
-            latest_valid_time: latest.as_ref().map(|s| s.valid_time),
+            latest_valid_time: latest.as_ref().map(|s| s.valid_time()),
             latest_add_time: latest.as_ref().map(|s| s.add_time),
             age: latest.as_ref().map(|s| now.saturating_sub(s.add_time)),
             writer_alive: None,

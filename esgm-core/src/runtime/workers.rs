@@ -19,9 +19,10 @@ use crate::operators::sync::{InputDrops, MEMBER_CREATE_TIMES, MEMBER_VALID_TIMES
 use crate::pixel_buffer::{HeapAllocator, OctetsAllocator};
 use crate::sample::Sample;
 use crate::store::{AddError, AddOutcome, FanIn};
+use crate::structure::SharedStructure;
 use crate::time::Time;
 use crate::value::Value;
-use crate::value::frame::{AttributeValuePair, EntityFrame, EntityStructure};
+use crate::value::frame::{AttributeValuePair, EntityStructure};
 
 /// Starts `body` on a named thread and returns the handle that stops it.
 pub(crate) fn spawn(
@@ -60,7 +61,7 @@ fn guarded<R>(cell: &TrajectoryCell, what: &str, f: impl FnOnce() -> R) -> Optio
 
 /// Adds a produced structure to the worker's own trajectory, with the inputs it was
 /// made from (none for a sensor's).
-fn emit(cell: &TrajectoryCell, es: Arc<EntityStructure>, lineage: Option<Lineage>) {
+fn emit(cell: &TrajectoryCell, es: impl Into<SharedStructure>, lineage: Option<Lineage>) {
     WorkerCounters::bump(&cell.counters.outputs);
     let (result, at) = {
         let mut store = cell.store.lock();
@@ -170,7 +171,7 @@ impl InputState {
         InputRef {
             trajectory: self.trajectory.clone(),
             generation: self.generation.load(std::sync::atomic::Ordering::Relaxed),
-            valid_time: sample.valid_time,
+            valid_time: sample.valid_time(),
             add_time: sample.add_time,
         }
     }
@@ -218,10 +219,13 @@ pub(crate) fn unit(
             &c.counters.input_overflow,
             &c.counters.flush_done,
             |i, sample| {
+                let added = sample.add_time;
+                crate::probe::mark(crate::probe::Step::Taken);
                 update_inputs(&mut states, i, sample);
                 let Some(args) =
                     states.iter().map(|s| s.latest.clone()).collect::<Option<Vec<Sample>>>()
                 else {
+                    crate::probe::settle(added);
                     return;
                 };
                 WorkerCounters::bump(&c.counters.calls);
@@ -230,6 +234,8 @@ pub(crate) fn unit(
                     let inputs = states.iter().zip(&args).map(|(s, a)| s.input_ref(a)).collect();
                     Lineage::of(inputs).with_unrecorded_reads()
                 };
+                crate::probe::mark(crate::probe::Step::Computed);
+                crate::probe::settle(added);
                 let result = guarded(&c, "compute", || cu.compute(&args, qtime));
                 emit_computed(&c, "unit", result, lineage);
             },
@@ -265,7 +271,7 @@ pub(crate) fn state(
     name: &str,
     valid_time: Time,
     create_time: Time,
-    parts: &[(&str, &EntityStructure)],
+    parts: &[(&str, &SharedStructure)],
 ) -> EntityStructure {
     EntityStructure {
         name: name.to_owned(),
@@ -275,10 +281,9 @@ pub(crate) fn state(
             .iter()
             .map(|(input, es)| AttributeValuePair {
                 name: (*input).to_owned(),
-                value: Value::EntityFrame(Box::new(EntityFrame {
-                    name: es.name.clone(),
-                    attributes: es.attributes.clone(),
-                })),
+                // A state holds its members' values: each is converted into it (octet
+                // sequences stay shared).
+                value: Value::EntityFrame(Box::new(es.to_frame())),
             })
             .collect(),
     }
@@ -345,26 +350,26 @@ pub(crate) fn sync(
                 match result {
                     Ok(sets) => {
                         for set in sets {
-                            let vt = set.iter().map(|s| s.valid_time).max().unwrap_or_default();
-                            let parts: Vec<(&str, &EntityStructure)> = names
+                            let vt = set.iter().map(|s| s.valid_time()).max().unwrap_or_default();
+                            let parts: Vec<(&str, &SharedStructure)> = names
                                 .iter()
                                 .map(String::as_str)
-                                .zip(set.iter().map(|s| &*s.structure))
+                                .zip(set.iter().map(|s| &s.structure))
                                 .collect();
                             let mut es = state(&c.info.name, vt, clock.now(), &parts);
                             // Which samples were matched (documented in `operators::sync`).
                             let times = |f: fn(&Sample) -> Time| set.iter().map(f).collect();
                             es.attributes.push(AttributeValuePair {
                                 name: MEMBER_VALID_TIMES.to_owned(),
-                                value: Value::LongSeq(times(|s| s.structure.valid_time)),
+                                value: Value::LongSeq(times(|s| s.structure.valid_time())),
                             });
                             es.attributes.push(AttributeValuePair {
                                 name: MEMBER_CREATE_TIMES.to_owned(),
-                                value: Value::LongSeq(times(|s| s.structure.create_time)),
+                                value: Value::LongSeq(times(|s| s.structure.create_time())),
                             });
                             let inputs =
                                 states.iter().zip(&set).map(|(s, a)| s.input_ref(a)).collect();
-                            emit(&c, Arc::new(es), Some(Lineage::of(inputs)));
+                            emit(&c, es, Some(Lineage::of(inputs)));
                         }
                     }
                     Err(e) => {
@@ -455,23 +460,23 @@ pub(crate) fn sampled_generators(
                 return;
             }
             let es = match values.as_slice() {
-                [one] => EntityStructure {
-                    name: one.name.clone(),
-                    valid_time: t,
-                    create_time: one.create_time,
-                    attributes: one.attributes.clone(),
-                },
+                // One input's value re-stamped at `t`: a new structure of its fields.
+                [one] => {
+                    let mut es = one.structure.to_structure();
+                    es.valid_time = t;
+                    es
+                }
                 many => {
-                    let parts: Vec<(&str, &EntityStructure)> = inputs
+                    let parts: Vec<(&str, &SharedStructure)> = inputs
                         .iter()
                         .map(|(d, _)| d.name.as_str())
-                        .zip(many.iter().map(|s| &*s.structure))
+                        .zip(many.iter().map(|s| &s.structure))
                         .collect();
                     state(&c.info.name, t, clock.now(), &parts)
                 }
             };
             call_ended.set(Some(clock.now()));
-            emit(&c, Arc::new(es), Some(Lineage::of(from)));
+            emit(&c, es, Some(Lineage::of(from)));
         });
     })
 }

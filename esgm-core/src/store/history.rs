@@ -11,8 +11,8 @@ use std::collections::{BTreeMap, VecDeque};
 use std::ops::Bound;
 use std::sync::Arc;
 
+use crate::structure::SharedStructure;
 use crate::time::Time;
-use crate::value::frame::EntityStructure;
 
 /// One stored sample: the shared structure, when it entered, and its add sequence
 /// number (strictly increasing; ties in valid time are broken by it).
@@ -22,7 +22,7 @@ pub(crate) struct Entry {
     /// probe, and reading it through the `Arc` costs a cache miss each on a large
     /// history.
     pub vt: Time,
-    pub es: Arc<EntityStructure>,
+    pub es: SharedStructure,
     pub add_time: Time,
     pub seq: u64,
     /// The inputs it was made from (a produced structure's; see [`crate::lineage`]).
@@ -210,7 +210,7 @@ mod tests {
     fn entry(vt: Time, seq: u64) -> Entry {
         Entry {
             vt,
-            es: Arc::new(EntityStructure::new("e", vt, vt)),
+            es: crate::value::frame::EntityStructure::new("e", vt, vt).into(),
             add_time: seq as Time,
             seq,
             lineage: None,

@@ -41,6 +41,7 @@ use crate::policy::{
     FluentStreamPolicy, OrderConstraint, PolicyError,
 };
 use crate::sample::Sample;
+use crate::structure::SharedStructure;
 use crate::time::Time;
 use crate::type_check::TypeChecker;
 use crate::types::EntityStructureType;
@@ -64,7 +65,7 @@ pub use violation::{
 /// A sample waiting in the reorder buffer, ordered by (valid time, add sequence).
 #[derive(Debug)]
 struct Held {
-    es: Arc<EntityStructure>,
+    es: SharedStructure,
     lineage: Option<Arc<Lineage>>,
     seq: u64,
     release_at: Time,
@@ -88,7 +89,7 @@ impl Ord for Held {
 }
 impl Held {
     fn key(&self) -> (Time, u64) {
-        (self.es.valid_time, self.seq)
+        (self.es.valid_time(), self.seq)
     }
 }
 
@@ -189,7 +190,7 @@ pub struct TrajectoryStore {
     held: BinaryHeap<Reverse<Held>>,
     /// The last sample that entered the stream, kept after eviction: order and change
     /// are relations between consecutive samples, whatever the cache keeps.
-    last: Option<Arc<EntityStructure>>,
+    last: Option<SharedStructure>,
     next_seq: u64,
     subscribers: Subscribers<Sample>,
     violation_subscribers: Subscribers<PolicyViolation>,
@@ -263,7 +264,7 @@ pub trait StoreTap: Send + 'static {
     /// enters in its place — the same content with its bytes elsewhere, e.g. pixels
     /// this process wrote into a loan and just sent, now read through a received
     /// sample — which is then what the store keeps and its subscribers get.
-    fn entering(&mut self, sample: &Sample) -> Option<Arc<EntityStructure>> {
+    fn entering(&mut self, sample: &Sample) -> Option<SharedStructure> {
         self.observe(&StoreEvent::Entered(sample.clone()));
         None
     }
@@ -337,23 +338,23 @@ impl TrajectoryStore {
     /// Adds a structure; a constraint violation drops it, counts it and notifies
     /// violation subscribers (`Ok(AddOutcome::Dropped)`).
     pub fn add(&mut self, es: EntityStructure) -> Result<AddOutcome, AddError> {
-        self.offer(Arc::new(es), false)
+        self.offer(es.into(), false)
     }
 
     /// Adds a structure; a constraint violation is also returned as
     /// [`AddError::PolicyViolation`].
     pub fn add_blocking(&mut self, es: EntityStructure) -> Result<AddOutcome, AddError> {
-        self.offer(Arc::new(es), true)
+        self.offer(es.into(), true)
     }
 
     /// Adds an already shared structure without copying it (what runtimes use to pass
-    /// one structure to several stores).
+    /// one structure to several stores), owned or archived in place.
     pub fn add_shared(
         &mut self,
-        es: Arc<EntityStructure>,
+        es: impl Into<SharedStructure>,
         blocking: bool,
     ) -> Result<AddOutcome, AddError> {
-        self.offer(es, blocking)
+        self.offer(es.into(), blocking)
     }
 
     /// [`Self::add_shared`] for a structure made from other structures: `lineage` names
@@ -361,11 +362,11 @@ impl TrajectoryStore {
     /// forwards its adds to a writer elsewhere forwards the structure only.
     pub fn add_produced(
         &mut self,
-        es: Arc<EntityStructure>,
+        es: impl Into<SharedStructure>,
         lineage: Option<Arc<Lineage>>,
         blocking: bool,
     ) -> Result<AddOutcome, AddError> {
-        self.offer_with(es, lineage, blocking)
+        self.offer_with(es.into(), lineage, blocking)
     }
 
     /// Creates a structure valid at `valid_time`, created now, and adds it.
@@ -376,7 +377,7 @@ impl TrajectoryStore {
         attributes: impl Into<AttributeList>,
     ) -> Result<AddOutcome, AddError> {
         let es = self.make(name, Some(valid_time), attributes);
-        self.offer(Arc::new(es), false)
+        self.offer(es.into(), false)
     }
 
     /// [`TrajectoryStore::create_at`], returning violations.
@@ -387,7 +388,7 @@ impl TrajectoryStore {
         attributes: impl Into<AttributeList>,
     ) -> Result<AddOutcome, AddError> {
         let es = self.make(name, Some(valid_time), attributes);
-        self.offer(Arc::new(es), true)
+        self.offer(es.into(), true)
     }
 
     /// Creates a structure valid and created now, and adds it.
@@ -397,7 +398,7 @@ impl TrajectoryStore {
         attributes: impl Into<AttributeList>,
     ) -> Result<AddOutcome, AddError> {
         let es = self.make(name, None, attributes);
-        self.offer(Arc::new(es), false)
+        self.offer(es.into(), false)
     }
 
     /// [`TrajectoryStore::create_at_now`], returning violations.
@@ -407,7 +408,7 @@ impl TrajectoryStore {
         attributes: impl Into<AttributeList>,
     ) -> Result<AddOutcome, AddError> {
         let es = self.make(name, None, attributes);
-        self.offer(Arc::new(es), true)
+        self.offer(es.into(), true)
     }
 
     fn make(
@@ -499,8 +500,7 @@ impl TrajectoryStore {
             .history
             .last_n(options.last)
             .map(|e| {
-                Sample::new(Arc::clone(&e.es), e.add_time, e.add_time)
-                    .with_lineage(e.lineage.clone())
+                Sample::new(e.es.clone(), e.add_time, e.add_time).with_lineage(e.lineage.clone())
             })
             .collect();
         // A replay longer than the buffer keeps its newest samples; the rest count as
@@ -626,21 +626,21 @@ impl TrajectoryStore {
         self.stats.snapshot(self.history.len(), self.held.len(), self.subscribers.len())
     }
 
-    fn offer(&mut self, es: Arc<EntityStructure>, blocking: bool) -> Result<AddOutcome, AddError> {
+    fn offer(&mut self, es: SharedStructure, blocking: bool) -> Result<AddOutcome, AddError> {
         self.offer_with(es, None, blocking)
     }
 
     fn offer_with(
         &mut self,
-        es: Arc<EntityStructure>,
+        es: SharedStructure,
         lineage: Option<Arc<Lineage>>,
         blocking: bool,
     ) -> Result<AddOutcome, AddError> {
         let now = self.clock.now();
         self.release_due_at(now);
-        if let Err(source) = self.checker.check(&es.attributes) {
+        if let Err(source) = self.checker.check_structure(&es) {
             self.stats.record_dropped(DropCause::InvalidType);
-            self.remember_drop(now, DropCause::InvalidType, es.valid_time, source.to_string());
+            self.remember_drop(now, DropCause::InvalidType, es.valid_time(), source.to_string());
             tracing::debug!(trajectory = %self.name, error = %source, "structure refused");
             return Err(AddError::InvalidType { trajectory: self.name.clone(), source });
         }
@@ -651,7 +651,7 @@ impl TrajectoryStore {
             return self.violated(&es, now, constraint, detail, blocking);
         }
         if let (true, DelayConstraint::Max(d)) = (self.policy.holds_samples(), self.policy.delay) {
-            let release_at = es.valid_time.saturating_add(d);
+            let release_at = es.valid_time().saturating_add(d);
             if release_at > now {
                 let seq = self.next_seq;
                 self.next_seq += 1;
@@ -673,8 +673,8 @@ impl TrajectoryStore {
         released
     }
 
-    fn arrival_violation(&self, es: &EntityStructure, now: Time) -> Option<(Constraint, String)> {
-        let vt = es.valid_time;
+    fn arrival_violation(&self, es: &SharedStructure, now: Time) -> Option<(Constraint, String)> {
+        let vt = es.valid_time();
         if let Some((from, to)) = self.window {
             if vt < from {
                 return Some((
@@ -696,17 +696,17 @@ impl TrajectoryStore {
             }
         }
         if let Some(f) = &self.filter {
-            if !f.matches(&es.attributes) {
+            if !f.matches_structure(es) {
                 return Some((Constraint::Filter, format!("`{}` is false", f.source())));
             }
         }
         None
     }
 
-    fn sequence_violation(&self, es: &EntityStructure) -> Option<(Constraint, String)> {
-        let vt = es.valid_time;
+    fn sequence_violation(&self, es: &SharedStructure) -> Option<(Constraint, String)> {
+        let vt = es.valid_time();
         if let Some(last) = &self.last {
-            let lvt = last.valid_time;
+            let lvt = last.valid_time();
             match self.policy.order {
                 OrderConstraint::Monotone if vt < lvt => {
                     return Some((
@@ -722,13 +722,18 @@ impl TrajectoryStore {
                 }
                 _ => {}
             }
-            let same_value = || es.name == last.name && es.attributes == last.attributes;
+            let same_value = || {
+                es.ptr_eq(last)
+                    || (es.name() == last.name()
+                        && es.attribute_count() == last.attribute_count()
+                        && es.attributes().zip(last.attributes()).all(|(a, b)| a == b))
+            };
             match self.policy.change {
                 ChangeConstraint::AnyChange if same_value() => {
                     return Some((Constraint::Change, "value equals the previous sample's".into()));
                 }
                 ChangeConstraint::AnyUpdate
-                    if same_value() && vt == lvt && es.create_time == last.create_time =>
+                    if same_value() && vt == lvt && es.create_time() == last.create_time() =>
                 {
                     return Some((Constraint::Change, "identical to the previous sample".into()));
                 }
@@ -759,7 +764,7 @@ impl TrajectoryStore {
 
     fn enter(
         &mut self,
-        es: Arc<EntityStructure>,
+        es: SharedStructure,
         lineage: Option<Arc<Lineage>>,
         now: Time,
         blocking: bool,
@@ -768,23 +773,26 @@ impl TrajectoryStore {
             return self.violated(&es, now, constraint, detail, blocking);
         }
         if let (ChangeConstraint::SampleEvery(p), Some(last)) = (self.policy.change, &self.last) {
-            let skipped = es.valid_time.saturating_sub(last.valid_time) / p - 1;
+            let skipped = es.valid_time().saturating_sub(last.valid_time()) / p - 1;
             if skipped > 0 {
                 self.stats.record_missed_sample_points(skipped as u64);
             }
         }
         self.admit(es, lineage, now);
+        crate::probe::mark(crate::probe::Step::Stored);
+        crate::probe::settle(now);
         Ok(AddOutcome::Added)
     }
 
     /// Stores a structure that passed every check, added at `add_time`: evicts as the
     /// cache says and tells subscribers and the tap.
-    fn admit(&mut self, es: Arc<EntityStructure>, lineage: Option<Arc<Lineage>>, add_time: Time) {
+    fn admit(&mut self, es: SharedStructure, lineage: Option<Arc<Lineage>>, add_time: Time) {
         let now = add_time;
         // The tap first: mirrors publish before this process delivers, and may hand
         // back the structure to keep instead (see `StoreTap::entering`).
         let es = match &mut self.tap {
             Some((_, tap)) => {
+                crate::probe::mark(crate::probe::Step::Gate);
                 let entering = Sample::new(es, now, now).with_lineage(lineage.clone());
                 let kept = tap.entering(&entering).unwrap_or(entering.structure);
                 self.stats.record_dropped_n(DropCause::Unpublished, tap.take_unpublished());
@@ -794,11 +802,11 @@ impl TrajectoryStore {
         };
         let seq = self.next_seq;
         self.next_seq += 1;
-        self.stats.record_added(now, es.valid_time);
-        self.last = Some(Arc::clone(&es));
+        self.stats.record_added(now, es.valid_time());
+        self.last = Some(es.clone());
         self.history.push(Entry {
-            vt: es.valid_time,
-            es: Arc::clone(&es),
+            vt: es.valid_time(),
+            es: es.clone(),
             add_time: now,
             seq,
             lineage: lineage.clone(),
@@ -832,11 +840,13 @@ impl TrajectoryStore {
     /// is the lineage the writer stored with it.
     pub fn replicate(
         &mut self,
-        es: Arc<EntityStructure>,
+        es: SharedStructure,
         add_time: Time,
         lineage: Option<Arc<Lineage>>,
     ) {
         self.admit(es, lineage, add_time);
+        crate::probe::mark(crate::probe::Step::Replicated);
+        crate::probe::settle(add_time);
     }
 
     /// Counts `n` messages a bridge to another middleware lost on their way into or
@@ -894,19 +904,19 @@ impl TrajectoryStore {
 
     fn violated(
         &mut self,
-        es: &EntityStructure,
+        es: &SharedStructure,
         now: Time,
         constraint: Constraint,
         detail: String,
         blocking: bool,
     ) -> Result<AddOutcome, AddError> {
         self.stats.record_dropped(DropCause::Violation(constraint));
-        self.remember_drop(now, DropCause::Violation(constraint), es.valid_time, detail.clone());
+        self.remember_drop(now, DropCause::Violation(constraint), es.valid_time(), detail.clone());
         let v = PolicyViolation {
             trajectory: self.name.clone(),
             constraint,
-            valid_time: es.valid_time,
-            create_time: es.create_time,
+            valid_time: es.valid_time(),
+            create_time: es.create_time(),
             add_time: now,
             detail,
         };

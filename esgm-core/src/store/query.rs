@@ -3,8 +3,6 @@
 //! Every answer is a [`Sample`] sharing the stored structure (no copy) and stamped
 //! with the query time. Time lookups are O(log n); `get_between` is O(log n + k).
 
-use std::sync::Arc;
-
 use super::TrajectoryStore;
 use super::history::Entry;
 use crate::approximation::{ValueApproximation, interpolated};
@@ -58,7 +56,7 @@ impl TrajectoryStore {
     }
 
     pub(crate) fn sample_of(&self, e: &Entry, now: Time) -> Sample {
-        Sample::new(Arc::clone(&e.es), e.add_time, now).with_lineage(e.lineage.clone())
+        Sample::new(e.es.clone(), e.add_time, now).with_lineage(e.lineage.clone())
     }
 
     /// Number of stored samples.
@@ -176,7 +174,7 @@ impl TrajectoryStore {
                     create_time: now,
                     attributes: attributes.clone(),
                 };
-                Ok(Sample::new(Arc::new(es), now, now))
+                Ok(Sample::new(es, now, now))
             }
             ValueApproximation::Linear | ValueApproximation::LinearStrict => {
                 match (self.history.before(t), self.history.after(t)) {

@@ -46,7 +46,7 @@ fn reading(vt: Time, x: f64) -> EntityStructure {
 }
 
 fn vts(samples: &[Sample]) -> Vec<Time> {
-    samples.iter().map(|s| s.valid_time).collect()
+    samples.iter().map(|s| s.valid_time()).collect()
 }
 
 fn stored_vts(s: &TrajectoryStore) -> Vec<Time> {
@@ -89,17 +89,20 @@ fn one_sample() {
     f.clock.set(1_500);
     let s = &f.store;
     let latest = s.get_latest().unwrap();
-    assert_eq!((latest.valid_time, latest.add_time, latest.query_time), (100, 1_000, 1_500));
-    assert_eq!(s.get_nth_latest(0).unwrap().valid_time, 100);
+    assert_eq!((latest.valid_time(), latest.add_time, latest.query_time), (100, 1_000, 1_500));
+    assert_eq!(s.get_nth_latest(0).unwrap().valid_time(), 100);
     assert!(not_available(s.get_nth_latest(1)));
-    assert_eq!(s.get_at(100).unwrap().valid_time, 100);
+    assert_eq!(s.get_at(100).unwrap().valid_time(), 100);
     assert!(not_available(s.get_at(101)));
     assert!(not_available(s.get_closest_at_or_before(99)));
-    assert_eq!(s.get_closest_at_or_before(100).unwrap().valid_time, 100);
-    assert_eq!(s.get_closest_at_or_before(i64::MAX).unwrap().valid_time, 100);
+    assert_eq!(s.get_closest_at_or_before(100).unwrap().valid_time(), 100);
+    assert_eq!(s.get_closest_at_or_before(i64::MAX).unwrap().valid_time(), 100);
     assert_eq!(vts(&s.get_between(100, 100)), vec![100]);
     assert_eq!((s.start_time().unwrap(), s.end_time().unwrap()), (100, 100));
-    assert_eq!(s.get_at_approximating(500, &ValueApproximation::Closest).unwrap().valid_time, 100);
+    assert_eq!(
+        s.get_at_approximating(500, &ValueApproximation::Closest).unwrap().valid_time(),
+        100
+    );
     assert!(not_available(s.get_at_approximating(500, &ValueApproximation::Linear)));
 }
 
@@ -120,12 +123,12 @@ fn equal_valid_times() {
     f.store.add(reading(20, 3.0)).unwrap();
     f.store.add(reading(30, 4.0)).unwrap();
     let s = &f.store;
-    assert_eq!(s.get_at(20).unwrap().get("x"), Some(&Value::Double(3.0)), "latest added wins");
-    assert_eq!(s.get_closest_at_or_before(25).unwrap().get("x"), Some(&Value::Double(3.0)));
-    let between: Vec<_> = s.get_between(20, 20).iter().map(|s| s.get("x").cloned()).collect();
+    assert_eq!(s.get_at(20).unwrap().value("x"), Some(Value::Double(3.0)), "latest added wins");
+    assert_eq!(s.get_closest_at_or_before(25).unwrap().value("x"), Some(Value::Double(3.0)));
+    let between: Vec<_> = s.get_between(20, 20).iter().map(|s| s.value("x")).collect();
     assert_eq!(between, vec![Some(Value::Double(2.0)), Some(Value::Double(3.0))]);
     assert_eq!(vts(&s.get_between(0, 100)), vec![10, 20, 20, 30]);
-    assert_eq!(s.get_nth_latest(1).unwrap().get("x"), Some(&Value::Double(3.0)));
+    assert_eq!(s.get_nth_latest(1).unwrap().value("x"), Some(Value::Double(3.0)));
 }
 
 #[test]
@@ -145,9 +148,9 @@ fn out_of_order_storage_is_queried_by_valid_time() {
     for vt in [30, 10, 40, 20] {
         f.store.add(reading(vt, vt as f64)).unwrap();
     }
-    assert_eq!(f.store.get_latest().unwrap().valid_time, 20, "latest is by add order");
+    assert_eq!(f.store.get_latest().unwrap().valid_time(), 20, "latest is by add order");
     assert_eq!(vts(&f.store.get_between(0, 100)), vec![10, 20, 30, 40]);
-    assert_eq!(f.store.get_closest_at_or_before(35).unwrap().valid_time, 30);
+    assert_eq!(f.store.get_closest_at_or_before(35).unwrap().valid_time(), 30);
     assert_eq!((f.store.start_time().unwrap(), f.store.end_time().unwrap()), (10, 40));
 }
 
@@ -159,36 +162,36 @@ fn approximations_at_before_and_after_the_ends() {
     let s = &f.store;
     let lin = |t| s.get_at_approximating(t, &ValueApproximation::Linear);
     // At an end: the sample itself.
-    assert_eq!(lin(100).unwrap().get("x"), Some(&Value::Double(10.0)));
-    assert_eq!(lin(200).unwrap().get("x"), Some(&Value::Double(20.0)));
+    assert_eq!(lin(100).unwrap().value("x"), Some(Value::Double(10.0)));
+    assert_eq!(lin(200).unwrap().value("x"), Some(Value::Double(20.0)));
     // Inside: numeric interpolated, others most recent, valid at t, created at query time.
     let mid = lin(125).unwrap();
-    assert_eq!(mid.get("x"), Some(&Value::Double(12.5)));
-    assert_eq!(mid.get("n"), Some(&Value::Long(13)));
-    assert_eq!(mid.get("label"), Some(&Value::from("l")));
-    assert_eq!((mid.valid_time, mid.create_time), (125, 1_000));
+    assert_eq!(mid.value("x"), Some(Value::Double(12.5)));
+    assert_eq!(mid.value("n"), Some(Value::Long(13)));
+    assert_eq!(mid.value("label"), Some(Value::from("l")));
+    assert_eq!((mid.valid_time(), mid.create_time()), (125, 1_000));
     // Outside: nothing on one side.
     assert!(not_available(lin(99)));
     assert!(not_available(lin(201)));
 
     let mr = |t| s.get_at_approximating(t, &ValueApproximation::MostRecent);
     assert!(not_available(mr(99)));
-    assert_eq!(mr(199).unwrap().valid_time, 100, "the stored structure, not re-stamped");
-    assert_eq!(mr(5_000).unwrap().valid_time, 200);
+    assert_eq!(mr(199).unwrap().valid_time(), 100, "the stored structure, not re-stamped");
+    assert_eq!(mr(5_000).unwrap().valid_time(), 200);
 
     let cl = |t| s.get_at_approximating(t, &ValueApproximation::Closest);
-    assert_eq!(cl(149).unwrap().valid_time, 100);
-    assert_eq!(cl(150).unwrap().valid_time, 100, "a tie goes to the earlier sample");
-    assert_eq!(cl(151).unwrap().valid_time, 200);
-    assert_eq!(cl(0).unwrap().valid_time, 100);
+    assert_eq!(cl(149).unwrap().valid_time(), 100);
+    assert_eq!(cl(150).unwrap().valid_time(), 100, "a tie goes to the earlier sample");
+    assert_eq!(cl(151).unwrap().valid_time(), 200);
+    assert_eq!(cl(0).unwrap().valid_time(), 100);
 
     let none = s.get_at_approximating(150, &ValueApproximation::None);
     assert!(not_available(none));
 
     let d = ValueApproximation::Default(reading(0, 7.0).attributes);
     let dv = s.get_at_approximating(150, &d).unwrap();
-    assert_eq!((dv.valid_time, dv.get("x")), (150, Some(&Value::Double(7.0))));
-    assert_eq!(s.get_at_approximating(100, &d).unwrap().get("x"), Some(&Value::Double(10.0)));
+    assert_eq!((dv.valid_time(), dv.value("x")), (150, Some(Value::Double(7.0))));
+    assert_eq!(s.get_at_approximating(100, &d).unwrap().value("x"), Some(Value::Double(10.0)));
     let bad = ValueApproximation::Default(vec![crate::AttributeValuePair::new("x", 1i64)]);
     assert!(matches!(s.get_at_approximating(150, &bad), Err(QueryError::InvalidDefault { .. })));
 }
@@ -207,7 +210,7 @@ fn generator_merges_samples_sharing_a_valid_time() {
     f.store.add(reading(200, 100.0)).unwrap();
     let x_at = |merge, approximation, t| {
         let p = GeneratorPolicy { approximation, merge };
-        f.store.generator(&p).value_at(t).unwrap().get("x").cloned()
+        f.store.generator(&p).value_at(t).unwrap().value("x")
     };
     use ValueApproximation::{Linear, MostRecent};
     assert_eq!(x_at(MergeRule::KeepFirst, MostRecent, 100), Some(Value::Double(10.0)));
@@ -364,7 +367,7 @@ fn strict_order_with_reordering_drops_equal_valid_times_at_release() {
     let v = violations.drain();
     assert_eq!(v.len(), 1);
     assert_eq!(v[0].constraint, Constraint::Order);
-    assert_eq!(f.store.get_latest().unwrap().get("x"), Some(&Value::Double(1.0)));
+    assert_eq!(f.store.get_latest().unwrap().value("x"), Some(Value::Double(1.0)));
 }
 
 #[test]
@@ -448,10 +451,10 @@ fn create_at_forms_stamp_times_from_the_clock() {
     let attrs = reading(0, 1.0).attributes;
     f.store.create_at("a", 4_000, attrs.clone()).unwrap();
     let s = f.store.get_latest().unwrap();
-    assert_eq!((s.name.as_str(), s.valid_time, s.create_time), ("a", 4_000, 5_000));
+    assert_eq!((s.name(), s.valid_time(), s.create_time()), ("a", 4_000, 5_000));
     f.store.create_at_now("b", attrs.clone()).unwrap();
     let s = f.store.get_latest().unwrap();
-    assert_eq!((s.valid_time, s.create_time), (5_000, 5_000));
+    assert_eq!((s.valid_time(), s.create_time()), (5_000, 5_000));
     let mut m = store(FluentStreamPolicy::default().order(OrderConstraint::StrictMonotone));
     m.store.create_at_blocking("a", 10, attrs.clone()).unwrap();
     assert!(m.store.create_at_blocking("a", 10, attrs.clone()).is_err());
@@ -595,11 +598,11 @@ fn extreme_times_and_values_never_overflow() {
     let st = f.store.stats();
     assert_eq!(st.added, 2);
     assert_eq!(
-        f.store.get_at_approximating(5, &ValueApproximation::Closest).unwrap().valid_time,
+        f.store.get_at_approximating(5, &ValueApproximation::Closest).unwrap().valid_time(),
         i64::MAX
     );
     let lin = f.store.get_at_approximating(0, &ValueApproximation::Linear).unwrap();
-    assert!(matches!(lin.get("n"), Some(Value::Long(_))));
+    assert!(matches!(lin.value("n"), Some(Value::Long(_))));
     // Time caches and sample periods at the extremes.
     let mut c = store(
         FluentStreamPolicy::default()
@@ -631,7 +634,7 @@ fn entries_a_tap_could_not_pass_on_are_counted_unpublished() {
     struct FailingTap(u64);
     impl StoreTap for FailingTap {
         fn observe(&mut self, _: &StoreEvent) {}
-        fn entering(&mut self, _: &Sample) -> Option<Arc<EntityStructure>> {
+        fn entering(&mut self, _: &Sample) -> Option<crate::SharedStructure> {
             self.0 += 1;
             None
         }

@@ -3,12 +3,10 @@
 
 use std::fmt;
 
-use std::sync::Arc;
-
 use crate::policy::Constraint;
+use crate::structure::SharedStructure;
 use crate::time::Time;
 use crate::type_check::InvalidType;
-use crate::value::frame::EntityStructure;
 
 /// A structure broke a constraint of a trajectory's policy (the seed's
 /// `PolicyViolation`). Returned by the blocking add forms, delivered to violation
@@ -240,7 +238,7 @@ pub trait AddForwarder: Send + Sync + std::fmt::Debug {
     /// (`blocking` false): answers [`AddOutcome::Forwarded`] once sent. Blocking: waits
     /// for the writer's gate and answers its outcome, a violation included
     /// ([`AddError::PolicyViolation`]), as an add in the writer's process would (T4).
-    fn forward(&self, es: Arc<EntityStructure>, blocking: bool) -> Result<AddOutcome, AddError>;
+    fn forward(&self, es: SharedStructure, blocking: bool) -> Result<AddOutcome, AddError>;
 
     /// True if the writer is known to be gone (its process exited, or it released the
     /// trajectory), so that an add would reach nobody. Asked before each add, without

@@ -1,12 +1,13 @@
 //! Reading a sample (M3): its name and times, and its attributes by name or by index,
 //! typed, through nested frames and sequences.
 //!
-//! Nothing is copied to read: a string, a sequence or an image's pixels is lent as a
-//! pointer into the sample, valid while the caller holds a handle on it (the sample's,
-//! or a frame's of it); an image's pixels stay in the writer's shared memory chunk,
-//! which the sample holds mapped whatever the writer does meanwhile (exits, crashes,
-//! resets the trajectory). A sample's small attributes were decoded once when it
-//! entered this process's replica; reading one here is a lookup, never a decode.
+//! Nothing is decoded or copied to read (P7): a sample from another process is the
+//! archive its writer put in shared memory, checked once when it arrived, and every
+//! read here is a lookup in it, in place; a string, a sequence or an image's pixels is
+//! lent as a pointer into it, valid while the caller holds a handle on the sample (or
+//! a frame's of it), which keeps the writer's chunk mapped and borrowed whatever the
+//! writer does meanwhile (exits, crashes, resets the trajectory). The Rust path reads
+//! the same way, through `esgm_core::ValueRef`: C takes no step it does not.
 //!
 //! A missing attribute is `ESGM_NO_SUCH_ATTRIBUTE` (the message lists those there
 //! are); one of another sort `ESGM_INVALID_TYPE` (it names both sorts).
@@ -45,39 +46,36 @@ impl View {
         Self { sample, path: Vec::new() }
     }
 
-    /// The frame's name and attributes.
-    pub(crate) fn frame(&self) -> (&str, &[AttributeValuePair]) {
-        let mut name = self.sample.structure.name.as_str();
-        let mut attributes = self.sample.structure.attributes.as_slice();
+    /// The frame's name and attributes, read in place.
+    pub(crate) fn frame(&self) -> (&str, Attributes<'_>) {
+        let mut name = self.sample.structure.name();
+        let mut attributes = self.sample.structure.attributes();
         for step in &self.path {
             // Every step was checked when the view was made, and a sample never
             // changes: each resolves.
             let frame = match *step {
-                Step::Frame(i) => match attributes.get(i).map(|a| &a.value) {
-                    Some(Value::EntityFrame(f)) => Some(f.as_ref()),
-                    _ => None,
-                },
-                Step::Item(i, j) => match attributes.get(i).map(|a| &a.value) {
-                    Some(Value::EntityFrameSeq(seq)) => seq.get(j),
-                    _ => None,
-                },
+                Step::Frame(i) => attributes.clone().nth(i).and_then(|(_, v)| v.as_frame()),
+                Step::Item(i, j) => {
+                    attributes.clone().nth(i).and_then(|(_, v)| v.as_frames()?.get(j))
+                }
             };
-            let Some(f) = frame else { return (name, &[]) };
-            name = f.name.as_str();
-            attributes = f.attributes.as_slice();
+            let Some(f) = frame else { return (name, Attributes::none()) };
+            name = f.name();
+            attributes = f.attributes();
         }
         (name, attributes)
     }
 
     /// The attribute `name` and its index.
-    fn find(&self, name: &str) -> Result<(usize, &Value)> {
+    fn find(&self, name: &str) -> Result<(usize, ValueRef<'_>)> {
         let (frame, attributes) = self.frame();
         attributes
-            .iter()
-            .position(|a| a.name == name)
-            .map(|i| (i, &attributes[i].value))
+            .clone()
+            .enumerate()
+            .find(|(_, (n, _))| *n == name)
+            .map(|(i, (_, v))| (i, v))
             .ok_or_else(|| {
-                let there: Vec<&str> = attributes.iter().map(|a| a.name.as_str()).collect();
+                let there: Vec<&str> = attributes.map(|(n, _)| n).collect();
                 Error::new(
                     esgm_status::ESGM_NO_SUCH_ATTRIBUTE,
                     format!(
@@ -88,13 +86,14 @@ impl View {
             })
     }
 
-    /// The attribute at `index`.
-    fn at(&self, index: usize) -> Result<&AttributeValuePair> {
+    /// The attribute at `index`, with its name.
+    fn at(&self, index: usize) -> Result<(&str, ValueRef<'_>)> {
         let (frame, attributes) = self.frame();
-        attributes.get(index).ok_or_else(|| {
+        let count = attributes.len();
+        attributes.clone().nth(index).ok_or_else(|| {
             Error::new(
                 esgm_status::ESGM_OUT_OF_RANGE,
-                format!("`{frame}` has {} attributes; there is no index {index}", attributes.len()),
+                format!("`{frame}` has {count} attributes; there is no index {index}"),
             )
         })
     }
@@ -169,8 +168,8 @@ pub extern "C" fn esgm_sample_info(s: esgm_sample_t, out: *mut esgm_sample_info_
             let (name, attributes) = v.frame();
             Ok(esgm_sample_info_t {
                 name: esgm_str_t::of(name),
-                valid_time: v.sample.structure.valid_time,
-                create_time: v.sample.structure.create_time,
+                valid_time: v.sample.structure.valid_time(),
+                create_time: v.sample.structure.create_time(),
                 add_time: v.sample.add_time,
                 query_time: v.sample.query_time,
                 attribute_count: attributes.len(),
@@ -192,7 +191,7 @@ pub extern "C" fn esgm_sample_value(
         handles::with(s, |v| {
             let name = unsafe { text(attribute, "attribute") }?;
             let (_, value) = v.find(name)?;
-            let read = esgm_value_t::of(name, value);
+            let read = esgm_value_t::of(name, value)?;
             unsafe { put(out, "out", read) }
         })
     })
@@ -208,8 +207,8 @@ pub extern "C" fn esgm_sample_value_at(
 ) -> esgm_status {
     guard(|| {
         handles::with(s, |v| {
-            let a = v.at(index)?;
-            let read = esgm_value_t::of(&a.name, &a.value);
+            let (name, value) = v.at(index)?;
+            let read = esgm_value_t::of(name, value)?;
             unsafe { put(out, "out", read) }
         })
     })
@@ -230,14 +229,9 @@ pub extern "C" fn esgm_sample_item(
         handles::with(s, |v| {
             let name = unsafe { text(attribute, "attribute") }?;
             let (_, value) = v.find(name)?;
-            let len = match value {
-                Value::SymbolSeq(x) => x.len(),
-                Value::VecSeq(x) => x.len(),
-                Value::Pos2Seq(x) => x.len(),
-                Value::Agg(x) | Value::Collection(x) => x.len(),
-                Value::LongSeq(x) => x.len(),
-                Value::DoubleSeq(x) => x.len(),
-                Value::EntityFrameSeq(_) => {
+            let sort = value.sort();
+            let len = match sort {
+                ValueSort::EntityFrameSeq => {
                     return Err(Error::new(
                         esgm_status::ESGM_INVALID_TYPE,
                         format!(
@@ -245,12 +239,14 @@ pub extern "C" fn esgm_sample_item(
                         ),
                     ));
                 }
-                other => {
-                    return Err(Error::new(
-                        esgm_status::ESGM_INVALID_TYPE,
-                        format!("attribute `{name}` is {}, not a sequence", other.sort()),
-                    ));
-                }
+                ValueSort::OctetSeq => None,
+                _ => value.seq_len(),
+            };
+            let Some(len) = len else {
+                return Err(Error::new(
+                    esgm_status::ESGM_INVALID_TYPE,
+                    format!("attribute `{name}` is {sort}, not a sequence"),
+                ));
             };
             if index >= len {
                 return Err(Error::new(
@@ -258,19 +254,43 @@ pub extern "C" fn esgm_sample_item(
                     format!("attribute `{name}` has {len} items; there is no index {index}"),
                 ));
             }
-            let item = match value {
-                Value::SymbolSeq(x) => {
-                    let mut read = esgm_value_t::of("", &Value::NoValue);
+            let item = match sort {
+                ValueSort::SymbolSeq => {
+                    let mut read = esgm_value_t::of_value("", &Value::NoValue);
                     read.sort = sort_to_c(ValueSort::Symbol);
-                    read.text = esgm_str_t::of(&x[index]);
+                    read.text = esgm_str_t::of(value.symbol_at(index).unwrap_or_default());
                     read
                 }
-                Value::Agg(x) | Value::Collection(x) => esgm_value_t::of("", &x[index]),
-                Value::VecSeq(x) => esgm_value_t::of("", &Value::Vec(x[index])),
-                Value::Pos2Seq(x) => esgm_value_t::of("", &Value::Pos2(x[index])),
-                Value::LongSeq(x) => esgm_value_t::of("", &Value::Long(x[index])),
-                Value::DoubleSeq(x) => esgm_value_t::of("", &Value::Double(x[index])),
-                _ => esgm_value_t::of("", &Value::NoValue),
+                ValueSort::Agg | ValueSort::Collection => match value.elements() {
+                    Some(mut items) => match items.nth(index) {
+                        Some(item) => esgm_value_t::of("", item)?,
+                        None => esgm_value_t::of_value("", &Value::NoValue),
+                    },
+                    None => esgm_value_t::of_value("", &Value::NoValue),
+                },
+                ValueSort::VecSeq => esgm_value_t::of_value(
+                    "",
+                    &value.vec3_at(index).map_or(Value::NoValue, Value::Vec),
+                ),
+                ValueSort::Pos2Seq => esgm_value_t::of_value(
+                    "",
+                    &value.pos2_at(index).map_or(Value::NoValue, Value::Pos2),
+                ),
+                ValueSort::LongSeq => esgm_value_t::of_value(
+                    "",
+                    &value
+                        .as_long_seq()
+                        .and_then(|x| x.get(index).copied())
+                        .map_or(Value::NoValue, Value::Long),
+                ),
+                ValueSort::DoubleSeq => esgm_value_t::of_value(
+                    "",
+                    &value
+                        .as_double_seq()
+                        .and_then(|x| x.get(index).copied())
+                        .map_or(Value::NoValue, Value::Double),
+                ),
+                _ => esgm_value_t::of_value("", &Value::NoValue),
             };
             unsafe { put(out, "out", item) }
         })
@@ -278,7 +298,7 @@ pub extern "C" fn esgm_sample_item(
 }
 
 /// The value of `attribute`, which must be of `sort` (a wrong one is named).
-fn typed(v: &View, attribute: *const c_char, sort: ValueSort) -> Result<&Value> {
+fn typed<'a>(v: &'a View, attribute: *const c_char, sort: ValueSort) -> Result<ValueRef<'a>> {
     let name = unsafe { text(attribute, "attribute") }?;
     let (_, value) = v.find(name)?;
     if value.sort() != sort {
@@ -291,6 +311,13 @@ fn typed(v: &View, attribute: *const c_char, sort: ValueSort) -> Result<&Value> 
     Ok(value)
 }
 
+/// A number read from a value `typed` checked: its sort has one.
+fn checked<T>(read: Option<T>) -> Result<T> {
+    read.ok_or_else(|| {
+        Error::new(esgm_status::ESGM_INVALID_TYPE, "the attribute has no such value")
+    })
+}
+
 /// Reads a `Long` attribute.
 #[unsafe(no_mangle)]
 pub extern "C" fn esgm_sample_get_long(
@@ -300,8 +327,8 @@ pub extern "C" fn esgm_sample_get_long(
 ) -> esgm_status {
     guard(|| {
         handles::with(s, |v| {
-            let Value::Long(x) = typed(v, attribute, ValueSort::Long)? else { unreachable_sort() };
-            unsafe { put(out, "out", *x) }
+            let x = checked(typed(v, attribute, ValueSort::Long)?.as_long())?;
+            unsafe { put(out, "out", x) }
         })
     })
 }
@@ -315,10 +342,8 @@ pub extern "C" fn esgm_sample_get_double(
 ) -> esgm_status {
     guard(|| {
         handles::with(s, |v| {
-            let Value::Double(x) = typed(v, attribute, ValueSort::Double)? else {
-                unreachable_sort()
-            };
-            unsafe { put(out, "out", *x) }
+            let x = checked(typed(v, attribute, ValueSort::Double)?.as_double())?;
+            unsafe { put(out, "out", x) }
         })
     })
 }
@@ -332,8 +357,8 @@ pub extern "C" fn esgm_sample_get_bool(
 ) -> esgm_status {
     guard(|| {
         handles::with(s, |v| {
-            let Value::Bool(x) = typed(v, attribute, ValueSort::Bool)? else { unreachable_sort() };
-            unsafe { put(out, "out", *x) }
+            let x = checked(typed(v, attribute, ValueSort::Bool)?.as_bool())?;
+            unsafe { put(out, "out", x) }
         })
     })
 }
@@ -347,8 +372,8 @@ pub extern "C" fn esgm_sample_get_time(
 ) -> esgm_status {
     guard(|| {
         handles::with(s, |v| {
-            let Value::Time(x) = typed(v, attribute, ValueSort::Time)? else { unreachable_sort() };
-            unsafe { put(out, "out", *x) }
+            let x = checked(typed(v, attribute, ValueSort::Time)?.as_long())?;
+            unsafe { put(out, "out", x) }
         })
     })
 }
@@ -362,9 +387,7 @@ pub extern "C" fn esgm_sample_get_string(
 ) -> esgm_status {
     guard(|| {
         handles::with(s, |v| {
-            let Value::String(x) = typed(v, attribute, ValueSort::String)? else {
-                unreachable_sort()
-            };
+            let x = checked(typed(v, attribute, ValueSort::String)?.as_str())?;
             unsafe { put(out, "out", esgm_str_t::of(x)) }
         })
     })
@@ -383,9 +406,7 @@ pub extern "C" fn esgm_sample_get_octets(
         crate::strings::writable(data, "data")?;
         crate::strings::writable(len, "len")?;
         handles::with(s, |v| {
-            let Value::OctetSeq(o) = typed(v, attribute, ValueSort::OctetSeq)? else {
-                unreachable_sort()
-            };
+            let o = checked(typed(v, attribute, ValueSort::OctetSeq)?.as_bytes())?;
             unsafe {
                 put(data, "data", o.as_ptr())?;
                 put(len, "len", o.len())
@@ -404,10 +425,8 @@ pub extern "C" fn esgm_sample_octets_are_shared(
 ) -> esgm_status {
     guard(|| {
         handles::with(s, |v| {
-            let Value::OctetSeq(o) = typed(v, attribute, ValueSort::OctetSeq)? else {
-                unreachable_sort()
-            };
-            unsafe { put(out, "out", o.is_held()) }
+            let shared = typed(v, attribute, ValueSort::OctetSeq)?.octets_are_shared();
+            unsafe { put(out, "out", shared) }
         })
     })
 }
@@ -424,9 +443,7 @@ pub extern "C" fn esgm_sample_get_long_seq(
         crate::strings::writable(data, "data")?;
         crate::strings::writable(len, "len")?;
         handles::with(s, |v| {
-            let Value::LongSeq(x) = typed(v, attribute, ValueSort::LongSeq)? else {
-                unreachable_sort()
-            };
+            let x = lent(checked(typed(v, attribute, ValueSort::LongSeq)?.as_long_seq())?)?;
             unsafe {
                 put(data, "data", x.as_ptr())?;
                 put(len, "len", x.len())
@@ -447,9 +464,7 @@ pub extern "C" fn esgm_sample_get_double_seq(
         crate::strings::writable(data, "data")?;
         crate::strings::writable(len, "len")?;
         handles::with(s, |v| {
-            let Value::DoubleSeq(x) = typed(v, attribute, ValueSort::DoubleSeq)? else {
-                unreachable_sort()
-            };
+            let x = lent(checked(typed(v, attribute, ValueSort::DoubleSeq)?.as_double_seq())?)?;
             unsafe {
                 put(data, "data", x.as_ptr())?;
                 put(len, "len", x.len())
@@ -458,9 +473,17 @@ pub extern "C" fn esgm_sample_get_double_seq(
     })
 }
 
-/// `typed` checked the sort: the match that follows it cannot miss.
-fn unreachable_sort() -> ! {
-    unreachable!("the attribute's sort was checked")
+/// Numbers lent where they lie in the sample; numbers that had to be converted (an
+/// archive read on a big-endian host) cannot be lent past this call.
+pub(crate) fn lent<T: Clone>(numbers: std::borrow::Cow<'_, [T]>) -> Result<&[T]> {
+    match numbers {
+        std::borrow::Cow::Borrowed(x) => Ok(x),
+        std::borrow::Cow::Owned(_) => Err(Error::new(
+            esgm_status::ESGM_INVALID_TYPE,
+            "this host's byte order differs from the archive's: read the items one by one \
+             (esgm_sample_item)",
+        )),
+    }
 }
 
 /// The `EntityFrame` attribute `attribute`, as a new handle (to free) that reads like
@@ -476,7 +499,7 @@ pub extern "C" fn esgm_sample_frame(
         let v = view(s)?;
         let name = unsafe { text(attribute, "attribute") }?;
         let (index, value) = v.find(name)?;
-        if !matches!(value, Value::EntityFrame(_)) {
+        if value.as_frame().is_none() {
             return Err(Error::new(
                 esgm_status::ESGM_INVALID_TYPE,
                 format!("attribute `{name}` is {}, not EntityFrame", value.sort()),
@@ -501,7 +524,7 @@ pub extern "C" fn esgm_sample_frame_at(
         let v = view(s)?;
         let name = unsafe { text(attribute, "attribute") }?;
         let (at, value) = v.find(name)?;
-        let Value::EntityFrameSeq(seq) = value else {
+        let Some(seq) = value.as_frames() else {
             return Err(Error::new(
                 esgm_status::ESGM_INVALID_TYPE,
                 format!("attribute `{name}` is {}, not EntityFrameSeq", value.sort()),
@@ -531,13 +554,14 @@ pub extern "C" fn esgm_sample_to_json(
         handles::with(s, |v| {
             let (name, attributes) = v.frame();
             let mut fields = serde_json::Map::new();
-            for a in attributes {
-                fields.insert(a.name.clone(), json_value(&a.value));
+            for (attribute, value) in attributes {
+                // For printing: values converted (an image to its length).
+                fields.insert(attribute.to_owned(), json_value(&value.to_value()));
             }
             let text = serde_json::json!({
                 "name": name,
-                "valid_time": v.sample.structure.valid_time,
-                "create_time": v.sample.structure.create_time,
+                "valid_time": v.sample.structure.valid_time(),
+                "create_time": v.sample.structure.create_time(),
                 "add_time": v.sample.add_time,
                 "attributes": fields,
             })

@@ -73,11 +73,13 @@ pub struct esgm_value_t {
 }
 
 impl esgm_value_t {
-    /// `value`, named `name`, lent from its sample.
-    pub(crate) fn of(name: &str, value: &Value) -> Self {
+    /// `value`, named `name`, lent from its sample: read where it lies (in the writer's
+    /// shared memory for a sample from another process), never copied.
+    pub(crate) fn of(name: &str, value: ValueRef<'_>) -> Result<Self> {
+        let sort = value.sort();
         let mut v = Self {
             name: esgm_str_t::of(name),
-            sort: sort_to_c(value.sort()),
+            sort: sort_to_c(sort),
             long_value: 0,
             double_value: 0.0,
             bool_value: false,
@@ -89,35 +91,80 @@ impl esgm_value_t {
             pose: esgm_pose_t::default(),
             handle: 0,
         };
-        match value {
-            Value::NoValue | Value::EntityFrame(_) => {}
-            Value::Long(x) | Value::Time(x) => v.long_value = *x,
-            Value::Double(x) | Value::Altitude(x) => v.double_value = *x,
-            Value::Bool(b) => v.bool_value = *b,
-            Value::String(s) | Value::Symbol(s) => v.text = esgm_str_t::of(s),
-            Value::OctetSeq(o) => (v.data, v.len) = (o.as_ptr().cast(), o.len()),
-            Value::LongSeq(x) => (v.data, v.len) = (x.as_ptr().cast(), x.len()),
-            Value::DoubleSeq(x) => (v.data, v.len) = (x.as_ptr().cast(), x.len()),
-            Value::SymbolSeq(x) => v.len = x.len(),
-            Value::VecSeq(x) => v.len = x.len(),
-            Value::Pos2Seq(x) => v.len = x.len(),
-            Value::Agg(x) | Value::Collection(x) => v.len = x.len(),
-            Value::EntityFrameSeq(x) => v.len = x.len(),
-            Value::Vec(x) => v.vec = (*x).into(),
-            Value::Pos2(p) => v.pos2 = (*p).into(),
-            Value::Position(p) => v.pose.position = (*p).into(),
-            Value::Rotation(r) => v.pose.rotation = (*r).into(),
-            Value::PositionAltitude(p) => {
+        match sort {
+            ValueSort::Long | ValueSort::Time => v.long_value = value.as_long().unwrap_or_default(),
+            ValueSort::Double | ValueSort::Altitude => {
+                v.double_value = value.as_double().unwrap_or_default()
+            }
+            ValueSort::Bool => v.bool_value = value.as_bool().unwrap_or_default(),
+            ValueSort::String | ValueSort::Symbol => {
+                v.text = esgm_str_t::of(value.as_str().unwrap_or_default())
+            }
+            ValueSort::OctetSeq => {
+                if let Some(o) = value.as_bytes() {
+                    (v.data, v.len) = (o.as_ptr().cast(), o.len());
+                }
+            }
+            ValueSort::LongSeq => {
+                if let Some(x) = value.as_long_seq() {
+                    let x = crate::sample::lent(x)?;
+                    (v.data, v.len) = (x.as_ptr().cast(), x.len());
+                }
+            }
+            ValueSort::DoubleSeq => {
+                if let Some(x) = value.as_double_seq() {
+                    let x = crate::sample::lent(x)?;
+                    (v.data, v.len) = (x.as_ptr().cast(), x.len());
+                }
+            }
+            ValueSort::SymbolSeq
+            | ValueSort::VecSeq
+            | ValueSort::Pos2Seq
+            | ValueSort::Agg
+            | ValueSort::Collection
+            | ValueSort::EntityFrameSeq => v.len = value.seq_len().unwrap_or_default(),
+            ValueSort::Vec => v.vec = value.as_vec3().unwrap_or_default().into(),
+            ValueSort::Pos2 => v.pos2 = value.as_pos2().unwrap_or_default().into(),
+            ValueSort::Position => v.pose.position = value.as_position().unwrap_or_default().into(),
+            ValueSort::Rotation => v.pose.rotation = value.as_rotation().unwrap_or_default().into(),
+            ValueSort::PositionAltitude => {
+                let p = value.as_position_altitude().unwrap_or_default();
                 v.pose.position = p.position.into();
                 v.pose.altitude = p.altitude;
             }
-            Value::PositionAltitudeRotation(p) => {
+            ValueSort::PositionAltitudeRotation => {
+                let p = value.as_pose().unwrap_or_default();
                 v.pose.position = p.position.into();
                 v.pose.altitude = p.altitude;
                 v.pose.rotation = p.rotation.into();
             }
+            _ => {}
         }
-        v
+        Ok(v)
+    }
+
+    /// An owned value that holds no bytes to lend (a number, a point, no value), named
+    /// `name`.
+    pub(crate) fn of_value(name: &str, value: &Value) -> Self {
+        // Nothing is lent from a value without bytes, and numbers are never refused.
+        Self::of(name, value.into()).unwrap_or_else(|_| Self::of_nothing(name))
+    }
+
+    fn of_nothing(name: &str) -> Self {
+        Self {
+            name: esgm_str_t::of(name),
+            sort: sort_to_c(ValueSort::NoValue),
+            long_value: 0,
+            double_value: 0.0,
+            bool_value: false,
+            text: esgm_str_t::of(""),
+            data: std::ptr::null(),
+            len: 0,
+            vec: esgm_vec3_t::default(),
+            pos2: esgm_pos2_t::default(),
+            pose: esgm_pose_t::default(),
+            handle: 0,
+        }
     }
 }
 
@@ -375,12 +422,14 @@ pub extern "C" fn esgm_sample_values(
         }
         crate::handles::with(s, |v| {
             let (_, attrs) = v.frame();
-            for (i, a) in attrs.iter().take(capacity).enumerate() {
+            let n = attrs.len();
+            for (i, (name, value)) in attrs.take(capacity).enumerate() {
+                let read = esgm_value_t::of(name, value)?;
                 // SAFETY: `out` has room for `capacity` values (checked not null and
                 // aligned above), and `i < capacity`.
-                unsafe { out.add(i).write(esgm_value_t::of(&a.name, &a.value)) };
+                unsafe { out.add(i).write(read) };
             }
-            unsafe { put(count, "count", attrs.len()) }
+            unsafe { put(count, "count", n) }
         })
     })
 }

@@ -1,13 +1,15 @@
 //! A sample as Python sees it: its four times, and its attributes as a read-only
-//! mapping (`sample["x"]`, `sample.keys()`, `dict(sample.items())`), converted when read.
-//! An image's pixels (`image_data` beside `width`, `height` and `format`) are a
-//! read-only numpy array shaped `(height, width, 3)` (rgb8) or `(height, width)`
-//! (mono8), over the writer's memory: no copy.
+//! mapping (`sample["x"]`, `sample.keys()`, `dict(sample.items())`), converted when read,
+//! from where the sample lies (a sample from another process is read in its writer's
+//! shared memory, nothing decoded before an attribute is asked for). An image's pixels
+//! (`image_data` beside `width`, `height` and `format`) are a read-only numpy array
+//! shaped `(height, width, 3)` (rgb8) or `(height, width)` (mono8), over the writer's
+//! memory: no copy.
 
 use std::sync::Arc;
 
 use esgm_core::library::Image;
-use esgm_core::{EntityStructure, Value};
+use esgm_core::{SharedStructure, ValueSort};
 use pyo3::exceptions::PyKeyError;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
@@ -18,7 +20,7 @@ use crate::values::from_value;
 #[pyclass(frozen, module = "esgm")]
 #[derive(Debug)]
 pub struct Sample {
-    pub(crate) structure: Arc<EntityStructure>,
+    pub(crate) structure: SharedStructure,
     pub(crate) add_time: i64,
     pub(crate) query_time: i64,
     pub(crate) lineage: Option<Arc<esgm_core::Lineage>>,
@@ -36,10 +38,7 @@ impl Sample {
     }
 
     fn long(&self, name: &str) -> Option<i64> {
-        match self.structure.get(name) {
-            Some(Value::Long(x)) => Some(*x),
-            _ => None,
-        }
+        self.structure.get(name).filter(|v| v.sort() == ValueSort::Long)?.as_long()
     }
 
     /// `(height, width[, 3])` if the structure is an image whose pixels `len` bytes fit.
@@ -57,9 +56,8 @@ impl Sample {
             .get(key)
             .ok_or_else(|| PyKeyError::new_err(format!("the sample has no attribute `{key}`")))?;
         let out = from_value(py, v)?;
-        if let Value::OctetSeq(o) = v {
-            let len: &[u8] = o.as_ref();
-            if let Some(shape) = self.image_shape(len.len()) {
+        if let Some(bytes) = v.as_bytes() {
+            if let Some(shape) = self.image_shape(bytes.len()) {
                 return out.call_method1("reshape", (shape,));
             }
         }
@@ -72,17 +70,17 @@ impl Sample {
     /// The entity's name.
     #[getter]
     fn name(&self) -> &str {
-        &self.structure.name
+        self.structure.name()
     }
     /// When its content is true of the world (ns).
     #[getter]
     fn valid_time(&self) -> i64 {
-        self.structure.valid_time
+        self.structure.valid_time()
     }
     /// When its content was made (ns).
     #[getter]
     fn create_time(&self) -> i64 {
-        self.structure.create_time
+        self.structure.create_time()
     }
     /// When it entered the trajectory (ns).
     #[getter]
@@ -110,28 +108,27 @@ impl Sample {
         self.structure.get(key).is_some()
     }
     fn __len__(&self) -> usize {
-        self.structure.attributes.len()
+        self.structure.attribute_count()
     }
     fn __iter__<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         self.keys(py)?.try_iter().map(Bound::into_any)
     }
     /// The attribute names, in the type's order.
     fn keys<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
-        PyList::new(py, self.structure.attributes.iter().map(|p| p.name.as_str()))
+        PyList::new(py, self.structure.attributes().map(|(name, _)| name))
     }
     /// `(name, value)` pairs.
     fn items<'py>(&self, py: Python<'py>) -> PyResult<Vec<(String, Bound<'py, PyAny>)>> {
         self.structure
-            .attributes
-            .iter()
-            .map(|p| Ok((p.name.clone(), self.value(py, &p.name)?)))
+            .attributes()
+            .map(|(name, _)| Ok((name.to_owned(), self.value(py, name)?)))
             .collect()
     }
     /// The attributes as a `dict`.
     fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
-        for p in &self.structure.attributes {
-            d.set_item(&p.name, self.value(py, &p.name)?)?;
+        for (name, _) in self.structure.attributes() {
+            d.set_item(name, self.value(py, name)?)?;
         }
         Ok(d)
     }
@@ -149,11 +146,11 @@ impl Sample {
         cls.call((), Some(&kwargs))
     }
     fn __repr__(&self) -> String {
-        let names: Vec<&str> = self.structure.attributes.iter().map(|p| p.name.as_str()).collect();
+        let names: Vec<&str> = self.structure.attributes().map(|(name, _)| name).collect();
         format!(
             "Sample(name={:?}, valid_time={}, add_time={}, attributes=[{}])",
-            self.structure.name,
-            self.structure.valid_time,
+            self.structure.name(),
+            self.structure.valid_time(),
             self.add_time,
             names.join(", ")
         )

@@ -11,7 +11,8 @@ use esgm_core::value::{
     Pos2, Position, PositionAltitude, PositionAltitudeRotation, Rotation, Vec3,
 };
 use esgm_core::{
-    Attr, AttributeValuePair, EntityFrame, EntityStructureType, Octets, Value, ValueSort,
+    Attr, AttributeValuePair, EntityFrame, EntityStructureType, FrameRef, Octets, Value, ValueRef,
+    ValueSort,
 };
 use numpy::ndarray::ArrayView1;
 use numpy::{PyArray1, PyArrayMethods, PyUntypedArrayMethods};
@@ -259,66 +260,103 @@ pub fn octets_array<'py>(py: Python<'py>, octets: &Octets) -> PyResult<Bound<'py
 }
 
 /// A value as Python: numbers, strings, lists, dicts for frames, and octets as
-/// zero-copy read-only numpy arrays.
-pub fn from_value<'py>(py: Python<'py>, v: &Value) -> PyResult<Bound<'py, PyAny>> {
-    Ok(match v {
-        Value::NoValue => py.None().into_bound(py),
-        Value::Long(x) | Value::Time(x) => x.into_pyobject(py)?.into_any(),
-        Value::Double(x) | Value::Altitude(x) => x.into_pyobject(py)?.into_any(),
-        Value::Bool(x) => PyBool::new(py, *x).to_owned().into_any(),
-        Value::String(s) | Value::Symbol(s) => PyString::new(py, s).into_any(),
-        Value::OctetSeq(o) => octets_array(py, o)?,
-        Value::LongSeq(x) => PyList::new(py, x)?.into_any(),
-        Value::DoubleSeq(x) => PyList::new(py, x)?.into_any(),
-        Value::SymbolSeq(x) => PyList::new(py, x)?.into_any(),
-        Value::Vec(p) => PyTuple::new(py, [p.x, p.y, p.z])?.into_any(),
-        Value::Pos2(p) => PyTuple::new(py, [p.x, p.y])?.into_any(),
-        Value::VecSeq(x) => {
-            let items = x
-                .iter()
-                .map(|p| PyTuple::new(py, [p.x, p.y, p.z]))
+/// zero-copy read-only numpy arrays. Read in place: a sample from another process is
+/// converted from its archive in shared memory, field by field, and its pixels are
+/// not copied (the array's base holds the memory they lie in).
+pub fn from_value<'py>(py: Python<'py>, v: ValueRef<'_>) -> PyResult<Bound<'py, PyAny>> {
+    let tuple = |xs: &[f64]| PyTuple::new(py, xs).map(Bound::into_any);
+    Ok(match v.sort() {
+        ValueSort::Long | ValueSort::Time => v.as_long().into_pyobject(py)?.into_any(),
+        ValueSort::Double | ValueSort::Altitude => v.as_double().into_pyobject(py)?.into_any(),
+        ValueSort::Bool => v.as_bool().into_pyobject(py)?.to_owned().into_any(),
+        ValueSort::String | ValueSort::Symbol => {
+            PyString::new(py, v.as_str().unwrap_or_default()).into_any()
+        }
+        ValueSort::OctetSeq => match v.as_octets() {
+            Some(o) => octets_array(py, &o)?,
+            None => py.None().into_bound(py),
+        },
+        ValueSort::LongSeq => {
+            PyList::new(py, v.as_long_seq().unwrap_or_default().iter())?.into_any()
+        }
+        ValueSort::DoubleSeq => {
+            PyList::new(py, v.as_double_seq().unwrap_or_default().iter())?.into_any()
+        }
+        ValueSort::SymbolSeq => PyList::new(py, v.symbols().unwrap_or_default())?.into_any(),
+        ValueSort::Vec => {
+            let p = v.as_vec3().unwrap_or_default();
+            tuple(&[p.x, p.y, p.z])?
+        }
+        ValueSort::Pos2 => {
+            let p = v.as_pos2().unwrap_or_default();
+            tuple(&[p.x, p.y])?
+        }
+        ValueSort::VecSeq => {
+            let n = v.seq_len().unwrap_or_default();
+            let items = (0..n)
+                .filter_map(|i| v.vec3_at(i))
+                .map(|p| tuple(&[p.x, p.y, p.z]))
                 .collect::<PyResult<Vec<_>>>()?;
             PyList::new(py, items)?.into_any()
         }
-        Value::Pos2Seq(x) => {
-            let items =
-                x.iter().map(|p| PyTuple::new(py, [p.x, p.y])).collect::<PyResult<Vec<_>>>()?;
+        ValueSort::Pos2Seq => {
+            let n = v.seq_len().unwrap_or_default();
+            let items = (0..n)
+                .filter_map(|i| v.pos2_at(i))
+                .map(|p| tuple(&[p.x, p.y]))
+                .collect::<PyResult<Vec<_>>>()?;
             PyList::new(py, items)?.into_any()
         }
-        Value::Position(p) => PyTuple::new(py, [p.north, p.east])?.into_any(),
-        Value::Rotation(r) => PyTuple::new(py, [r.roll, r.pitch, r.yaw])?.into_any(),
-        Value::PositionAltitude(p) => {
-            PyTuple::new(py, [p.position.north, p.position.east, p.altitude])?.into_any()
+        ValueSort::Position => {
+            let p = v.as_position().unwrap_or_default();
+            tuple(&[p.north, p.east])?
         }
-        Value::PositionAltitudeRotation(p) => PyTuple::new(
-            py,
-            [
+        ValueSort::Rotation => {
+            let r = v.as_rotation().unwrap_or_default();
+            tuple(&[r.roll, r.pitch, r.yaw])?
+        }
+        ValueSort::PositionAltitude => {
+            let p = v.as_position_altitude().unwrap_or_default();
+            tuple(&[p.position.north, p.position.east, p.altitude])?
+        }
+        ValueSort::PositionAltitudeRotation => {
+            let p = v.as_pose().unwrap_or_default();
+            tuple(&[
                 p.position.north,
                 p.position.east,
                 p.altitude,
                 p.rotation.roll,
                 p.rotation.pitch,
                 p.rotation.yaw,
-            ],
-        )?
-        .into_any(),
-        Value::Agg(items) | Value::Collection(items) => {
-            let items = items.iter().map(|x| from_value(py, x)).collect::<PyResult<Vec<_>>>()?;
+            ])?
+        }
+        ValueSort::Agg | ValueSort::Collection => {
+            let items = match v.elements() {
+                Some(items) => items.map(|x| from_value(py, x)).collect::<PyResult<Vec<_>>>()?,
+                None => Vec::new(),
+            };
             PyList::new(py, items)?.into_any()
         }
-        Value::EntityFrame(f) => frame_dict(py, f)?.into_any(),
-        Value::EntityFrameSeq(fs) => {
-            let items = fs.iter().map(|f| frame_dict(py, f)).collect::<PyResult<Vec<_>>>()?;
+        ValueSort::EntityFrame => match v.as_frame() {
+            Some(f) => frame_dict(py, f)?.into_any(),
+            None => py.None().into_bound(py),
+        },
+        ValueSort::EntityFrameSeq => {
+            let items = match v.as_frames() {
+                Some(fs) => fs.iter().map(|f| frame_dict(py, f)).collect::<PyResult<Vec<_>>>()?,
+                None => Vec::new(),
+            };
             PyList::new(py, items)?.into_any()
         }
+        _ => py.None().into_bound(py),
     })
 }
 
-fn frame_dict<'py>(py: Python<'py>, f: &EntityFrame) -> PyResult<Bound<'py, PyDict>> {
+fn frame_dict<'py>(py: Python<'py>, f: FrameRef<'_>) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
-    d.set_item("name", &f.name)?;
-    for p in &f.attributes {
-        d.set_item(&p.name, from_value(py, &p.value)?)?;
+    d.set_item("name", f.name())?;
+    for (name, value) in f.attributes() {
+        d.set_item(name, from_value(py, value)?)?;
     }
     Ok(d)
 }

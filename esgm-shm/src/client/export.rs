@@ -18,9 +18,8 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use esgm_core::esgm::TrajectoryKind;
-use esgm_core::value::Value;
 use esgm_core::{
-    EntityStructure, EntityTrajectoryStructure, InProcessTrajectory, Rejection, Sample, StoreEvent,
+    EntityTrajectoryStructure, InProcessTrajectory, Rejection, Sample, SharedStructure, StoreEvent,
     TapId,
 };
 
@@ -111,9 +110,12 @@ impl Outlet {
     /// Publishes an entering structure. One whose pixels are this outlet's loan is sent
     /// in place, and the structure as this process received it is returned, for the
     /// store to keep (see [`super::image_loans`]).
-    fn enter(&mut self, sample: &Sample, owner: usize) -> Option<Arc<EntityStructure>> {
+    fn enter(&mut self, sample: &Sample, owner: usize) -> Option<SharedStructure> {
         let es = &sample.structure;
-        let loaned = self.own.is_some().then(|| loaned_image(es, owner)).flatten();
+        let loaned = match (&self.own, es.as_owned()) {
+            (Some(_), Some(owned)) => loaned_image(owned, owner),
+            _ => None,
+        };
         let Some(holder) = loaned else {
             self.encode(sample);
             return None;
@@ -138,7 +140,7 @@ impl Outlet {
         }
         let index = self.reserve();
         let sent = chunk
-            .complete(&self.publisher, &es.name, es.valid_time, es.create_time)
+            .complete(&self.publisher, es.name(), es.valid_time(), es.create_time())
             .and_then(|loan| match index {
                 Some(index) => loan.send_kept(sample.add_time, index),
                 None => loan.send_added(sample.add_time),
@@ -158,13 +160,12 @@ impl Outlet {
             self.not_kept(index, &"the image sent did not come back to be kept");
             return None;
         };
-        if let Some(Value::OctetSeq(pixels)) = received.get("image_data") {
-            loan.sent(pixels.clone());
+        if let Some(pixels) = received.get("image_data").and_then(|v| v.as_octets()) {
+            loan.sent(pixels);
         }
         // Kept from the structure as this process received it (its pixels held in the
         // sent chunk), after the readers were woken.
-        let received = Arc::new(received);
-        self.keep(index, &Sample::new(Arc::clone(&received), sample.add_time, sample.add_time));
+        self.keep(index, &Sample::new(received.clone(), sample.add_time, sample.add_time));
         Some(received)
     }
 
@@ -173,8 +174,8 @@ impl Outlet {
     fn encode(&mut self, sample: &Sample) {
         self.publish(&StoreEvent::Entered(sample.clone()));
         if let Some((_, owner)) = &self.own {
-            let octets = sample.structure.attributes.iter().any(|a| {
-                matches!(&a.value, Value::OctetSeq(o) if o.len() >= crate::client::holdings::HOLD_MIN_BYTES)
+            let octets = sample.structure.attributes().any(|(_, v)| {
+                v.as_bytes().is_some_and(|o| o.len() >= crate::client::holdings::HOLD_MIN_BYTES)
             });
             if octets {
                 owner.count_sent(false);
@@ -183,15 +184,15 @@ impl Outlet {
         self.drain_own();
     }
 
-    /// Takes what the own subscriber received, up to the sample `sequence`, and
-    /// decodes that one (its pixels held in place).
-    fn receive_own(&mut self, sequence: u64) -> Option<EntityStructure> {
+    /// Takes what the own subscriber received, up to the sample `sequence`, and holds
+    /// that one, read in place.
+    fn receive_own(&mut self, sequence: u64) -> Option<SharedStructure> {
         let (own, owner) = self.own.as_ref()?;
         loop {
             match own.receive() {
                 Ok(Some(sample)) if sample.header().sequence == sequence => {
                     return owner
-                        .decode(sample)
+                        .hold(sample)
                         .map_err(|e| {
                             tracing::warn!(error = %e, "cannot read back an image this process sent")
                         })
@@ -268,6 +269,7 @@ impl Outlet {
         if let Err(e) = kept.write(index, &sample.structure, sample.add_time) {
             self.not_kept(Some(index), &e);
         }
+        esgm_core::probe::mark(esgm_core::probe::Step::Kept);
     }
 
     /// The structure reserved at `index` was not kept, for `why`: logged and counted.
@@ -484,7 +486,7 @@ impl Export {
                 if let Some(former) = &former {
                     for entry in &former.entries {
                         if start.known().is_none_or(|k| entry.index > k) {
-                            s.replicate(Arc::new(entry.structure.clone()), entry.add_time, None);
+                            s.replicate(entry.structure.clone().into(), entry.add_time, None);
                         }
                     }
                 }
@@ -701,7 +703,7 @@ impl esgm_core::StoreTap for OutletTap {
         self.outlet.lock().publish(event);
     }
 
-    fn entering(&mut self, sample: &Sample) -> Option<Arc<EntityStructure>> {
+    fn entering(&mut self, sample: &Sample) -> Option<SharedStructure> {
         self.outlet.lock().enter(sample, self.owner)
     }
 

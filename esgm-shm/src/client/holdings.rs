@@ -1,33 +1,35 @@
-//! Samples kept borrowed because values elsewhere in the process read their bytes in
-//! place: how an image received from another process reaches a replica's cache, its
-//! units, its subscribers and query answers without being copied.
+//! Samples kept borrowed because values elsewhere in the process read them in place:
+//! how a structure received from another process reaches a replica's cache, its
+//! units, its subscribers and query answers without being decoded or copied (P7).
 //!
-//! A received sample is decoded with [`codec::decode_holding`]: its small fields are
-//! copied (they cost less than bookkeeping), its octet sequences become
-//! [`Octets::held`](esgm_core::value::Octets::held) values pointing into the
-//! shared-memory chunk. The values share one `SharedChunk`, which *owns* the
-//! received sample — and through it a share of the subscriber port and node that keep
-//! the chunk borrowed and mapped (see [`ReceivedSample`]). The chunk goes back to its
-//! publisher when the last value reading it is dropped, on whatever thread that
-//! happens, and never before: destroying the trajectory, dropping the connection or a
-//! panic of any esgm thread drops only *other* shares. Nothing has to remember to keep
-//! a sample alive; the value that reads it does.
+//! A received sample, checked once by its subscriber, becomes an archived
+//! [`SharedStructure`] read where it arrived: every field, and every
+//! [`Octets`](esgm_core::value::Octets) taken from it, reads the shared-memory chunk.
+//! They share one `SharedChunk`, which *owns* the received sample — and through it a
+//! share of the subscriber port and node that keep the chunk borrowed and mapped (see
+//! [`ReceivedSample`]). The chunk goes back to its publisher when the last value
+//! reading it is dropped, on whatever thread that happens, and never before:
+//! destroying the trajectory, dropping the connection or a panic of any esgm thread
+//! drops only *other* shares. Nothing has to remember to keep a sample alive; the
+//! value that reads it does.
 //!
 //! A subscriber may borrow only so many samples at once
-//! ([`crate::TrajectoryQos::max_borrowed_samples`]): an owner past its budget, or a
-//! sample too small to be worth holding, is copied instead, and the copy is counted.
+//! ([`crate::TrajectoryQos::max_borrowed_samples`]): past its budget, the archive's
+//! bytes are copied onto this process's heap (still archived, never decoded), the chunk
+//! goes back at once, and the copy is counted.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 
-use esgm_core::EntityStructure;
-use esgm_core::codec::{self, CodecError};
+use esgm_core::SharedStructure;
+use esgm_core::codec::CodecError;
 use esgm_core::value::OctetsHolder;
 
 use crate::data_plane::received::ReceivedSample;
 
-/// Archives smaller than this are copied, never held: holding costs a borrowed chunk
-/// (of a limited budget), which only pays off for large octet sequences such as images.
+/// Structures with octet sequences at least this long count as images: sent from a
+/// loan or copied ([`HoldingOwner::count_sent`]), and their copies past a reader's
+/// budget are worth a warning.
 pub(crate) const HOLD_MIN_BYTES: usize = 16 * 1024;
 
 pub use crate::control::holding_stats::HoldingStats;
@@ -38,6 +40,7 @@ pub(crate) struct Holdings {
     held_now: AtomicUsize,
     held_total: AtomicU64,
     copied_over_budget: AtomicU64,
+    copied_small: AtomicU64,
     sent_in_place: AtomicU64,
     sent_copied: AtomicU64,
 }
@@ -49,6 +52,7 @@ impl Holdings {
             held_now: self.held_now.load(Ordering::Relaxed),
             held_total: self.held_total.load(Ordering::Relaxed),
             copied_over_budget: self.copied_over_budget.load(Ordering::Relaxed),
+            copied_small: self.copied_small.load(Ordering::Relaxed),
             sent_in_place: self.sent_in_place.load(Ordering::Relaxed),
             sent_copied: self.sent_copied.load(Ordering::Relaxed),
         }
@@ -80,15 +84,17 @@ impl HoldingOwner {
         counter.fetch_add(1, Ordering::Relaxed);
     }
 
-    /// Decodes `sample`. Large octet sequences stay in shared memory, owned by the
-    /// values that read them, while the owner has budget; otherwise everything is
-    /// copied and the sample returned at once.
-    pub fn decode(&self, sample: ReceivedSample) -> Result<EntityStructure, CodecError> {
-        let archived = sample.structure()?;
-        if sample.archive_bytes().len() < HOLD_MIN_BYTES {
-            return codec::decode(archived);
-        }
+    /// The structure `sample` carries, read in place where it arrived (the chunk held
+    /// for as long as any value reads it), or, past the owner's budget, from a copy of
+    /// its archive on the heap (counted). Nothing is decoded.
+    pub fn hold(&self, sample: ReceivedSample) -> Result<SharedStructure, CodecError> {
+        let root = std::ptr::from_ref(sample.structure()?);
         if self.held.load(Ordering::Relaxed) >= self.budget {
+            let bytes = sample.archive_bytes();
+            if bytes.len() < HOLD_MIN_BYTES {
+                self.process.copied_small.fetch_add(1, Ordering::Relaxed);
+                return SharedStructure::archived_copy(bytes);
+            }
             let copied = self.process.copied_over_budget.fetch_add(1, Ordering::Relaxed);
             if copied == 0 {
                 tracing::warn!(
@@ -98,12 +104,13 @@ impl HoldingOwner {
                      bound's slack, or drop old samples sooner)"
                 );
             }
-            return codec::decode(archived);
+            return SharedStructure::archived_copy(bytes);
         }
         let bytes = sample.archive_bytes();
         let (ptr, len) = (bytes.as_ptr(), bytes.len());
         self.held.fetch_add(1, Ordering::Relaxed);
         self.process.held_now.fetch_add(1, Ordering::Relaxed);
+        self.process.held_total.fetch_add(1, Ordering::Relaxed);
         let holder: Arc<dyn OctetsHolder> = Arc::new(SharedChunk {
             bytes: ptr,
             len,
@@ -111,17 +118,14 @@ impl HoldingOwner {
             owner: Arc::clone(&self.held),
             process: Arc::clone(&self.process),
         });
-        // The sample moved into the holder: decode from the holder's own bytes.
-        // SAFETY: these are the bytes `sample.structure()` validated above, still
-        // borrowed (the holder owns the sample), unchanged since.
-        let archived = unsafe { codec::access_unchecked(holder.bytes()) }?;
-        let structure = codec::decode_holding(archived, &holder)?;
-        if Arc::strong_count(&holder) > 1 {
-            self.process.held_total.fetch_add(1, Ordering::Relaxed);
-        }
-        // With no octets in it after all, nothing points into the sample: it goes back
-        // here, as the holder drops.
-        Ok(structure)
+        // SAFETY: `root` is what `sample.structure()` validated above, inside the bytes
+        // the holder now owns (the sample moved into it without moving its payload,
+        // which lies in shared memory), borrowed and unchanged for the holder's life.
+        let structure = unsafe { SharedStructure::archived_checked(holder, &*root) };
+        structure.ok_or_else(|| CodecError::Malformed {
+            len,
+            reason: "the checked archive lies outside its sample".into(),
+        })
     }
 }
 

@@ -25,9 +25,8 @@ use std::time::Duration;
 
 use esgm_core::esgm::{Peer, TrajectoryKind, Unreachable};
 use esgm_core::{
-    AddError, AddForwarder, AddOutcome, EntityStructure, EntityStructureType,
-    EntityTrajectoryStructure, FeedWaiter, InProcessTrajectory, Lineage, Rejection, ReplicaFeed,
-    TypeChecker,
+    AddError, AddForwarder, AddOutcome, EntityStructureType, EntityTrajectoryStructure, FeedWaiter,
+    InProcessTrajectory, Lineage, Rejection, ReplicaFeed, SharedStructure, TypeChecker,
 };
 use iceoryx2::identifiers::UniquePublisherId;
 use iceoryx2::port::listener::Listener;
@@ -176,10 +175,9 @@ impl Import {
 /// decides about it.
 #[derive(Debug)]
 enum Arrival {
-    /// A structure, decoded (its images stay in shared memory, held), with its index
-    /// in the kept history (`None`: not kept).
-    /// And the lineage the writer sent with it.
-    Entry { es: EntityStructure, add_time: i64, kept: Option<u64>, lineage: Option<Arc<Lineage>> },
+    /// A structure, read in place where it arrived (held), with its index in the kept
+    /// history (`None`: not kept) and the lineage the writer sent with it.
+    Entry { es: SharedStructure, add_time: i64, kept: Option<u64>, lineage: Option<Arc<Lineage>> },
     /// A reset marker.
     Reset,
 }
@@ -340,7 +338,7 @@ impl Import {
         let mut n = 0;
         for entry in kept.entries {
             let arrival = Arrival::Entry {
-                es: entry.structure,
+                es: entry.structure.into(),
                 add_time: entry.add_time,
                 kept: Some(entry.index),
                 // Kept histories are primitive trajectories': pushed, no lineage.
@@ -384,10 +382,12 @@ impl Import {
     /// Enters every waiting sample, reset and violation into the replica; returns how
     /// many there were.
     pub fn pump(&mut self) -> usize {
+        esgm_core::probe::mark(esgm_core::probe::Step::Locked);
         let mut n = 0;
         loop {
             match self.subscriber.receive() {
                 Ok(Some(sample)) => {
+                    esgm_core::probe::mark(esgm_core::probe::Step::Received);
                     n += 1;
                     let publisher = sample.publisher_id();
                     let header = sample.header();
@@ -400,8 +400,9 @@ impl Import {
                             continue;
                         }
                     };
-                    match self.owner.decode(sample) {
+                    match self.owner.hold(sample) {
                         Ok(es) => {
+                            esgm_core::probe::mark(esgm_core::probe::Step::Held);
                             let entry = Arrival::Entry { es, add_time, kept, lineage };
                             self.arrive(publisher, sequence, entry)
                         }
@@ -474,15 +475,15 @@ impl Import {
                         return;
                     }
                 }
-                if let Some(Err(e)) = self.checker.as_ref().map(|c| c.check(&es.attributes)) {
+                if let Some(Err(e)) = self.checker.as_ref().map(|c| c.check_structure(&es)) {
                     return self.count_rejection(Rejection::WrongLayout, &e);
                 }
                 if kept.is_some() {
                     self.last_kept = kept;
                 }
+                esgm_core::probe::mark(esgm_core::probe::Step::Checked);
                 // A replica destroyed meanwhile needs nothing more.
-                let _destroyed =
-                    self.replica.with_store(|s| s.replicate(Arc::new(es), add_time, lineage));
+                let _destroyed = self.replica.with_store(|s| s.replicate(es, add_time, lineage));
             }
             Arrival::Reset => {
                 let _destroyed = self.replica.with_store(|s| s.reset());
@@ -841,6 +842,7 @@ impl FeedWaiter for JoinedWaiter {
                     crate::data_plane::wake_word::sleep_any(&seen, timeout)
                 })
             });
+            esgm_core::probe::mark(esgm_core::probe::Step::Woken);
             if let Err(e) = slept {
                 tracing::warn!(error = %e,
                     "cannot sleep on the inputs' words; waiting on the channel");
@@ -932,6 +934,7 @@ impl FeedWaiter for ImportWaiter {
             {
                 word.sleep(seen, timeout.min(WAIT_SLICE));
             }
+            esgm_core::probe::mark(esgm_core::probe::Step::Woken);
             self.check_word();
             self.feed();
             return true;
@@ -943,6 +946,7 @@ impl FeedWaiter for ImportWaiter {
         };
         match crate::data_plane::wait::timed_wait(listener, timeout.min(WAIT_SLICE)) {
             Ok(_) => {
+                esgm_core::probe::mark(esgm_core::probe::Step::Woken);
                 self.feed();
                 true
             }
@@ -1076,7 +1080,7 @@ struct Outbox {
 }
 
 impl AddForwarder for Outbox {
-    fn forward(&self, es: Arc<EntityStructure>, blocking: bool) -> Result<AddOutcome, AddError> {
+    fn forward(&self, es: SharedStructure, blocking: bool) -> Result<AddOutcome, AddError> {
         let unavailable = |detail: String| AddError::Unavailable {
             trajectory: self.trajectory.clone(),
             reason: Unreachable::transport(Peer::Writer, detail),
@@ -1112,7 +1116,8 @@ impl AddForwarder for Outbox {
             let Some(client) = client.as_ref() else {
                 return Err(unavailable("the writer's blocking adds are not open".into()));
             };
-            return client.add(&es);
+            // The request carries an owned structure (an archived one is converted).
+            return client.add(&es.to_arc());
         }
         let mut inbox = self.inbox.lock();
         if inbox.is_none() {
@@ -1144,7 +1149,7 @@ impl AddForwarder for Outbox {
             return Err(unavailable("the writer's inbox is not open".into()));
         };
         let sent = publisher
-            .publish(&es)
+            .publish_shared(&es)
             .map_err(|e| unavailable(format!("cannot send to the writer's inbox: {e}")))?;
         // The writer's inbox is gone (it left since it opened it): nobody got it. The
         // next add asks to take the trajectory over.

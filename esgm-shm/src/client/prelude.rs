@@ -7,7 +7,8 @@
 //!   seed's operation names;
 //! - the data model: types ([`EntityStructureType`], [`ValueSort`]), structures,
 //!   frames, values, samples, time, clocks, and [`Entity`] with its derive
-//!   (`#[derive(Entity)]`), plus the [`library`] of predefined types;
+//!   (`#[derive(Entity)]`), plus the [`library`] of predefined types; and how a sample
+//!   is read in place ([`SharedStructure`], [`ValueRef`], [`FrameRef`]);
 //! - trajectories: [`TrajectorySpec`] for every kind, [`FluentStreamPolicy`] and its
 //!   six constraints, sync and generator settings, queries' approximations,
 //!   subscriptions, the add outcomes and violations;
@@ -31,7 +32,7 @@
 //! let odometry = esgm.create_primitive_entity_trajectory_structure("odo", "RobotState")?;
 //! odometry.create_at_now("robot1", [("x", 1.0.into()), ("y", 2.0.into()), ("dir", 0.0.into())].into())?;
 //! let latest = odometry.get_latest()?;
-//! assert_eq!(latest.get("x"), Some(&Value::Double(1.0)));
+//! assert_eq!(latest.get("x").and_then(|x| x.as_double()), Some(1.0));
 //! # Ok(())
 //! # }
 //! ```
@@ -48,10 +49,11 @@ pub use esgm_core::generator_entry::parse_generator;
 pub use esgm_core::library;
 pub use esgm_core::operators::sync::SyncPolicy;
 pub use esgm_core::{
-    AddError, Attr, AttributeList, AttributeValuePair, CacheConstraint, ChangeConstraint, Clock,
-    Constraint, DelayConstraint, DropCause, DurationConstraint, GeneratorPolicy, HeapAllocator,
-    InvalidType, MergeRule, Octets, OctetsAllocator, OrderConstraint, PixelBuffer, PolicyError,
-    PolicyViolation, Pos2, Position, PositionAltitude, PositionAltitudeRotation, QueryError,
-    RecvError, Rotation, SharedClock, SimClock, Subscription, SubscriptionId, SystemClock,
-    TrajectoryStats, TypeRegistryError, Vec3,
+    AddError, Attr, AttributeList, AttributeValuePair, Attributes, CacheConstraint,
+    ChangeConstraint, Clock, Constraint, DelayConstraint, DropCause, DurationConstraint, FrameRef,
+    FramesRef, GeneratorPolicy, HeapAllocator, InvalidType, MergeRule, Octets, OctetsAllocator,
+    OrderConstraint, PixelBuffer, PolicyError, PolicyViolation, Pos2, Position, PositionAltitude,
+    PositionAltitudeRotation, QueryError, RecvError, Rotation, SharedClock, SimClock,
+    StructureForm, Subscription, SubscriptionId, SystemClock, TrajectoryStats, TypeRegistryError,
+    Vec3,
 };

@@ -19,9 +19,9 @@ use crate::data_plane::service_name::{NameError, TrajectoryServiceNames};
 /// 1024 would map gigabytes for a camera.
 pub(crate) const MAX_OCTET_HISTORY: usize = 16;
 
-/// Samples a replica may keep borrowed beyond its cache's bound: images that units,
+/// Samples a replica may keep borrowed beyond its cache's bound: structures that units,
 /// subscriptions and query answers still read after the cache evicted them (see
-/// [`crate::client::holdings`]). Past it, images are copied (and counted).
+/// [`crate::client::holdings`]). Past it, their archives are copied (and counted).
 pub(crate) const HOLD_SLACK: usize = 8;
 
 /// The service settings every process opens a trajectory's data service with, writer
@@ -52,13 +52,10 @@ pub fn bridge_qos(
         _ => history_bound(policy.cache, DEFAULT_MAX_HISTORY),
     };
     let qos = history_qos(bound, TrajectoryQos::default());
-    // Readers decode a structure without octets into their own memory and give its
-    // sample back at once ([`crate::client::holdings`]): they borrow one at a time. Images
-    // stay in the writer's chunk for as long as a value reads them.
-    let max_borrowed_samples = match octets {
-        true => qos.max_borrowed_samples + HOLD_SLACK,
-        false => TrajectoryQos::default().max_borrowed_samples,
-    };
+    // Readers read every structure in place, in the writer's chunk, for as long as a
+    // value reads it ([`crate::client::holdings`]): a replica borrows its cache's bound
+    // and the slack its values hold beyond it.
+    let max_borrowed_samples = qos.max_borrowed_samples + HOLD_SLACK;
     let qos = TrajectoryQos { max_borrowed_samples, max_publishers: 1, ..qos }.readers(readers);
     // The writer of images reads its own samples back ([`own_subscriber`]).
     TrajectoryQos { max_subscribers: qos.max_subscribers + own_subscriber(entity_type), ..qos }

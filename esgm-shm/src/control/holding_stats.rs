@@ -7,14 +7,19 @@
 /// copy: how to check that images from other processes reach this one without a copy.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct HoldingStats {
-    /// Received samples borrowed now, because values in this process read their
-    /// octets (images) in place.
+    /// Received samples borrowed now, because values in this process read them in
+    /// place.
     pub held_now: usize,
-    /// Received samples whose octets were kept in shared memory, since the start.
+    /// Received samples read in place where they arrived, since the start.
     pub held_total: u64,
     /// Received samples with large octets that were copied instead, because their
     /// subscriber's borrow budget was spent (values kept too many older ones).
     pub copied_over_budget: u64,
+    #[serde(default)]
+    /// Received samples without large octets whose archive was copied onto this
+    /// process's heap for the same reason (still read in place there, never decoded;
+    /// not an image copy).
+    pub copied_small: u64,
     /// Images this process published from loans: pixels written in place by their
     /// producer, never copied ([`esgm_core::OctetsAllocator`]).
     pub sent_in_place: u64,

@@ -43,6 +43,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use esgm_core::codec::{self, ARCHIVE_ALIGNMENT, CodecError, ENVELOPE_LEN};
 use esgm_core::{CacheConstraint, EntityStructure, Time};
 
+use crate::data_plane::encodable::Encodable;
 use crate::data_plane::shm_access::ShmAccess;
 
 /// Where the files live: POSIX shared memory, as iceoryx2's segments.
@@ -531,14 +532,14 @@ impl KeptHistory {
     }
 
     /// Keeps `es`, added at `add_time`, and returns its index: [`Self::reserve`] then
-    /// [`Self::write`].
+    /// `write`.
     pub fn append(&mut self, es: &EntityStructure, add_time: Time) -> Result<u64, KeepError> {
         let index = self.reserve();
         self.write(index, es, add_time)?;
         Ok(index)
     }
 
-    /// Takes the next index for a structure about to be written with [`Self::write`]:
+    /// Takes the next index for a structure about to be written with `write`:
     /// the writer publishes the structure under it first (readers are woken before
     /// the copy), then keeps it, and `add` returns after both. An index reserved and
     /// never written (the writer died between the two, or the write failed) is skipped
@@ -564,16 +565,18 @@ impl KeptHistory {
     /// last. Entries the retention lets go make room first; the file grows (doubling)
     /// when the policy keeps more than it holds. Called by the writer alone (the
     /// store's tap, under the store's lock).
-    pub fn write(
+    pub(crate) fn write<'a>(
         &mut self,
         index: u64,
-        es: &EntityStructure,
+        es: impl Into<Encodable<'a>>,
         add_time: Time,
     ) -> Result<(), KeepError> {
         debug_assert_eq!(index + 1, self.counters.next, "the index reserved last");
-        let len = codec::encoded_len(es)?;
+        let es = es.into();
+        let len = es.encoded_len()?;
         let padded = align_up(len, ARCHIVE_ALIGNMENT) as u64;
-        self.let_go(index, es.valid_time);
+        let valid_time = es.times().0;
+        self.let_go(index, valid_time);
         let mut grown = 0;
         let start = loop {
             if let Some(start) = self.room_for(index, padded) {
@@ -588,18 +591,12 @@ impl KeptHistory {
             grown += 1;
         };
         let at = self.shape.area_at() + (start % self.shape.area) as usize;
-        let written = codec::encode_into(es, self.map.bytes_mut(at, padded as usize))?;
+        let written = es.write_into(self.map.bytes_mut(at, padded as usize))?;
         self.counters.head = start + padded;
         self.map.write_u64(OFF_HEAD, self.counters.head);
         // The slot last: a reader (or a writer after a crash) sees the entry whole or
         // not at all (a slot that names another index).
-        self.write_slot(Slot {
-            index,
-            start,
-            len: written as u64,
-            add_time,
-            valid_time: es.valid_time,
-        });
+        self.write_slot(Slot { index, start, len: written as u64, add_time, valid_time });
         Ok(())
     }
 

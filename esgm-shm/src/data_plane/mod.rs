@@ -8,6 +8,7 @@
 //! ([`crate::client`]).
 
 pub mod capacity;
+pub(crate) mod encodable;
 pub mod image_layout;
 pub(crate) mod image_loan;
 pub mod kept_history;

@@ -47,7 +47,7 @@ use std::cell::Cell;
 use std::time::Duration;
 
 use esgm_core::codec::{self, CodecError};
-use esgm_core::{EntityStructure, Lineage, SharedClock, SystemClock, Time};
+use esgm_core::{EntityStructure, Lineage, SharedClock, SharedStructure, SystemClock, Time};
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::update_connections::{ConnectionFailure, UpdateConnections};
@@ -56,6 +56,7 @@ use iceoryx2::prelude::{AllocationStrategy, BackpressureStrategy};
 use iceoryx2::sample_mut::SampleMut;
 use iceoryx2::service::port_factory::PortFactory;
 
+use crate::data_plane::encodable::Encodable;
 use crate::data_plane::image_layout::{ImageError, image_loan_len, pixel_len};
 use crate::data_plane::image_loan::{ImageChunk, ImageLoan};
 use crate::data_plane::payload::{
@@ -67,7 +68,6 @@ use crate::data_plane::service::{
     DataService, OpenError, ShmNode, WakeService, open_data_service, open_wake_service, with_room,
 };
 use crate::data_plane::service_name::{DEFAULT_DOMAIN, TrajectoryServiceNames};
-use crate::data_plane::size_hint::archived_size_hint;
 use crate::data_plane::structure_loan::StructureLoan;
 use crate::data_plane::type_id::type_id;
 use crate::data_plane::wake_word::WakeWord;
@@ -440,7 +440,13 @@ impl TrajectoryPublisher {
     /// The structure is not type-checked here: the caller (the runtime) checks it
     /// against the trajectory's type before publishing.
     pub fn publish(&self, es: &EntityStructure) -> Result<Published, PublishError> {
-        self.publish_inner(es, None)
+        self.publish_inner(es.into(), None)
+    }
+
+    /// [`Self::publish`] of a structure as a trajectory holds it: an archived one is
+    /// copied as it is, never decoded and encoded again.
+    pub(crate) fn publish_shared(&self, es: &SharedStructure) -> Result<Published, PublishError> {
+        self.publish_inner(es.into(), None)
     }
 
     /// [`Self::publish`] with the add time the gate gave the structure (a runtime
@@ -450,7 +456,7 @@ impl TrajectoryPublisher {
         es: &EntityStructure,
         add_time: Time,
     ) -> Result<Published, PublishError> {
-        self.publish_inner(es, Some(add_time))
+        self.publish_inner(es.into(), Some(add_time))
     }
 
     /// [`Self::publish_added`] for a structure kept at index `kept` of its
@@ -471,14 +477,16 @@ impl TrajectoryPublisher {
     /// [`Self::publish_added`] (or [`Self::publish_kept`] with `kept`) for a structure
     /// made from others: `lineage` names them, and travels after the archive in the
     /// same sample ([`SampleHeader::FLAG_LINEAGE`]), so every reader's replica holds it.
+    /// An archived structure (one another process wrote, passed on by a merge here) is
+    /// copied as it is, never decoded and encoded again.
     pub fn publish_produced(
         &self,
-        es: &EntityStructure,
+        es: &SharedStructure,
         add_time: Time,
         kept: Option<u64>,
         lineage: Option<&Lineage>,
     ) -> Result<Published, PublishError> {
-        let loan = self.loan_structure_traced(es, lineage)?;
+        let loan = self.loan_structure_traced(es.into(), lineage)?;
         let blocks = loan.blocks();
         let sent = match kept {
             Some(kept) => loan.send_kept(add_time, kept),
@@ -490,10 +498,10 @@ impl TrajectoryPublisher {
 
     fn publish_inner(
         &self,
-        es: &EntityStructure,
+        es: Encodable<'_>,
         add_time: Option<Time>,
     ) -> Result<Published, PublishError> {
-        let loan = self.loan_structure(es)?;
+        let loan = self.loan_structure_traced(es, None)?;
         let blocks = loan.blocks();
         let sent = match add_time {
             Some(add_time) => loan.send_added(add_time),
@@ -536,27 +544,29 @@ impl TrajectoryPublisher {
     /// [`StructureLoan::send`] (see `crate::data_plane::structure_loan`): the encoding is done
     /// before the moment the structure has to go.
     pub fn loan_structure(&self, es: &EntityStructure) -> Result<StructureLoan<'_>, PublishError> {
-        self.loan_structure_traced(es, None)
+        self.loan_structure_traced(es.into(), None)
     }
 
     /// [`Self::loan_structure`] with the structure's lineage after the archive.
     fn loan_structure_traced(
         &self,
-        es: &EntityStructure,
+        es: Encodable<'_>,
         lineage: Option<&Lineage>,
     ) -> Result<StructureLoan<'_>, PublishError> {
-        let mut want = archived_size_hint(es);
+        let mut want = es.size_hint();
         if want > self.max_len {
-            want = codec::encoded_len(es).map_err(PublishError::Encode)?;
+            want = es.encoded_len().map_err(PublishError::Encode)?;
         }
         let lineage_len = lineage.map(codec::lineage_len);
         let mut retried = false;
         loop {
             let total = lineage_len.map_or(want, |l| with_trailer_len(want, l));
             let mut sample = self.loan_blocks(blocks_for(total)).map_err(PublishError::Loan)?;
+            esgm_core::probe::mark(esgm_core::probe::Step::Loaned);
             let bytes = as_uninit_bytes(sample.payload_mut());
-            match codec::encode_into_uninit(es, bytes) {
+            match es.write_into_uninit(bytes) {
                 Ok(len) => {
+                    esgm_core::probe::mark(esgm_core::probe::Step::Encoded);
                     let bytes = zero_fill(&mut bytes[len..]);
                     let mut flags = 0;
                     if let (Some(lineage), Some(lineage_len)) = (lineage, lineage_len) {
@@ -576,13 +586,7 @@ impl TrajectoryPublisher {
                     // SAFETY: the encoder initialised `..len` (it promises every byte it
                     // reports) and `zero_fill` the rest of the payload.
                     let sample = unsafe { sample.assume_init() };
-                    return Ok(StructureLoan::new(
-                        self,
-                        sample,
-                        len,
-                        (es.valid_time, es.create_time),
-                        flags,
-                    ));
+                    return Ok(StructureLoan::new(self, sample, len, es.times(), flags));
                 }
                 Err(CodecError::BufferTooSmall { needed, .. }) if !retried => {
                     tracing::debug!(trajectory = %self.trajectory, hint = want, needed,
@@ -674,12 +678,14 @@ impl TrajectoryPublisher {
             kept: kept.map_or(0, |index| index + 1),
         };
         let sent = sample.send();
+        esgm_core::probe::mark(esgm_core::probe::Step::Sent);
         if matches!(sent, Ok(_) | Err(SendError::UnableToDeliver)) {
             // Delivered to every reader, or to all but the ones that stayed full past
             // the timeout: either way the number is used, so a reader that missed it
             // sees a gap in the sequence and counts the sample as lost.
             self.sequence.set(sequence + 1);
             self.wake(Listeners::Uncovered);
+            esgm_core::probe::mark(esgm_core::probe::Step::Rung);
         }
         let subscribers = sent.map_err(|e| match e {
             SendError::UnableToDeliver => {

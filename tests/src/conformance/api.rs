@@ -26,7 +26,7 @@ pub fn get_latest_vtime_is_the_most_current<H: Harness>(h: &H) {
     for side in [&w, &r] {
         assert_eq!(x_of(&side.get_latest().unwrap()), Some(2.0), "the last added");
         let current = side.get_latest_vtime().unwrap();
-        assert_eq!((current.valid_time, x_of(&current)), (t0 + 30, Some(3.0)));
+        assert_eq!((current.valid_time(), x_of(&current)), (t0 + 30, Some(3.0)));
     }
     // Of two samples valid at the same latest time, the one added last.
     w.add(reading(t0 + 30, 4.0)).unwrap();
@@ -60,7 +60,7 @@ pub fn types_structures_and_stats_by_name<H: Harness>(h: &H) {
     w.add(EntityStructure::named("p").at(t0).with("a", 8i64)).unwrap();
     wait_visible(&w, &r);
     let first = r.get_nth_latest(1).unwrap();
-    assert_eq!((first.valid_time, first.create_time), (t0 - 5, t0));
+    assert_eq!((first.valid_time(), first.create_time()), (t0 - 5, t0));
     let stats = e.stats().unwrap();
     assert_eq!(stats.trajectories["p"].stats.added, 2);
     assert_eq!(stats.get("p").map(|p| p.info.type_name.as_str()), Some("Pair"));

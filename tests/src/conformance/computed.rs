@@ -17,7 +17,7 @@ use crate::{Harness, wait_for};
 /// (inputs 1, 2 → 12), valid at the latest input's valid time: it shows input order.
 fn digits(inputs: &[Sample], _qtime: Time) -> Result<EntityStructure, ComputeError> {
     let x = inputs.iter().fold(0.0, |acc, s| acc * 10.0 + x_of(s).unwrap_or(0.0));
-    let vt = inputs.iter().map(|s| s.valid_time).max().unwrap_or(0);
+    let vt = inputs.iter().map(|s| s.valid_time()).max().unwrap_or(0);
     Ok(reading(vt, x))
 }
 
@@ -41,7 +41,7 @@ pub fn inputs_in_order_once_all_have_one<H: Harness>(h: &H) {
     a.add(reading(t0 + 1, 1.0)).unwrap();
     wait_stored(&out, 1);
     assert_eq!(x_of(&out.get_latest().unwrap()), Some(12.0), "inputs in declared order");
-    assert_eq!(out.get_latest().unwrap().valid_time, t0 + 1);
+    assert_eq!(out.get_latest().unwrap().valid_time(), t0 + 1);
     b.add(reading(t0 + 2, 3.0)).unwrap();
     wait_stored(&out, 2);
     assert_eq!(x_of(&out.get_latest().unwrap()), Some(13.0));
@@ -81,7 +81,7 @@ pub fn three_level_chain<H: Harness>(h: &H) {
     register_reading(h);
     let e = h.esgm();
     let double = |i: &[Sample], _: Time| -> Result<EntityStructure, ComputeError> {
-        Ok(reading(i[0].valid_time, x_of(&i[0]).unwrap_or(0.0) * 2.0))
+        Ok(reading(i[0].valid_time(), x_of(&i[0]).unwrap_or(0.0) * 2.0))
     };
     e.add_comp_unit("double", "Reading", vec!["Reading".into()], Arc::new(double)).unwrap();
     e.add_comp_unit(
@@ -102,7 +102,7 @@ pub fn three_level_chain<H: Harness>(h: &H) {
     other.add(reading(t0, 1.0)).unwrap();
     src.add(reading(t0 + 5, 2.0)).unwrap();
     let s = sub.recv_timeout(WAIT).unwrap();
-    assert_eq!((x_of(&s), s.valid_time), (Some(18.0), t0 + 5), "1 then 2·2·2 = 8");
+    assert_eq!((x_of(&s), s.valid_time()), (Some(18.0), t0 + 5), "1 then 2·2·2 = 8");
     // Every level is readable from the reader too.
     for (name, x) in [("l1", 4.0), ("l2", 8.0)] {
         let level = read(h, name);
@@ -140,7 +140,8 @@ pub fn unit_output_is_type_checked<H: Harness>(h: &H) {
     register_reading(h);
     let e = h.esgm();
     let wrong = |i: &[Sample], _: Time| -> Result<EntityStructure, ComputeError> {
-        Ok(EntityStructure::new("r", i[0].valid_time, i[0].valid_time).with("x", "not a number"))
+        Ok(EntityStructure::new("r", i[0].valid_time(), i[0].valid_time())
+            .with("x", "not a number"))
     };
     e.add_comp_unit("wrong", "Reading", vec!["Reading".into()], Arc::new(wrong)).unwrap();
     let a = e.create_primitive_entity_trajectory_structure("a", "Reading").unwrap();
@@ -211,7 +212,7 @@ pub fn computed_policy_applies<H: Harness>(h: &H) {
     assert_eq!((v.constraint, v.valid_time), (esgm_core::Constraint::Order, t0 + 5));
     wait_visible(&out, &seen);
     let vts: Vec<Time> =
-        seen.get_between(t0, t0 + 20).unwrap().iter().map(|s| s.valid_time).collect();
+        seen.get_between(t0, t0 + 20).unwrap().iter().map(|s| s.valid_time()).collect();
     assert_eq!(vts, vec![t0 + 10, t0 + 20]);
     let counted = || seen.stats().map(|s| (s.added, s.violations));
     assert!(wait_for(WAIT, || counted() == Ok((2, 1))), "reader stats {:?}", seen.stats());

@@ -14,7 +14,7 @@ use crate::{Harness, wait_for};
 
 /// A unit that adds 1 to its one input's x.
 fn plus_one(i: &[Sample], _: Time) -> Result<EntityStructure, ComputeError> {
-    Ok(reading(i[0].valid_time, x_of(&i[0]).unwrap_or(0.0) + 1.0))
+    Ok(reading(i[0].valid_time(), x_of(&i[0]).unwrap_or(0.0) + 1.0))
 }
 
 /// T5: a reset through any handle — the reader's replica or the writer's own — empties
@@ -124,7 +124,7 @@ pub fn flush_gives_up_at_its_deadline<H: Harness>(h: &H) {
     let slow = move |i: &[Sample], _: Time| -> Result<EntityStructure, ComputeError> {
         // Waits for the test to let it go (bounded, so a failing test ends).
         wait_for(WAIT, || gate.load(std::sync::atomic::Ordering::Acquire));
-        Ok((*i[0].structure).clone())
+        Ok(i[0].structure.to_structure())
     };
     e.add_comp_unit("slow", "Reading", vec!["Reading".into()], Arc::new(slow)).unwrap();
     let src = e.create_primitive_entity_trajectory_structure("src", "Reading").unwrap();

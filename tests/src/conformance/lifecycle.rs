@@ -15,7 +15,7 @@ use crate::{Harness, wait_for};
 
 /// A unit that copies its one input.
 fn copy(i: &[Sample], _: Time) -> Result<EntityStructure, ComputeError> {
-    Ok((*i[0].structure).clone())
+    Ok(i[0].structure.to_structure())
 }
 
 /// Unknown names get the seed's errors, with a suggestion when one is close, on

@@ -25,7 +25,7 @@ fn named(sample: &Sample) -> Vec<(String, Time, Time)> {
 fn stored<H: Harness>(h: &H, name: &str, vt: Time) -> (String, Time, Time) {
     let t = h.esgm().get_entity_trajectory_structure(name).unwrap();
     let s = t.get_at(vt).unwrap_or_else(|e| panic!("{name} at {vt}: {e}"));
-    (name.to_owned(), s.valid_time, s.add_time)
+    (name.to_owned(), s.valid_time(), s.add_time)
 }
 
 /// A three-stage pipeline: two pushed inputs, a unit over both, a unit over that. The
@@ -35,7 +35,7 @@ pub fn a_three_stage_pipeline_names_its_inputs<H: Harness>(h: &H) {
     register_reading(h);
     let e = h.esgm();
     let sum = |i: &[Sample], _: Time| -> Result<EntityStructure, ComputeError> {
-        let vt = i.iter().map(|s| s.valid_time).max().unwrap_or(0);
+        let vt = i.iter().map(|s| s.valid_time()).max().unwrap_or(0);
         Ok(reading(vt, i.iter().filter_map(|s| x_of(s)).sum()))
     };
     for (unit, inputs) in [("sum2", 2), ("sum1", 1)] {
@@ -157,7 +157,7 @@ pub fn a_trace_names_what_is_gone<H: Harness>(h: &H) {
     register_reading(h);
     let e = h.esgm();
     let copy = |i: &[Sample], _: Time| -> Result<EntityStructure, ComputeError> {
-        Ok(reading(i[0].valid_time, x_of(&i[0]).unwrap_or(0.0)))
+        Ok(reading(i[0].valid_time(), x_of(&i[0]).unwrap_or(0.0)))
     };
     e.add_comp_unit("copy", "Reading", vec!["Reading".into()], Arc::new(copy)).unwrap();
     let policy = esgm_core::FluentStreamPolicy {

@@ -53,7 +53,7 @@ pub fn reading(vt: Time, x: f64) -> EntityStructure {
 }
 
 /// The `x` of a structure, for compact assertions.
-pub fn x_of(es: &EntityStructure) -> Option<f64> {
+pub fn x_of(es: &esgm_core::SharedStructure) -> Option<f64> {
     es.get("x").and_then(|v| v.as_double())
 }
 
@@ -72,7 +72,7 @@ pub fn contents<T: EntityTrajectoryStructure>(
     t: &T,
 ) -> Result<Vec<(Time, EntityStructure)>, QueryError> {
     let all = t.get_between(Time::MIN, Time::MAX)?;
-    Ok(all.iter().map(|s| (s.add_time, (*s.structure).clone())).collect())
+    Ok(all.iter().map(|s| (s.add_time, s.structure.to_structure())).collect())
 }
 
 /// Waits until `reader` stores exactly what `writer` stores (the same structures with

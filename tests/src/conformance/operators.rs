@@ -38,7 +38,7 @@ pub fn sync_exact<H: Harness>(h: &H) {
     a.add(reading(t0 + 20, 3.0)).unwrap();
     b.add(reading(t0 + 20, 4.0)).unwrap();
     let state = sub.recv_timeout(WAIT).unwrap();
-    assert_eq!(state.valid_time, t0 + 20);
+    assert_eq!(state.valid_time(), t0 + 20);
     assert_eq!((frame_x(&state, "a"), frame_x(&state, "b")), (Some(3.0), Some(4.0)));
     // One frame per input, and the members' times.
     assert_eq!(s.entity_type().unwrap().attributes.len(), 4);
@@ -71,14 +71,11 @@ pub fn sync_approximate<H: Harness>(h: &H) {
     // Which samples were matched: every member's valid and create time, by input.
     assert_eq!(member_times(&second, MEMBER_VALID_TIMES), Some(vec![t0 + 10, t0 + 13]));
     assert_eq!(member_times(&second, MEMBER_CREATE_TIMES), Some(vec![t0 + 10, t0 + 13]));
-    assert_eq!(second.valid_time, t0 + 13, "a set is valid at its latest member's time");
+    assert_eq!(second.valid_time(), t0 + 13, "a set is valid at its latest member's time");
 }
 
 fn member_times(s: &esgm_core::Sample, attr: &str) -> Option<Vec<esgm_core::Time>> {
-    match s.get(attr) {
-        Some(esgm_core::Value::LongSeq(v)) => Some(v.clone()),
-        _ => None,
-    }
+    s.get(attr)?.as_long_seq().map(|v| v.into_owned())
 }
 
 /// G2 epsilon (message_filters' ApproximateEpsilonTime): a set leaves as soon as every
@@ -227,7 +224,7 @@ pub fn sampled_temporal_function<H: Harness>(h: &H) {
     e.add_comp_unit("sum", "Reading", vec!["Reading".into(), "Reading".into()], Arc::new(Sum))
         .unwrap();
     let only_compute = |i: &[Sample], _: Time| -> Result<EntityStructure, ComputeError> {
-        Ok((*i[0].structure).clone())
+        Ok(i[0].structure.to_structure())
     };
     e.add_comp_unit(
         "plain",

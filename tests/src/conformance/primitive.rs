@@ -12,7 +12,11 @@ use crate::{Harness, wait_for};
 
 /// The `x` of every stored sample, oldest first.
 fn xs<T: EntityTrajectoryStructure>(t: &T) -> Vec<Option<f64>> {
-    contents(t).unwrap().iter().map(|(_, es)| x_of(es)).collect()
+    contents(t)
+        .unwrap()
+        .iter()
+        .map(|(_, es)| es.get("x").and_then(esgm_core::Value::as_double))
+        .collect()
 }
 
 /// E1 with the seed's errors; types are system-wide, so what one side registers or
@@ -62,7 +66,7 @@ pub fn primitive_add_and_query<H: Harness>(h: &H) {
     w.create_at("r", t0 + millis(300), reading(0, 3.0).attributes.into()).unwrap();
     wait_visible(&w, &t);
     let latest = t.get_latest().unwrap();
-    assert_eq!((latest.valid_time, x_of(&latest)), (t0 + millis(300), Some(3.0)));
+    assert_eq!((latest.valid_time(), x_of(&latest)), (t0 + millis(300), Some(3.0)));
     assert_eq!(latest.add_time, w.get_latest().unwrap().add_time, "the writer's add time");
     assert_eq!(x_of(&t.get_nth_latest(3).unwrap()), Some(0.0));
     assert_eq!(t.get_between(t0 + millis(50), t0 + millis(250)).unwrap().len(), 2);
@@ -183,7 +187,7 @@ pub fn subscriptions_in_add_order_with_replay<H: Harness>(h: &H) {
     t.add(reading(t0 + 9, 9.0)).unwrap();
     wait_visible(&t, &r);
     assert_eq!(
-        late.recv_timeout(std::time::Duration::from_millis(50)).map(|s| s.valid_time),
+        late.recv_timeout(std::time::Duration::from_millis(50)).map(|s| s.valid_time()),
         Err(esgm_core::store::RecvError::Closed)
     );
 }

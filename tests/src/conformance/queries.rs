@@ -226,9 +226,9 @@ pub fn extreme_valid_times_are_queried<H: Harness>(h: &H) {
     }
     wait_visible(&w, &r);
     let closest = r.get_at_approximating(0, &ValueApproximation::Closest).unwrap();
-    assert_eq!(closest.structure.valid_time, Time::MAX);
+    assert_eq!(closest.structure.valid_time(), Time::MAX);
     let linear = r.get_at_approximating(0, &ValueApproximation::Linear).unwrap();
-    assert_eq!(linear.structure.valid_time, 0);
+    assert_eq!(linear.structure.valid_time(), 0);
     assert_eq!(r.get_between(Time::MIN, Time::MAX).unwrap().len(), 3);
     assert_eq!((r.start_time(), r.end_time()), (Ok(Time::MIN), Ok(Time::MAX)));
     assert_same_answers(&w, &r);
@@ -264,9 +264,9 @@ pub fn linear_interpolates_sequences_element_wise_or_says_it_did_not<H: Harness>
 
     let mid = r.get_at_approximating(25, &ValueApproximation::Linear).unwrap();
     assert_eq!(mid.not_interpolated, None, "same lengths: interpolated throughout");
-    assert_eq!(mid.get("points"), Some(&Value::Pos2Seq(vec![Pos2 { x: 2.5, y: -2.5 }; 2])));
-    assert_eq!(mid.get("normals"), Some(&Value::VecSeq(vec![Vec3 { x: 0.0, y: 2.5, z: 1.0 }; 2])));
-    assert_eq!(mid.get("stops"), Some(&Value::EntityFrameSeq(vec![frame(2.5); 2])));
+    assert_eq!(mid.value("points"), Some(Value::Pos2Seq(vec![Pos2 { x: 2.5, y: -2.5 }; 2])));
+    assert_eq!(mid.value("normals"), Some(Value::VecSeq(vec![Vec3 { x: 0.0, y: 2.5, z: 1.0 }; 2])));
+    assert_eq!(mid.value("stops"), Some(Value::EntityFrameSeq(vec![frame(2.5); 2])));
     assert_eq!(mid.get("label").and_then(|v| v.as_str()), Some("start"));
     let strict = r.get_at_approximating(25, &ValueApproximation::LinearStrict).unwrap();
     assert_eq!(strict.structure, mid.structure);
@@ -277,8 +277,8 @@ pub fn linear_interpolates_sequences_element_wise_or_says_it_did_not<H: Harness>
     let marked: Vec<&str> =
         held.not_interpolated.as_deref().unwrap_or_default().iter().map(String::as_str).collect();
     assert_eq!(marked, ["points", "normals"]);
-    assert_eq!(held.get("points"), Some(&Value::Pos2Seq(vec![Pos2 { x: 10.0, y: -10.0 }; 2])));
-    assert_eq!(held.get("stops"), Some(&Value::EntityFrameSeq(vec![frame(15.0); 2])));
+    assert_eq!(held.value("points"), Some(Value::Pos2Seq(vec![Pos2 { x: 10.0, y: -10.0 }; 2])));
+    assert_eq!(held.value("stops"), Some(Value::EntityFrameSeq(vec![frame(15.0); 2])));
     let refused = r.get_at_approximating(150, &ValueApproximation::LinearStrict).unwrap_err();
     assert!(refused.to_string().contains("`points`"), "{refused}");
     assert_eq!(

@@ -24,7 +24,7 @@ fn counting_sensor() -> (Arc<AtomicU64>, Arc<dyn SensorInterface>) {
 }
 
 fn valid_times<T: EntityTrajectoryStructure>(t: &T) -> Vec<Time> {
-    t.get_between(Time::MIN, Time::MAX).unwrap().iter().map(|s| s.valid_time).collect()
+    t.get_between(Time::MIN, Time::MAX).unwrap().iter().map(|s| s.valid_time()).collect()
 }
 
 /// E3: samples at from, from + period, … up to to, nothing after; the seed's 0 rules.

@@ -78,7 +78,7 @@ pub fn why_names_the_input_it_waits_for<H: Harness>(h: &H) {
     register_reading(h);
     let e = h.esgm();
     let sum = |i: &[Sample], _: Time| -> Result<EntityStructure, ComputeError> {
-        Ok(reading(i[0].valid_time, i.iter().filter_map(|s| x_of(s)).sum()))
+        Ok(reading(i[0].valid_time(), i.iter().filter_map(|s| x_of(s)).sum()))
     };
     e.add_comp_unit("sum", "Reading", vec!["Reading".into(); 2], Arc::new(sum)).unwrap();
     e.add_comp_unit("copy", "Reading", vec!["Reading".into()], Arc::new(sum)).unwrap();
@@ -116,7 +116,7 @@ pub fn why_names_the_constraint_that_dropped<H: Harness>(h: &H) {
     register_reading(h);
     let e = h.esgm();
     let copy = |i: &[Sample], _: Time| -> Result<EntityStructure, ComputeError> {
-        Ok((*i[0].structure).clone())
+        Ok(i[0].structure.to_structure())
     };
     e.add_comp_unit("copy", "Reading", vec!["Reading".into()], Arc::new(copy)).unwrap();
     let a = e.create_primitive_entity_trajectory_structure("a", "Reading").unwrap();
@@ -246,7 +246,7 @@ pub fn why_names_missed_sample_points<H: Harness>(h: &H) {
     let before = why.missed[0].at + 1;
     assert!(wait_for(WAIT, || e
         .get_entity_trajectory_structure("lagging")
-        .is_ok_and(|t| t.get_latest().is_ok_and(|s| s.valid_time == since + millis(30)))));
+        .is_ok_and(|t| t.get_latest().is_ok_and(|s| s.valid_time() == since + millis(30)))));
     h.advance(millis(45));
     let why = why_when(h, "lagging", before, |w| w.missed.len() == 2);
     assert_eq!(

@@ -16,7 +16,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use esgm_core::{EntityTrajectoryStructure, Esgm, InProcessTrajectory, Sample, codec};
+use esgm_core::{EntityTrajectoryStructure, Esgm, InProcessTrajectory, Sample};
 use esgm_shm::ShmEsgm;
 use zenoh::Wait as _;
 use zenoh::key_expr::KeyExpr;
@@ -139,7 +139,7 @@ fn answer(
                     kind: wire::Kind::Structure,
                     lineage: s.lineage.as_deref().cloned(),
                 };
-                let bytes = codec::encode(&s.structure).map_err(|e| e.to_string())?;
+                let bytes = s.structure.to_codec_bytes().map_err(|e| e.to_string())?;
                 send(query, &k, wire::encode(&header, &bytes))?;
             }
             // An empty reply ends the answer, so an empty one is told from no bridge.
@@ -182,7 +182,7 @@ fn param<'a>(query: &'a Query, name: &str) -> Result<&'a str, String> {
 
 fn samples(h: &InProcessTrajectory, ask: Ask, query: &Query) -> Result<Vec<Sample>, String> {
     // Empty has no latest; a relative time then says it needs one.
-    let latest = h.get_latest().ok().map(|s| s.structure.valid_time);
+    let latest = h.get_latest().ok().map(|s| s.structure.valid_time());
     let time = |name| times::resolve(param(query, name)?, latest);
     let one =
         |r: Result<Sample, esgm_core::QueryError>| r.map(|s| vec![s]).map_err(|e| e.to_string());

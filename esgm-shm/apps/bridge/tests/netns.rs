@@ -395,14 +395,14 @@ fn netns_host() {
             let Ok(t) = d.esgm().get_entity_trajectory_structure("robot_state") else { continue };
             let all = t.get_between(i64::MIN / 2, i64::MAX / 2).unwrap_or_default();
             let broken =
-                all.iter().filter(|s| *s.structure != robot((s.valid_time - BASE) / STEP)).count();
+                all.iter().filter(|s| s.structure != robot((s.valid_time() - BASE) / STEP)).count();
             let images_ok = d
                 .esgm()
                 .get_entity_trajectory_structure("images")
                 .ok()
                 .and_then(|t| t.get_between(i64::MIN / 2, i64::MAX / 2).ok())
                 .is_none_or(|all| {
-                    all.iter().all(|s| *s.structure == image((s.valid_time - BASE) / STEP))
+                    all.iter().all(|s| s.structure == image((s.valid_time() - BASE) / STEP))
                 });
             if broken > 0 || !images_ok {
                 say(format!("intact robot_state broken {broken}, images ok {images_ok}"));

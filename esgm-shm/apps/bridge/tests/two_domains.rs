@@ -91,7 +91,7 @@ fn robot_state_and_images_cross_with_their_times_and_are_computed_on() {
     let got = samples(b.esgm(), "robot_state", 10);
     for (i, s) in got.iter().enumerate() {
         let want = robot(i as i64, base);
-        assert_eq!(*s.structure, want, "sample {i}: values and times intact");
+        assert_eq!(s.structure, want, "sample {i}: values and times intact");
         assert!(s.add_time >= want.valid_time, "the add time is the importer's");
     }
     // Live: written while the bridges run.
@@ -100,14 +100,14 @@ fn robot_state_and_images_cross_with_their_times_and_are_computed_on() {
     }
     let got = samples(b.esgm(), "robot_state", 20);
     assert_eq!(got.len(), 20);
-    assert_eq!(*got[19].structure, robot(19, base));
+    assert_eq!(got[19].structure, robot(19, base));
 
     // Images: the cache bound (4) of the three written, then one live.
     images.add_blocking(image(3, base)).unwrap();
     let got = samples(b.esgm(), "images", 4);
     for s in &got {
-        let i = (s.valid_time - base) / 1_000_000;
-        assert_eq!(*s.structure, image(i, base), "image {i} intact");
+        let i = (s.valid_time() - base) / 1_000_000;
+        assert_eq!(s.structure, image(i, base), "image {i} intact");
     }
 
     // Domain B computes on the imported trajectory like on any of its own.
@@ -119,11 +119,11 @@ fn robot_state_and_images_cross_with_their_times_and_are_computed_on() {
             vec![InputType::Type("RobotState".into())],
             Arc::new(|inputs: &[Sample], _t: i64| {
                 let s = &inputs[0];
-                let x = match s.get("x") {
-                    Some(Value::Double(x)) => *x,
+                let x = match s.value("x") {
+                    Some(Value::Double(x)) => x,
                     _ => 0.0,
                 };
-                Ok(EntityStructure::new("robot1", s.valid_time, s.create_time)
+                Ok(EntityStructure::new("robot1", s.valid_time(), s.create_time())
                     .with("x", x + 1.0)
                     .with("y", 0.0)
                     .with("dir", 0.0))
@@ -135,9 +135,9 @@ fn robot_state_and_images_cross_with_their_times_and_are_computed_on() {
         .unwrap();
     states.add_blocking(robot(20, base)).unwrap();
     let computed = eventually(WAIT, "a computed sample in B", || {
-        ahead.get_latest().ok().filter(|s| s.valid_time == robot(20, base).valid_time)
+        ahead.get_latest().ok().filter(|s| s.valid_time() == robot(20, base).valid_time)
     });
-    assert_eq!(computed.get("x"), Some(&Value::Double(20.0 * 0.5 + 1.0)));
+    assert_eq!(computed.value("x"), Some(Value::Double(20.0 * 0.5 + 1.0)));
 
     let c = bridge_b.wait_counters("import", "robot_state", WAIT, |v| v["added"] == 21);
     assert_eq!(c["malformed"], 0);
@@ -236,7 +236,7 @@ fn malformed_payloads_are_counted_and_a_type_conflict_names_the_attribute() {
     // The importer keeps serving.
     states.add_blocking(robot(2, base)).unwrap();
     let got = samples(b.esgm(), "robot_state", 2);
-    assert_eq!(*got[1].structure, robot(2, base));
+    assert_eq!(got[1].structure, robot(2, base));
 }
 
 #[test]
@@ -282,9 +282,9 @@ fn a_killed_exporter_resumes_and_its_gap_is_counted_as_lost() {
 
     let t = b.esgm().get_entity_trajectory_structure("robot_state").unwrap();
     let latest = eventually(WAIT, "the last sample in B", || {
-        t.get_latest().ok().filter(|s| s.valid_time == robot(44, base).valid_time)
+        t.get_latest().ok().filter(|s| s.valid_time() == robot(44, base).valid_time)
     });
-    assert_eq!(*latest.structure, robot(44, base));
+    assert_eq!(latest.structure, robot(44, base));
 }
 
 #[test]
@@ -397,7 +397,7 @@ fn the_exporter_sends_the_writers_samples_alone() {
     bridge_a.wait_counters("export", "robot_state", WAIT, |v| v["not_writer"] == 1);
     bridge_b.wait_counters("import", "robot_state", WAIT, |v| v["added"] == 3);
     let got = samples(b.esgm(), "robot_state", 3);
-    let times: Vec<i64> = got.iter().map(|s| s.valid_time).collect();
+    let times: Vec<i64> = got.iter().map(|s| s.valid_time()).collect();
     let want: Vec<i64> = (0..3).map(|i| robot(i, base).valid_time).collect();
     assert_eq!(times, want, "the writer's three, not the forged one an hour ahead");
 }
@@ -410,7 +410,7 @@ fn lineage_crosses_the_bridge() {
     let a = Domain::start("bridge-lin-a");
     let b = Domain::start("bridge-lin-b");
     primitive(a.esgm(), "robot_state", "RobotState", 100);
-    let copy = |inputs: &[Sample], _t: i64| Ok((*inputs[0].structure).clone());
+    let copy = |inputs: &[Sample], _t: i64| Ok(inputs[0].structure.to_structure());
     let types = vec![InputType::Type("RobotState".into())];
     a.esgm().add_comp_unit("Copy", "RobotState", types, Arc::new(copy)).unwrap();
     a.esgm()
@@ -430,10 +430,10 @@ fn lineage_crosses_the_bridge() {
     for s in &got {
         let lineage = s.lineage.as_ref().unwrap_or_else(|| panic!("no lineage crossed: {s:?}"));
         let input = &lineage.inputs[0];
-        let there = states.get_at(s.valid_time).unwrap();
+        let there = states.get_at(s.valid_time()).unwrap();
         assert_eq!(
             (input.trajectory.as_str(), input.valid_time, input.add_time),
-            ("robot_state", there.valid_time, there.add_time),
+            ("robot_state", there.valid_time(), there.add_time),
             "named as the exporting domain stores it"
         );
         assert!(!lineage.complete);

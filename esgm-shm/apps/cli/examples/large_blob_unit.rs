@@ -51,12 +51,12 @@ fn main() -> anyhow::Result<()> {
                 reason: format!("expected one input, got {}", inputs.len()),
             });
         };
-        let blob = Blob::from_structure(&input.structure)
+        let blob = Blob::from_shared(&input.structure)
             .map_err(|e| ComputeError::Failed { reason: e.to_string() })?;
         if blob.size < min_size {
             return Err(ComputeError::ValueNotAvailable);
         }
-        Ok(blob.to_structure("large_blob", input.structure.valid_time, qtime))
+        Ok(blob.to_structure("large_blob", input.structure.valid_time(), qtime))
     };
     esgm.add_comp_unit(
         &name,

@@ -42,11 +42,12 @@ fn frame_json(f: &EntityFrame) -> serde_json::Value {
 pub fn sample_json(trajectory: &str, s: &Sample) -> serde_json::Value {
     let mut v = json!({
         "trajectory": trajectory,
-        "name": s.structure.name,
-        "valid_time": s.structure.valid_time,
-        "create_time": s.structure.create_time,
+        "name": s.structure.name(),
+        "valid_time": s.structure.valid_time(),
+        "create_time": s.structure.create_time(),
         "add_time": s.add_time,
-        "attributes": attributes_json(&s.structure.attributes),
+        // Printed from owned values (an image as its length, never its pixels).
+        "attributes": attributes_json(&s.structure.attributes().to_pairs()),
     });
     if let Some(held) = &s.not_interpolated {
         v["not_interpolated"] = json!(held.as_ref());
@@ -61,9 +62,8 @@ pub fn sample_json(trajectory: &str, s: &Sample) -> serde_json::Value {
 pub fn sample_line(s: &Sample) -> String {
     let attrs: Vec<String> = s
         .structure
-        .attributes
-        .iter()
-        .map(|a| format!("{}={}", a.name, value_json(&a.value)))
+        .attributes()
+        .map(|(name, value)| format!("{name}={}", value_json(&value.to_value())))
         .collect();
     let held = match &s.not_interpolated {
         Some(held) => format!("  (not interpolated, most recent value: {})", held.join(", ")),
@@ -71,8 +71,8 @@ pub fn sample_line(s: &Sample) -> String {
     };
     format!(
         "{}  {}  {}  (add delay {:.3} ms){held}",
-        display(s.structure.valid_time),
-        s.structure.name,
+        display(s.structure.valid_time()),
+        s.structure.name(),
         attrs.join(" "),
         s.add_delay() as f64 / 1e6
     )

@@ -41,7 +41,7 @@ fn push_reset_and_log_level_reach_the_running_program() {
     assert!(out.contains("added"), "{out}");
     assert!(wait_for(|| robot.get_latest().is_ok()), "the push never reached the program");
     let s = robot.get_latest().unwrap();
-    assert_eq!((s.valid_time, s.get("x").and_then(|v| v.as_double())), (1000, Some(1.5)));
+    assert_eq!((s.valid_time(), s.get("x").and_then(|v| v.as_double())), (1000, Some(1.5)));
     // The gate's violation comes back, and fails the command.
     let late = esgm(
         &["--domain", &d, "push", "robot", "x=0", "y=0", "dir=0", "--valid-time", "500"],

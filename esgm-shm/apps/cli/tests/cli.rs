@@ -215,7 +215,7 @@ fn every_query_command_against_a_running_system() {
         assert!(!o.stderr.contains("panicked"), "{}", o.stderr);
 
         // Nothing running was disturbed.
-        assert_eq!(robot.get_latest().unwrap().structure.valid_time, t0 + 900_000_000);
+        assert_eq!(robot.get_latest().unwrap().structure.valid_time(), t0 + 900_000_000);
         drop(robot);
         drop(system);
     });
@@ -241,7 +241,7 @@ fn trace_follows_lineage_across_processes() {
     let b = system.create_primitive_entity_trajectory_structure("b", "RobotState").unwrap();
     ok(&["--domain", &d, "traj", "create", "pair", "--sync", "a,b", "--tolerance", "20ms"]);
     ok(&["--domain", &d, "traj", "create", "ab", "--merge", "a,b"]);
-    let copy = |i: &[esgm_core::Sample], _: i64| Ok((*i[0].structure).clone());
+    let copy = |i: &[esgm_core::Sample], _: i64| Ok(i[0].structure.to_structure());
     let types = vec!["RobotState".into()];
     system.add_comp_unit("copy", "RobotState", types, std::sync::Arc::new(copy)).unwrap();
     system.create_computed_entity_trajectory_structure("out", "copy", &["ab"]).unwrap();
@@ -357,7 +357,7 @@ fn why_names_a_stopped_writer_and_the_input_that_went_quiet() {
             if i[0].get("x").and_then(|v| v.as_double()).is_some_and(|x| x >= 0.0) {
                 Err(esgm_core::ComputeError::ValueNotAvailable)
             } else {
-                Ok((*i[0].structure).clone())
+                Ok(i[0].structure.to_structure())
             }
         };
     let types = vec!["RobotState".into()];

@@ -192,7 +192,8 @@ fn run<M: Serialize + 'static>(
             counters.lost(LossCause::SlowSide, now - overflowed);
             overflowed = now;
         }
-        let sent = convert(&sample.structure)
+        // ROS 2 messages are made of owned values: an archived structure is converted.
+        let sent = convert(&sample.structure.to_arc())
             .map_err(|e| (LossCause::Unconvertible, e.to_string()))
             .and_then(|m| {
                 publisher.publish(m).map_err(|e| match e {

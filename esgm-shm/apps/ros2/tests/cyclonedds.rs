@@ -160,9 +160,9 @@ fn a_ros2_node_on_cyclonedds_feeds_an_image_trajectory_and_reads_an_exported_pos
     assert!(wait_for(|| camera.stats().is_ok_and(|s| s.stored == 5)), "{:?}", camera.stats());
     let samples = camera.get_between(0, i64::MAX).unwrap();
     for (i, s) in samples.iter().enumerate() {
-        let image = Image::from_structure(&s.structure).unwrap();
-        assert_eq!(s.structure.valid_time, 1_000_000_000_000 + i as i64 * 1_000_000);
-        assert_eq!(s.structure.name, "camera");
+        let image = Image::from_shared(&s.structure).unwrap();
+        assert_eq!(s.structure.valid_time(), 1_000_000_000_000 + i as i64 * 1_000_000);
+        assert_eq!(s.structure.name(), "camera");
         assert_eq!((image.width, image.height, image.format), (4, 3, Image::FORMAT_RGB8));
         let pixels: &[u8] = image.image_data.as_ref();
         let expected: Vec<u8> = (0..36).map(|k| ((k + 7 * i) % 251) as u8).collect();
@@ -297,13 +297,13 @@ fn a_type_without_a_standard_message_is_read_as_its_generated_one() {
     for (i, s) in detections.get_between(0, i64::MAX).unwrap().iter().enumerate() {
         let i = i as i64;
         assert_eq!(
-            (s.structure.name.as_str(), s.structure.valid_time),
+            (s.structure.name(), s.structure.valid_time()),
             ("camera", 2_000_000_000_000 + i * 1_000_000)
         );
-        let seq = BlobSeq::from_structure(&s.structure).unwrap();
+        let seq = BlobSeq::from_shared(&s.structure).unwrap();
         let expected: Vec<Blob> = (1..=2).map(|k| Blob { x: k, y: -k, size: 10 * i + k }).collect();
         assert_eq!(seq.items, expected, "message {i}");
-        let Some(esgm_core::Value::EntityFrameSeq(frames)) = s.structure.get("items") else {
+        let Some(esgm_core::Value::EntityFrameSeq(frames)) = s.structure.value("items") else {
             panic!("a BlobSeq holds frames")
         };
         assert_eq!(frames.iter().map(|f| f.name.as_str()).collect::<Vec<_>>(), ["b1", "b2"]);

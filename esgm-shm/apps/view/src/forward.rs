@@ -136,8 +136,10 @@ fn run(
         buf.clear();
         let es = &sample.structure;
         let encoded = match shown {
+            // Foxglove's encodings are made of owned values: an archived structure is
+            // converted for them (its pixels stay where they are).
             Shown::Structures(encoding) => {
-                encoding.encode(es, name, &mut buf).map_err(|e| e.to_string())
+                encoding.encode(&es.to_arc(), name, &mut buf).map_err(|e| e.to_string())
             }
             Shown::Trace => {
                 let open = |input: &str| {
@@ -157,7 +159,7 @@ fn run(
             continue;
         }
         // Foxglove's times are unsigned: a valid time before 1970 is shown at 0.
-        let valid = u64::try_from(es.valid_time).unwrap_or(0);
+        let valid = u64::try_from(es.valid_time()).unwrap_or(0);
         channel.log_with_meta(&buf, PartialMetadata { log_time: Some(valid) });
         counters.sent.fetch_add(1, Ordering::Relaxed);
         counters.latest_valid_time.fetch_max(valid, Ordering::Relaxed);

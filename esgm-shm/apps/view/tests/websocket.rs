@@ -196,7 +196,7 @@ fn a_produced_trajectory_has_a_trace_channel_splitting_its_latency_by_stage() {
     let _coordinator = esgm_shm::control::Coordinator::spawn(&domain, registry).unwrap();
     let writer = esgm_shm::ShmEsgm::builder().domain(&domain).connect().unwrap();
     let robot = writer.create_trajectory(TrajectorySpec::primitive("robot", "RobotState")).unwrap();
-    let copy = |i: &[esgm_core::Sample], _: i64| Ok((*i[0].structure).clone());
+    let copy = |i: &[esgm_core::Sample], _: i64| Ok(i[0].structure.to_structure());
     let types = vec!["RobotState".into()];
     writer.add_comp_unit("copy", "RobotState", types.clone(), std::sync::Arc::new(copy)).unwrap();
     writer.create_trajectory(TrajectorySpec::computed("near", "copy", ["robot"])).unwrap();

@@ -488,7 +488,7 @@ fn verify(domain: &str, profile: &Profile, run: &Path, report: &mut Report) -> a
             .get_between(i64::MIN, i64::MAX)
             .with_context(|| format!("cannot query `{}`", t.name))?
             .iter()
-            .map(|s| s.structure.valid_time)
+            .map(|s| s.structure.valid_time())
             .collect();
         let acked = acks.get(&t.name).map_or(&[][..], Vec::as_slice);
         check::check_one(&t.name, worker::cache_of(t.class), acked, &held, &mut report.checked);

@@ -363,13 +363,13 @@ fn drive(domain: &str, a: &Args, plan: &Plan) -> anyhow::Result<()> {
     let mut t0 = None;
     while start.elapsed() < run_for {
         let Ok(s) = sub.recv_timeout(Duration::from_millis(50)) else { continue };
-        let t0 = *t0.get_or_insert(s.structure.valid_time);
+        let t0 = *t0.get_or_insert(s.structure.valid_time());
         print_direction(&s, t0, &robot_state);
     }
     drop(sub);
 
     let latest = directions.get_latest().context("no driving direction was computed")?;
-    let t0 = t0.unwrap_or(latest.structure.valid_time);
+    let t0 = t0.unwrap_or(latest.structure.valid_time());
     queries(&directions, &latest, t0)?;
     stage_latencies(&stages)?;
     let copies = image_copies(&esgm)?;
@@ -413,16 +413,16 @@ fn since(t0: Time, t: Time) -> f64 {
 }
 
 fn print_direction(s: &Sample, t0: Time, robot_state: &impl EntityTrajectoryStructure) {
-    let Ok(d) = DrivingDirection::from_structure(&s.structure) else { return };
+    let Ok(d) = DrivingDirection::from_shared(&s.structure) else { return };
     let heading = robot_state
-        .get_closest_at_or_before(s.structure.valid_time)
+        .get_closest_at_or_before(s.structure.valid_time())
         // No robot state yet (or not a `RobotState`): the heading prints as NaN.
         .ok()
-        .and_then(|r| RobotState::from_structure(&r.structure).ok())
+        .and_then(|r| RobotState::from_shared(&r.structure).ok())
         .map_or(f64::NAN, |r| r.dir);
     println!(
         "  {:>7.3}  {:>11.2}  {:>9.2}  {:>8.2}  {:>8.2}",
-        since(t0, s.structure.valid_time),
+        since(t0, s.structure.valid_time()),
         heading,
         d.dir,
         d.speed,
@@ -436,10 +436,10 @@ fn queries(
     latest: &Sample,
     t0: Time,
 ) -> anyhow::Result<()> {
-    let show = |s: &Sample| match DrivingDirection::from_structure(&s.structure) {
+    let show = |s: &Sample| match DrivingDirection::from_shared(&s.structure) {
         Ok(d) => format!(
             "t={:.3} s  dir {:>7.2} deg  speed {:.2}",
-            since(t0, s.structure.valid_time),
+            since(t0, s.structure.valid_time()),
             d.dir,
             d.speed
         ),
@@ -447,7 +447,7 @@ fn queries(
     };
     println!("\nqueries on driving_direction (seed 10.2)");
     println!("  {:<52} {}", "get_latest", show(latest));
-    let vt = latest.structure.valid_time;
+    let vt = latest.structure.valid_time();
     let between = directions.get_between(vt - 5_000_000_000, vt - 1_000_000_000)?;
     println!("  {:<52} {} samples", "get_between(latest - 5 s, latest - 1 s)", between.len());
     if let (Some(first), Some(last)) = (between.first(), between.last()) {
@@ -495,9 +495,9 @@ fn check(
         return Ok(());
     }
     let scene = SyntheticScene::builder().blobs(a.blobs).seed(a.seed).create()?;
-    let blob_sample = current_blob.get_closest_at_or_before(latest.structure.valid_time)?;
-    let blob = Blob::from_structure(&blob_sample.structure)?;
-    let truth = scene.truth(blob_sample.structure.valid_time);
+    let blob_sample = current_blob.get_closest_at_or_before(latest.structure.valid_time())?;
+    let blob = Blob::from_shared(&blob_sample.structure)?;
+    let truth = scene.truth(blob_sample.structure.valid_time());
     let largest = truth.iter().map(|b| b.size).max().unwrap_or(0);
     let near = |b: &Blob| (b.x - blob.x).abs() <= 3 && (b.y - blob.y).abs() <= 3;
     let matched = truth.iter().filter(|b| b.size * 10 >= largest * 9).any(near);

@@ -43,7 +43,7 @@ pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
         while start.elapsed() < window {
             if let Ok(s) = sub.recv_timeout(window.saturating_sub(start.elapsed())) {
                 delays.push(s.add_delay());
-                valid.push(s.structure.valid_time);
+                valid.push(s.structure.valid_time());
             }
         }
         delays.sort_unstable();

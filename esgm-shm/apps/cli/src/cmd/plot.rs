@@ -87,11 +87,8 @@ fn from_system(domain: &str, a: &Args) -> anyhow::Result<(Vec<Field>, Source)> {
         bail!("`{}` holds no samples to plot", a.trajectory);
     };
     let (from, to) = range(a, earliest, latest)?;
-    let structures = t
-        .get_between(from, to)?
-        .into_iter()
-        .map(|s| EntityStructure::clone(&s.structure))
-        .collect();
+    let structures =
+        t.get_between(from, to)?.into_iter().map(|s| s.structure.to_structure()).collect();
     Ok((fields, Source { type_name: ty.name, structures }))
 }
 

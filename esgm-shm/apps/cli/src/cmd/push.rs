@@ -46,7 +46,7 @@ pub fn run(domain: &str, json: bool, a: &Args) -> anyhow::Result<()> {
     let now = esgm.local().clock().now();
     let valid_time = match &a.valid_time {
         // Empty has no latest; a relative time then says it needs one.
-        Some(arg) => arg.resolve(t.get_latest_vtime().ok().map(|s| s.valid_time))?,
+        Some(arg) => arg.resolve(t.get_latest_vtime().ok().map(|s| s.valid_time()))?,
         None => now,
     };
     let name = a.name.clone().unwrap_or_else(|| a.trajectory.clone());

@@ -75,7 +75,7 @@ pub struct Approx {
 
 fn latest_vt(t: &impl EntityTrajectoryStructure) -> Option<i64> {
     // Empty has no latest; a relative time then says it needs one.
-    t.get_latest().ok().map(|s| s.structure.valid_time)
+    t.get_latest().ok().map(|s| s.structure.valid_time())
 }
 
 fn print_all(json: bool, name: &str, samples: &[Sample]) {

@@ -55,7 +55,7 @@ fn pick(t: &InProcessTrajectory, at: Option<&TimeArg>) -> anyhow::Result<Sample>
     match at {
         None => Ok(latest),
         Some(at) => {
-            let time = at.resolve(Some(latest.valid_time))?;
+            let time = at.resolve(Some(latest.valid_time()))?;
             t.get_at(time).with_context(|| format!("`{name}` holds no structure valid at {time}"))
         }
     }

@@ -85,7 +85,7 @@ pub fn run(domain: &str, a: &WorkerArgs) -> anyhow::Result<()> {
     for t in profile.written_by(a.index) {
         let handle = take(&esgm, t)?;
         // Numbered on from what the trajectory holds (its kept history after a restart).
-        let next = handle.get_latest().map_or(0, |s| s.structure.valid_time + 1);
+        let next = handle.get_latest().map_or(0, |s| s.structure.valid_time() + 1);
         written.push((handle, t.class, t.hz, next));
     }
     let received = Arc::new(AtomicU64::new(0));

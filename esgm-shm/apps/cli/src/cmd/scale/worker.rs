@@ -128,7 +128,7 @@ pub fn run(domain: &str, a: &WorkerArgs) -> anyhow::Result<()> {
             while !stop.load(Ordering::Acquire) {
                 if let Ok(sample) = subscription.recv_timeout(Duration::from_secs(3600)) {
                     let held = clock.now();
-                    let us = (held - sample.structure.create_time).max(0) / 1_000;
+                    let us = (held - sample.structure.create_time()).max(0) / 1_000;
                     if stop.load(Ordering::Acquire) {
                         break;
                     }
