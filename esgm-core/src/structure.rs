@@ -92,7 +92,7 @@ impl Archived {
 
 /// Bytes held on this process's heap, for an archive copied out of memory that could
 /// not be held (a reader past its budget of borrowed samples, a file read back).
-struct HeapArchive(rkyv::util::AlignedVec<{ codec::ARCHIVE_ALIGNMENT }>);
+struct HeapArchive(codec::ArchiveBuffer);
 
 impl OctetsHolder for HeapArchive {
     fn bytes(&self) -> &[u8] {
@@ -117,9 +117,15 @@ impl SharedStructure {
     /// buffer and checked: for bytes that cannot be held where they are (a request's
     /// payload, a file's record, a reader past its borrow budget).
     pub fn archived_copy(bytes: &[u8]) -> Result<Self, CodecError> {
-        let mut copy = rkyv::util::AlignedVec::<{ codec::ARCHIVE_ALIGNMENT }>::new();
+        let mut copy = codec::ArchiveBuffer::new();
         copy.extend_from_slice(bytes);
-        Self::archived(Arc::new(HeapArchive(copy)))
+        Self::archived_buffer(copy)
+    }
+
+    /// An archived structure read in place in `buffer` (codec bytes on this process's
+    /// heap, already copied there), checked.
+    pub fn archived_buffer(buffer: codec::ArchiveBuffer) -> Result<Self, CodecError> {
+        Self::archived(Arc::new(HeapArchive(buffer)))
     }
 
     /// An archived structure that `root` points at inside `holder`'s bytes, checked by

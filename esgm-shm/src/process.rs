@@ -148,7 +148,7 @@ pub fn print_json_lines<T: serde::Serialize>(lines: impl IntoIterator<Item = T>)
 /// runs and not after. Returns how many files were removed.
 pub fn remove_domain_files(domain: &str) -> usize {
     crate::data_plane::wake_word::remove_domain(domain)
-        + crate::data_plane::kept_history::KeptHistory::remove_domain(domain)
+        + crate::data_plane::kept::KeptHistory::remove_domain(domain)
 }
 
 /// True while process `pid` runs (a zombie has stopped).

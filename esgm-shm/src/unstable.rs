@@ -16,8 +16,9 @@ pub use crate::client::{AdminRead, AdminReader, read_blocking_add_answer, serve_
 pub use crate::control::registry::changes_registry;
 pub use crate::control::state::{SNAPSHOT_VERSION, SavedTrajectory, Snapshot};
 pub use crate::data_plane::image_layout::{IMAGE_NAME_MAX, IMAGE_PIXELS_OFFSET};
-pub use crate::data_plane::kept_history::{
-    KeepError, KeptEntries, KeptEntry, KeptHistory, Retention,
+pub use crate::data_plane::kept::{
+    HOLDERS, KeepError, KeptEntries, KeptEntry, KeptHistory, KeptImage, KeptLocation, KeptView,
+    Retention, RingLoan,
 };
 pub use crate::data_plane::payload::{BLOCK_LEN, as_bytes, blocks_for};
 pub use crate::data_plane::publisher::notifies_spared_here;

@@ -127,7 +127,7 @@ fn a_kept_image_survives_panics_of_esgm_threads() {
 }
 
 #[test]
-fn a_readers_pixels_live_in_the_writers_shared_memory_segment() {
+fn a_readers_pixels_live_in_the_kept_history_mapped_read_only() {
     let s = setup("life-segment");
     let px = pixels(&s.kept);
     let (start, end) = (px.as_ptr() as usize, px.as_ptr() as usize + px.len());
@@ -142,12 +142,14 @@ fn a_readers_pixels_live_in_the_writers_shared_memory_segment() {
             lo <= start && end <= hi
         })
         .unwrap_or_else(|| panic!("no mapping holds the pixels at {start:#x}"));
+    // A kept trajectory's image lies in its kept history, where the camera wrote it
+    // (written once, P7), and the reader maps that file read-only.
     assert!(
-        mapping.contains("/dev/shm/iox2_"),
-        "the pixels are not in an iceoryx2 shared-memory segment: {mapping}"
+        mapping.contains("/dev/shm/esgm_keep@"),
+        "the pixels are not in the trajectory's kept history: {mapping}"
     );
-    // ... and that segment is the writer's data segment: the same bytes through the
-    // writer's own publisher are the ones the reader reads (no copy in between).
+    let permissions = mapping.split_whitespace().nth(1).unwrap_or_default();
+    assert_eq!(permissions, "r--s", "the reader maps the kept history read-only: {mapping}");
     assert!(px.is_held());
     drop(s.frames);
 }

@@ -85,6 +85,7 @@ fn run() -> anyhow::Result<()> {
             window.set(as_time(start), as_time(until));
             sleep_until(until.saturating_add(u64::try_from(DRAIN.as_nanos()).unwrap_or(0)));
             run.done(&name, &served.report())?;
+            write_steps(&name);
         }
         None => window.open_for_good(),
     }
@@ -92,6 +93,24 @@ fn run() -> anyhow::Result<()> {
     serve_while_system_lives(&esgm, None, Duration::from_millis(500));
     Ok(())
 }
+
+/// With the hop probes built in (`--features hop-probe`) and [`STEPS_ENV`] naming a
+/// directory: this node's hop steps, one line a step ([`crate::hop_steps::lines`]), in
+/// `steps-<node>.txt` there, to read beside the run's KPIs.
+fn write_steps(name: &str) {
+    let Some(dir) = std::env::var_os(STEPS_ENV) else { return };
+    let lines = crate::hop_steps::lines(name);
+    if lines.is_empty() {
+        return;
+    }
+    let path = std::path::Path::new(&dir).join(format!("steps-{name}.txt"));
+    if let Err(e) = std::fs::write(&path, lines.join("\n") + "\n") {
+        eprintln!("{PROGRAM}: cannot write {}: {e}", path.display());
+    }
+}
+
+/// The directory [`write_steps`] writes to.
+pub const STEPS_ENV: &str = "ESGM_REFSYS_STEPS";
 
 /// A worker of a measured run leaves when the process that started it (the run's
 /// coordinator) dies, so a run that fails and kills its coordinator leaves no worker

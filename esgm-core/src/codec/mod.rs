@@ -59,6 +59,9 @@ use writer::CountingWriter;
 /// out on this boundary.
 pub const ARCHIVE_ALIGNMENT: usize = 16;
 
+/// A heap buffer aligned for the archived form, as [`encode`] returns one.
+pub type ArchiveBuffer = AlignedVec<ARCHIVE_ALIGNMENT>;
+
 /// Encoding or decoding failed; the message says which check failed.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]

@@ -120,6 +120,9 @@ pub enum Rejection {
     /// attribute missing from the type, of another sort, or assigned twice), though
     /// its header names the type.
     WrongLayout,
+    /// The sample names bytes in the trajectory's kept history that this reader cannot
+    /// read (the file cannot be opened or mapped here).
+    Unreadable,
 }
 
 impl fmt::Display for Rejection {
@@ -131,6 +134,7 @@ impl fmt::Display for Rejection {
             Rejection::Truncated => "rejected_truncated",
             Rejection::NotWriter => "rejected_not_writer",
             Rejection::WrongLayout => "rejected_wrong_layout",
+            Rejection::Unreadable => "rejected_unreadable",
         })
     }
 }

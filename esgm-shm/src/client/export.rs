@@ -26,7 +26,7 @@ use esgm_core::{
 use parking_lot::Mutex;
 
 use super::blocking_add::{AddServer, BlockingAddError};
-use super::image_loans::{LoanAllocator, as_loan, loaned_image};
+use super::image_loans::{Chunk, LoanAllocator, as_loan, loaned_image};
 use super::settings::{
     fixed_sample_len, generation_domain, handle_qos, inbox_domain, inbox_qos, join_service,
 };
@@ -35,7 +35,7 @@ use crate::client::holdings::{HoldingOwner, Holdings};
 use crate::control::protocol::TrajectoryRecord;
 use crate::data_plane::capacity::{EventCapacity, Readers};
 use crate::data_plane::image_loan::ImageChunk;
-use crate::data_plane::kept_history::{KeptHistory, Retention};
+use crate::data_plane::kept::{KeepError, KeptHistory, KeptImage, KeptLocation, Retention};
 use crate::data_plane::publisher::{PublishError, SampleSizing, TrajectoryPublisher};
 use crate::data_plane::service::EventSpec;
 use crate::data_plane::service::OpenError;
@@ -95,11 +95,28 @@ pub(crate) struct Outlet {
 }
 
 impl Outlet {
-    /// A loan of this outlet's publisher for an image (the trajectory's
-    /// [`esgm_core::OctetsAllocator`]); `None`, logged, if it cannot lend one now.
-    fn loan_image(&mut self, width: i64, height: i64, format: i64) -> Option<ImageChunk> {
+    /// A loan for an image (the trajectory's [`esgm_core::OctetsAllocator`]): of the
+    /// kept history for a kept trajectory, of the publisher otherwise; `None`, logged,
+    /// if it cannot lend one now.
+    fn loan_image(&mut self, width: i64, height: i64, format: i64) -> Option<Chunk> {
+        if let Some(kept) = &mut self.kept {
+            let loaned = crate::data_plane::image_layout::pixel_len(width, height, format)
+                .map_err(|e| e.to_string())
+                .and_then(|len| {
+                    KeptImage::loan(kept, (width, height, format), len).map_err(|e| e.to_string())
+                });
+            return match loaned {
+                Ok(image) => Some(Chunk::Kept(image)),
+                Err(e) => {
+                    tracing::debug!(trajectory = %self.publisher.trajectory(), error = %e,
+                        "no room in the kept history for an image; it is written on the heap");
+                    None
+                }
+            };
+        }
         self.publisher
             .loan_image_chunk(width, height, format)
+            .map(Chunk::Shm)
             .map_err(|e| {
                 tracing::debug!(trajectory = %self.publisher.trajectory(), error = %e,
                     "no shared-memory buffer for an image; it is written on the heap")
@@ -107,14 +124,15 @@ impl Outlet {
             .ok()
     }
 
-    /// Publishes an entering structure. One whose pixels are this outlet's loan is sent
-    /// in place, and the structure as this process received it is returned, for the
-    /// store to keep (see [`super::image_loans`]).
+    /// Publishes an entering structure (and keeps it, for a kept trajectory). One whose
+    /// pixels are this outlet's loan is completed in place and sent or kept where it is,
+    /// and the structure as this process now reads it is returned, for the store to
+    /// keep (see [`super::image_loans`]).
     fn enter(&mut self, sample: &Sample, owner: usize) -> Option<SharedStructure> {
         let es = &sample.structure;
-        let loaned = match (&self.own, es.as_owned()) {
-            (Some(_), Some(owned)) => loaned_image(owned, owner),
-            _ => None,
+        let loaned = match es.as_owned() {
+            Some(owned) => loaned_image(owned, owner),
+            None => None,
         };
         let Some(holder) = loaned else {
             self.encode(sample);
@@ -138,39 +156,67 @@ impl Outlet {
             self.encode(sample);
             return None;
         }
-        let index = self.reserve();
+        let received = match chunk {
+            Chunk::Kept(image) => self.keep_image(image, sample)?,
+            Chunk::Shm(chunk) => self.send_image(chunk, sample)?,
+        };
+        if let Some(pixels) = received.get("image_data").and_then(|v| v.as_octets()) {
+            loan.sent(pixels);
+        }
+        Some(received)
+    }
+
+    /// Completes an image in its loan of the kept history, keeps it there and publishes
+    /// where it is: written once. The structure as this process reads it back in place.
+    fn keep_image(&mut self, image: KeptImage, sample: &Sample) -> Option<SharedStructure> {
+        let es = &sample.structure;
+        let (valid, create) = (es.valid_time(), es.create_time());
+        let kept = self.kept.as_mut()?;
+        let kept_at = image
+            .complete(es.name(), valid, create)
+            .map_err(KeepError::from)
+            .and_then(|(loan, written)| kept.commit(loan, written, sample.add_time, valid));
+        let at = match kept_at {
+            Ok(at) => at,
+            Err(e) => {
+                // Not kept: published in full instead, as any structure that cannot be.
+                self.not_kept(&e);
+                self.publish_entry(sample);
+                return None;
+            }
+        };
+        esgm_core::probe::mark(esgm_core::probe::Step::Kept);
+        if let Err(e) = self.publisher.publish_kept(&at, (valid, create), sample.add_time) {
+            self.entry_failed(&e);
+        }
+        if let Some((_, owner)) = &self.own {
+            owner.count_sent(true);
+        }
+        self.kept.as_mut()?.hold_own(&at)
+    }
+
+    /// Completes an image in its loan of the publisher and sends it: written once. The
+    /// structure as this process received it back through its own subscriber.
+    fn send_image(&mut self, chunk: ImageChunk, sample: &Sample) -> Option<SharedStructure> {
+        let es = &sample.structure;
         let sent = chunk
             .complete(&self.publisher, es.name(), es.valid_time(), es.create_time())
-            .and_then(|loan| match index {
-                Some(index) => loan.send_kept(sample.add_time, index),
-                None => loan.send_added(sample.add_time),
-            });
+            .and_then(|loan| loan.send_added(sample.add_time));
         let published = match sent {
             Ok(p) => p,
             Err(e) => {
                 self.entry_failed(&e);
-                self.not_kept(index, &e);
                 return None;
             }
         };
         if let Some((_, owner)) = &self.own {
             owner.count_sent(true);
         }
-        let Some(received) = self.receive_own(published.sequence) else {
-            self.not_kept(index, &"the image sent did not come back to be kept");
-            return None;
-        };
-        if let Some(pixels) = received.get("image_data").and_then(|v| v.as_octets()) {
-            loan.sent(pixels);
-        }
-        // Kept from the structure as this process received it (its pixels held in the
-        // sent chunk), after the readers were woken.
-        self.keep(index, &Sample::new(received.clone(), sample.add_time, sample.add_time));
-        Some(received)
+        self.receive_own(published.sequence)
     }
 
-    /// Publishes an entering structure by encoding it; an image's pixels are copied
-    /// into shared memory (counted).
+    /// Publishes an entering structure by writing it (an image's pixels are copied
+    /// into shared memory, counted): kept and named, for a kept trajectory.
     fn encode(&mut self, sample: &Sample) {
         self.publish(&StoreEvent::Entered(sample.clone()));
         if let Some((_, owner)) = &self.own {
@@ -254,29 +300,9 @@ impl Outlet {
         })
     }
 
-    /// The index an entering structure of a primitive trajectory will be kept at,
-    /// reserved before it is published ([`KeptHistory::reserve`]); `None` if the
-    /// trajectory keeps nothing.
-    fn reserve(&mut self) -> Option<u64> {
-        self.kept.as_mut().map(KeptHistory::reserve)
-    }
-
-    /// Keeps a structure just published under `index` (reserved): readers were woken
-    /// first, and `add` returns once it is kept. One that could not be kept is logged
-    /// and counted; its index is never given again.
-    fn keep(&mut self, index: Option<u64>, sample: &Sample) {
-        let (Some(index), Some(kept)) = (index, self.kept.as_mut()) else { return };
-        if let Err(e) = kept.write(index, &sample.structure, sample.add_time) {
-            self.not_kept(Some(index), &e);
-        }
-        esgm_core::probe::mark(esgm_core::probe::Step::Kept);
-    }
-
-    /// The structure reserved at `index` was not kept, for `why`: logged and counted.
-    fn not_kept(&mut self, index: Option<u64>, why: &dyn std::fmt::Display) {
-        if index.is_none() {
-            return;
-        }
+    /// A structure that entered was not kept, for `why`: logged and counted. It is
+    /// published in full instead: readers have it, it will not outlive this process.
+    fn not_kept(&mut self, why: &dyn std::fmt::Display) {
         self.unkept += 1;
         if is_power_of_ten(self.unkept) {
             tracing::warn!(trajectory = %self.publisher.trajectory(), error = %why,
@@ -286,12 +312,42 @@ impl Outlet {
         }
     }
 
-    /// Publishes a structure kept at `kept` (or not kept: `None`).
-    fn publish_entry(&mut self, sample: &Sample, kept: Option<u64>) {
+    /// Publishes a structure in full (encoded into a loan, or an archive copied).
+    fn publish_entry(&mut self, sample: &Sample) {
         let lineage = sample.lineage.as_deref();
         let sent =
-            self.publisher.publish_produced(&sample.structure, sample.add_time, kept, lineage);
+            self.publisher.publish_produced(&sample.structure, sample.add_time, None, lineage);
         if let Err(e) = sent {
+            self.entry_failed(&e);
+        }
+    }
+
+    /// Keeps a structure that entered and publishes where it is, for a kept trajectory
+    /// (written once, in the kept history); publishes it in full otherwise, or when it
+    /// cannot be kept.
+    fn keep_and_publish(&mut self, sample: &Sample) {
+        if let Some(kept) = &mut self.kept {
+            let lineage = sample.lineage.as_deref();
+            match kept.write_traced(&sample.structure, sample.add_time, lineage) {
+                Ok(at) => {
+                    esgm_core::probe::mark(esgm_core::probe::Step::Kept);
+                    let times = (sample.valid_time(), sample.create_time());
+                    if let Err(e) = self.publisher.publish_kept(&at, times, sample.add_time) {
+                        self.entry_failed(&e);
+                    }
+                    return;
+                }
+                Err(e) => self.not_kept(&e),
+            }
+        }
+        self.publish_entry(sample);
+    }
+
+    /// Publishes again an entry the kept history holds at `at` (a writer that restarted
+    /// or took over hands it on with the index readers know it by).
+    fn publish_kept_again(&mut self, at: &KeptLocation, sample: &Sample) {
+        let times = (sample.valid_time(), sample.create_time());
+        if let Err(e) = self.publisher.publish_kept(at, times, sample.add_time) {
             self.entry_failed(&e);
         }
     }
@@ -299,9 +355,7 @@ impl Outlet {
     fn publish(&mut self, event: &StoreEvent) {
         let result = match event {
             StoreEvent::Entered(s) => {
-                let index = self.reserve();
-                self.publish_entry(s, index);
-                self.keep(index, s);
+                self.keep_and_publish(s);
                 return;
             }
             StoreEvent::Violation(v) => self.violation_publisher().and_then(|p| p.publish(v)),
@@ -486,7 +540,8 @@ impl Export {
                 if let Some(former) = &former {
                     for entry in &former.entries {
                         if start.known().is_none_or(|k| entry.index > k) {
-                            s.replicate(entry.structure.clone().into(), entry.add_time, None);
+                            let lineage = entry.lineage.clone().map(Arc::new);
+                            s.replicate(entry.structure.clone(), entry.add_time, lineage);
                         }
                     }
                 }
@@ -502,15 +557,17 @@ impl Export {
                     out.publish(&StoreEvent::Reset);
                 }
                 match former {
-                    // Handed on as kept, with the indices readers know it by.
+                    // Handed on as kept, with the indices readers know it by, where it is.
                     Some(former) => {
                         for entry in former.entries {
-                            let sample = Sample::new(
-                                Arc::new(entry.structure),
-                                entry.add_time,
-                                entry.add_time,
-                            );
-                            out.publish_entry(&sample, Some(entry.index));
+                            let at = out.kept.as_ref().and_then(|k| k.location(entry.index));
+                            let sample =
+                                Sample::new(entry.structure, entry.add_time, entry.add_time)
+                                    .with_lineage(entry.lineage.map(Arc::new));
+                            match at {
+                                Some(at) => out.publish_kept_again(&at, &sample),
+                                None => out.publish_entry(&sample),
+                            }
                         }
                     }
                     None => {
@@ -609,10 +666,12 @@ impl Export {
             match port.receive() {
                 Ok(Some(sample)) => {
                     n += 1;
-                    match sample.to_owned() {
+                    // The add's archive, copied as it is (never decoded): the gate checks it
+                    // in place, and a kept trajectory keeps its bytes as they came.
+                    match SharedStructure::archived_copy(sample.archive_bytes()) {
                         Ok(es) => {
                             // The gate counts (and publishes) what it refuses.
-                            if let Err(e) = self.handle.add(es) {
+                            if let Err(e) = self.handle.add_shared(es) {
                                 tracing::debug!(trajectory = %self.handle.name(), error = %e,
                                     "add from another process refused");
                             }

@@ -14,6 +14,11 @@
 //! borrowed for as long as a value in this process reads it (as in every reader, see
 //! [`crate::client::holdings`]); the loan's holder reads the same received bytes from then on.
 //!
+//! A kept trajectory (a primitive one, whose history outlives its writer) lends its
+//! kept history's memory instead ([`crate::data_plane::kept::KeptImage`]): the image
+//! is completed there, kept where it was written, and read there by every reader; the
+//! writer's store reads it through its own hold of the file. Written once either way.
+//!
 //! A structure whose shape is not an image the layout can complete (other
 //! attributes, sizes that differ from the loan's), or whose pixels were already sent,
 //! is encoded the ordinary way: its pixels are copied once, never lost.
@@ -26,6 +31,34 @@ use esgm_core::{EntityStructure, Octets, OctetsAllocator, PixelBuffer, PixelStor
 use parking_lot::Mutex;
 
 use crate::data_plane::image_loan::ImageChunk;
+use crate::data_plane::kept::KeptImage;
+
+/// The memory an image is written into: a loan of the trajectory's publisher, or of
+/// its kept history.
+#[derive(Debug)]
+pub(crate) enum Chunk {
+    /// The publisher's: sent in place.
+    Shm(ImageChunk),
+    /// The kept history's: kept where it was written.
+    Kept(KeptImage),
+}
+
+impl Chunk {
+    /// Width, height and format the loan was made for.
+    pub fn size(&self) -> (i64, i64, i64) {
+        match self {
+            Chunk::Shm(c) => c.size(),
+            Chunk::Kept(k) => k.size(),
+        }
+    }
+
+    fn pixels_mut(&mut self) -> &mut [u8] {
+        match self {
+            Chunk::Shm(c) => c.pixels_mut(),
+            Chunk::Kept(k) => k.pixels_mut(),
+        }
+    }
+}
 
 /// The attributes of an image the layout completes around its pixels.
 const IMAGE_ATTRIBUTES: [&str; 4] = ["width", "height", "format", "image_data"];
@@ -35,15 +68,12 @@ const IMAGE_ATTRIBUTES: [&str; 4] = ["width", "height", "format", "image_data"];
 pub(crate) struct LoanAllocator<T: Send + 'static> {
     /// The export's outlet (gone when the export is).
     outlet: Weak<Mutex<T>>,
-    /// Loans the outlet's publisher: `(outlet, width, height, format)`.
-    loan: fn(&mut T, i64, i64, i64) -> Option<ImageChunk>,
+    /// Loans the outlet's memory: `(outlet, width, height, format)`.
+    loan: fn(&mut T, i64, i64, i64) -> Option<Chunk>,
 }
 
 impl<T: Send + 'static> LoanAllocator<T> {
-    pub fn new(
-        outlet: &Arc<Mutex<T>>,
-        loan: fn(&mut T, i64, i64, i64) -> Option<ImageChunk>,
-    ) -> Self {
+    pub fn new(outlet: &Arc<Mutex<T>>, loan: fn(&mut T, i64, i64, i64) -> Option<Chunk>) -> Self {
         Self { outlet: Arc::downgrade(outlet), loan }
     }
 }
@@ -59,7 +89,7 @@ impl<T: Send + std::fmt::Debug + 'static> OctetsAllocator for LoanAllocator<T> {
 
 /// A buffer being written: the loan itself.
 struct LoanStorage {
-    chunk: ImageChunk,
+    chunk: Chunk,
     owner: usize,
 }
 
@@ -88,7 +118,7 @@ impl PixelStorage for LoanStorage {
 pub(crate) struct LoanHolder {
     ptr: *const u8,
     len: usize,
-    chunk: Mutex<Option<ImageChunk>>,
+    chunk: Mutex<Option<Chunk>>,
     sent: OnceLock<Octets>,
     /// The outlet whose publisher lent the chunk.
     owner: usize,
@@ -120,7 +150,7 @@ impl OctetsHolder for LoanHolder {
 
 impl LoanHolder {
     /// The loan, if not taken yet, to send.
-    pub fn take(&self) -> Option<ImageChunk> {
+    pub fn take(&self) -> Option<Chunk> {
         self.chunk.lock().take()
     }
 

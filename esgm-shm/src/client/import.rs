@@ -45,7 +45,7 @@ use super::takeover::{TakeOverAsk, WriterLiveness};
 use crate::client::holdings::{HoldingOwner, Holdings};
 use crate::control::protocol::{TrajectoryRecord, WriterPort};
 use crate::data_plane::capacity::{EventCapacity, Readers};
-use crate::data_plane::kept_history::KeptHistory;
+use crate::data_plane::kept::KeptHistory;
 use crate::data_plane::publisher::{SampleSizing, TrajectoryPublisher};
 use crate::data_plane::service::{EventSpec, OpenError, ShmService, open_event_service};
 use crate::data_plane::service_name::{NameError, TrajectoryServiceNames};
@@ -338,11 +338,11 @@ impl Import {
         let mut n = 0;
         for entry in kept.entries {
             let arrival = Arrival::Entry {
-                es: entry.structure.into(),
+                es: entry.structure,
                 add_time: entry.add_time,
                 kept: Some(entry.index),
-                // Kept histories are primitive trajectories': pushed, no lineage.
-                lineage: None,
+                // Kept with it (a structure a bridge imported with its inputs), or none.
+                lineage: entry.lineage.map(Arc::new),
             };
             let before = self.last_kept;
             self.enter(arrival);

@@ -1,7 +1,7 @@
 //! The coordinator: serves the [`Registry`] on `esgm/<domain>/control`, and cleans up
 //! after processes that died.
 
-use crate::data_plane::kept_history::KeptHistory;
+use crate::data_plane::kept::KeptHistory;
 use crate::data_plane::service::ShmService;
 use crate::data_plane::service_name::generation_domain;
 use iceoryx2::port::listener::Listener;

@@ -168,6 +168,16 @@ pub(crate) struct ImageChunk {
     pixels_init: bool,
 }
 
+impl std::fmt::Debug for ImageChunk {
+    // iceoryx2's loaned sample has no `Debug`; the image's sizes say what it is.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ImageChunk")
+            .field("size", &(self.width, self.height, self.format))
+            .field("pixel_len", &self.pixel_len)
+            .finish_non_exhaustive()
+    }
+}
+
 impl ImageChunk {
     /// A loan of at least `image_layout::image_loan_len(pixel_len)` bytes for an image
     /// of these sizes (already checked by the publisher).

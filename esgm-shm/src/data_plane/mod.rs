@@ -11,7 +11,7 @@ pub mod capacity;
 pub(crate) mod encodable;
 pub mod image_layout;
 pub(crate) mod image_loan;
-pub mod kept_history;
+pub mod kept;
 pub mod payload;
 pub mod publisher;
 pub(crate) mod qos;

@@ -121,6 +121,11 @@ pub(crate) fn with_trailer_len(archive_len: usize, lineage_len: usize) -> usize 
     trailer_start(archive_len) + TRAILER_HEAD + lineage_len
 }
 
+/// [`with_trailer_len`] of lengths another process wrote: `None` on overflow.
+pub(crate) fn checked_trailer_len(archive_len: usize, lineage_len: usize) -> Option<usize> {
+    trailer_start(archive_len).checked_add(TRAILER_HEAD)?.checked_add(lineage_len)
+}
+
 /// The lineage bytes of a payload whose header has [`SampleHeader::FLAG_LINEAGE`]: at
 /// [`trailer_start`], a length, then that many bytes ([`esgm_core::codec::decode_lineage`]
 /// reads them). An error says what is wrong with a trailer another process wrote.
@@ -182,6 +187,16 @@ impl SampleHeader {
     /// one. No payload (`archive_len` 0); it takes a sequence number like a structure,
     /// and sits in the publisher's history so a late reader forgets what came before.
     pub const KIND_RESET: u32 = 2;
+
+    /// The structure is in the trajectory's kept history, written there once
+    /// ([`crate::unstable::KeptHistory`]): the payload names the file (its id, a `u64`)
+    /// and the entry's start position in the file's ring (a `u64`), `kept` the entry's
+    /// index + 1 and `archive_len` its length. A reader reads the entry in place in the
+    /// file, while the ring has not come round to it.
+    pub const KIND_KEPT: u32 = 3;
+
+    /// Bytes of a [`Self::KIND_KEPT`] sample's payload.
+    pub const KEPT_PAYLOAD: usize = 16;
 
     /// The structure is an `Image` whose pixels the producer wrote straight into shared
     /// memory: a cache can keep the sample itself instead of copying the bytes out.

@@ -59,6 +59,7 @@ use iceoryx2::service::port_factory::PortFactory;
 use crate::data_plane::encodable::Encodable;
 use crate::data_plane::image_layout::{ImageError, image_loan_len, pixel_len};
 use crate::data_plane::image_loan::{ImageChunk, ImageLoan};
+use crate::data_plane::kept::KeptLocation;
 use crate::data_plane::payload::{
     BLOCK_LEN, Block16, SampleHeader, TRAILER_HEAD, as_uninit_bytes, blocks_for, trailer_start,
     with_trailer_len, zero_fill,
@@ -459,22 +460,37 @@ impl TrajectoryPublisher {
         self.publish_inner(es.into(), Some(add_time))
     }
 
-    /// [`Self::publish_added`] for a structure kept at index `kept` of its
-    /// trajectory's kept history (the header's [`SampleHeader::kept`]).
+    /// Publishes a structure its writer kept in the trajectory's kept history at `at`,
+    /// valid and created at `times`, added at `add_time`: a sample that names the entry
+    /// ([`SampleHeader::KIND_KEPT`]), which readers read in place in the file. The
+    /// structure's bytes are not written again.
     pub fn publish_kept(
         &self,
-        es: &EntityStructure,
+        at: &KeptLocation,
+        times: (Time, Time),
         add_time: Time,
-        kept: u64,
     ) -> Result<Published, PublishError> {
-        let loan = self.loan_structure(es)?;
-        let blocks = loan.blocks();
-        let sent = loan.send_kept(add_time, kept);
-        self.loan_spare(blocks);
+        let want = blocks_for(SampleHeader::KEPT_PAYLOAD);
+        let mut sample = self.loan_blocks(want).map_err(PublishError::Loan)?;
+        esgm_core::probe::mark(esgm_core::probe::Step::Loaned);
+        let bytes = as_uninit_bytes(sample.payload_mut());
+        let bytes = zero_fill(bytes);
+        bytes[..8].copy_from_slice(&at.file_id.to_ne_bytes());
+        bytes[8..16].copy_from_slice(&at.start.to_ne_bytes());
+        // SAFETY: `zero_fill` initialised the whole payload.
+        let sample = unsafe { sample.assume_init() };
+        esgm_core::probe::mark(esgm_core::probe::Step::Encoded);
+        let flags = match at.lineage {
+            true => SampleHeader::FLAG_LINEAGE,
+            false => 0,
+        };
+        let kind = (flags, SampleHeader::KIND_KEPT);
+        let sent = self.send_kind(sample, at.len, times, kind, Some(add_time), Some(at.index));
+        self.loan_spare(want);
         sent
     }
 
-    /// [`Self::publish_added`] (or [`Self::publish_kept`] with `kept`) for a structure
+    /// [`Self::publish_added`] for a structure
     /// made from others: `lineage` names them, and travels after the archive in the
     /// same sample ([`SampleHeader::FLAG_LINEAGE`]), so every reader's replica holds it.
     /// An archived structure (one another process wrote, passed on by a merge here) is

@@ -10,8 +10,10 @@ use esgm_core::codec::{self, ArchivedEntityStructure, CodecError};
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::sample::Sample;
 
+use crate::data_plane::kept::{KeptHold, Taken};
 use crate::data_plane::payload::{Block16, SampleHeader, as_bytes};
 use crate::data_plane::sample_check::validate;
+use iceoryx2::identifiers::UniquePublisherId;
 
 /// The iceoryx2 sample type of a trajectory.
 pub(crate) type RawSample = Sample<ShmService, [Block16], SampleHeader>;
@@ -44,28 +46,43 @@ pub(crate) enum Checked {
     Invalid,
 }
 
-/// A sample taken from a trajectory: the iceoryx2 sample itself (its payload stays in
-/// shared memory, where the producer wrote it) and what the subscriber checked.
+/// A sample taken from a trajectory, read in place: the iceoryx2 sample itself (its
+/// payload stays in shared memory, where the producer wrote it), or the entry of the
+/// trajectory's kept history it names, held in the file; and what the subscriber
+/// checked.
 ///
-/// Holding it keeps the shared-memory chunk borrowed: the publisher cannot reuse it,
-/// and a subscriber may hold only `max_borrowed_samples` at once
-/// ([`crate::TrajectoryQos`]). Drop samples you are done with.
+/// Holding it keeps the memory borrowed: the publisher cannot reuse the chunk (a
+/// subscriber may hold only `max_borrowed_samples` at once, [`crate::TrajectoryQos`]),
+/// and the kept history's writer does not write over the entry. Drop samples you are
+/// done with.
 ///
 /// A sample owns what keeps its bytes valid: the chunk, and a share of the subscriber
 /// port it came through (iceoryx2 hands a publisher back every chunk of a port that is
-/// gone), which keeps the port's node and segment mapped too. So a sample stays valid
-/// and unchanged after its subscriber is dropped, on any thread, whatever ended the
-/// subscriber (a destroyed trajectory, a closed connection, a panic): no path has to
-/// remember to keep anything alive.
+/// gone), which keeps the port's node and segment mapped too; or the kept entry's hold
+/// and the file's mapping. So a sample stays valid and unchanged after its subscriber
+/// is dropped, on any thread, whatever ended the subscriber (a destroyed trajectory, a
+/// closed connection, a panic): no path has to remember to keep anything alive.
 #[derive(Debug)]
 pub struct ReceivedSample {
-    // Dropped in this order: the chunk goes back through the port before the port goes.
-    sample: RawSample,
-    _port: Arc<SubscriberPort>,
+    body: Body,
+    header: SampleHeader,
+    publisher: UniquePublisherId,
     archive_len: usize,
     checked: Cell<Checked>,
     /// Present only when validation is deferred, to count failures found later.
     counters: Option<Arc<Counters>>,
+}
+
+/// Where a received sample's bytes are.
+#[derive(Debug)]
+enum Body {
+    /// In the iceoryx2 chunk. Dropped in this order: the chunk goes back through the
+    /// port before the port goes.
+    Chunk { sample: RawSample, _port: Arc<SubscriberPort> },
+    /// In the trajectory's kept history, held.
+    Kept(KeptHold),
+    /// Copied out of the kept history (no holder slot was free).
+    Copied(esgm_core::codec::ArchiveBuffer),
 }
 
 impl ReceivedSample {
@@ -76,26 +93,84 @@ impl ReceivedSample {
         checked: Checked,
         counters: Option<Arc<Counters>>,
     ) -> Self {
-        Self { sample, _port: Arc::clone(port), archive_len, checked: Cell::new(checked), counters }
+        let header = *sample.user_header();
+        let publisher = sample.header().publisher_id();
+        Self {
+            body: Body::Chunk { sample, _port: Arc::clone(port) },
+            header,
+            publisher,
+            archive_len,
+            checked: Cell::new(checked),
+            counters,
+        }
+    }
+
+    /// A structure of the kept history the sample `header` named, taken from the file
+    /// and checked there (`Malformed` if its bytes do not check).
+    pub(crate) fn kept(
+        taken: Taken,
+        header: SampleHeader,
+        publisher: UniquePublisherId,
+    ) -> Result<Self, CodecError> {
+        let body = match taken {
+            Taken::Held(hold) => Body::Kept(hold),
+            Taken::Copied(bytes) => Body::Copied(bytes),
+        };
+        let mut sample = Self {
+            body,
+            header,
+            publisher,
+            archive_len: 0,
+            checked: Cell::new(Checked::No),
+            counters: None,
+        };
+        let held = sample.bytes().len();
+        sample.archive_len = usize::try_from(header.archive_len).unwrap_or(usize::MAX);
+        if sample.archive_len > held {
+            return Err(CodecError::Malformed {
+                len: held,
+                reason: format!(
+                    "the kept entry has {held} bytes, the sample says {}",
+                    header.archive_len
+                ),
+            });
+        }
+        validate(sample.archive_bytes(), &sample.header)?;
+        sample.checked.set(Checked::Valid);
+        Ok(sample)
+    }
+
+    /// Every byte of the body.
+    fn bytes(&self) -> &[u8] {
+        match &self.body {
+            Body::Chunk { sample, .. } => as_bytes(sample.payload()),
+            Body::Kept(hold) => hold.all_bytes(),
+            Body::Copied(bytes) => bytes,
+        }
     }
 
     /// The header: times, type id, sequence, archive length. Reading it never touches
     /// the payload.
     pub fn header(&self) -> &SampleHeader {
-        self.sample.user_header()
+        &self.header
     }
 
     /// The iceoryx2 publisher port that sent the sample: sequence numbers
     /// ([`SampleHeader::sequence`]) count per publisher.
-    pub fn publisher_id(&self) -> iceoryx2::identifiers::UniquePublisherId {
-        self.sample.header().publisher_id()
+    pub fn publisher_id(&self) -> UniquePublisherId {
+        self.publisher
     }
 
     /// The codec bytes (envelope + archive) in shared memory.
     pub fn archive_bytes(&self) -> &[u8] {
         // The subscriber checked `archive_len <= payload length` before building us.
-        let bytes = as_bytes(self.sample.payload());
+        let bytes = self.bytes();
         bytes.get(..self.archive_len).unwrap_or(bytes)
+    }
+
+    /// True if the structure was read from the trajectory's kept history.
+    pub fn is_kept(&self) -> bool {
+        !matches!(self.body, Body::Chunk { .. })
     }
 
     /// The lineage the writer sent with the structure ([`esgm_core::lineage`]), read
@@ -106,7 +181,7 @@ impl ReceivedSample {
         if !self.header().has_flag(SampleHeader::FLAG_LINEAGE) {
             return Ok(None);
         }
-        let payload = as_bytes(self.sample.payload());
+        let payload = self.bytes();
         let bytes = crate::data_plane::payload::lineage_trailer(payload, self.archive_len)
             .map_err(|reason| CodecError::Malformed { len: payload.len(), reason })?;
         codec::decode_lineage(bytes).map(Some)

@@ -30,6 +30,18 @@ pub enum SampleVerdict<'a> {
         /// The validated structure, if validation ran.
         archived: Option<&'a ArchivedEntityStructure>,
     },
+    /// A structure kept in the trajectory's kept history: where it is. The reader takes
+    /// it from the file and checks it there.
+    Kept {
+        /// The file's id.
+        file_id: u64,
+        /// The entry's index.
+        index: u64,
+        /// The entry's start position in the file's ring.
+        start: u64,
+        /// The entry's codec bytes' length.
+        len: usize,
+    },
     /// The writer reset the trajectory (T5); the reader forgets what came before.
     Reset {
         /// The marker's sequence number.
@@ -58,6 +70,20 @@ pub fn check_sample<'a>(
     }
     if header.kind == SampleHeader::KIND_RESET {
         return Ok(SampleVerdict::Reset { sequence: header.sequence });
+    }
+    if header.kind == SampleHeader::KIND_KEPT {
+        let len = usize::try_from(header.archive_len).ok().filter(|n| *n >= ENVELOPE_LEN);
+        let (Some(len), Some(index), Some(id), Some(start)) =
+            (len, header.kept.checked_sub(1), payload.get(..8), payload.get(8..16))
+        else {
+            return Err(ReceiveError::Truncated {
+                archive_len: header.archive_len,
+                payload_len: payload.len(),
+            });
+        };
+        let word = |b: &[u8]| u64::from_ne_bytes(b.try_into().unwrap_or([0; 8]));
+        let (file_id, start) = (word(id), word(start));
+        return Ok(SampleVerdict::Kept { file_id, index, start, len });
     }
     if header.kind != SampleHeader::KIND_STRUCTURE {
         return Err(ReceiveError::UnknownKind { kind: header.kind });

@@ -18,7 +18,8 @@ use iceoryx2::identifiers::UniquePublisherId;
 use iceoryx2::port::listener::ListenerWaitError;
 use iceoryx2::service::port_factory::PortFactory;
 
-use crate::data_plane::payload::as_bytes;
+use crate::data_plane::kept::{KeptAt, KeptReader};
+use crate::data_plane::payload::{SampleHeader, as_bytes};
 use crate::data_plane::qos::TrajectoryQos;
 use crate::data_plane::received::SubscriberPort;
 use crate::data_plane::received::{Checked, Counters, ReceivedSample};
@@ -97,6 +98,18 @@ pub enum ReceiveError {
     /// that differ from the archive's). The sample was dropped.
     #[error("malformed sample: {0}")]
     Malformed(#[source] CodecError),
+    /// The sample names an entry of the trajectory's kept history that the file no
+    /// longer holds: the writer wrote over it before this reader took it (it fell
+    /// behind). The sample is lost (counted by the gap it leaves).
+    #[error("kept entry {index} is no longer in its file (this reader fell behind)")]
+    KeptGone {
+        /// The entry's index.
+        index: u64,
+    },
+    /// The trajectory's kept history, which the sample names, cannot be opened or
+    /// mapped here (another user's file, no memory): the sample is lost, counted.
+    #[error("the kept history cannot be read: {0}")]
+    KeptUnreadable(String),
     /// Waiting was interrupted (e.g. by a signal) or the wake-up listener failed;
     /// check for shutdown, then wait again.
     #[error("wait interrupted: {0}")]
@@ -115,9 +128,11 @@ impl ReceiveError {
             ReceiveError::TypeMismatch { .. } => Some(Rejection::WrongType),
             ReceiveError::UnknownKind { .. } => Some(Rejection::UnknownKind),
             ReceiveError::Truncated { .. } => Some(Rejection::Truncated),
+            ReceiveError::KeptUnreadable(_) => Some(Rejection::Unreadable),
             ReceiveError::TooManyHeld
             | ReceiveError::Connection(_)
             | ReceiveError::Reset { .. }
+            | ReceiveError::KeptGone { .. }
             | ReceiveError::Wait(_) => None,
         }
     }
@@ -233,6 +248,8 @@ impl TrajectorySubscriberBuilder {
             waiter: Waiter::new(self.wait, sleeper),
             validation: self.validation,
             counters: Arc::default(),
+            kept: parking_lot::Mutex::new(None),
+            domain: self.domain.clone(),
         })
     }
 }
@@ -251,6 +268,10 @@ pub struct TrajectorySubscriber {
     waiter: Waiter,
     validation: Validation,
     counters: Arc<Counters>,
+    /// The trajectory's kept history, where samples of [`SampleHeader::KIND_KEPT`] are
+    /// read; opened at the first.
+    kept: parking_lot::Mutex<Option<KeptReader>>,
+    domain: String,
 }
 
 impl TrajectorySubscriber {
@@ -317,6 +338,15 @@ impl TrajectorySubscriber {
         );
         let (archive_len, validated) = match checked {
             Ok(SampleVerdict::Structure { bytes, archived }) => (bytes.len(), archived.is_some()),
+            Ok(SampleVerdict::Kept { file_id, index, start, len }) => {
+                let publisher = sample.header().publisher_id();
+                // The descriptor goes back to the publisher at once: the entry is in the
+                // file, held by the sample made of it.
+                drop(sample);
+                let lineage = header.has_flag(SampleHeader::FLAG_LINEAGE);
+                let at = KeptAt { index, file_id, start, len, lineage };
+                return self.take_kept(header, publisher, at).map(Some);
+            }
             Ok(SampleVerdict::Reset { sequence }) => {
                 return Err(ReceiveError::Reset {
                     sequence,
@@ -349,6 +379,35 @@ impl TrajectorySubscriber {
                 Some(Arc::clone(&self.counters)),
             )
         }))
+    }
+
+    /// The kept entry a sample of [`SampleHeader::KIND_KEPT`] named, taken from the
+    /// trajectory's kept history and checked there.
+    fn take_kept(
+        &self,
+        header: SampleHeader,
+        publisher: UniquePublisherId,
+        at: KeptAt,
+    ) -> Result<ReceivedSample, ReceiveError> {
+        let index = at.index;
+        let taken = {
+            let mut kept = self.kept.lock();
+            let reader =
+                kept.get_or_insert_with(|| KeptReader::new(&self.domain, &self.trajectory));
+            reader.take(at)
+        };
+        let malformed = |e: CodecError| {
+            if self.counters.count_malformed() {
+                tracing::warn!(trajectory = %self.trajectory, error = %e,
+                    "dropping a malformed kept entry (later ones are only counted)");
+            }
+            ReceiveError::Malformed(e)
+        };
+        match taken {
+            Ok(Some(taken)) => ReceivedSample::kept(taken, header, publisher).map_err(malformed),
+            Ok(None) => Err(ReceiveError::KeptGone { index }),
+            Err(e) => Err(ReceiveError::KeptUnreadable(e.to_string())),
+        }
     }
 
     /// Waits up to `timeout` for the next sample, with the subscriber's

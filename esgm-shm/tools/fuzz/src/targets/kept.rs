@@ -4,12 +4,16 @@
 //! continues. A damaged or hostile file must be refused or read in part, never read
 //! out of bounds.
 //!
-//! An input is a whole file, written where the trajectory's kept history lives. The
-//! seeds are files a writer wrote: robot states under each retention, images, a reset,
-//! a wrapped area and an index reserved and never written. Promises beyond "no
-//! panic": a reader never returns more entries than slots, nor one at an index the
-//! file has not reached; a writer always continues or replaces the file and keeps the
-//! next structure, which a reader then reads back; every seed reads whole.
+//! An input is a whole file, written where the trajectory's kept history lives: its
+//! header, its holders' page (which every reading process writes), its slots and its
+//! area. The seeds are files a writer wrote: robot states under each retention,
+//! images, a reset, a wrapped area, and one whose holders' page names a reader that
+//! died holding an entry. Readers read entries in place (held, then checked), so this
+//! is also the in-place reader's fuzzing. Promises beyond "no panic": a reader never
+//! returns more entries than slots, nor one at an index the file has not reached, and
+//! every entry it returns reads whole through the in-place accessors; a writer always
+//! continues or replaces the file and keeps the next structure, which a reader then
+//! reads back; every seed reads whole.
 
 use esgm_core::Entity;
 use esgm_core::library::{Image, RobotState};
@@ -69,10 +73,17 @@ impl Kept {
             }
             if name == "reset" {
                 w.reset();
-                w.reserve();
                 w.append(&robot(99), 9_999).map_err(|e| broken(&e))?;
             }
             seeds.push(std::fs::read(w.path()).map_err(|e| broken(&e))?);
+            if name == "count" {
+                // A reader that holds an entry, as its file is copied: the copy names a
+                // holder whose lock nobody holds (a reader that died holding it).
+                let reader = KeptHistory::open(&domain, name).map_err(|e| broken(&e))?;
+                let held = reader.map(|r| r.entries());
+                seeds.push(std::fs::read(w.path()).map_err(|e| broken(&e))?);
+                drop(held);
+            }
         }
         Ok(Self { seeds, domain })
     }
@@ -89,6 +100,10 @@ impl Kept {
             return Ok(None);
         };
         let read = kept.entries();
+        // Every entry returned reads whole in place (attributes, nested values).
+        for e in &read.entries {
+            std::hint::black_box(e.structure.to_structure());
+        }
         let increasing = read.entries.windows(2).all(|w| w[0].index < w[1].index);
         if read.entries.len() as u64 > kept.capacity()
             || read.entries.iter().any(|e| e.index >= read.next)
@@ -144,10 +159,10 @@ impl Target for Kept {
         };
         let read = kept.entries();
         match read.entries.last() {
-            Some(e) if e.index == index && e.structure.valid_time == 7 => Ok(()),
+            Some(e) if e.index == index && e.structure.valid_time() == 7 => Ok(()),
             other => Err(Broken::new(
                 "the structure a writer just kept is read back last",
-                format!("{:?}", other.map(|e| (e.index, e.structure.valid_time))),
+                format!("{:?}", other.map(|e| (e.index, e.structure.valid_time()))),
             )),
         }
     }

@@ -185,7 +185,37 @@ fn check(input: &[u8]) -> Result<Result<(), ReceiveError>, Broken> {
                     format!("{:?}", header),
                 ));
             }
-            codec::decode(archived).map_err(|e| Broken::new("an accepted sample decodes", e))?;
+            let decoded = codec::decode(archived)
+                .map_err(|e| Broken::new("an accepted sample decodes", e))?;
+            // The in-place reader (what every replica keeps) reads what the decoder
+            // decodes, attribute by attribute, nested values included.
+            let in_place = esgm_core::SharedStructure::archived_copy(bytes)
+                .map_err(|e| Broken::new("an accepted sample is read in place", e))?;
+            // Compared as bytes: a NaN is not equal to itself, its bits are.
+            let same = codec::encode(&in_place.to_structure()).ok().as_deref()
+                == codec::encode(&decoded).ok().as_deref();
+            if !same {
+                return Err(Broken::new(
+                    "the in-place reader reads what the decoder decodes",
+                    format!("{in_place:?} / {decoded:?}"),
+                ));
+            }
+            Ok(Ok(()))
+        }
+        (
+            Ok(SampleVerdict::Kept { index, len, .. }),
+            Ok(SampleVerdict::Kept { index: later, len: later_len, .. }),
+        ) => {
+            let named = header.kind == SampleHeader::KIND_KEPT
+                && header.kept.checked_sub(1) == Some(index)
+                && len as u64 == header.archive_len
+                && (later, later_len) == (index, len);
+            if !named {
+                return Err(Broken::new(
+                    "a kept entry is named by its header's index and length",
+                    format!("{header:?}"),
+                ));
+            }
             Ok(Ok(()))
         }
         (Ok(SampleVerdict::Reset { sequence }), Ok(SampleVerdict::Reset { .. })) => {
