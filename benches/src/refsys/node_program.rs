@@ -109,7 +109,7 @@ fn write_steps(name: &str) {
     }
 }
 
-/// The directory [`write_steps`] writes to.
+/// The directory the node writes its hop steps to (`--features hop-probe`).
 pub const STEPS_ENV: &str = "ESGM_REFSYS_STEPS";
 
 /// A worker of a measured run leaves when the process that started it (the run's

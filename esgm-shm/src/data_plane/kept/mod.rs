@@ -103,7 +103,7 @@ pub enum KeepError {
     /// The structure could not be encoded.
     #[error("cannot keep a structure: {0}")]
     Encode(#[from] CodecError),
-    /// Keeping the structure would grow the file past [`MAX_AREA`].
+    /// Keeping the structure would grow the file past its largest size (16 GiB).
     #[error("kept history {path} would exceed {max} bytes to keep a structure of {len}")]
     Full {
         /// The file.

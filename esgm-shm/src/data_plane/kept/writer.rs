@@ -43,12 +43,12 @@ const FIRST_AREA: u64 = 64 * 1024;
 /// enough below `u64::MAX` that a writer never overflows it.
 const MAX_INDEX: u64 = 1 << 62;
 
-/// Where an entry was kept: what a reader needs to find it ([`super::KeptReader`]).
+/// Where an entry was kept: what a reader needs to find it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct KeptLocation {
     /// Its index in the trajectory's kept history.
     pub index: u64,
-    /// The file it is in ([`super::KeptReader`] follows the writer to newer ones).
+    /// The file it is in (a reader follows the writer to newer ones).
     pub file_id: u64,
     /// Its start position in the file's ring.
     pub start: u64,
@@ -87,7 +87,7 @@ struct Region {
 }
 
 /// A primitive trajectory's kept history, as its one writer maps it (see the module
-/// docs of this file and of [`super`]).
+/// docs of this module and its parent).
 #[derive(Debug)]
 pub struct KeptHistory {
     path: PathBuf,
