@@ -212,6 +212,9 @@ pub(crate) fn unit(
 ) -> Worker {
     let c = Arc::clone(cell);
     spawn("unit", cell, move |stop, wake| {
+        // The inputs handed to each call, in one buffer for the worker's life: a call
+        // allocates nothing for them.
+        let mut args: Vec<Sample> = Vec::with_capacity(states.len());
         inputs::run(
             fan_in,
             wake,
@@ -222,12 +225,12 @@ pub(crate) fn unit(
                 let added = sample.add_time;
                 crate::probe::mark(crate::probe::Step::Taken);
                 update_inputs(&mut states, i, sample);
-                let Some(args) =
-                    states.iter().map(|s| s.latest.clone()).collect::<Option<Vec<Sample>>>()
-                else {
+                args.clear();
+                args.extend(states.iter().map_while(|s| s.latest.clone()));
+                if args.len() < states.len() {
                     crate::probe::settle(added);
                     return;
-                };
+                }
                 WorkerCounters::bump(&c.counters.calls);
                 let qtime = clock.now();
                 let lineage = || {

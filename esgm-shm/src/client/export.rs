@@ -545,7 +545,8 @@ impl Export {
                         }
                     }
                 }
-                let (id, backlog) = s.set_tap(Box::new(OutletTap { outlet: tap, owner }));
+                let (id, backlog) =
+                    s.set_tap(Box::new(OutletTap { outlet: tap, owner, unpublished: 0 }));
                 if images {
                     s.set_octets_allocator(Arc::new(LoanAllocator::new(
                         &outlet,
@@ -755,19 +756,27 @@ struct OutletTap {
     outlet: Arc<Mutex<Outlet>>,
     /// The outlet's identity, which its loans carry.
     owner: usize,
+    /// Entries not published, taken from the outlet under the lock that published
+    /// them: the store asks right after, and the outlet is not locked twice per entry.
+    unpublished: u64,
 }
 
 impl esgm_core::StoreTap for OutletTap {
     fn observe(&mut self, event: &StoreEvent) {
-        self.outlet.lock().publish(event);
+        let mut outlet = self.outlet.lock();
+        outlet.publish(event);
+        self.unpublished += std::mem::take(&mut outlet.unpublished);
     }
 
     fn entering(&mut self, sample: &Sample) -> Option<SharedStructure> {
-        self.outlet.lock().enter(sample, self.owner)
+        let mut outlet = self.outlet.lock();
+        let kept = outlet.enter(sample, self.owner);
+        self.unpublished += std::mem::take(&mut outlet.unpublished);
+        kept
     }
 
     fn take_unpublished(&mut self) -> u64 {
-        std::mem::take(&mut self.outlet.lock().unpublished)
+        std::mem::take(&mut self.unpublished)
     }
 }
 

@@ -17,7 +17,7 @@
 //! out (and frees it) when it finds it in its way. [`HOLDERS`] − 1 processes may hold
 //! entries of one file at once.
 
-use std::collections::BTreeMap;
+use std::collections::VecDeque;
 use std::fs::File;
 use std::os::fd::AsRawFd as _;
 use std::path::Path;
@@ -43,8 +43,11 @@ pub(super) struct Holder {
     /// The holders' page, writable.
     page: Mapping,
     slot: usize,
-    /// Holds per start position; the lowest is published in the slot.
-    counts: Mutex<BTreeMap<u64, u32>>,
+    /// Holds per start position, lowest first; the lowest is published in the slot.
+    /// Positions are mostly held in the order they were written and let go in it: new
+    /// ones go at the back, old ones leave at the front, and nothing is allocated once
+    /// the queue has grown to what the process holds at once.
+    counts: Mutex<Holds>,
 }
 
 impl Holder {
@@ -65,12 +68,12 @@ impl Holder {
     }
 
     /// Holds the entry starting at `start`, if the writer has not begun to write over
-    /// it: `reclaim` is the file's header counter (see the module docs). True if held;
-    /// it must be [`Self::release`]d.
+    /// it: `header` maps the file's header, whose `reclaim` says (see the module docs).
+    /// True if held; it must be [`Self::release`]d.
     pub fn hold(&self, start: u64, header: &Mapping) -> bool {
         let mut counts = self.counts.lock();
-        let lowest = counts.keys().next().copied().unwrap_or(NONE);
-        *counts.entry(start).or_insert(0) += 1;
+        let lowest = counts.lowest();
+        counts.add(start);
         let min = self.page.counter(self.slot * HOLDER_LEN);
         if start < lowest {
             min.store(start, Ordering::SeqCst);
@@ -89,17 +92,49 @@ impl Holder {
         Self::forget(&mut counts, start, self.page.counter(self.slot * HOLDER_LEN));
     }
 
-    fn forget(counts: &mut BTreeMap<u64, u32>, start: u64, min: &std::sync::atomic::AtomicU64) {
-        let lowest = counts.keys().next().copied();
-        if let Some(n) = counts.get_mut(&start) {
-            *n -= 1;
-            if *n == 0 {
-                counts.remove(&start);
-            }
-        }
-        let now = counts.keys().next().copied();
+    fn forget(counts: &mut Holds, start: u64, min: &std::sync::atomic::AtomicU64) {
+        let lowest = counts.lowest();
+        counts.remove(start);
+        let now = counts.lowest();
         if now != lowest {
-            min.store(now.unwrap_or(NONE), Ordering::Release);
+            min.store(now, Ordering::Release);
+        }
+    }
+}
+
+/// Positions held and how many times each, lowest first.
+#[derive(Debug, Default)]
+struct Holds(VecDeque<(u64, u32)>);
+
+impl Holds {
+    /// The lowest position held, or [`NONE`].
+    fn lowest(&self) -> u64 {
+        self.0.front().map_or(NONE, |(p, _)| *p)
+    }
+
+    fn add(&mut self, position: u64) {
+        match self.0.back_mut() {
+            Some((p, n)) if *p == position => *n += 1,
+            Some((p, _)) if *p > position => {
+                match self.0.binary_search_by_key(&position, |e| e.0) {
+                    Ok(i) => self.0[i].1 += 1,
+                    Err(i) => self.0.insert(i, (position, 1)),
+                }
+            }
+            _ => self.0.push_back((position, 1)),
+        }
+    }
+
+    fn remove(&mut self, position: u64) {
+        let at = match self.0.front() {
+            Some((p, _)) if *p == position => Some(0),
+            _ => self.0.binary_search_by_key(&position, |e| e.0).ok(),
+        };
+        if let Some(i) = at {
+            self.0[i].1 -= 1;
+            if self.0[i].1 == 0 {
+                self.0.remove(i);
+            }
         }
     }
 }
@@ -148,5 +183,31 @@ fn lock(file: &File, slot: usize, kind: libc::c_int) -> std::io::Result<()> {
         Ok(())
     } else {
         Err(std::io::Error::last_os_error())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn holds_keep_their_lowest_position_in_any_order() {
+        let mut h = Holds::default();
+        assert_eq!(h.lowest(), NONE);
+        for p in [10, 20, 20, 5, 30, 15] {
+            h.add(p);
+        }
+        assert_eq!(h.lowest(), 5);
+        h.remove(5);
+        assert_eq!(h.lowest(), 10);
+        h.remove(20);
+        h.remove(10);
+        assert_eq!(h.lowest(), 15);
+        h.remove(15);
+        assert_eq!(h.lowest(), 20, "held twice, let go once");
+        h.remove(20);
+        h.remove(30);
+        h.remove(99);
+        assert_eq!(h.lowest(), NONE);
     }
 }
