@@ -268,7 +268,7 @@ impl Row<'_> {
         let (value, held) = read_value(self.kind, &sample.structure)?;
         let seq = match self.kind {
             Kind::Small => f64::from_bits(value) as i64,
-            Kind::Image => sample.structure.valid_time,
+            Kind::Image => sample.valid_time(),
         };
         Ok((seq, held))
     }

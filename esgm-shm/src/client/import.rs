@@ -131,6 +131,10 @@ pub(crate) struct Import {
     /// one this replica holds already (the history handed over again by a writer
     /// that restarted or took over), and is skipped.
     last_kept: Option<u64>,
+    /// The last pump stopped before the queue was empty (too many held, a broken
+    /// connection): a waiter pumps again at its next feed even if the writer's word
+    /// has not moved since, or what is left would wait for the writer's next sample.
+    stopped_early: bool,
 }
 
 impl Drop for Import {
@@ -279,6 +283,7 @@ impl Import {
         }
         Ok(Self {
             generation,
+            stopped_early: false,
             type_name: type_name.clone(),
             subscriber,
             violations,
@@ -383,6 +388,7 @@ impl Import {
     /// many there were.
     pub fn pump(&mut self) -> usize {
         esgm_core::probe::mark(esgm_core::probe::Step::Locked);
+        self.stopped_early = false;
         let mut n = 0;
         loop {
             match self.subscriber.receive() {
@@ -418,6 +424,7 @@ impl Import {
                     n += 1;
                     self.reject(&e);
                     if matches!(e, ReceiveError::Connection(_) | ReceiveError::TooManyHeld) {
+                        self.stopped_early = true;
                         break;
                     }
                 }
@@ -434,6 +441,7 @@ impl Import {
                     n += 1;
                     self.reject(&e);
                     if matches!(e, ReceiveError::Connection(_) | ReceiveError::TooManyHeld) {
+                        self.stopped_early = true;
                         break;
                     }
                 }
@@ -592,6 +600,7 @@ impl ReplicaFeed for ImportFeed {
         Some(Box::new(ImportWaiter {
             listening: None,
             seen: None,
+            look_again: false,
             trajectory: self.trajectory.clone(),
             node: self.node.clone(),
             mirrors: Weak::clone(&self.mirrors),
@@ -607,6 +616,7 @@ impl ReplicaFeed for ImportFeed {
         Some(Box::new(ImportWaiter {
             listening: None,
             seen: None,
+            look_again: false,
             trajectory: self.trajectory.clone(),
             node: self.node.clone(),
             mirrors: Weak::clone(&self.mirrors),
@@ -636,6 +646,9 @@ struct ImportWaiter {
     /// word still holds it (a sample sent since changed it). `None` until the first
     /// feed after listening.
     seen: Option<u32>,
+    /// The last pump left samples in the queue ([`Import::pump`] stopped early): the
+    /// next feed pumps even if the word has not moved.
+    look_again: bool,
     trajectory: String,
     node: SharedNode,
     mirrors: Weak<SharedMirrors>,
@@ -917,7 +930,7 @@ impl FeedWaiter for ImportWaiter {
         // a loop costs a load per poll).
         if let Some((word, seen)) = self.word() {
             let now = word.sequence();
-            if seen == Some(now) && self.import.strong_count() > 0 {
+            if seen == Some(now) && !self.look_again && self.import.strong_count() > 0 {
                 return;
             }
             self.seen = Some(now);
@@ -927,7 +940,9 @@ impl FeedWaiter for ImportWaiter {
             None => self.mirrors.upgrade().and_then(|m| m.import(&self.trajectory)),
         };
         if let Some(import) = import {
-            import.lock().pump();
+            let mut import = import.lock();
+            import.pump();
+            self.look_again = import.stopped_early;
         }
     }
 

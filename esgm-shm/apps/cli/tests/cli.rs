@@ -250,10 +250,22 @@ fn trace_follows_lineage_across_processes() {
     let t0 = 1_700_000_000_000_000_000_i64;
     let out = system.get_entity_trajectory_structure("out").unwrap();
     let pair = system.get_entity_trajectory_structure("pair").unwrap();
+    let merged = system.get_entity_trajectory_structure("ab").unwrap();
+    // A merge stores its inputs in the order it takes them, and a and b are two
+    // services: each add waits until the merge has taken the one before, so that b's
+    // last is the merge's last.
+    let mut added = 0;
     for k in 0..3 {
         let t = t0 + k * 100_000_000;
-        a.add(state(t)).unwrap();
-        b.add(state(t + 1_000_000)).unwrap();
+        for (input, time) in [(&a, t), (&b, t + 1_000_000)] {
+            input.add(state(time)).unwrap();
+            added += 1;
+            let deadline = Instant::now() + Duration::from_secs(20);
+            while merged.stats().map(|s| s.added).unwrap_or(0) < added {
+                assert!(Instant::now() < deadline, "the merge never took sample {added}");
+                std::thread::sleep(Duration::from_millis(5));
+            }
+        }
     }
     let deadline = Instant::now() + Duration::from_secs(20);
     let produced = || {
@@ -312,7 +324,7 @@ fn trace_follows_lineage_across_processes() {
     let o = esgm(&["--domain", &d, "trace", "nope"], Duration::from_secs(30));
     assert_eq!(o.code, Some(1));
     assert!(o.stderr.contains("no entity trajectory structure `nope`"), "{}", o.stderr);
-    drop((a, b, out, pair));
+    drop((a, b, out, pair, merged));
     drop(system);
 }
 
