@@ -173,6 +173,63 @@ fn images_outlive_their_killed_writer() {
     }
 }
 
+/// An image whose structure does not match the loan its pixels were written into
+/// (another shape of the same size) is written the ordinary way, and the pixels its
+/// producer and its writer's store hold stay its own while later images are loaned
+/// where that loan was; a reader in another process reads them too.
+#[test]
+fn an_image_that_does_not_match_its_loan_keeps_its_pixels() {
+    let c = coordinator("kept-mismatch");
+    let camera = location(&c, "camera");
+    let policy = FluentStreamPolicy::default().cache(CacheConstraint::Elements(3));
+    let spec = TrajectorySpec::primitive("frames", "Image").policy(policy);
+    let frames = camera.create_trajectory(spec).unwrap();
+    let image = |vt: i64, (width, height): (i64, i64), pixels: esgm_core::Octets| {
+        esgm_core::EntityStructure::new("cam", vt, vt)
+            .with("width", width)
+            .with("height", height)
+            .with("format", 0i64)
+            .with("image_data", pixels)
+    };
+    let mut buffer = frames.image_buffer(64, 48, 0).expect("a loan");
+    common::fill(buffer.pixels_mut(), 1);
+    let odd = buffer.into_octets();
+    assert_eq!(frames.add(image(1, (48, 64), odd.clone())).unwrap(), AddOutcome::Added);
+    let stored = frames.get_latest().unwrap();
+    // Enough frames for the kept history's ring to come round many times.
+    for vt in 2..200 {
+        let mut buffer = frames.image_buffer(64, 48, 0).expect("a loan");
+        common::fill(buffer.pixels_mut(), vt as u64);
+        assert_eq!(
+            frames.add(image(vt, (64, 48), buffer.into_octets())).unwrap(),
+            AddOutcome::Added
+        );
+    }
+    common::check_pattern(&odd, 1);
+    let Some(esgm_core::value::Value::OctetSeq(pixels)) = stored.structure.value("image_data")
+    else {
+        panic!("no pixels in {stored:?}")
+    };
+    common::check_pattern(&pixels, 1);
+    let reader = location(&c, "reader");
+    for (who, esgm) in [("the writer's store", &camera), ("a reader", &reader)] {
+        let t = esgm.get_entity_trajectory_structure("frames").unwrap();
+        let kept = t.get_between(i64::MIN, i64::MAX).unwrap();
+        assert_eq!(
+            kept.iter().map(|s| s.valid_time()).collect::<Vec<_>>(),
+            [197, 198, 199],
+            "{who}"
+        );
+        for s in &kept {
+            let Some(esgm_core::value::Value::OctetSeq(pixels)) = s.structure.value("image_data")
+            else {
+                panic!("no pixels in {s:?}")
+            };
+            common::check_pattern(&pixels, s.valid_time() as u64);
+        }
+    }
+}
+
 /// Destroying a trajectory removes its kept history: a name created again starts
 /// empty, in every process.
 #[test]

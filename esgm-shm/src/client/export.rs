@@ -153,17 +153,23 @@ impl Outlet {
         if size != (Some(w), Some(h), Some(f)) {
             // The structure says another size than its pixels were loaned for: the
             // reader must get what the structure says, so encode it (a copy).
+            loan.rescue();
+            drop(chunk);
             self.encode(sample);
             return None;
         }
         let received = match chunk {
-            Chunk::Kept(image) => self.keep_image(image, sample)?,
-            Chunk::Shm(chunk) => self.send_image(chunk, sample)?,
+            Chunk::Kept(image) => self.keep_image(image, sample),
+            Chunk::Shm(chunk) => self.send_image(chunk, sample),
         };
-        if let Some(pixels) = received.get("image_data").and_then(|v| v.as_octets()) {
-            loan.sent(pixels);
+        // Every path that did not send the pixels gives the chunk's memory back; the
+        // holder, which the store and the producer still read, takes a copy first (the
+        // outlet is locked: no loan has written there yet).
+        match received.as_ref().and_then(|r| r.get("image_data")).and_then(|v| v.as_octets()) {
+            Some(pixels) => loan.sent(pixels),
+            None => loan.rescue(),
         }
-        Some(received)
+        received
     }
 
     /// Completes an image in its loan of the kept history, keeps it there and publishes
@@ -686,9 +692,14 @@ impl Export {
                         n += 1;
                         inbox.reject(&self.handle, why, &e);
                     }
-                    // Adders never send resets: a marker in the inbox is a kind of sample
-                    // it does not take.
-                    None if matches!(e, ReceiveError::Reset { .. }) => {
+                    // Adders never send resets or name kept entries (only a writer
+                    // keeps): a marker or a name in the inbox is a kind of sample it
+                    // does not take; the adds behind it are still taken.
+                    None if matches!(
+                        e,
+                        ReceiveError::Reset { .. } | ReceiveError::KeptGone { .. }
+                    ) =>
+                    {
                         n += 1;
                         inbox.reject(&self.handle, Rejection::UnknownKind, &e);
                     }

@@ -89,6 +89,10 @@ impl HoldingOwner {
     /// its archive on the heap (counted). Nothing is decoded.
     pub fn hold(&self, sample: ReceivedSample) -> Result<SharedStructure, CodecError> {
         let root = std::ptr::from_ref(sample.structure()?);
+        // A kept-history entry counts too, though its chunk went back already: each
+        // one held pins its place in the writer's file, which moves to a new file
+        // rather than write over it, so one subscriber that keeps every image would
+        // cost the writer a file per ring's turn.
         if self.held.load(Ordering::Relaxed) >= self.budget {
             let bytes = sample.archive_bytes();
             if bytes.len() < HOLD_MIN_BYTES {

@@ -58,6 +58,17 @@ impl Chunk {
             Chunk::Kept(k) => k.pixels_mut(),
         }
     }
+
+    /// What keeps the loan's memory mapped after the loan itself is gone: a kept
+    /// history's file, which the writer unmaps when it moves to a new one. A
+    /// publisher's segment stays mapped while its publisher lives, which outlives the
+    /// loan's holder's reads (see [`LoanHolder::rescue`]).
+    fn mapping(&self) -> Option<Arc<dyn Any + Send + Sync>> {
+        match self {
+            Chunk::Shm(_) => None,
+            Chunk::Kept(k) => Some(k.mapping()),
+        }
+    }
 }
 
 /// The attributes of an image the layout completes around its pixels.
@@ -104,6 +115,7 @@ impl PixelStorage for LoanStorage {
         let holder = LoanHolder {
             ptr,
             len,
+            _mapping: self.chunk.mapping(),
             chunk: Mutex::new(Some(self.chunk)),
             sent: OnceLock::new(),
             owner: self.owner,
@@ -118,6 +130,8 @@ impl PixelStorage for LoanStorage {
 pub(crate) struct LoanHolder {
     ptr: *const u8,
     len: usize,
+    /// Keeps `ptr` mapped for the holder's life (a kept history's file).
+    _mapping: Option<Arc<dyn Any + Send + Sync>>,
     chunk: Mutex<Option<Chunk>>,
     sent: OnceLock<Octets>,
     /// The outlet whose publisher lent the chunk.
@@ -126,8 +140,10 @@ pub(crate) struct LoanHolder {
 
 // SAFETY: `ptr..ptr+len` are the pixels of the loaned chunk this holder owns (mapped
 // and written by nobody once frozen) until it is sent; from then on `bytes` reads the
-// received copy in `sent` instead, which owns its own sample. The chunk itself sits
-// behind a lock and is iceoryx2's thread-safe variant.
+// received copy in `sent` instead, which owns its own sample. A chunk taken and not
+// sent is rescued (copied into `sent`) before its memory can be lent again; a kept
+// history's file stays mapped while the holder lives (`_mapping`). The chunk itself
+// sits behind a lock and is iceoryx2's thread-safe variant.
 unsafe impl Send for LoanHolder {}
 // SAFETY: as above; `&LoanHolder` gives only shared reads of the pixels.
 unsafe impl Sync for LoanHolder {}
@@ -158,6 +174,20 @@ impl LoanHolder {
     pub fn sent(&self, pixels: Octets) {
         if pixels.len() == self.len && self.sent.set(pixels).is_err() {
             tracing::debug!("a loan's pixels were sent twice");
+        }
+    }
+
+    /// The pixels of a loan taken and not sent (a structure that did not match its
+    /// loan, a failed send or keep): copied onto the heap, read from there from now on.
+    /// Called while the writer's outlet is locked, so that no new loan has written
+    /// over the chunk's memory yet; a holder already sent keeps what it reads.
+    pub fn rescue(&self) {
+        if self.sent.get().is_some() {
+            return;
+        }
+        let copy = Octets::from(self.bytes().to_vec());
+        if self.sent.set(copy).is_err() {
+            tracing::debug!("a loan's pixels were sent while being rescued");
         }
     }
 }

@@ -132,9 +132,10 @@ pub(crate) struct Import {
     /// that restarted or took over), and is skipped.
     last_kept: Option<u64>,
     /// The last pump stopped before the queue was empty (too many held, a broken
-    /// connection): a waiter pumps again at its next feed even if the writer's word
-    /// has not moved since, or what is left would wait for the writer's next sample.
-    stopped_early: bool,
+    /// connection), whoever pumped: a waiter pumps again at its next feed even if the
+    /// writer's word has not moved since, and sleeps at most [`LOOK_AGAIN`], or what is
+    /// left would wait for the writer's next sample.
+    stopped_early: Arc<std::sync::atomic::AtomicBool>,
 }
 
 impl Drop for Import {
@@ -283,7 +284,7 @@ impl Import {
         }
         Ok(Self {
             generation,
-            stopped_early: false,
+            stopped_early: Arc::default(),
             type_name: type_name.clone(),
             subscriber,
             violations,
@@ -388,7 +389,7 @@ impl Import {
     /// many there were.
     pub fn pump(&mut self) -> usize {
         esgm_core::probe::mark(esgm_core::probe::Step::Locked);
-        self.stopped_early = false;
+        let mut stopped_early = false;
         let mut n = 0;
         loop {
             match self.subscriber.receive() {
@@ -424,7 +425,7 @@ impl Import {
                     n += 1;
                     self.reject(&e);
                     if matches!(e, ReceiveError::Connection(_) | ReceiveError::TooManyHeld) {
-                        self.stopped_early = true;
+                        stopped_early = true;
                         break;
                     }
                 }
@@ -441,12 +442,13 @@ impl Import {
                     n += 1;
                     self.reject(&e);
                     if matches!(e, ReceiveError::Connection(_) | ReceiveError::TooManyHeld) {
-                        self.stopped_early = true;
+                        stopped_early = true;
                         break;
                     }
                 }
             }
         }
+        self.stopped_early.store(stopped_early, std::sync::atomic::Ordering::Release);
         n
     }
 
@@ -600,7 +602,7 @@ impl ReplicaFeed for ImportFeed {
         Some(Box::new(ImportWaiter {
             listening: None,
             seen: None,
-            look_again: false,
+            left: None,
             trajectory: self.trajectory.clone(),
             node: self.node.clone(),
             mirrors: Weak::clone(&self.mirrors),
@@ -616,7 +618,7 @@ impl ReplicaFeed for ImportFeed {
         Some(Box::new(ImportWaiter {
             listening: None,
             seen: None,
-            look_again: false,
+            left: None,
             trajectory: self.trajectory.clone(),
             node: self.node.clone(),
             mirrors: Weak::clone(&self.mirrors),
@@ -636,6 +638,11 @@ impl ReplicaFeed for ImportFeed {
 /// 2 s it was 2 % of a core for 60 processes, twice an idle domain's budget).
 const WAIT_SLICE: std::time::Duration = std::time::Duration::from_secs(30);
 
+/// The longest sleep of a subscriber whose import left samples in its queue (a pump
+/// that stopped at a broken connection or at its holding budget): it looks again this
+/// soon, without spinning.
+const LOOK_AGAIN: std::time::Duration = std::time::Duration::from_millis(10);
+
 /// One subscription's sleep on its writer's wake-ups: the trajectory's futex word
 /// ([`crate::data_plane::wake_word`]), or a listener on the writer's wake-up service where the
 /// word cannot be mapped.
@@ -646,9 +653,10 @@ struct ImportWaiter {
     /// word still holds it (a sample sent since changed it). `None` until the first
     /// feed after listening.
     seen: Option<u32>,
-    /// The last pump left samples in the queue ([`Import::pump`] stopped early): the
-    /// next feed pumps even if the word has not moved.
-    look_again: bool,
+    /// Set while the import's last pump left samples in its queue
+    /// ([`Import::pump`] stopped early): the next feed pumps even if the word has not
+    /// moved, and a wait sleeps at most [`LOOK_AGAIN`].
+    left: Option<Arc<std::sync::atomic::AtomicBool>>,
     trajectory: String,
     node: SharedNode,
     mirrors: Weak<SharedMirrors>,
@@ -691,19 +699,24 @@ impl ImportWaiter {
             let i = i.lock();
             i.sample_wake().map(|w| {
                 let counts = (Arc::clone(&i.sleepers), i.coverage.clone());
-                (i.generation, w, Arc::clone(&i.workers), counts, Arc::clone(&i.retired))
+                let flags = (Arc::clone(&i.retired), Arc::clone(&i.stopped_early));
+                (i.generation, w, Arc::clone(&i.workers), counts, flags)
             })
         });
-        let (Some(import), Some((generation, wake, workers, (sleepers, coverage), retired))) =
-            (import, current)
+        let (
+            Some(import),
+            Some((generation, wake, workers, (sleepers, coverage), (retired, left))),
+        ) = (import, current)
         else {
             self.import = Weak::new();
             self.retired = None;
+            self.left = None;
             self.stand_down();
             return false;
         };
         self.import = Arc::downgrade(&import);
         self.retired = Some(retired);
+        self.left = Some(left);
         self.sleepers = Some(sleepers);
         self.coverage = coverage;
         if self.listening.as_ref().is_some_and(|(g, _)| *g == generation) {
@@ -806,6 +819,20 @@ impl ImportWaiter {
         seen.filter(|&s| s == word.sequence()).map(|s| (word, s))
     }
 
+    /// Whether the import's last pump left samples in its queue.
+    fn left_in_queue(&self) -> bool {
+        self.left.as_ref().is_some_and(|l| l.load(std::sync::atomic::Ordering::Acquire))
+    }
+
+    /// How long one sleep may last: at most [`LOOK_AGAIN`] while samples are left in
+    /// the queue.
+    fn slice(&self, timeout: std::time::Duration) -> std::time::Duration {
+        match self.left_in_queue() {
+            true => timeout.min(LOOK_AGAIN),
+            false => timeout.min(WAIT_SLICE),
+        }
+    }
+
     /// After a sleep on the word that saw no change: a word whose file was made anew
     /// (the domain restarted with this process in it) is mapped again at the next
     /// wait, to meet the new writer.
@@ -838,7 +865,7 @@ impl FeedWaiter for JoinedWaiter {
         if !self.waiters.iter_mut().all(ImportWaiter::listen) {
             return false;
         }
-        let timeout = timeout.min(WAIT_SLICE);
+        let timeout = self.waiters.iter().fold(timeout, |t, w| w.slice(t));
         if self.waiters.iter().all(|w| w.word().is_some()) {
             // Sleep only if no word changed since the last feed (nor was never seen).
             let seen: Option<Vec<(&WakeWord, u32)>> =
@@ -930,7 +957,7 @@ impl FeedWaiter for ImportWaiter {
         // a loop costs a load per poll).
         if let Some((word, seen)) = self.word() {
             let now = word.sequence();
-            if seen == Some(now) && !self.look_again && self.import.strong_count() > 0 {
+            if seen == Some(now) && !self.left_in_queue() && self.import.strong_count() > 0 {
                 return;
             }
             self.seen = Some(now);
@@ -940,9 +967,7 @@ impl FeedWaiter for ImportWaiter {
             None => self.mirrors.upgrade().and_then(|m| m.import(&self.trajectory)),
         };
         if let Some(import) = import {
-            let mut import = import.lock();
-            import.pump();
-            self.look_again = import.stopped_early;
+            import.lock().pump();
         }
     }
 
@@ -954,7 +979,7 @@ impl FeedWaiter for ImportWaiter {
             if let Some((word, seen)) = self.unchanged_word()
                 && let Some(_asleep) = self.fall_asleep(Some(word))
             {
-                word.sleep(seen, timeout.min(WAIT_SLICE));
+                word.sleep(seen, self.slice(timeout));
             }
             esgm_core::probe::mark(esgm_core::probe::Step::Woken);
             self.check_word();
@@ -966,7 +991,7 @@ impl FeedWaiter for ImportWaiter {
             self.feed();
             return true;
         };
-        match crate::data_plane::wait::timed_wait(listener, timeout.min(WAIT_SLICE)) {
+        match crate::data_plane::wait::timed_wait(listener, self.slice(timeout)) {
             Ok(_) => {
                 esgm_core::probe::mark(esgm_core::probe::Step::Woken);
                 self.feed();

@@ -213,7 +213,9 @@ impl KeptView {
             bytes.resize(total, 0);
             self.map.copy_out(at, &mut bytes);
             // Not written over while it was copied: the writer publishes `reclaim`
-            // before it writes below it.
+            // before it writes below it. The fence keeps the copy's loads before the
+            // counter's (a seqlock's read side), on every architecture.
+            std::sync::atomic::fence(Ordering::Acquire);
             let reclaim = self.map.counter(OFF_RECLAIM).load(Ordering::SeqCst);
             return (reclaim <= start).then_some(Taken::Copied(bytes));
         };
@@ -318,32 +320,35 @@ impl KeptReader {
         Self { path: super::KeptHistory::path_for(domain, trajectory), view: None }
     }
 
-    /// The view of the file `file_id` names, if it is (still) the one at the path, or
-    /// else the one at the path now.
-    fn view(&mut self, file_id: u64, reopen: bool) -> Result<Option<Arc<KeptView>>, KeepError> {
-        if !reopen {
-            if let Some(v) = self.view.as_ref().filter(|v| v.file_id == file_id) {
-                return Ok(Some(Arc::clone(v)));
-            }
-        }
-        self.view = KeptView::open(&self.path)?;
-        Ok(self.view.clone())
-    }
-
     /// The entry a sample named: held in place where it is, in its file. The writer
     /// may have moved to a new file since (its kept entries moved with it), where the
     /// entry is looked up by its index. `None` if no file keeps it any more.
+    ///
+    /// The file this reader maps is tried first, whichever file the sample names (a
+    /// late joiner's history names files the writer has left since): the path is
+    /// opened and mapped again only when it holds another file, so a reader maps each
+    /// file once and takes one of its holder slots, not one per sample.
     pub fn take(&mut self, at: KeptAt) -> Result<Option<Taken>, KeepError> {
-        for reopen in [false, true] {
-            let Some(view) = self.view(at.file_id, reopen)? else { return Ok(None) };
-            let taken = match view.file_id == at.file_id {
-                true => view.take_at(at.start, at.len, at.lineage),
-                false => view.take(at.index).map(|(taken, _)| taken),
-            };
-            if taken.is_some() {
-                return Ok(taken);
+        if let Some(view) = self.view.clone() {
+            if let Some(taken) = Self::take_from(&view, at) {
+                return Ok(Some(taken));
+            }
+            match super::file::open(&self.path)? {
+                Some(opened) if opened.file_id != view.file_id => {}
+                // The same file, which does not keep the entry, or none at all.
+                _ => return Ok(None),
             }
         }
-        Ok(None)
+        self.view = KeptView::open(&self.path)?;
+        Ok(self.view.clone().and_then(|view| Self::take_from(&view, at)))
+    }
+
+    /// The entry `at` names, from `view`: at its position in the file it was kept in,
+    /// by its index in another.
+    fn take_from(view: &Arc<KeptView>, at: KeptAt) -> Option<Taken> {
+        match view.file_id == at.file_id {
+            true => view.take_at(at.start, at.len, at.lineage),
+            false => view.take(at.index).map(|(taken, _)| taken),
+        }
     }
 }

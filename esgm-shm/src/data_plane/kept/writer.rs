@@ -711,6 +711,12 @@ impl KeptImage {
         Ok((self.loan, written))
     }
 
+    /// What keeps the file's memory mapped: a holder of the pixels keeps it for as
+    /// long as it may read them, even after the writer moved to a new file.
+    pub fn mapping(&self) -> Arc<dyn std::any::Any + Send + Sync> {
+        Arc::clone(&self.loan.map) as Arc<dyn std::any::Any + Send + Sync>
+    }
+
     /// The loan, given back unused.
     pub fn into_loan(self) -> RingLoan {
         self.loan
