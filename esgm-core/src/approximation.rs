@@ -15,10 +15,11 @@ use std::sync::Arc;
 
 use crate::sample::Sample;
 use crate::structure::SharedStructure;
+use crate::structure::ValueRef;
 use crate::time::Time;
 use crate::value::frame::{AttributeValuePair, EntityFrame, EntityStructure};
 use crate::value::{
-    Pos2, Position, PositionAltitude, PositionAltitudeRotation, Rotation, Value, Vec3,
+    Pos2, Position, PositionAltitude, PositionAltitudeRotation, Rotation, Value, ValueSort, Vec3,
 };
 
 /// How to answer "the value at `t`" when no sample has valid time `t` (the seed's
@@ -108,9 +109,9 @@ pub fn interpolated(
     query_time: Time,
     rule: &ValueApproximation,
 ) -> Result<Sample, String> {
-    // Interpolation makes a new structure of both sides' values: an archived side is
-    // converted for it (an interpolated answer is a value the asker computes).
-    let (es, held) = interpolate_marked(&a.to_arc(), &b.to_arc(), t, query_time);
+    // Interpolation makes a new structure of both sides' values, read where they are
+    // (an archived side is not decoded: only the answer is built).
+    let (es, held) = interpolate_shared(a, b, t, query_time);
     let mut sample = Sample::new(Arc::new(es), query_time, query_time);
     if !held.is_empty() {
         if *rule == ValueApproximation::LinearStrict {
@@ -123,6 +124,75 @@ pub fn interpolated(
         sample.not_interpolated = Some(held.into());
     }
     Ok(sample)
+}
+
+/// [`interpolate_marked`] of two structures read in place (owned or archived): the
+/// same rules, through [`lerp_ref`], so an archived side is never decoded whole.
+fn interpolate_shared(
+    a: &SharedStructure,
+    b: &SharedStructure,
+    t: Time,
+    query_time: Time,
+) -> (EntityStructure, Vec<String>) {
+    if let (Some(a), Some(b)) = (a.as_owned(), b.as_owned()) {
+        return interpolate_marked(a, b, t, query_time);
+    }
+    let span = (i128::from(b.valid_time()) - i128::from(a.valid_time())) as f64;
+    let offset = (i128::from(t) - i128::from(a.valid_time())) as f64;
+    let f = if span > 0.0 { offset / span } else { 0.0 };
+    let mut held = Vec::new();
+    let attributes = a
+        .attributes()
+        .map(|(name, va)| {
+            let value = match b.get(name) {
+                Some(vb) => lerp_ref(va, vb, f, name, &mut held),
+                None => va.to_value(),
+            };
+            AttributeValuePair { name: name.to_owned(), value }
+        })
+        .collect();
+    let es = EntityStructure {
+        name: a.name().to_owned(),
+        valid_time: t,
+        create_time: query_time,
+        attributes,
+    };
+    (es, held)
+}
+
+/// [`lerp`] of two values read in place: the numbers a robot's state is made of are
+/// read where they are; any other pair is converted and given to [`lerp`], the one
+/// place the rules are written.
+fn lerp_ref(a: ValueRef<'_>, b: ValueRef<'_>, f: f64, path: &str, held: &mut Vec<String>) -> Value {
+    let scalar = match (a.sort(), b.sort()) {
+        (ValueSort::Long, ValueSort::Long) => {
+            a.as_long().zip(b.as_long()).map(|(x, y)| Value::Long(li(x, y, f)))
+        }
+        (ValueSort::Time, ValueSort::Time) => {
+            a.as_long().zip(b.as_long()).map(|(x, y)| Value::Time(li(x, y, f)))
+        }
+        (ValueSort::Double, ValueSort::Double) => {
+            a.as_double().zip(b.as_double()).map(|(x, y)| Value::Double(l(x, y, f)))
+        }
+        (ValueSort::Altitude, ValueSort::Altitude) => {
+            a.as_double().zip(b.as_double()).map(|(x, y)| Value::Altitude(l(x, y, f)))
+        }
+        (ValueSort::Pos2, ValueSort::Pos2) => a
+            .as_pos2()
+            .zip(b.as_pos2())
+            .map(|(x, y)| Value::Pos2(Pos2 { x: l(x.x, y.x, f), y: l(x.y, y.y, f) })),
+        (ValueSort::Position, ValueSort::Position) => {
+            a.as_position().zip(b.as_position()).map(|(x, y)| Value::Position(lpos(&x, &y, f)))
+        }
+        (ValueSort::Rotation, ValueSort::Rotation) => {
+            a.as_rotation().zip(b.as_rotation()).map(|(x, y)| Value::Rotation(lrot(&x, &y, f)))
+        }
+        (ValueSort::Vec, ValueSort::Vec) => {
+            a.as_vec3().zip(b.as_vec3()).map(|(x, y)| Value::Vec(lvec(&x, &y, f)))
+        }
+        _ => None,
+    };
+    scalar.unwrap_or_else(|| lerp(&a.to_value(), &b.to_value(), f, path, held))
 }
 
 fn lerp_attributes(
@@ -699,6 +769,46 @@ mod tests {
         assert_eq!(m.get("x"), Some(&Value::Double(4.0)));
         assert_eq!(m.get("n"), Some(&Value::Long(2)));
         assert_eq!(m.get("label"), Some(&Value::from("a")));
+    }
+
+    /// Interpolating two archived structures (read in place, as a replica of another
+    /// process holds them) answers what interpolating them owned answers, attribute
+    /// for attribute and with the same attributes held, for every sort.
+    #[test]
+    fn archived_sides_interpolate_as_owned_ones() {
+        let side = |vt: Time, k: f64| {
+            at(vt, vt)
+                .with("n", Value::Long(k as i64 * 10))
+                .with("t", Value::Time(vt * 3))
+                .with("x", Value::Double(k))
+                .with("alt", Value::Altitude(k * 2.0))
+                .with("p", Value::Pos2(Pos2 { x: k, y: -k }))
+                .with("q", Value::Position(Position { north: k, east: 2.0 * k }))
+                .with("r", Value::Rotation(yaw(k)))
+                .with("v", Value::Vec(Vec3 { x: k, y: k, z: -k }))
+                .with("seq", Value::DoubleSeq(vec![k; (k as usize % 2) + 1]))
+                .with("frame", Value::from(EntityFrame::new("f").with("y", k)))
+                .with("label", Value::from(if k > 1.0 { "b" } else { "a" }))
+                .with("mixed", if k > 1.0 { Value::Double(k) } else { Value::Long(1) })
+        };
+        let (a, b) = (side(0, 1.0), side(10, 2.0).with("only_b", 1.0));
+        let archived = |es: &EntityStructure| {
+            SharedStructure::archived_copy(&crate::codec::encode(es).unwrap()).unwrap()
+        };
+        let (sa, sb) = (SharedStructure::from(a.clone()), SharedStructure::from(b.clone()));
+        for rule in [ValueApproximation::Linear, ValueApproximation::LinearStrict] {
+            let owned = interpolated(&sa, &sb, 4, 99, &rule);
+            let in_place = interpolated(&archived(&a), &archived(&b), 4, 99, &rule);
+            match (owned, in_place) {
+                (Ok(o), Ok(i)) => {
+                    assert_eq!(o.structure.to_structure(), i.structure.to_structure());
+                    assert_eq!(o.not_interpolated, i.not_interpolated);
+                    assert!(o.not_interpolated.is_some(), "the sequence and the mixed pair");
+                }
+                (Err(o), Err(i)) => assert_eq!(o, i),
+                (o, i) => panic!("{rule:?}: owned {o:?}, in place {i:?}"),
+            }
+        }
     }
 
     #[test]
