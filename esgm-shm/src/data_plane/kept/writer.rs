@@ -713,7 +713,7 @@ impl KeptImage {
 
     /// What keeps the file's memory mapped: a holder of the pixels keeps it for as
     /// long as it may read them, even after the writer moved to a new file.
-    pub fn mapping(&self) -> Arc<dyn std::any::Any + Send + Sync> {
+    pub(crate) fn mapping(&self) -> Arc<dyn std::any::Any + Send + Sync> {
         Arc::clone(&self.loan.map) as Arc<dyn std::any::Any + Send + Sync>
     }
 
